@@ -1,0 +1,92 @@
+//! Typed errors of the library.
+//!
+//! Split as exrs does: invalid data, unsupported features, the operating system,
+//! and configuration mistakes. Every variant that concerns a file names it.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong in epfilt.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// The arguments do not make a valid filter or pipeline.
+    #[error("invalid configuration: {0}")]
+    Config(String),
+
+    /// The file is not a valid OpenEXR file, or is damaged.
+    #[error("{path}: invalid or damaged EXR: {reason}")]
+    InvalidFile {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, and where.
+        reason: String,
+    },
+
+    /// The file is valid but uses something epfilt cannot filter.
+    #[error("{path}: unsupported: {reason}")]
+    Unsupported {
+        /// The file.
+        path: PathBuf,
+        /// What is not supported.
+        reason: String,
+    },
+
+    /// A sample value that the filter or the output cannot handle.
+    #[error("{path}: {reason}")]
+    Value {
+        /// The file concerned (input or output).
+        path: PathBuf,
+        /// What value, where.
+        reason: String,
+    },
+
+    /// An operating-system error on a file.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        #[source]
+        source: std::io::Error,
+    },
+
+    /// The energy ledger did not balance: the output was not written.
+    #[error("energy ledger does not balance (channel {channel}: relative error {rel_error:e}); output not written")]
+    Ledger {
+        /// Channel name.
+        channel: String,
+        /// Relative difference found.
+        rel_error: f64,
+    },
+
+    /// The run was interrupted.
+    #[error("interrupted; no output written")]
+    Interrupted,
+}
+
+/// Result with [`Error`].
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+impl Error {
+    /// An I/O error on `path`.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io { path: path.into(), source }
+    }
+
+    /// Turn an `exr` crate error into ours, with the file named.
+    pub fn from_exr(path: impl Into<PathBuf>, err: exr::error::Error, context: &str) -> Self {
+        let path = path.into();
+        let ctx = if context.is_empty() { String::new() } else { format!("{context}: ") };
+        match err {
+            exr::error::Error::NotSupported(msg) => {
+                Error::Unsupported { path, reason: format!("{ctx}{msg}") }
+            }
+            exr::error::Error::Invalid(msg) => Error::InvalidFile { path, reason: format!("{ctx}{msg}") },
+            exr::error::Error::Io(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => {
+                Error::InvalidFile { path, reason: format!("{ctx}file is truncated") }
+            }
+            exr::error::Error::Io(e) => Error::Io { path, source: e },
+            exr::error::Error::Aborted => Error::Interrupted,
+        }
+    }
+}

@@ -1,0 +1,1 @@
+//! EXR input and output.

@@ -1,0 +1,622 @@
+//! The streaming engine: scatter as the mirror image of gather.
+//!
+//! Rows flow through four stages, each a cursor over output (pixel) rows:
+//!
+//! 1. **box luminance** `Ybox` of pixel row `y` once its S input rows are in;
+//! 2. **classification** of row `y` (the base noise test, which reads `Ybox`
+//!    rows `y ± xbar_reach`): noisy samples are set aside (with their values)
+//!    and zeroed in the input, and every input row gets its horizontal gather
+//!    pass;
+//! 3. **spreading** of the noisy samples of row `y` (the width search reads
+//!    `Ybox` rows `y ± search_reach`) into tile accumulators that own output
+//!    pixels, visited in input row-major order;
+//! 4. **output** of row `y` once no later input row can reach it: the vertical
+//!    gather of the base kernel (`y ± base_reach` input pixel rows classified)
+//!    plus the accumulator (all noisy samples of rows `≤ y + spread_reach`
+//!    spread).
+//!
+//! Each cursor advances only when what it reads is present, so the result does
+//! not depend on how rows arrive (strip height). Every output value is built
+//! by the same operations in the same order whatever the tile size or thread
+//! count: the gather sums its taps in index order, the accumulator receives
+//! noisy samples in input row-major order. Output is bit-identical across
+//! `--tile`, `--strip-rows` and `--threads`.
+//!
+//! Memory: the windows hold `O(lag)` rows of the output width (`lag` from
+//! [`crate::geometry::Halo`]) and `O(S * (strip + xbar_reach))` input rows,
+//! whatever the image height.
+
+use rayon::prelude::*;
+
+use super::ledger::{Ledger, Sums};
+use super::window::RowWindow;
+use super::{Precision, Strip};
+use crate::error::{Error, Result};
+use crate::filter::ep_gauss::{EpGauss, LumRows};
+use crate::filter::kernel::{ColumnTaps, Kernel1d};
+use crate::filter::{FilterParams, Method};
+use crate::geometry::{mirror, Grid, Halo};
+
+/// Most channels one job filters (R, G, B, A).
+pub const MAX_CHANNELS: usize = 4;
+
+#[derive(Clone, Copy, Debug)]
+struct Noisy {
+    i: u32,
+    j: u32,
+    x0: f64,
+    xbar0: f64,
+    v: [f32; MAX_CHANNELS],
+    level: u16,
+    capped: bool,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Spread {
+    xs: usize,
+    xl: usize,
+    ys: usize,
+    yl: usize,
+    off: usize,
+    v: [f64; MAX_CHANNELS],
+}
+
+struct YView<'a> {
+    win: &'a RowWindow<f64>,
+    h: usize,
+}
+
+impl LumRows for YView<'_> {
+    #[inline]
+    fn row(&self, vy: i64) -> &[f64] {
+        self.win.get(mirror(vy, self.h))
+    }
+}
+
+/// Counters of a run.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Counters {
+    /// Samples that failed the base test.
+    pub noisy: u64,
+    /// Samples spread wider than the base kernel (m > 1).
+    pub spread: u64,
+    /// Samples that still failed Relation 14 at the cap.
+    pub capped: u64,
+}
+
+/// A finished batch of output rows, `[row][channel][x]`.
+pub struct OutRows {
+    /// First output row.
+    pub y0: usize,
+    /// Number of rows.
+    pub rows: usize,
+    /// Values, already rounded to the output precision.
+    pub data: Vec<f32>,
+}
+
+/// The filter state between strips.
+pub struct Engine {
+    grid: Grid,
+    w: usize,
+    h: usize,
+    nch: usize,
+    inv_s2: f64,
+    lum: Vec<f64>,
+    names: Vec<String>,
+    base: Kernel1d,
+    cols: ColumnTaps,
+    ep: Option<EpGauss>,
+    halo: Halo,
+    pad: usize,
+    tile: usize,
+    precision: Precision,
+    input: RowWindow<f32>,
+    ybox: RowWindow<f64>,
+    hpass: RowWindow<f64>,
+    acc: RowWindow<f64>,
+    pending: Vec<Noisy>,
+    arena: Vec<f64>,
+    rows_in: usize,
+    cls_done: usize,
+    spread_done: usize,
+    out_done: usize,
+    ledger: Ledger,
+    counters: Counters,
+}
+
+impl Engine {
+    /// Build the engine: kernels, taps and halo are settled here, once.
+    pub fn new(
+        grid: Grid,
+        names: Vec<String>,
+        lum: Vec<f64>,
+        params: &FilterParams,
+        tile: usize,
+        precision: Precision,
+    ) -> Result<Self> {
+        params.validate()?;
+        let nch = names.len();
+        if nch == 0 || nch > MAX_CHANNELS || lum.len() != nch {
+            return Err(Error::Config(format!("1..={MAX_CHANNELS} channels with luminance weights needed, got {nch}")));
+        }
+        let s = grid.s;
+        if grid.in_w == 0 || grid.in_h == 0 {
+            return Err(Error::Config("the image is empty".into()));
+        }
+        if grid.in_w < s || grid.in_h < s {
+            return Err(Error::Config(format!(
+                "--supersample {s} is larger than the image ({}x{} samples)",
+                grid.in_w, grid.in_h
+            )));
+        }
+        if grid.in_w % s != 0 || grid.in_h % s != 0 {
+            return Err(Error::Config(format!(
+                "image size {}x{} is not a multiple of --supersample {s}",
+                grid.in_w, grid.in_h
+            )));
+        }
+        if tile == 0 {
+            return Err(Error::Config("--tile must be at least 1".into()));
+        }
+        let (w, h) = (grid.out_w(), grid.out_h());
+        let base = match params.method {
+            Method::Box => Kernel1d::boxed(s),
+            _ => Kernel1d::gaussian(s, params.radius, params.cutoff),
+        };
+        let ep = (params.method == Method::EpGauss).then(|| {
+            EpGauss::new(s, params.radius, params.max_radius, params.cutoff, params.tolerance, params.width_step)
+        });
+        let halo = Halo {
+            xbar_reach: ep.as_ref().map_or(0, |e| e.xbar_reach()),
+            base_reach: base.reach(),
+            search_reach: ep.as_ref().map_or(0, |e| e.search_reach()),
+            spread_reach: ep.as_ref().map_or(0, |e| e.spread_reach()),
+        };
+        let pad = ep.as_ref().map_or(0, |e| e.pad());
+        let cols = ColumnTaps::new(&base, w, grid.in_w);
+        Ok(Engine {
+            grid,
+            w,
+            h,
+            nch,
+            inv_s2: 1.0 / (s * s) as f64,
+            lum,
+            names,
+            base,
+            cols,
+            ep,
+            halo,
+            pad,
+            tile,
+            precision,
+            input: RowWindow::new(nch * grid.in_w),
+            ybox: RowWindow::new(w + 2 * pad),
+            hpass: RowWindow::new(nch * w),
+            acc: RowWindow::new(nch * w),
+            pending: Vec::new(),
+            arena: Vec::new(),
+            rows_in: 0,
+            cls_done: 0,
+            spread_done: 0,
+            out_done: 0,
+            ledger: Ledger::new(nch),
+            counters: Counters::default(),
+        })
+    }
+
+    /// The halo this job needs.
+    pub fn halo(&self) -> Halo {
+        self.halo
+    }
+
+    /// Output rows finished so far.
+    pub fn rows_out(&self) -> usize {
+        self.out_done
+    }
+
+    /// Counters so far.
+    pub fn counters(&self) -> Counters {
+        self.counters
+    }
+
+    /// The ledger so far.
+    pub fn ledger(&self) -> &Ledger {
+        &self.ledger
+    }
+
+    /// Channel names.
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// Most rows each window held at once: input, box luminance, horizontal
+    /// pass, accumulator.
+    pub fn high_water(&self) -> [usize; 4] {
+        [self.input.high_water(), self.ybox.high_water(), self.hpass.high_water(), self.acc.high_water()]
+    }
+
+    /// Feed the next strip of input rows; returns the output rows it finished.
+    pub fn push(&mut self, strip: Strip) -> Result<Option<OutRows>> {
+        let (nch, in_w) = (self.nch, self.grid.in_w);
+        let row_len = nch * in_w;
+        if strip.y0 != self.rows_in || strip.data.len() != strip.rows * row_len || self.rows_in + strip.rows > self.grid.in_h {
+            return Err(Error::Config(format!(
+                "source delivered rows {}..{} but row {} was expected (source bug)",
+                strip.y0,
+                strip.y0 + strip.rows,
+                self.rows_in
+            )));
+        }
+        // Ledger of the input, row by row in parallel, merged in order.
+        let sums: Vec<std::result::Result<Sums, (usize, usize)>> = strip
+            .data
+            .par_chunks(row_len)
+            .map(|row| {
+                let mut s = Sums::new(nch);
+                for c in 0..nch {
+                    for (x, &v) in row[c * in_w..(c + 1) * in_w].iter().enumerate() {
+                        if !v.is_finite() {
+                            return Err((x, c));
+                        }
+                        s.values[c].add(v as f64);
+                        s.mass[c].add((v as f64).abs());
+                    }
+                }
+                Ok(s)
+            })
+            .collect();
+        for (r, s) in sums.into_iter().enumerate() {
+            match s {
+                Ok(s) => self.ledger.input.merge(&s),
+                Err((x, c)) => {
+                    return Err(Error::Value {
+                        path: Default::default(),
+                        reason: format!(
+                            "non-finite input value at sample ({x}, {}) in channel {}",
+                            strip.y0 + r,
+                            self.names[c]
+                        ),
+                    })
+                }
+            }
+        }
+        for row in strip.data.chunks(row_len) {
+            self.input.push(0.0).copy_from_slice(row);
+        }
+        self.rows_in += strip.rows;
+        self.advance()
+    }
+
+    fn advance(&mut self) -> Result<Option<OutRows>> {
+        let s = self.grid.s;
+        // 1. box luminance
+        let ready = self.rows_in / s;
+        if ready > self.ybox.end() {
+            self.make_ybox(self.ybox.end(), ready);
+        }
+        let yb = self.ybox.end();
+        let all_in = yb == self.h;
+        // 2. classification + horizontal pass
+        let cls_target = if all_in { self.h } else { yb.saturating_sub(self.halo.xbar_reach) };
+        if cls_target > self.cls_done {
+            self.classify(self.cls_done, cls_target);
+            self.cls_done = cls_target;
+            self.input.evict_below(self.cls_done * s);
+        }
+        // 3. spreading
+        if self.ep.is_some() {
+            let sp_target = if all_in {
+                self.cls_done
+            } else {
+                self.cls_done.min(yb.saturating_sub(self.halo.search_reach))
+            };
+            if sp_target > self.spread_done {
+                self.spread(sp_target);
+                self.spread_done = sp_target;
+            }
+        }
+        // 4. output
+        let h = self.h;
+        let by_cls = if self.cls_done == h { h } else { self.cls_done.saturating_sub(self.halo.base_reach) };
+        let by_spread = match &self.ep {
+            Some(_) if self.spread_done < h => self.spread_done.saturating_sub(self.halo.spread_reach),
+            _ => h,
+        };
+        let out_target = by_cls.min(by_spread);
+        let mut out = None;
+        if out_target > self.out_done {
+            out = Some(self.finish_rows(self.out_done, out_target)?);
+            self.out_done = out_target;
+            self.hpass.evict_below(out_target.saturating_sub(self.halo.base_reach) * s);
+            self.acc.evict_below(out_target);
+        }
+        let keep = if self.ep.is_some() {
+            self.cls_done
+                .saturating_sub(self.halo.xbar_reach)
+                .min(self.spread_done.saturating_sub(self.halo.search_reach))
+        } else {
+            yb
+        };
+        self.ybox.evict_below(keep.min(yb));
+        Ok(out)
+    }
+
+    fn make_ybox(&mut self, a: usize, b: usize) {
+        let (s, w, pad, in_w, nch) = (self.grid.s, self.w, self.pad, self.grid.in_w, self.nch);
+        let inv = self.inv_s2;
+        for _ in a..b {
+            self.ybox.push(0.0);
+        }
+        let input = &self.input;
+        let lum = &self.lum;
+        let mut rows = self.ybox.range_mut(a, b);
+        rows.par_iter_mut().enumerate().for_each(|(k, row)| {
+            let y = a + k;
+            let (core, _) = row.split_at_mut(w + pad);
+            let core = &mut core[pad..];
+            core.iter_mut().for_each(|v| *v = 0.0);
+            for j in y * s..(y + 1) * s {
+                let r = input.get(j);
+                for c in 0..nch {
+                    let lw = lum[c];
+                    if lw == 0.0 {
+                        continue;
+                    }
+                    let ch = &r[c * in_w..(c + 1) * in_w];
+                    for (px, out) in core.iter_mut().enumerate() {
+                        let mut acc = 0.0;
+                        for &v in &ch[px * s..(px + 1) * s] {
+                            acc += v as f64;
+                        }
+                        *out += lw * acc;
+                    }
+                }
+            }
+            core.iter_mut().for_each(|v| *v *= inv);
+            for i in 0..pad {
+                row[i] = row[pad + mirror(i as i64 - pad as i64, w)];
+                row[pad + w + i] = row[pad + mirror((w + i) as i64, w)];
+            }
+        });
+    }
+
+    fn classify(&mut self, a: usize, b: usize) {
+        let (s, w, in_w, nch, h) = (self.grid.s, self.w, self.grid.in_w, self.nch, self.h);
+        for _ in a * s..b * s {
+            self.hpass.push(0.0);
+        }
+        let ep = self.ep.as_ref();
+        let ybox = &self.ybox;
+        let lum = &self.lum;
+        let cols = &self.cols;
+        let mut inputs = self.input.range_mut(a * s, b * s);
+        let mut hrows = self.hpass.range_mut(a * s, b * s);
+        let noisy: Vec<Vec<Noisy>> = inputs
+            .par_chunks_mut(s)
+            .zip(hrows.par_chunks_mut(s))
+            .enumerate()
+            .map(|(k, (ins, hs))| {
+                let y = a + k;
+                let mut found = Vec::new();
+                if let Some(ep) = ep {
+                    let view = YView { win: ybox, h };
+                    for px in 0..w {
+                        let xbar = ep.xbar0(&view, px, y as i64);
+                        for (b, row) in ins.iter_mut().enumerate() {
+                            for i in px * s..(px + 1) * s {
+                                let mut x0 = 0.0;
+                                for c in 0..nch {
+                                    x0 += lum[c] * row[c * in_w + i] as f64;
+                                }
+                                if ep.is_noisy(x0, xbar) {
+                                    let mut v = [0.0f32; MAX_CHANNELS];
+                                    for c in 0..nch {
+                                        v[c] = row[c * in_w + i];
+                                        row[c * in_w + i] = 0.0;
+                                    }
+                                    found.push(Noisy {
+                                        i: i as u32,
+                                        j: (y * s + b) as u32,
+                                        x0,
+                                        xbar0: xbar,
+                                        v,
+                                        level: 0,
+                                        capped: false,
+                                    });
+                                }
+                            }
+                        }
+                    }
+                    // Row-major order: by input row, then column.
+                    found.sort_by_key(|n| (n.j, n.i));
+                }
+                for (row, hrow) in ins.iter().zip(hs.iter_mut()) {
+                    for c in 0..nch {
+                        let src = &row[c * in_w..(c + 1) * in_w];
+                        let dst = &mut hrow[c * w..(c + 1) * w];
+                        for (x, d) in dst.iter_mut().enumerate() {
+                            let (start, taps) = cols.taps(x);
+                            let mut acc = 0.0;
+                            for (t, &v) in taps.iter().zip(&src[start..start + taps.len()]) {
+                                acc += t * v as f64;
+                            }
+                            *d = acc;
+                        }
+                    }
+                }
+                found
+            })
+            .collect();
+        for list in noisy {
+            self.pending.extend(list);
+        }
+    }
+
+    fn spread(&mut self, target: usize) {
+        let Some(ep) = self.ep.as_ref() else { return };
+        let (s, w, h, nch) = (self.grid.s, self.w, self.h, self.nch);
+        let split = self.pending.partition_point(|n| (n.j as usize) / s < target);
+        let batch = &mut self.pending[..split];
+        // Width search, one sample per task (each is independent of the rest).
+        let view = YView { win: &self.ybox, h };
+        let scratch = ep.scratch_len();
+        batch.par_iter_mut().for_each_init(
+            || vec![0.0; scratch],
+            |rs, n| {
+                let c = ep.search(&view, n.i as usize / s, n.j as usize / s, n.x0, n.xbar0, rs);
+                n.level = c.level;
+                n.capped = c.capped;
+            },
+        );
+        // Reflect each sample's kernel once, in order.
+        self.arena.clear();
+        let mut spreads = Vec::with_capacity(batch.len());
+        let mut tmp = Vec::new();
+        for n in batch.iter() {
+            self.counters.noisy += 1;
+            self.counters.spread += (n.level > 0) as u64;
+            self.counters.capped += n.capped as u64;
+            let k = &ep.levels()[n.level as usize].kernel;
+            let (i, j) = (n.i as usize, n.j as usize);
+            let off = self.arena.len();
+            let xs = k.fold(i % s, i / s, w, &mut tmp);
+            let xl = tmp.len();
+            self.arena.extend_from_slice(&tmp);
+            let ys = k.fold(j % s, j / s, h, &mut tmp);
+            let yl = tmp.len();
+            self.arena.extend_from_slice(&tmp);
+            let mut v = [0.0; MAX_CHANNELS];
+            for c in 0..nch {
+                v[c] = n.v[c] as f64 * self.inv_s2;
+            }
+            spreads.push(Spread { xs, xl, ys, yl, off, v });
+        }
+        self.pending.drain(..split);
+        // Accumulator rows down to the widest reach of this batch.
+        let need = (target + self.halo.spread_reach).min(h);
+        while self.acc.end() < need {
+            self.acc.push(-0.0);
+        }
+        let (first, end) = (self.acc.first(), self.acc.end());
+        let tile = self.tile;
+        let ntiles = w.div_ceil(tile);
+        let mut tiles: Vec<Vec<&mut [f64]>> = (0..ntiles).map(|_| Vec::with_capacity(end - first)).collect();
+        for row in self.acc.range_mut(first, end) {
+            for (t, part) in row.chunks_mut(tile * nch).enumerate() {
+                tiles[t].push(part);
+            }
+        }
+        let arena = &self.arena;
+        tiles.into_par_iter().enumerate().for_each(|(t, mut rows)| {
+            let x0 = t * tile;
+            let x1 = (x0 + tile).min(w);
+            for sp in &spreads {
+                let (cx0, cx1) = (sp.xs.max(x0), (sp.xs + sp.xl).min(x1));
+                if cx0 >= cx1 {
+                    continue;
+                }
+                let wx = &arena[sp.off + cx0 - sp.xs..sp.off + cx1 - sp.xs];
+                let wy = &arena[sp.off + sp.xl..sp.off + sp.xl + sp.yl];
+                for (dy, &wyv) in wy.iter().enumerate() {
+                    let row = &mut rows[sp.ys + dy - first];
+                    let mut coef = [0.0; MAX_CHANNELS];
+                    for c in 0..nch {
+                        coef[c] = sp.v[c] * wyv;
+                    }
+                    let dst = &mut row[(cx0 - x0) * nch..(cx1 - x0) * nch];
+                    match nch {
+                        3 => scatter_row::<3>(dst, wx, &coef),
+                        4 => scatter_row::<4>(dst, wx, &coef),
+                        1 => scatter_row::<1>(dst, wx, &coef),
+                        _ => scatter_row::<2>(dst, wx, &coef),
+                    }
+                }
+            }
+        });
+    }
+
+    fn finish_rows(&mut self, a: usize, b: usize) -> Result<OutRows> {
+        let (w, h, nch, in_h) = (self.w, self.h, self.nch, self.grid.in_h);
+        let mut data = vec![0.0f32; (b - a) * nch * w];
+        let base = &self.base;
+        let hpass = &self.hpass;
+        let acc = self.ep.as_ref().map(|_| &self.acc);
+        let inv = self.inv_s2;
+        let precision = self.precision;
+        let names = &self.names;
+        let sums: Vec<Result<(Sums, Sums)>> = data
+            .par_chunks_mut(nch * w)
+            .enumerate()
+            .map_init(
+                || (vec![0.0f64; w], Vec::new()),
+                |(tmp, taps), (k, out)| {
+                    let y = a + k;
+                    let j0 = base.gather(y, h, in_h, taps);
+                    let mut raw = Sums::new(nch);
+                    let mut rounded = Sums::new(nch);
+                    for c in 0..nch {
+                        tmp.iter_mut().for_each(|v| *v = 0.0);
+                        for (t, &wt) in taps.iter().enumerate() {
+                            let src = &hpass.get(j0 + t)[c * w..(c + 1) * w];
+                            for (d, &v) in tmp.iter_mut().zip(src) {
+                                *d += wt * v;
+                            }
+                        }
+                        let dst = &mut out[c * w..(c + 1) * w];
+                        for (x, (d, &v)) in dst.iter_mut().zip(tmp.iter()).enumerate() {
+                            let mut val = v * inv;
+                            if let Some(acc) = acc {
+                                val += acc.get(y)[x * nch + c];
+                            }
+                            let r = round(val, precision).ok_or_else(|| Error::Value {
+                                path: Default::default(),
+                                reason: format!(
+                                    "output value {val:e} at pixel ({x}, {y}) in channel {} does not fit in {}",
+                                    names[c],
+                                    precision.name()
+                                ),
+                            })?;
+                            *d = r;
+                            raw.values[c].add(val);
+                            raw.mass[c].add(val.abs());
+                            rounded.values[c].add(r as f64);
+                            rounded.mass[c].add((r as f64).abs());
+                        }
+                    }
+                    Ok((raw, rounded))
+                },
+            )
+            .collect();
+        for s in sums {
+            let (raw, rounded) = s?;
+            self.ledger.output.merge(&raw);
+            self.ledger.rounded.merge(&rounded);
+        }
+        Ok(OutRows { y0: a, rows: b - a, data })
+    }
+}
+
+/// The hot loop of spreading: `dst[x][c] += coef[c] * wx[x]`.
+#[inline]
+fn scatter_row<const C: usize>(dst: &mut [f64], wx: &[f64], coef: &[f64; MAX_CHANNELS]) {
+    for (px, &wv) in dst.chunks_exact_mut(C).zip(wx) {
+        for c in 0..C {
+            px[c] += coef[c] * wv;
+        }
+    }
+}
+
+/// Round to the output type; `None` if the value does not fit.
+#[inline]
+fn round(v: f64, p: Precision) -> Option<f32> {
+    match p {
+        Precision::F32 => {
+            let f = v as f32;
+            f.is_finite().then_some(f)
+        }
+        Precision::F16 => {
+            let f = half::f16::from_f64(v);
+            f.is_finite().then(|| f.to_f32())
+        }
+    }
+}

@@ -1,0 +1,287 @@
+//! The streaming pipeline: a reader stage, the filter engine, a writer stage,
+//! joined by bounded channels and sharing one rayon pool.
+//!
+//! ```text
+//!  Source ──strips──▶ Engine (halo windows, tiles) ──rows──▶ Sink
+//!  (reader thread)    (this thread, rayon pool)           (writer thread)
+//! ```
+//!
+//! The pipeline never sees EXR types: sources and sinks speak planar `f32`
+//! rows (`[row][channel][x]`). Back-pressure through the two-slot channels,
+//! not the image size, bounds memory.
+
+pub mod engine;
+pub mod ledger;
+pub mod window;
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+use crate::error::{Error, Result};
+use crate::filter::FilterParams;
+use crate::geometry::{Grid, Halo};
+pub use engine::{Counters, Engine, OutRows};
+pub use ledger::{ChannelLedger, Ledger};
+
+/// Rows of input samples, `[row][channel][x]`.
+#[derive(Clone, Debug)]
+pub struct Strip {
+    /// First row.
+    pub y0: usize,
+    /// Number of rows.
+    pub rows: usize,
+    /// The values.
+    pub data: Vec<f32>,
+}
+
+/// Something that delivers input rows in increasing order.
+pub trait Source: Send {
+    /// The next `max_rows` rows (fewer at the end); `None` when done.
+    fn next_strip(&mut self, max_rows: usize) -> Result<Option<Strip>>;
+}
+
+/// Something that takes finished output rows in increasing order.
+pub trait Sink: Send {
+    /// Rows `y0..y0 + rows`, `[row][channel][x]`.
+    fn write_rows(&mut self, y0: usize, rows: usize, data: &[f32]) -> Result<()>;
+    /// All rows have been written.
+    fn finish(&mut self) -> Result<()>;
+}
+
+/// Precision of the output samples.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Precision {
+    /// 32-bit float.
+    F32,
+    /// 16-bit float (refuses values beyond ±65504).
+    F16,
+}
+
+impl Precision {
+    /// Name as on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::F16 => "f16",
+        }
+    }
+}
+
+/// How the work is cut up; none of it changes the result.
+#[derive(Clone, Debug)]
+pub struct PipelineConfig {
+    /// Tile width of the accumulators, in output pixels.
+    pub tile: usize,
+    /// Input rows per strip.
+    pub strip_rows: usize,
+    /// Worker threads (0: one per core).
+    pub threads: usize,
+    /// Output precision.
+    pub precision: Precision,
+    /// Set to stop the run early (e.g. on SIGINT).
+    pub cancel: Option<Arc<AtomicBool>>,
+}
+
+impl Default for PipelineConfig {
+    fn default() -> Self {
+        PipelineConfig { tile: 256, strip_rows: 96, threads: 0, precision: Precision::F32, cancel: None }
+    }
+}
+
+/// What one job filters: the grid and its channels.
+#[derive(Clone, Debug)]
+pub struct Job {
+    /// Sizes.
+    pub grid: Grid,
+    /// Channel names, in the order of the strips.
+    pub channels: Vec<String>,
+    /// Luminance weight of each channel (0 for alpha).
+    pub luminance: Vec<f64>,
+}
+
+/// The result of a run.
+#[derive(Clone, Debug)]
+pub struct RunStats {
+    /// Counters of the noise test.
+    pub counters: Counters,
+    /// Per-channel ledger.
+    pub ledger: Vec<ChannelLedger>,
+    /// Wall time in seconds.
+    pub seconds: f64,
+    /// Halo of the job.
+    pub halo: Halo,
+    /// Most rows each window held (input, luminance, horizontal pass, accumulator).
+    pub window_rows: [usize; 4],
+}
+
+/// Progress callback: (output rows done, output rows in all).
+pub type Progress<'a> = &'a (dyn Fn(usize, usize) + Sync);
+
+/// Build the thread pool that every stage shares.
+pub fn thread_pool(threads: usize) -> Result<rayon::ThreadPool> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .thread_name(|i| format!("epfilt-{i}"))
+        .build()
+        .map_err(|e| Error::Config(format!("cannot start {threads} threads: {e}")))
+}
+
+/// Run `job` from `source` to `sink`.
+pub fn run<S: Source, K: Sink>(
+    source: S,
+    sink: K,
+    job: &Job,
+    params: &FilterParams,
+    cfg: &PipelineConfig,
+    progress: Progress<'_>,
+) -> Result<RunStats> {
+    if cfg.strip_rows == 0 {
+        return Err(Error::Config("--strip-rows must be at least 1".into()));
+    }
+    let pool = thread_pool(cfg.threads)?;
+    let start = Instant::now();
+    let mut engine = Engine::new(job.grid, job.channels.clone(), job.luminance.clone(), params, cfg.tile, cfg.precision)?;
+    let total = job.grid.out_h();
+    let cancelled = || cfg.cancel.as_ref().is_some_and(|c| c.load(Ordering::Relaxed));
+    let (strip_tx, strip_rx) = crossbeam_channel::bounded::<Result<Strip>>(2);
+    let (row_tx, row_rx) = crossbeam_channel::bounded::<OutRows>(2);
+    let strip_rows = cfg.strip_rows;
+    let pool = &pool;
+
+    let result = std::thread::scope(|scope| -> Result<()> {
+        let reader = scope.spawn(move || {
+            let mut source = source;
+            loop {
+                let next = pool.install(|| source.next_strip(strip_rows));
+                let stop = !matches!(next, Ok(Some(_)));
+                let msg = match next {
+                    Ok(Some(s)) => Ok(s),
+                    Ok(None) => break,
+                    Err(e) => Err(e),
+                };
+                if strip_tx.send(msg).is_err() || stop {
+                    break;
+                }
+            }
+        });
+        let writer = scope.spawn(move || -> Result<()> {
+            let mut sink = sink;
+            for rows in row_rx.iter() {
+                pool.install(|| sink.write_rows(rows.y0, rows.rows, &rows.data))?;
+            }
+            pool.install(|| sink.finish())
+        });
+        let mut engine_result = Ok(());
+        for strip in strip_rx.iter() {
+            if cancelled() {
+                engine_result = Err(Error::Interrupted);
+                break;
+            }
+            match strip.and_then(|s| pool.install(|| engine.push(s))) {
+                Ok(Some(rows)) => {
+                    progress(rows.y0 + rows.rows, total);
+                    if row_tx.send(rows).is_err() {
+                        break; // the writer failed; its error is reported below
+                    }
+                }
+                Ok(None) => {}
+                Err(e) => {
+                    engine_result = Err(e);
+                    break;
+                }
+            }
+        }
+        drop(strip_rx);
+        if engine_result.is_ok() && engine.rows_out() != total {
+            engine_result = Err(Error::Config(format!(
+                "the source ended after {} of {} output rows",
+                engine.rows_out(),
+                total
+            )));
+        }
+        drop(row_tx);
+        let _ = reader.join();
+        let write_result = writer.join().unwrap_or_else(|_| Err(Error::Config("writer thread panicked".into())));
+        engine_result.and(write_result)
+    });
+    result?;
+    let s2 = (job.grid.s * job.grid.s) as f64;
+    Ok(RunStats {
+        counters: engine.counters(),
+        ledger: engine.ledger().balance(engine.names(), s2),
+        seconds: start.elapsed().as_secs_f64(),
+        halo: engine.halo(),
+        window_rows: engine.high_water(),
+    })
+}
+
+/// An in-memory source: a whole planar image (`[row][channel][x]`).
+#[derive(Clone, Debug)]
+pub struct MemorySource {
+    data: Vec<f32>,
+    row_len: usize,
+    rows: usize,
+    next: usize,
+}
+
+impl MemorySource {
+    /// Wrap `data` of `rows` rows of `row_len` values.
+    pub fn new(data: Vec<f32>, row_len: usize) -> Self {
+        let rows = if row_len == 0 { 0 } else { data.len() / row_len };
+        MemorySource { data, row_len, rows, next: 0 }
+    }
+}
+
+impl Source for MemorySource {
+    fn next_strip(&mut self, max_rows: usize) -> Result<Option<Strip>> {
+        if self.next >= self.rows {
+            return Ok(None);
+        }
+        let n = max_rows.min(self.rows - self.next);
+        let data = self.data[self.next * self.row_len..(self.next + n) * self.row_len].to_vec();
+        let strip = Strip { y0: self.next, rows: n, data };
+        self.next += n;
+        Ok(Some(strip))
+    }
+}
+
+/// An in-memory sink collecting the output image.
+#[derive(Clone, Debug, Default)]
+pub struct MemorySink {
+    /// Output rows, `[row][channel][x]`.
+    pub data: Vec<f32>,
+}
+
+impl Sink for MemorySink {
+    fn write_rows(&mut self, _y0: usize, _rows: usize, data: &[f32]) -> Result<()> {
+        self.data.extend_from_slice(data);
+        Ok(())
+    }
+    fn finish(&mut self) -> Result<()> {
+        Ok(())
+    }
+}
+
+impl<K: Sink> Sink for &mut K {
+    fn write_rows(&mut self, y0: usize, rows: usize, data: &[f32]) -> Result<()> {
+        (**self).write_rows(y0, rows, data)
+    }
+    fn finish(&mut self) -> Result<()> {
+        (**self).finish()
+    }
+}
+
+/// Filter a whole in-memory image (planar `[row][channel][x]`) — for tests,
+/// the demo and small jobs. Returns the output image and the statistics.
+pub fn filter_in_memory(
+    data: Vec<f32>,
+    job: &Job,
+    params: &FilterParams,
+    cfg: &PipelineConfig,
+) -> Result<(Vec<f32>, RunStats)> {
+    let row_len = job.channels.len() * job.grid.in_w;
+    let mut sink = MemorySink::default();
+    let stats = run(MemorySource::new(data, row_len), &mut sink, job, params, cfg, &|_, _| {})?;
+    Ok((sink.data, stats))
+}
