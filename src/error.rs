@@ -70,20 +70,34 @@ pub type Result<T, E = Error> = std::result::Result<T, E>;
 impl Error {
     /// An I/O error on `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Error::Io { path: path.into(), source }
+        Error::Io {
+            path: path.into(),
+            source,
+        }
     }
 
     /// Turn an `exr` crate error into ours, with the file named.
     pub fn from_exr(path: impl Into<PathBuf>, err: exr::error::Error, context: &str) -> Self {
         let path = path.into();
-        let ctx = if context.is_empty() { String::new() } else { format!("{context}: ") };
+        let ctx = if context.is_empty() {
+            String::new()
+        } else {
+            format!("{context}: ")
+        };
         match err {
-            exr::error::Error::NotSupported(msg) => {
-                Error::Unsupported { path, reason: format!("{ctx}{msg}") }
-            }
-            exr::error::Error::Invalid(msg) => Error::InvalidFile { path, reason: format!("{ctx}{msg}") },
+            exr::error::Error::NotSupported(msg) => Error::Unsupported {
+                path,
+                reason: format!("{ctx}{msg}"),
+            },
+            exr::error::Error::Invalid(msg) => Error::InvalidFile {
+                path,
+                reason: format!("{ctx}{msg}"),
+            },
             exr::error::Error::Io(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => {
-                Error::InvalidFile { path, reason: format!("{ctx}file is truncated") }
+                Error::InvalidFile {
+                    path,
+                    reason: format!("{ctx}file is truncated"),
+                }
             }
             exr::error::Error::Io(e) => Error::Io { path, source: e },
             exr::error::Error::Aborted => Error::Interrupted,

@@ -94,7 +94,14 @@ pub struct EpGauss {
 impl EpGauss {
     /// Build the ladder from base radius `radius` up to `max_radius` in
     /// relative steps of `width_step`.
-    pub fn new(s: usize, radius: f64, max_radius: f64, cutoff: f64, tol: f64, width_step: f64) -> Self {
+    pub fn new(
+        s: usize,
+        radius: f64,
+        max_radius: f64,
+        cutoff: f64,
+        tol: f64,
+        width_step: f64,
+    ) -> Self {
         let mut rhos = vec![radius];
         let mut k = 1;
         while max_radius > radius {
@@ -111,7 +118,13 @@ impl EpGauss {
         let mut count = vec![0u32; max_d2 + 1];
         for dy in 0..=max_shell {
             for dx in 0..=max_shell {
-                let mult = if dx == 0 && dy == 0 { 1 } else if dx == 0 || dy == 0 { 2 } else { 4 };
+                let mult = if dx == 0 && dy == 0 {
+                    1
+                } else if dx == 0 || dy == 0 {
+                    2
+                } else {
+                    4
+                };
                 count[dx * dx + dy * dy] += mult;
             }
         }
@@ -160,8 +173,22 @@ impl EpGauss {
         }
         let a = 1.0 / base.w0;
         let t_hi = (1.0 + tol * a) / (1.0 + tol);
-        let t_lo = if tol < 1.0 { (1.0 - tol * a) / (1.0 - tol) } else { f64::NEG_INFINITY };
-        EpGauss { s, tol, levels, ln_step: (1.0 + width_step).ln(), bin_d2, bin_of, stencil, t_hi, t_lo }
+        let t_lo = if tol < 1.0 {
+            (1.0 - tol * a) / (1.0 - tol)
+        } else {
+            f64::NEG_INFINITY
+        };
+        EpGauss {
+            s,
+            tol,
+            levels,
+            ln_step: (1.0 + width_step).ln(),
+            bin_d2,
+            bin_of,
+            stencil,
+            t_hi,
+            t_lo,
+        }
     }
 
     /// The ladder; level 0 is the base kernel.
@@ -186,7 +213,11 @@ impl EpGauss {
 
     /// Rows either side the widest kernel writes.
     pub fn spread_reach(&self) -> usize {
-        self.levels.iter().map(|l| l.kernel.reach()).max().unwrap_or(0)
+        self.levels
+            .iter()
+            .map(|l| l.kernel.reach())
+            .max()
+            .unwrap_or(0)
     }
 
     /// Length of the ring-sum scratch a worker needs.
@@ -239,10 +270,21 @@ impl EpGauss {
     /// Find the width of a sample at pixel `(px, py)` with luminance `x0`
     /// that failed the base test against `xbar0`. `rs` is a zeroed scratch of
     /// [`EpGauss::scratch_len`]; it is zeroed again on return.
-    pub fn search(&self, rows: &impl LumRows, px: usize, py: usize, x0: f64, xbar0: f64, rs: &mut [f64]) -> Choice {
+    pub fn search(
+        &self,
+        rows: &impl LumRows,
+        px: usize,
+        py: usize,
+        x0: f64,
+        xbar0: f64,
+        rs: &mut [f64],
+    ) -> Choice {
         let last = self.levels.len() - 1;
         if last == 0 {
-            return Choice { level: 0, capped: true };
+            return Choice {
+                level: 0,
+                capped: true,
+            };
         }
         let pad = self.pad() as i64;
         let (cx, cy) = (px as i64 + pad, py as i64);
@@ -257,7 +299,8 @@ impl EpGauss {
                     for vy in [cy - c, cy + c] {
                         let r = rows.row(vy);
                         for dx in -c..=c {
-                            rs[self.bin_of[c2 + (dx * dx) as usize] as usize] += r[(cx + dx) as usize];
+                            rs[self.bin_of[c2 + (dx * dx) as usize] as usize] +=
+                                r[(cx + dx) as usize];
                         }
                     }
                     for dy in 1 - c..c {
@@ -290,8 +333,18 @@ impl EpGauss {
         let mut guesses = 0;
         let choice = loop {
             match hi {
-                Some(h) if h - lo <= 1 => break Choice { level: h as u16, capped: false },
-                None if lo == last => break Choice { level: last as u16, capped: true },
+                Some(h) if h - lo <= 1 => {
+                    break Choice {
+                        level: h as u16,
+                        capped: false,
+                    }
+                }
+                None if lo == last => {
+                    break Choice {
+                        level: last as u16,
+                        capped: true,
+                    }
+                }
                 _ => {}
             }
             let upper = hi.map_or(last, |h| h - 1);
@@ -339,7 +392,11 @@ mod tests {
     impl Field {
         fn new(w: usize, h: usize, pad: usize, f: impl Fn(usize, usize) -> f64) -> Self {
             let rows = (0..h)
-                .map(|y| (0..w + 2 * pad).map(|i| f(mirror(i as i64 - pad as i64, w), y)).collect())
+                .map(|y| {
+                    (0..w + 2 * pad)
+                        .map(|i| f(mirror(i as i64 - pad as i64, w), y))
+                        .collect()
+                })
                 .collect();
             Field { w, h, pad, rows }
         }
@@ -394,7 +451,13 @@ mod tests {
         for &mag in &[10.0, 100.0, 1e3, 1e5] {
             let (w, h) = (120, 120);
             // Box luminance of the firefly's pixel: (8*1 + mag)/9.
-            let f = Field::new(w, h, ep.pad(), |x, y| if (x, y) == (60, 60) { (8.0 + mag) / 9.0 } else { 1.0 });
+            let f = Field::new(w, h, ep.pad(), |x, y| {
+                if (x, y) == (60, 60) {
+                    (8.0 + mag) / 9.0
+                } else {
+                    1.0
+                }
+            });
             let xb = ep.xbar0(&f, 60, 60);
             assert!(ep.is_noisy(mag, xb), "mag {mag}");
             let c = ep.search(&f, 60, 60, mag, xb, &mut rs);

@@ -55,7 +55,11 @@ impl Kernel1d {
 
     /// The S x S box: every sample goes to its own pixel with weight one.
     pub fn boxed(s: usize) -> Self {
-        Kernel1d { s, reach: 0, w: vec![1.0; s] }
+        Kernel1d {
+            s,
+            reach: 0,
+            w: vec![1.0; s],
+        }
     }
 
     /// How far (in output pixels) a sample reaches.
@@ -89,7 +93,11 @@ impl Kernel1d {
             out.extend_from_slice(row);
             return lo as usize;
         }
-        let (start, end) = if self.reach >= n { (0, n - 1) } else { (lo.max(0) as usize, hi.min(n as i64 - 1) as usize) };
+        let (start, end) = if self.reach >= n {
+            (0, n - 1)
+        } else {
+            (lo.max(0) as usize, hi.min(n as i64 - 1) as usize)
+        };
         out.resize(end - start + 1, 0.0);
         for (k, &w) in row.iter().enumerate() {
             let t = mirror(lo + k as i64, n);
@@ -125,7 +133,11 @@ impl Kernel1d {
         }
         // Trim zero taps at both ends so the hot loop does less work.
         let first = out.iter().position(|&w| w != 0.0).unwrap_or(0);
-        let last = out.iter().rposition(|&w| w != 0.0).map_or(first, |l| l + 1).max(first);
+        let last = out
+            .iter()
+            .rposition(|&w| w != 0.0)
+            .map_or(first, |l| l + 1)
+            .max(first);
         out.truncate(last);
         out.drain(..first);
         i0 + first
@@ -178,7 +190,10 @@ mod tests {
                 let k = Kernel1d::gaussian(s, rho, 3.0);
                 for a in 0..s {
                     let sum: f64 = k.row(a).iter().sum();
-                    assert!((sum - 1.0).abs() < SUM_TOL, "s={s} rho={rho} a={a} sum={sum}");
+                    assert!(
+                        (sum - 1.0).abs() < SUM_TOL,
+                        "s={s} rho={rho} a={a} sum={sum}"
+                    );
                 }
             }
         }
@@ -211,7 +226,10 @@ mod tests {
                 for x in 0..n {
                     k.gather(x, n, n * s, &mut out);
                     let sum: f64 = out.iter().sum();
-                    assert!((sum - s as f64).abs() < 1e-12, "s={s} rho={rho} n={n} x={x} sum={sum}");
+                    assert!(
+                        (sum - s as f64).abs() < 1e-12,
+                        "s={s} rho={rho} n={n} x={x} sum={sum}"
+                    );
                 }
             }
         }
@@ -232,7 +250,11 @@ mod tests {
         for x in 0..n {
             let start = k.gather(x, n, n * 3, &mut out);
             for i in 0..n * 3 {
-                let g = if i >= start && i < start + out.len() { out[i - start] } else { 0.0 };
+                let g = if i >= start && i < start + out.len() {
+                    out[i - start]
+                } else {
+                    0.0
+                };
                 assert!((g - m[x][i]).abs() < 1e-15);
             }
         }

@@ -40,7 +40,9 @@ impl Method {
             "ep-gauss" => Ok(Method::EpGauss),
             "gauss" => Ok(Method::Gauss),
             "box" => Ok(Method::Box),
-            _ => Err(Error::Config(format!("unknown method {s:?} (choose ep-gauss, gauss or box)"))),
+            _ => Err(Error::Config(format!(
+                "unknown method {s:?} (choose ep-gauss, gauss or box)"
+            ))),
         }
     }
 }
@@ -96,25 +98,43 @@ impl FilterParams {
     pub fn validate(&self) -> Result<()> {
         let bad = |m: String| Err(Error::Config(m));
         if !(1..=8).contains(&self.supersample) {
-            return bad(format!("--supersample must be 1..=8, got {}", self.supersample));
+            return bad(format!(
+                "--supersample must be 1..=8, got {}",
+                self.supersample
+            ));
         }
         if !(self.radius.is_finite() && self.radius >= 0.05 && self.radius <= 16.0) {
-            return bad(format!("--radius must be in 0.05..=16 output pixels, got {}", self.radius));
+            return bad(format!(
+                "--radius must be in 0.05..=16 output pixels, got {}",
+                self.radius
+            ));
         }
         if !(self.cutoff.is_finite() && (1.0..=6.0).contains(&self.cutoff)) {
-            return bad(format!("--cutoff must be in 1..=6 radii, got {}", self.cutoff));
+            return bad(format!(
+                "--cutoff must be in 1..=6 radii, got {}",
+                self.cutoff
+            ));
         }
         if !(self.tolerance.is_finite() && self.tolerance >= 0.0) {
-            return bad(format!("--tolerance must be a finite number >= 0, got {}", self.tolerance));
+            return bad(format!(
+                "--tolerance must be a finite number >= 0, got {}",
+                self.tolerance
+            ));
         }
-        if !(self.max_radius.is_finite() && self.max_radius >= self.radius && self.max_radius <= 128.0) {
+        if !(self.max_radius.is_finite()
+            && self.max_radius >= self.radius
+            && self.max_radius <= 128.0)
+        {
             return bad(format!(
                 "--max-radius must be between --radius ({}) and 128 output pixels, got {}",
                 self.radius, self.max_radius
             ));
         }
         if !(self.width_step.is_finite() && (0.005..=1.0).contains(&self.width_step)) {
-            return bad(format!("--width-step must be in 0.005..=1, got {}", self.width_step));
+            return bad(format!(
+                "--width-step must be in 0.005..=1, got {}",
+                self.width_step
+            ));
         }
         Ok(())
     }

@@ -122,6 +122,7 @@ pub struct Engine {
     out_done: usize,
     ledger: Ledger,
     counters: Counters,
+    digest: u64,
 }
 
 impl Engine {
@@ -137,7 +138,9 @@ impl Engine {
         params.validate()?;
         let nch = names.len();
         if nch == 0 || nch > MAX_CHANNELS || lum.len() != nch {
-            return Err(Error::Config(format!("1..={MAX_CHANNELS} channels with luminance weights needed, got {nch}")));
+            return Err(Error::Config(format!(
+                "1..={MAX_CHANNELS} channels with luminance weights needed, got {nch}"
+            )));
         }
         let s = grid.s;
         if grid.in_w == 0 || grid.in_h == 0 {
@@ -164,7 +167,14 @@ impl Engine {
             _ => Kernel1d::gaussian(s, params.radius, params.cutoff),
         };
         let ep = (params.method == Method::EpGauss).then(|| {
-            EpGauss::new(s, params.radius, params.max_radius, params.cutoff, params.tolerance, params.width_step)
+            EpGauss::new(
+                s,
+                params.radius,
+                params.max_radius,
+                params.cutoff,
+                params.tolerance,
+                params.width_step,
+            )
         });
         let halo = Halo {
             xbar_reach: ep.as_ref().map_or(0, |e| e.xbar_reach()),
@@ -201,6 +211,7 @@ impl Engine {
             out_done: 0,
             ledger: Ledger::new(nch),
             counters: Counters::default(),
+            digest: FNV_OFFSET,
         })
     }
 
@@ -224,6 +235,13 @@ impl Engine {
         &self.ledger
     }
 
+    /// FNV-1a digest of the bits of every unrounded (f64) output value, in
+    /// row-major order: equal digests mean bit-identical results before
+    /// rounding, which the f32 output alone cannot show.
+    pub fn digest(&self) -> u64 {
+        self.digest
+    }
+
     /// Channel names.
     pub fn names(&self) -> &[String] {
         &self.names
@@ -232,14 +250,22 @@ impl Engine {
     /// Most rows each window held at once: input, box luminance, horizontal
     /// pass, accumulator.
     pub fn high_water(&self) -> [usize; 4] {
-        [self.input.high_water(), self.ybox.high_water(), self.hpass.high_water(), self.acc.high_water()]
+        [
+            self.input.high_water(),
+            self.ybox.high_water(),
+            self.hpass.high_water(),
+            self.acc.high_water(),
+        ]
     }
 
     /// Feed the next strip of input rows; returns the output rows it finished.
     pub fn push(&mut self, strip: Strip) -> Result<Option<OutRows>> {
         let (nch, in_w) = (self.nch, self.grid.in_w);
         let row_len = nch * in_w;
-        if strip.y0 != self.rows_in || strip.data.len() != strip.rows * row_len || self.rows_in + strip.rows > self.grid.in_h {
+        if strip.y0 != self.rows_in
+            || strip.data.len() != strip.rows * row_len
+            || self.rows_in + strip.rows > self.grid.in_h
+        {
             return Err(Error::Config(format!(
                 "source delivered rows {}..{} but row {} was expected (source bug)",
                 strip.y0,
@@ -297,7 +323,11 @@ impl Engine {
         let yb = self.ybox.end();
         let all_in = yb == self.h;
         // 2. classification + horizontal pass
-        let cls_target = if all_in { self.h } else { yb.saturating_sub(self.halo.xbar_reach) };
+        let cls_target = if all_in {
+            self.h
+        } else {
+            yb.saturating_sub(self.halo.xbar_reach)
+        };
         if cls_target > self.cls_done {
             self.classify(self.cls_done, cls_target);
             self.cls_done = cls_target;
@@ -317,9 +347,15 @@ impl Engine {
         }
         // 4. output
         let h = self.h;
-        let by_cls = if self.cls_done == h { h } else { self.cls_done.saturating_sub(self.halo.base_reach) };
+        let by_cls = if self.cls_done == h {
+            h
+        } else {
+            self.cls_done.saturating_sub(self.halo.base_reach)
+        };
         let by_spread = match &self.ep {
-            Some(_) if self.spread_done < h => self.spread_done.saturating_sub(self.halo.spread_reach),
+            Some(_) if self.spread_done < h => {
+                self.spread_done.saturating_sub(self.halo.spread_reach)
+            }
             _ => h,
         };
         let out_target = by_cls.min(by_spread);
@@ -327,7 +363,8 @@ impl Engine {
         if out_target > self.out_done {
             out = Some(self.finish_rows(self.out_done, out_target)?);
             self.out_done = out_target;
-            self.hpass.evict_below(out_target.saturating_sub(self.halo.base_reach) * s);
+            self.hpass
+                .evict_below(out_target.saturating_sub(self.halo.base_reach) * s);
             self.acc.evict_below(out_target);
         }
         let keep = if self.ep.is_some() {
@@ -455,7 +492,9 @@ impl Engine {
     fn spread(&mut self, target: usize) {
         let Some(ep) = self.ep.as_ref() else { return };
         let (s, w, h, nch) = (self.grid.s, self.w, self.h, self.nch);
-        let split = self.pending.partition_point(|n| (n.j as usize) / s < target);
+        let split = self
+            .pending
+            .partition_point(|n| (n.j as usize) / s < target);
         let batch = &mut self.pending[..split];
         // Width search, one sample per task (each is independent of the rest).
         let view = YView { win: &self.ybox, h };
@@ -489,7 +528,14 @@ impl Engine {
             for c in 0..nch {
                 v[c] = n.v[c] as f64 * self.inv_s2;
             }
-            spreads.push(Spread { xs, xl, ys, yl, off, v });
+            spreads.push(Spread {
+                xs,
+                xl,
+                ys,
+                yl,
+                off,
+                v,
+            });
         }
         self.pending.drain(..split);
         // Accumulator rows down to the widest reach of this batch.
@@ -500,7 +546,9 @@ impl Engine {
         let (first, end) = (self.acc.first(), self.acc.end());
         let tile = self.tile;
         let ntiles = w.div_ceil(tile);
-        let mut tiles: Vec<Vec<&mut [f64]>> = (0..ntiles).map(|_| Vec::with_capacity(end - first)).collect();
+        let mut tiles: Vec<Vec<&mut [f64]>> = (0..ntiles)
+            .map(|_| Vec::with_capacity(end - first))
+            .collect();
         for row in self.acc.range_mut(first, end) {
             for (t, part) in row.chunks_mut(tile * nch).enumerate() {
                 tiles[t].push(part);
@@ -544,7 +592,7 @@ impl Engine {
         let inv = self.inv_s2;
         let precision = self.precision;
         let names = &self.names;
-        let sums: Vec<Result<(Sums, Sums)>> = data
+        let sums: Vec<Result<(Sums, Sums, u64)>> = data
             .par_chunks_mut(nch * w)
             .enumerate()
             .map_init(
@@ -554,6 +602,7 @@ impl Engine {
                     let j0 = base.gather(y, h, in_h, taps);
                     let mut raw = Sums::new(nch);
                     let mut rounded = Sums::new(nch);
+                    let mut digest = FNV_OFFSET;
                     for c in 0..nch {
                         tmp.iter_mut().for_each(|v| *v = 0.0);
                         for (t, &wt) in taps.iter().enumerate() {
@@ -577,23 +626,36 @@ impl Engine {
                                 ),
                             })?;
                             *d = r;
+                            digest = fnv(digest, val.to_bits());
                             raw.values[c].add(val);
                             raw.mass[c].add(val.abs());
                             rounded.values[c].add(r as f64);
                             rounded.mass[c].add((r as f64).abs());
                         }
                     }
-                    Ok((raw, rounded))
+                    Ok((raw, rounded, digest))
                 },
             )
             .collect();
         for s in sums {
-            let (raw, rounded) = s?;
+            let (raw, rounded, digest) = s?;
+            self.digest = fnv(self.digest, digest);
             self.ledger.output.merge(&raw);
             self.ledger.rounded.merge(&rounded);
         }
-        Ok(OutRows { y0: a, rows: b - a, data })
+        Ok(OutRows {
+            y0: a,
+            rows: b - a,
+            data,
+        })
     }
+}
+
+const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+
+#[inline]
+fn fnv(h: u64, word: u64) -> u64 {
+    (h ^ word).wrapping_mul(0x0000_0100_0000_01b3)
 }
 
 /// The hot loop of spreading: `dst[x][c] += coef[c] * wx[x]`.

@@ -51,7 +51,10 @@ pub struct Sums {
 impl Sums {
     /// Zeroed sums for `n` channels.
     pub fn new(n: usize) -> Self {
-        Sums { values: vec![CompensatedSum::default(); n], mass: vec![CompensatedSum::default(); n] }
+        Sums {
+            values: vec![CompensatedSum::default(); n],
+            mass: vec![CompensatedSum::default(); n],
+        }
     }
 
     /// Merge `other` (channel by channel).
@@ -109,7 +112,11 @@ fn rel(a: f64, b: f64, mass: f64) -> f64 {
 impl Ledger {
     /// A ledger for `n` channels.
     pub fn new(n: usize) -> Self {
-        Ledger { input: Sums::new(n), output: Sums::new(n), rounded: Sums::new(n) }
+        Ledger {
+            input: Sums::new(n),
+            output: Sums::new(n),
+            rounded: Sums::new(n),
+        }
     }
 
     /// The per-channel balance, `s2` = S².

@@ -85,7 +85,13 @@ pub struct PipelineConfig {
 
 impl Default for PipelineConfig {
     fn default() -> Self {
-        PipelineConfig { tile: 256, strip_rows: 96, threads: 0, precision: Precision::F32, cancel: None }
+        PipelineConfig {
+            tile: 256,
+            strip_rows: 96,
+            threads: 0,
+            precision: Precision::F32,
+            cancel: None,
+        }
     }
 }
 
@@ -113,6 +119,8 @@ pub struct RunStats {
     pub halo: Halo,
     /// Most rows each window held (input, luminance, horizontal pass, accumulator).
     pub window_rows: [usize; 4],
+    /// Digest of the unrounded output ([`Engine::digest`]).
+    pub digest: u64,
 }
 
 /// Progress callback: (output rows done, output rows in all).
@@ -141,9 +149,20 @@ pub fn run<S: Source, K: Sink>(
     }
     let pool = thread_pool(cfg.threads)?;
     let start = Instant::now();
-    let mut engine = Engine::new(job.grid, job.channels.clone(), job.luminance.clone(), params, cfg.tile, cfg.precision)?;
+    let mut engine = Engine::new(
+        job.grid,
+        job.channels.clone(),
+        job.luminance.clone(),
+        params,
+        cfg.tile,
+        cfg.precision,
+    )?;
     let total = job.grid.out_h();
-    let cancelled = || cfg.cancel.as_ref().is_some_and(|c| c.load(Ordering::Relaxed));
+    let cancelled = || {
+        cfg.cancel
+            .as_ref()
+            .is_some_and(|c| c.load(Ordering::Relaxed))
+    };
     let (strip_tx, strip_rx) = crossbeam_channel::bounded::<Result<Strip>>(2);
     let (row_tx, row_rx) = crossbeam_channel::bounded::<OutRows>(2);
     let strip_rows = cfg.strip_rows;
@@ -202,7 +221,9 @@ pub fn run<S: Source, K: Sink>(
         }
         drop(row_tx);
         let _ = reader.join();
-        let write_result = writer.join().unwrap_or_else(|_| Err(Error::Config("writer thread panicked".into())));
+        let write_result = writer
+            .join()
+            .unwrap_or_else(|_| Err(Error::Config("writer thread panicked".into())));
         engine_result.and(write_result)
     });
     result?;
@@ -213,6 +234,7 @@ pub fn run<S: Source, K: Sink>(
         seconds: start.elapsed().as_secs_f64(),
         halo: engine.halo(),
         window_rows: engine.high_water(),
+        digest: engine.digest(),
     })
 }
 
@@ -228,8 +250,17 @@ pub struct MemorySource {
 impl MemorySource {
     /// Wrap `data` of `rows` rows of `row_len` values.
     pub fn new(data: Vec<f32>, row_len: usize) -> Self {
-        let rows = if row_len == 0 { 0 } else { data.len() / row_len };
-        MemorySource { data, row_len, rows, next: 0 }
+        let rows = if row_len == 0 {
+            0
+        } else {
+            data.len() / row_len
+        };
+        MemorySource {
+            data,
+            row_len,
+            rows,
+            next: 0,
+        }
     }
 }
 
@@ -240,7 +271,11 @@ impl Source for MemorySource {
         }
         let n = max_rows.min(self.rows - self.next);
         let data = self.data[self.next * self.row_len..(self.next + n) * self.row_len].to_vec();
-        let strip = Strip { y0: self.next, rows: n, data };
+        let strip = Strip {
+            y0: self.next,
+            rows: n,
+            data,
+        };
         self.next += n;
         Ok(Some(strip))
     }
@@ -282,6 +317,13 @@ pub fn filter_in_memory(
 ) -> Result<(Vec<f32>, RunStats)> {
     let row_len = job.channels.len() * job.grid.in_w;
     let mut sink = MemorySink::default();
-    let stats = run(MemorySource::new(data, row_len), &mut sink, job, params, cfg, &|_, _| {})?;
+    let stats = run(
+        MemorySource::new(data, row_len),
+        &mut sink,
+        job,
+        params,
+        cfg,
+        &|_, _| {},
+    )?;
     Ok((sink.data, stats))
 }

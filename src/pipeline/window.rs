@@ -19,7 +19,13 @@ pub struct RowWindow<T> {
 impl<T: Copy> RowWindow<T> {
     /// An empty window whose next row is row 0.
     pub fn new(row_len: usize) -> Self {
-        RowWindow { first: 0, row_len, rows: VecDeque::new(), spare: Vec::new(), high_water: 0 }
+        RowWindow {
+            first: 0,
+            row_len,
+            rows: VecDeque::new(),
+            spare: Vec::new(),
+            high_water: 0,
+        }
     }
 
     /// Index of the first row held.
@@ -44,7 +50,10 @@ impl<T: Copy> RowWindow<T> {
         v.resize(self.row_len, fill);
         self.rows.push_back(v);
         self.high_water = self.high_water.max(self.rows.len());
-        self.rows.back_mut().map(|v| v.as_mut_slice()).unwrap_or(&mut [])
+        self.rows
+            .back_mut()
+            .map(|v| v.as_mut_slice())
+            .unwrap_or(&mut [])
     }
 
     /// Row `y` (absolute). Panics if not held: a halo bug, not an input error.
@@ -56,7 +65,10 @@ impl<T: Copy> RowWindow<T> {
     /// Mutable rows `a..b` (absolute), in order.
     pub fn range_mut(&mut self, a: usize, b: usize) -> Vec<&mut [T]> {
         let first = self.first;
-        self.rows.range_mut(a - first..b - first).map(|v| v.as_mut_slice()).collect()
+        self.rows
+            .range_mut(a - first..b - first)
+            .map(|v| v.as_mut_slice())
+            .collect()
     }
 
     /// Drop rows below `y`, keeping their buffers for reuse.

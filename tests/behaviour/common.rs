@@ -1,0 +1,264 @@
+//! Shared helpers of the behaviour tests: images, a reference filter written
+//! for clarity, and comparison tools.
+#![allow(dead_code)]
+
+use epfilt::filter::ep_gauss::{relation14, EpGauss};
+use epfilt::{filter_in_memory, FilterParams, Grid, Job, Method, PipelineConfig, RunStats};
+
+/// A small deterministic generator (SplitMix64).
+pub struct Rng(pub u64);
+impl Rng {
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    pub fn unit(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// A planar image `[row][channel][x]`.
+#[derive(Clone, Debug)]
+pub struct Img {
+    pub w: usize,
+    pub h: usize,
+    pub nch: usize,
+    pub data: Vec<f32>,
+}
+
+impl Img {
+    pub fn new(w: usize, h: usize, nch: usize, f: impl Fn(usize, usize, usize) -> f32) -> Self {
+        let mut data = Vec::with_capacity(w * h * nch);
+        for y in 0..h {
+            for c in 0..nch {
+                for x in 0..w {
+                    data.push(f(x, y, c));
+                }
+            }
+        }
+        Img { w, h, nch, data }
+    }
+    pub fn at(&self, x: usize, y: usize, c: usize) -> f32 {
+        self.data[(y * self.nch + c) * self.w + x]
+    }
+    pub fn set(&mut self, x: usize, y: usize, c: usize, v: f32) {
+        self.data[(y * self.nch + c) * self.w + x] = v;
+    }
+}
+
+pub fn rgb_job(w: usize, h: usize, s: usize) -> Job {
+    Job {
+        grid: Grid {
+            in_w: w,
+            in_h: h,
+            s,
+        },
+        channels: vec!["R".into(), "G".into(), "B".into()],
+        luminance: vec![0.2126, 0.7152, 0.0722],
+    }
+}
+
+pub fn job_for(img: &Img, s: usize) -> Job {
+    match img.nch {
+        3 => rgb_job(img.w, img.h, s),
+        4 => Job {
+            grid: Grid {
+                in_w: img.w,
+                in_h: img.h,
+                s,
+            },
+            channels: vec!["R".into(), "G".into(), "B".into(), "A".into()],
+            luminance: vec![0.2126, 0.7152, 0.0722, 0.0],
+        },
+        _ => Job {
+            grid: Grid {
+                in_w: img.w,
+                in_h: img.h,
+                s,
+            },
+            channels: vec!["Y".into()],
+            luminance: vec![1.0],
+        },
+    }
+}
+
+pub fn run(img: &Img, s: usize, params: &FilterParams, cfg: &PipelineConfig) -> (Img, RunStats) {
+    let job = job_for(img, s);
+    let (out, stats) = filter_in_memory(img.data.clone(), &job, params, cfg).expect("filter");
+    (
+        Img {
+            w: img.w / s,
+            h: img.h / s,
+            nch: img.nch,
+            data: out,
+        },
+        stats,
+    )
+}
+
+pub fn params(method: Method, s: usize) -> FilterParams {
+    FilterParams::new(method, s)
+}
+
+/// Smooth background with sparse fireflies (1e2..1e5 x), some forced onto the
+/// borders and corners.
+pub fn fireflies(w: usize, h: usize, nch: usize, frac: f64, seed: u64) -> Img {
+    let mut rng = Rng(seed);
+    let mut img = Img::new(w, h, nch, |x, y, c| {
+        0.5 + 0.3 * ((x as f32 * 0.07).sin() * (y as f32 * 0.05).cos()) + 0.05 * c as f32
+    });
+    let n = ((w * h) as f64 * frac).ceil() as usize;
+    let mut spots: Vec<(usize, usize)> = (0..n)
+        .map(|_| {
+            (
+                (rng.next_u64() % w as u64) as usize,
+                (rng.next_u64() % h as u64) as usize,
+            )
+        })
+        .collect();
+    spots.extend([
+        (0, 0),
+        (w - 1, 0),
+        (0, h - 1),
+        (w - 1, h - 1),
+        (w / 2, 0),
+        (0, h / 2),
+    ]);
+    for (x, y) in spots {
+        let mag = 10f64.powf(2.0 + 3.0 * rng.unit()) as f32;
+        for c in 0..nch {
+            let v = img.at(x, y, c);
+            img.set(x, y, c, v * mag);
+        }
+    }
+    img
+}
+
+/// Reference filter, written for clarity rather than speed: every sample is
+/// scattered, in row-major order, with its own 2-D weights into a full-size
+/// f64 image. Noise test and width choice use direct sums over the whole
+/// Gaussian footprint (no ring sums, no cheap path) and take the narrowest
+/// passing width on the ladder.
+pub fn reference(img: &Img, s: usize, p: &FilterParams, lum: &[f64]) -> (Vec<f64>, usize) {
+    let (w, h) = (img.w / s, img.h / s);
+    let mirror = |v: i64, n: usize| -> usize {
+        let n = n as i64;
+        let k = v.rem_euclid(2 * n);
+        (if k < n { k } else { 2 * n - 1 - k }) as usize
+    };
+    let lum_at =
+        |i: usize, j: usize| -> f64 { (0..img.nch).map(|c| lum[c] * img.at(i, j, c) as f64).sum() };
+    // Box luminance per output pixel.
+    let mut ybox = vec![0.0; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let mut acc = 0.0;
+            for j in y * s..(y + 1) * s {
+                for i in x * s..(x + 1) * s {
+                    acc += lum_at(i, j);
+                }
+            }
+            ybox[y * w + x] = acc / (s * s) as f64;
+        }
+    }
+    let ladder: Vec<f64> = if p.method == Method::EpGauss {
+        EpGauss::new(
+            s,
+            p.radius,
+            p.max_radius,
+            p.cutoff,
+            p.tolerance,
+            p.width_step,
+        )
+        .levels()
+        .iter()
+        .map(|l| l.rho)
+        .collect()
+    } else {
+        vec![p.radius]
+    };
+    // xbar and w0 of Relation 14 at radius rho around pixel (x, y).
+    let xbar_w0 = |x: usize, y: usize, rho: f64| -> (f64, f64) {
+        let lim = p.cutoff * rho;
+        let r = lim.floor() as i64;
+        let (mut num, mut den) = (0.0, 0.0);
+        for dy in -r..=r {
+            for dx in -r..=r {
+                let d2 = (dx * dx + dy * dy) as f64;
+                if d2 <= lim * lim {
+                    let g = (-d2 / (rho * rho)).exp();
+                    num += g * ybox[mirror(y as i64 + dy, h) * w + mirror(x as i64 + dx, w)];
+                    den += g;
+                }
+            }
+        }
+        (num / den, 1.0 / ((s * s) as f64 * den))
+    };
+    // 1-D weights of a sample at sub-offset a, radius rho (or the box).
+    let weights = |a: usize, rho: f64| -> (i64, Vec<f64>) {
+        if p.method == Method::Box {
+            return (0, vec![1.0]);
+        }
+        let delta = (a as f64 + 0.5) / s as f64 - 0.5;
+        let lim = p.cutoff * rho;
+        let r = (lim + 0.5).floor() as i64;
+        let mut v: Vec<f64> = (-r..=r)
+            .map(|d| {
+                let dist = d as f64 - delta;
+                if dist.abs() <= lim {
+                    (-(dist / rho).powi(2)).exp()
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let sum: f64 = v.iter().sum();
+        v.iter_mut().for_each(|x| *x /= sum);
+        (r, v)
+    };
+    let mut out = vec![0.0f64; w * h * img.nch];
+    let mut spread = 0;
+    for j in 0..img.h {
+        for i in 0..img.w {
+            let (px, py) = (i / s, j / s);
+            let mut rho = p.radius;
+            if p.method == Method::EpGauss {
+                let x0 = lum_at(i, j);
+                let (xb, w0) = xbar_w0(px, py, ladder[0]);
+                if x0 > 0.0 && xb > 0.0 && relation14(x0 / xb, w0) > p.tolerance {
+                    rho = *ladder.last().unwrap();
+                    for &r in &ladder[1..] {
+                        let (xb, w0) = xbar_w0(px, py, r);
+                        if xb > 0.0 && relation14(x0 / xb, w0) <= p.tolerance {
+                            rho = r;
+                            break;
+                        }
+                    }
+                    if rho > p.radius {
+                        spread += 1;
+                    }
+                }
+            }
+            let (rx, wx) = weights(i % s, rho);
+            let (ry, wy) = weights(j % s, rho);
+            for (ky, &a) in wy.iter().enumerate() {
+                let ty = mirror(py as i64 + ky as i64 - ry, h);
+                for (kx, &b) in wx.iter().enumerate() {
+                    let tx = mirror(px as i64 + kx as i64 - rx, w);
+                    for c in 0..img.nch {
+                        out[(ty * img.nch + c) * w + tx] +=
+                            img.at(i, j, c) as f64 * a * b / (s * s) as f64;
+                    }
+                }
+            }
+        }
+    }
+    (out, spread)
+}
+
+pub fn bits(img: &Img) -> Vec<u32> {
+    img.data.iter().map(|v| v.to_bits()).collect()
+}
