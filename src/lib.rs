@@ -30,16 +30,23 @@
 //! in and out), [`stats`] (reports), [`demo`].
 #![deny(missing_docs)]
 #![deny(unsafe_code)]
+// `!(x > 0.0)` is deliberate throughout: it is true for NaN, which must take
+// the safe branch.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod compare;
 pub mod demo;
 pub mod error;
 pub mod filter;
 pub mod geometry;
 pub mod io;
+pub mod job;
 pub mod pipeline;
 pub mod stats;
+pub mod synth;
 
 pub use error::{Error, Result};
 pub use filter::{FilterParams, Method};
 pub use geometry::Grid;
+pub use job::{filter_file, FilterJob};
 pub use pipeline::{filter_in_memory, Job, PipelineConfig, Precision, RunStats};

@@ -1,1 +1,209 @@
-fn main() {}
+//! The `epfilt` command: parse, call the library, report, exit.
+//! Errors print as one line (`epfilt: <file>: <cause>`) and exit with status 2.
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use anyhow::{Context, Result};
+use clap::{Args, Parser, Subcommand};
+use epfilt::io::{parse_compression, OutputSettings, PartSelect};
+use epfilt::{FilterJob, FilterParams, Method, PipelineConfig, Precision};
+use indicatif::{ProgressBar, ProgressStyle};
+
+#[derive(Parser)]
+#[command(
+    name = "epfilt",
+    version,
+    about = "Energy-preserving non-linear filters for HDR renders (Rushmeier & Ward 1994)"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Filter a super-sampled EXR into an output-resolution EXR.
+    Filter(Box<FilterArgs>),
+    /// Show an EXR's size, channels, compression and layout.
+    Info {
+        /// EXR file.
+        input: PathBuf,
+    },
+    /// Build a noisy scene with known truth, filter it with every method, and
+    /// print how close each comes to the truth.
+    Demo {
+        /// Folder for the demo's files.
+        #[arg(default_value = "demo-out")]
+        dir: PathBuf,
+        /// Output size in pixels, WxH.
+        #[arg(long, default_value = "320x200")]
+        size: String,
+    },
+}
+
+#[derive(Args)]
+struct FilterArgs {
+    /// Input EXR (super-sampled render).
+    input: PathBuf,
+    /// Output EXR (written to a temporary file, renamed on success).
+    output: PathBuf,
+    /// Method: ep-gauss (§5.2), gauss (linear foil) or box (S x S average).
+    #[arg(long, default_value = "ep-gauss")]
+    method: String,
+    /// Input samples per output pixel along each axis (1..=8).
+    #[arg(long, short = 's', default_value_t = 3)]
+    supersample: usize,
+    /// Relation 14 tolerance [default: 0.25 at S=3, 0.15 at S=4; 0.25*(3/S)^1.776 otherwise].
+    #[arg(long)]
+    tolerance: Option<f64>,
+    /// Base Gaussian radius in output pixels (weight exp(-(d/r)^2)).
+    #[arg(long, default_value_t = 0.6)]
+    radius: f64,
+    /// Largest Gaussian radius a noisy sample may get, in output pixels.
+    #[arg(long, default_value_t = 16.0)]
+    max_radius: f64,
+    /// Kernel cut-off in radii.
+    #[arg(long, default_value_t = 3.0)]
+    cutoff: f64,
+    /// Relative step of the ladder of widths the search picks from (its precision).
+    #[arg(long, default_value_t = 0.1)]
+    width_step: f64,
+    /// Output compression (none rle zips zip piz pxr24 b44 b44a dwaa dwab) [default: as input].
+    #[arg(long)]
+    compression: Option<String>,
+    /// Output sample type: f32 or f16 (f16 refuses values it cannot hold).
+    #[arg(long, default_value = "f32")]
+    pixel_type: String,
+    /// Part of a multi-part input, by name or index.
+    #[arg(long)]
+    part: Option<String>,
+    /// Accumulator tile width in output pixels (does not change the result).
+    #[arg(long, default_value_t = 256)]
+    tile: usize,
+    /// Input rows per strip (does not change the result).
+    #[arg(long, default_value_t = 96)]
+    strip_rows: usize,
+    /// Worker threads, 0 = one per core (does not change the result).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Write the summary as JSON to this file.
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// No progress bar and no summary.
+    #[arg(long, short = 'q')]
+    quiet: bool,
+}
+
+fn main() {
+    let cli = Cli::parse();
+    if let Err(e) = dispatch(cli) {
+        let chain: Vec<String> = e.chain().map(|c| c.to_string()).collect();
+        eprintln!("epfilt: {}", chain.join(": "));
+        std::process::exit(2);
+    }
+}
+
+fn dispatch(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Filter(args) => filter(*args),
+        Command::Info { input } => {
+            print!("{}", epfilt::io::info(&input)?);
+            Ok(())
+        }
+        Command::Demo { dir, size } => {
+            let (w, h) = parse_size(&size)?;
+            let text = epfilt::demo::run(&dir, w, h, &|line| eprintln!("{line}"))?;
+            print!("{text}");
+            Ok(())
+        }
+    }
+}
+
+fn parse_size(s: &str) -> Result<(usize, usize)> {
+    let (w, h) = s
+        .split_once('x')
+        .with_context(|| format!("size {s:?} is not WxH"))?;
+    Ok((w.parse().context("width")?, h.parse().context("height")?))
+}
+
+fn cancel_flag() -> Arc<AtomicBool> {
+    let flag = Arc::new(AtomicBool::new(false));
+    let f = flag.clone();
+    let _ = ctrlc::set_handler(move || f.store(true, Ordering::Relaxed));
+    flag
+}
+
+fn filter(a: FilterArgs) -> Result<()> {
+    let method = Method::parse(&a.method)?;
+    let mut params = FilterParams::new(method, a.supersample);
+    params.radius = a.radius;
+    params.max_radius = a.max_radius;
+    params.cutoff = a.cutoff;
+    params.width_step = a.width_step;
+    if let Some(t) = a.tolerance {
+        params.tolerance = t;
+    }
+    params.validate()?;
+    let precision = match a.pixel_type.as_str() {
+        "f32" | "float" => Precision::F32,
+        "f16" | "half" => Precision::F16,
+        other => anyhow::bail!("--pixel-type must be f32 or f16, not {other:?}"),
+    };
+    let compression = match &a.compression {
+        Some(c) => {
+            Some(parse_compression(c).with_context(|| format!("unknown --compression {c:?}"))?)
+        }
+        None => None,
+    };
+    let job = FilterJob {
+        input: a.input.clone(),
+        output: a.output.clone(),
+        params,
+        pipeline: PipelineConfig {
+            tile: a.tile,
+            strip_rows: a.strip_rows,
+            threads: a.threads,
+            precision,
+            cancel: Some(cancel_flag()),
+        },
+        output_settings: OutputSettings {
+            compression,
+            precision,
+        },
+        part: a.part.as_deref().map(PartSelect::parse),
+    };
+    let bar = if !a.quiet && std::io::stderr().is_terminal() {
+        let b = ProgressBar::new(0);
+        b.set_style(
+            ProgressStyle::with_template(
+                "{spinner} {wide_bar} {pos}/{len} rows  {elapsed_precise} eta {eta}",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        Some(b)
+    } else {
+        None
+    };
+    let progress = |done: usize, total: usize| {
+        if let Some(b) = &bar {
+            b.set_length(total as u64);
+            b.set_position(done as u64);
+        }
+    };
+    let report = epfilt::filter_file(&job, &progress);
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    let report = report?;
+    if let Some(path) = &a.report {
+        let json = serde_json::to_string_pretty(&report)?;
+        std::fs::write(path, json + "\n").with_context(|| format!("{}", path.display()))?;
+    }
+    if !a.quiet {
+        eprint!("{}", report.summary());
+    }
+    Ok(())
+}

@@ -1,1 +1,131 @@
-//! Reports.
+//! Reports: the summary a run prints and the JSON `--report` writes, and the
+//! process's memory high-water mark.
+
+use serde::Serialize;
+
+use crate::pipeline::ChannelLedger;
+
+/// Peak resident set size of this process in bytes (`VmHWM`), where the
+/// platform tells it.
+pub fn peak_rss_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+/// Summary of one filtering run (the `--report` JSON).
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    /// Input file.
+    pub input: String,
+    /// Output file.
+    pub output: String,
+    /// Method name.
+    pub method: String,
+    /// Super-sampling factor.
+    pub supersample: usize,
+    /// Input width (samples).
+    pub width: usize,
+    /// Input height (samples).
+    pub height: usize,
+    /// Output width (pixels).
+    pub out_width: usize,
+    /// Output height (pixels).
+    pub out_height: usize,
+    /// Filtered channels.
+    pub channels: Vec<String>,
+    /// Channels of the input that were not filtered nor written.
+    pub dropped_channels: Vec<String>,
+    /// Relation 14 tolerance (ep-gauss).
+    pub tolerance: f64,
+    /// Base radius (output pixels).
+    pub radius: f64,
+    /// Largest radius (output pixels).
+    pub max_radius: f64,
+    /// Wall time in seconds.
+    pub seconds: f64,
+    /// Input samples per second, in millions.
+    pub megapixels_per_second: f64,
+    /// Samples that failed the base noise test.
+    pub samples_noisy: u64,
+    /// Samples spread wider than the base kernel (m > 1).
+    pub samples_spread: u64,
+    /// Samples that still failed at the radius cap.
+    pub samples_capped: u64,
+    /// Per channel: sum of input values.
+    pub energy_in: Vec<f64>,
+    /// Per channel: sum of output values times S², before rounding.
+    pub energy_out: Vec<f64>,
+    /// Per channel: relative difference before rounding.
+    pub energy_rel_error: Vec<f64>,
+    /// Per channel: sum of output values as written, times S².
+    pub energy_out_rounded: Vec<f64>,
+    /// Per channel: relative difference after rounding.
+    pub energy_rel_error_rounded: Vec<f64>,
+    /// Digest of the unrounded output (equal digests: bit-identical results).
+    pub digest: String,
+    /// Tile width, strip height, threads used.
+    pub tile: usize,
+    /// Input rows per strip.
+    pub strip_rows: usize,
+    /// Worker threads.
+    pub threads: usize,
+    /// Peak resident set size, where the platform tells it.
+    pub peak_rss_bytes: Option<u64>,
+}
+
+impl Report {
+    /// Fill the ledger fields from per-channel ledger lines.
+    pub fn set_ledger(&mut self, ledger: &[ChannelLedger]) {
+        self.energy_in = ledger.iter().map(|l| l.energy_in).collect();
+        self.energy_out = ledger.iter().map(|l| l.energy_out).collect();
+        self.energy_rel_error = ledger.iter().map(|l| l.rel_error).collect();
+        self.energy_out_rounded = ledger.iter().map(|l| l.energy_out_rounded).collect();
+        self.energy_rel_error_rounded = ledger.iter().map(|l| l.rel_error_rounded).collect();
+    }
+
+    /// The human summary, a few lines.
+    pub fn summary(&self) -> String {
+        let mut s = format!(
+            "{} -> {}: {} S={} {}x{} -> {}x{}\n  {:.2} s, {:.1} Mpx/s; noisy {} spread {} capped {}\n",
+            self.input,
+            self.output,
+            self.method,
+            self.supersample,
+            self.width,
+            self.height,
+            self.out_width,
+            self.out_height,
+            self.seconds,
+            self.megapixels_per_second,
+            self.samples_noisy,
+            self.samples_spread,
+            self.samples_capped
+        );
+        s.push_str("  energy ledger   channel      in            out x S^2     rel.err     after rounding\n");
+        for (k, c) in self.channels.iter().enumerate() {
+            s.push_str(&format!(
+                "                  {:<8} {:>13.6e} {:>13.6e}  {:>9.2e}   {:>9.2e}\n",
+                c,
+                self.energy_in[k],
+                self.energy_out[k],
+                self.energy_rel_error[k],
+                self.energy_rel_error_rounded[k]
+            ));
+        }
+        if let Some(r) = self.peak_rss_bytes {
+            s.push_str(&format!(
+                "  peak RSS {:.1} MiB\n",
+                r as f64 / (1 << 20) as f64
+            ));
+        }
+        if !self.dropped_channels.is_empty() {
+            s.push_str(&format!(
+                "  not filtered (dropped): {}\n",
+                self.dropped_channels.join(", ")
+            ));
+        }
+        s
+    }
+}

@@ -103,15 +103,15 @@ impl EpGauss {
         width_step: f64,
     ) -> Self {
         let mut rhos = vec![radius];
-        let mut k = 1;
-        while max_radius > radius {
-            let rho = radius * (1.0 + width_step).powi(k);
-            if rho >= max_radius * (1.0 - 1e-12) {
-                rhos.push(max_radius);
-                break;
+        if max_radius > radius {
+            for k in 1.. {
+                let rho = radius * (1.0 + width_step).powi(k);
+                if rho >= max_radius * (1.0 - 1e-12) {
+                    rhos.push(max_radius);
+                    break;
+                }
+                rhos.push(rho);
             }
-            rhos.push(rho);
-            k += 1;
         }
         let max_shell = (cutoff * rhos[rhos.len() - 1]).floor() as usize;
         let max_d2 = 2 * max_shell * max_shell;
@@ -354,7 +354,7 @@ impl EpGauss {
             } else if hi.is_none() {
                 self.level_for(2.0 * self.levels[lo].rho)
             } else {
-                (lo + upper + 1) / 2
+                (lo + upper).div_ceil(2)
             };
             let cand = guess.clamp(lo + 1, upper);
             guesses += 1;
@@ -384,9 +384,7 @@ mod tests {
     use crate::geometry::mirror;
 
     struct Field {
-        w: usize,
         h: usize,
-        pad: usize,
         rows: Vec<Vec<f64>>,
     }
     impl Field {
@@ -398,7 +396,7 @@ mod tests {
                         .collect()
                 })
                 .collect();
-            Field { w, h, pad, rows }
+            Field { h, rows }
         }
     }
     impl LumRows for Field {

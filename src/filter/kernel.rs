@@ -176,6 +176,7 @@ impl ColumnTaps {
 }
 
 #[cfg(test)]
+#[allow(clippy::needless_range_loop)] // index loops mirror the maths
 mod tests {
     use super::*;
 

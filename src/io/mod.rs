@@ -1,1 +1,121 @@
-//! EXR input and output.
+//! EXR in and out: the only place that knows the `exr` crate.
+//!
+//! * [`reader`]: a memory-mapped file, its headers and offset tables, and a
+//!   [`crate::pipeline::Source`] that decodes blocks in increasing y, in
+//!   parallel, into planar f32 rows;
+//! * [`writer`]: a [`crate::pipeline::Sink`] that builds scan-line blocks,
+//!   compresses them in parallel and writes them with the chunk writer into a
+//!   temporary file in the destination directory.
+
+pub mod info;
+pub mod mapped;
+pub mod reader;
+pub mod writer;
+
+pub use info::info;
+pub use reader::{ExrInput, PartSelect};
+pub use writer::{ExrOutput, OutputSettings};
+
+use exr::meta::attribute::Chromaticities;
+use exr::prelude::Compression;
+
+/// Luminance weights (the Y row of the RGB→XYZ matrix) of a file's
+/// chromaticities; Rec. 709 / sRGB primaries when absent or degenerate.
+pub fn luminance_weights(ch: Option<&Chromaticities>) -> [f64; 3] {
+    const REC709: [f64; 3] = [0.2126, 0.7152, 0.0722];
+    let Some(c) = ch else { return REC709 };
+    let xy = |v: exr::math::Vec2<f32>| (v.0 as f64, v.1 as f64);
+    let prim = [xy(c.red), xy(c.green), xy(c.blue)];
+    let (xw, yw) = xy(c.white);
+    if prim.iter().any(|&(_, y)| y.abs() < 1e-9) || yw.abs() < 1e-9 {
+        return REC709;
+    }
+    // Columns: XYZ of each primary at Y = 1; solve M * S = white (Y = 1).
+    let m: Vec<[f64; 3]> = prim
+        .iter()
+        .map(|&(x, y)| [x / y, 1.0, (1.0 - x - y) / y])
+        .collect();
+    let w = [xw / yw, 1.0, (1.0 - xw - yw) / yw];
+    let a = [
+        [m[0][0], m[1][0], m[2][0]],
+        [m[0][1], m[1][1], m[2][1]],
+        [m[0][2], m[1][2], m[2][2]],
+    ];
+    let det = |a: &[[f64; 3]; 3]| {
+        a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
+            - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+            + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
+    };
+    let d = det(&a);
+    if d.abs() < 1e-12 {
+        return REC709;
+    }
+    let mut s = [0.0; 3];
+    for (k, sk) in s.iter_mut().enumerate() {
+        let mut ak = a;
+        for r in 0..3 {
+            ak[r][k] = w[r];
+        }
+        *sk = det(&ak) / d;
+    }
+    if s.iter().all(|v| v.is_finite()) {
+        s
+    } else {
+        REC709
+    }
+}
+
+/// A compression's name as on the command line.
+pub fn compression_name(c: Compression) -> String {
+    match c {
+        Compression::Uncompressed => "none".into(),
+        Compression::RLE => "rle".into(),
+        Compression::ZIP1 => "zips".into(),
+        Compression::ZIP16 => "zip".into(),
+        Compression::PIZ => "piz".into(),
+        Compression::PXR24 => "pxr24".into(),
+        Compression::B44 => "b44".into(),
+        Compression::B44A => "b44a".into(),
+        Compression::DWAA(_) => "dwaa".into(),
+        Compression::DWAB(_) => "dwab".into(),
+        other => format!("{other:?}").to_lowercase(),
+    }
+}
+
+/// Parse a compression name (`none rle zips zip piz pxr24 b44 b44a dwaa dwab`).
+pub fn parse_compression(s: &str) -> Option<Compression> {
+    Some(match s.to_ascii_lowercase().as_str() {
+        "none" | "uncompressed" => Compression::Uncompressed,
+        "rle" => Compression::RLE,
+        "zips" | "zip1" => Compression::ZIP1,
+        "zip" | "zip16" => Compression::ZIP16,
+        "piz" => Compression::PIZ,
+        "pxr24" => Compression::PXR24,
+        "b44" => Compression::B44,
+        "b44a" => Compression::B44A,
+        "dwaa" => Compression::DWAA(None),
+        "dwab" => Compression::DWAB(None),
+        _ => return None,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use exr::math::Vec2;
+
+    #[test]
+    fn rec709_chromaticities_give_rec709_weights() {
+        let c = Chromaticities {
+            red: Vec2(0.64, 0.33),
+            green: Vec2(0.30, 0.60),
+            blue: Vec2(0.15, 0.06),
+            white: Vec2(0.3127, 0.3290),
+        };
+        let w = luminance_weights(Some(&c));
+        for (a, b) in w.iter().zip([0.2126, 0.7152, 0.0722]) {
+            assert!((a - b).abs() < 2e-4, "{w:?}");
+        }
+        assert_eq!(luminance_weights(None), [0.2126, 0.7152, 0.0722]);
+    }
+}

@@ -525,8 +525,8 @@ impl Engine {
             let yl = tmp.len();
             self.arena.extend_from_slice(&tmp);
             let mut v = [0.0; MAX_CHANNELS];
-            for c in 0..nch {
-                v[c] = n.v[c] as f64 * self.inv_s2;
+            for (d, &x) in v.iter_mut().zip(&n.v).take(nch) {
+                *d = x as f64 * self.inv_s2;
             }
             spreads.push(Spread {
                 xs,
@@ -567,10 +567,7 @@ impl Engine {
                 let wy = &arena[sp.off + sp.xl..sp.off + sp.xl + sp.yl];
                 for (dy, &wyv) in wy.iter().enumerate() {
                     let row = &mut rows[sp.ys + dy - first];
-                    let mut coef = [0.0; MAX_CHANNELS];
-                    for c in 0..nch {
-                        coef[c] = sp.v[c] * wyv;
-                    }
+                    let coef = sp.v.map(|v| v * wyv);
                     let dst = &mut row[(cx0 - x0) * nch..(cx1 - x0) * nch];
                     match nch {
                         3 => scatter_row::<3>(dst, wx, &coef),

@@ -250,11 +250,7 @@ pub struct MemorySource {
 impl MemorySource {
     /// Wrap `data` of `rows` rows of `row_len` values.
     pub fn new(data: Vec<f32>, row_len: usize) -> Self {
-        let rows = if row_len == 0 {
-            0
-        } else {
-            data.len() / row_len
-        };
+        let rows = data.len().checked_div(row_len).unwrap_or(0);
         MemorySource {
             data,
             row_len,

@@ -1,0 +1,91 @@
+//! `epfilt info`: what an EXR file holds.
+
+use super::{compression_name, luminance_weights};
+
+/// A human description of an EXR file: parts, sizes, channels, compression,
+/// layout.
+pub fn info(path: &std::path::Path) -> crate::Result<String> {
+    use std::fmt::Write;
+    let meta = exr::meta::MetaData::read_from_file(path, false)
+        .map_err(|e| crate::Error::from_exr(path, e, "header"))?;
+    let mut s = String::new();
+    let _ = writeln!(s, "{}: {} part(s)", path.display(), meta.headers.len());
+    for (i, h) in meta.headers.iter().enumerate() {
+        let dw = h.data_window();
+        let disp = h.shared_attributes.display_window;
+        let layout = match h.blocks {
+            exr::meta::BlockDescription::ScanLines => {
+                format!(
+                    "scan lines ({} per block)",
+                    h.compression.scan_lines_per_block()
+                )
+            }
+            exr::meta::BlockDescription::Tiles(t) => {
+                format!(
+                    "tiles {}x{} {:?}",
+                    t.tile_size.0, t.tile_size.1, t.level_mode
+                )
+            }
+        };
+        let _ =
+            writeln!(
+            s,
+            "part {i}{}: {}x{} data window ({}, {})..({}, {}), display window ({}, {})..({}, {})",
+            h.own_attributes.layer_name.as_ref().map(|n| format!(" {n:?}")).unwrap_or_default(),
+            dw.size.0,
+            dw.size.1,
+            dw.position.0,
+            dw.position.1,
+            dw.position.0 + dw.size.0 as i32 - 1,
+            dw.position.1 + dw.size.1 as i32 - 1,
+            disp.position.0,
+            disp.position.1,
+            disp.position.0 + disp.size.0 as i32 - 1,
+            disp.position.1 + disp.size.1 as i32 - 1,
+        );
+        let _ = writeln!(
+            s,
+            "  compression {}, {layout}, line order {:?}{}",
+            compression_name(h.compression),
+            h.line_order,
+            if h.deep { ", DEEP" } else { "" }
+        );
+        let chans: Vec<String> = h
+            .channels
+            .list
+            .iter()
+            .map(|c| {
+                let t = match c.sample_type {
+                    exr::meta::attribute::SampleType::F16 => "half",
+                    exr::meta::attribute::SampleType::F32 => "float",
+                    exr::meta::attribute::SampleType::U32 => "uint",
+                };
+                if c.sampling.0 != 1 || c.sampling.1 != 1 {
+                    format!(
+                        "{} {t} ({}x{} subsampled)",
+                        c.name, c.sampling.0, c.sampling.1
+                    )
+                } else {
+                    format!("{} {t}", c.name)
+                }
+            })
+            .collect();
+        let _ = writeln!(s, "  channels: {}", chans.join(", "));
+        let ch = h.shared_attributes.chromaticities.as_ref();
+        let lw = luminance_weights(ch);
+        let _ = writeln!(
+            s,
+            "  luminance Y = {:.4} R + {:.4} G + {:.4} B ({}), pixel aspect {}",
+            lw[0],
+            lw[1],
+            lw[2],
+            if ch.is_some() {
+                "from chromaticities"
+            } else {
+                "Rec. 709 primaries"
+            },
+            h.shared_attributes.pixel_aspect
+        );
+    }
+    Ok(s)
+}

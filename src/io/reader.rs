@@ -1,0 +1,563 @@
+//! Reading an EXR as a stream of planar f32 rows.
+//!
+//! The headers and offset tables are parsed from the memory map with the `exr`
+//! crate's meta-data API; then each block row (a scan-line block, or one row of
+//! tiles of the full-resolution level) is read chunk by chunk from its offset,
+//! checked against where it should be, and decompressed in parallel on the
+//! shared pool. Blocks are visited in increasing y whatever the file's line
+//! order. Consumed byte ranges are released from the page cache.
+
+use std::path::{Path, PathBuf};
+
+use exr::block::chunk::{Chunk, TileCoordinates};
+use exr::block::UncompressedBlock;
+use exr::io::{PeekRead, Tracking};
+use exr::meta::attribute::SampleType;
+use exr::meta::header::Header;
+use exr::meta::{magic_number, MetaData, Requirements};
+use exr::prelude::Compression;
+use rayon::prelude::*;
+
+use super::mapped::MappedFile;
+use crate::error::{Error, Result};
+use crate::pipeline::{Source, Strip};
+
+/// Which part of a multi-part file to read.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum PartSelect {
+    /// By index (0-based).
+    Index(usize),
+    /// By the part's `name` attribute.
+    Name(String),
+}
+
+impl PartSelect {
+    /// Parse `--part`: a number is an index, anything else a name.
+    pub fn parse(s: &str) -> Self {
+        s.parse()
+            .map(PartSelect::Index)
+            .unwrap_or_else(|_| PartSelect::Name(s.to_string()))
+    }
+}
+
+#[derive(Clone, Debug)]
+struct BlockRow {
+    y0: usize,
+    y1: usize,
+    /// (offset, expected tile coordinates) of each chunk, left to right.
+    chunks: Vec<(usize, TileCoordinates)>,
+}
+
+#[derive(Clone, Debug)]
+struct Selected {
+    name: String,
+    /// Index in the header's channel list.
+    index: usize,
+}
+
+/// An opened input file: headers parsed and checked, channels chosen.
+#[derive(Debug)]
+pub struct ExrInput {
+    path: PathBuf,
+    map: MappedFile,
+    meta: MetaData,
+    part: usize,
+    selected: Vec<Selected>,
+    rows: Vec<BlockRow>,
+    dropped: Vec<String>,
+}
+
+fn invalid(path: &Path, reason: impl Into<String>) -> Error {
+    Error::InvalidFile {
+        path: path.into(),
+        reason: reason.into(),
+    }
+}
+
+fn unsupported(path: &Path, reason: impl Into<String>) -> Error {
+    Error::Unsupported {
+        path: path.into(),
+        reason: reason.into(),
+    }
+}
+
+fn bytes_of(t: SampleType) -> usize {
+    match t {
+        SampleType::F16 => 2,
+        SampleType::F32 | SampleType::U32 => 4,
+    }
+}
+
+fn part_name(h: &Header) -> String {
+    h.own_attributes
+        .layer_name
+        .as_ref()
+        .map(|t| t.to_string())
+        .unwrap_or_default()
+}
+
+impl ExrInput {
+    /// Open and check `path`; `part` chooses a part of a multi-part file.
+    pub fn open(path: &Path, part: Option<&PartSelect>) -> Result<Self> {
+        let map = MappedFile::open(path)?;
+        let bytes = map.bytes();
+        let exr_err = |e| Error::from_exr(path, e, "");
+        let mut read = PeekRead::new(Tracking::new(bytes));
+        if !magic_number::is_exr(&mut read).map_err(exr_err)? {
+            return Err(invalid(path, "not an OpenEXR file (no EXR magic number)"));
+        }
+        let requirements =
+            Requirements::read(&mut read).map_err(|e| Error::from_exr(path, e, "version field"))?;
+        requirements
+            .validate()
+            .map_err(|e| Error::from_exr(path, e, "version field"))?;
+        let headers = Header::read_all(&mut read, &requirements, false)
+            .map_err(|e| Error::from_exr(path, e, "header"))?;
+        MetaData::validate(&headers, false).map_err(|e| Error::from_exr(path, e, "header"))?;
+        let meta = MetaData {
+            requirements,
+            headers,
+        };
+
+        // Choose the part before reading offset tables (their size is checked).
+        let part = match (part, meta.headers.len()) {
+            (Some(PartSelect::Index(i)), n) if *i < n => *i,
+            (Some(PartSelect::Index(i)), n) => {
+                return Err(Error::Config(format!(
+                    "{}: --part {i} but the file has {n} part(s)",
+                    path.display()
+                )))
+            }
+            (Some(PartSelect::Name(name)), _) => meta
+                .headers
+                .iter()
+                .position(|h| &part_name(h) == name)
+                .ok_or_else(|| {
+                    let names: Vec<String> = meta.headers.iter().map(part_name).collect();
+                    Error::Config(format!(
+                        "{}: no part named {name:?} (parts: {})",
+                        path.display(),
+                        names.join(", ")
+                    ))
+                })?,
+            (None, 1) => 0,
+            (None, n) => {
+                let names: Vec<String> = meta
+                    .headers
+                    .iter()
+                    .enumerate()
+                    .map(|(i, h)| format!("{i}:{:?}", part_name(h)))
+                    .collect();
+                return Err(unsupported(
+                    path,
+                    format!(
+                        "multi-part file with {n} parts ({}): choose one with --part NAME|INDEX",
+                        names.join(", ")
+                    ),
+                ));
+            }
+        };
+        // Offset tables: their total size must fit in the file.
+        let table_bytes: usize = meta
+            .headers
+            .iter()
+            .map(|h| h.chunk_count.saturating_mul(8))
+            .sum();
+        if read.byte_position().saturating_add(table_bytes) > bytes.len() {
+            return Err(invalid(
+                path,
+                "truncated: the chunk offset table does not fit in the file",
+            ));
+        }
+        let tables = MetaData::read_offset_tables(&mut read, &meta.headers)
+            .map_err(|e| Error::from_exr(path, e, "offset table"))?;
+        let chunks_start = read.byte_position();
+
+        let header = &meta.headers[part];
+        if header.deep {
+            return Err(unsupported(
+                path,
+                "deep data (deepscanline/deeptile) cannot be filtered",
+            ));
+        }
+        if let Some(c) = header
+            .channels
+            .list
+            .iter()
+            .find(|c| c.sampling.0 != 1 || c.sampling.1 != 1)
+        {
+            return Err(unsupported(
+                path,
+                format!(
+                    "channel {} is subsampled {}x{} (luminance/chroma images are not supported)",
+                    c.name, c.sampling.0, c.sampling.1
+                ),
+            ));
+        }
+        if matches!(
+            header.compression,
+            Compression::HTJ2K32 | Compression::HTJ2K256
+        ) {
+            return Err(unsupported(
+                path,
+                format!("{:?} compression", header.compression),
+            ));
+        }
+        let (selected, dropped) = choose_channels(path, header)?;
+
+        // Level-0 block rows in increasing y, with checked offsets.
+        let table = &tables[part];
+        let mut rows: Vec<BlockRow> = Vec::new();
+        for (index, tile) in header.blocks_increasing_y_order().enumerate() {
+            if tile.location.level_index != exr::math::Vec2(0, 0) {
+                continue;
+            }
+            let bounds = header
+                .get_absolute_block_pixel_coordinates(tile.location)
+                .map_err(|e| Error::from_exr(path, e, "block layout"))?;
+            let offset = *table
+                .get(index)
+                .ok_or_else(|| invalid(path, "offset table is shorter than the image"))?;
+            let offset = usize::try_from(offset).unwrap_or(usize::MAX);
+            if offset < chunks_start || offset >= bytes.len() {
+                return Err(invalid(
+                    path,
+                    format!("offset table entry {index} points to byte {offset}, outside the pixel data"),
+                ));
+            }
+            let y0 = bounds.position.1.max(0) as usize;
+            let y1 = y0 + bounds.size.1;
+            match rows.last_mut() {
+                Some(r) if r.y0 == y0 => r.chunks.push((offset, tile.location)),
+                _ => rows.push(BlockRow {
+                    y0,
+                    y1,
+                    chunks: vec![(offset, tile.location)],
+                }),
+            }
+        }
+        if rows.last().map(|r| r.y1) != Some(header.layer_size.1) {
+            return Err(invalid(
+                path,
+                "the block layout does not cover the data window",
+            ));
+        }
+        Ok(ExrInput {
+            path: path.into(),
+            map,
+            meta,
+            part,
+            selected,
+            rows,
+            dropped,
+        })
+    }
+
+    /// The file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The chosen part's header.
+    pub fn header(&self) -> &Header {
+        &self.meta.headers[self.part]
+    }
+
+    /// Width and height of the data window.
+    pub fn size(&self) -> (usize, usize) {
+        let s = self.header().layer_size;
+        (s.0, s.1)
+    }
+
+    /// Names of the channels that will be filtered, in strip order.
+    pub fn channels(&self) -> Vec<String> {
+        self.selected.iter().map(|s| s.name.clone()).collect()
+    }
+
+    /// Channels of the file that are not filtered (and not written).
+    pub fn dropped_channels(&self) -> &[String] {
+        &self.dropped
+    }
+
+    /// Luminance weight of each filtered channel.
+    pub fn luminance(&self) -> Vec<f64> {
+        let rgb = super::luminance_weights(self.header().shared_attributes.chromaticities.as_ref());
+        self.selected
+            .iter()
+            .map(|s| match base_name(&s.name) {
+                "R" => rgb[0],
+                "G" => rgb[1],
+                "B" => rgb[2],
+                "Y" => 1.0,
+                _ => 0.0,
+            })
+            .collect()
+    }
+
+    /// A source of rows over this file.
+    pub fn source(&self) -> ExrSource<'_> {
+        let (w, _) = self.size();
+        ExrSource {
+            input: self,
+            next_row: 0,
+            buf: Vec::new(),
+            buf_y0: 0,
+            row_len: self.selected.len() * w,
+        }
+    }
+
+    fn decode_row(&self, row: &BlockRow) -> Result<Vec<Decoded>> {
+        row.chunks
+            .par_iter()
+            .map(|&(offset, expected)| self.decode_chunk(offset, expected))
+            .collect()
+    }
+
+    /// Read, check and decompress one chunk; returns (x0, width, planar rows
+    /// `[line][channel][x]`, consumed byte range).
+    fn decode_chunk(&self, offset: usize, expected: TileCoordinates) -> Result<Decoded> {
+        let path = &self.path;
+        let bytes = self.map.bytes();
+        let header = self.header();
+        let mut slice = &bytes[offset..];
+        let chunk = Chunk::read(&mut slice, &self.meta)
+            .map_err(|e| Error::from_exr(path, e, &format!("chunk at byte {offset}")))?;
+        let end = bytes.len() - slice.len();
+        if chunk.layer_index != self.part {
+            return Err(invalid(
+                path,
+                format!(
+                    "chunk at byte {offset} belongs to part {}",
+                    chunk.layer_index
+                ),
+            ));
+        }
+        let found = header
+            .get_block_data_indices(&chunk.compressed_block)
+            .map_err(|e| Error::from_exr(path, e, &format!("chunk at byte {offset}")))?;
+        if found != expected {
+            return Err(invalid(
+                path,
+                format!(
+                    "chunk at byte {offset} holds block {:?} but the offset table says {:?}",
+                    found.tile_index, expected.tile_index
+                ),
+            ));
+        }
+        let block = UncompressedBlock::decompress_chunk(chunk, &self.meta, false)
+            .map_err(|e| Error::from_exr(path, e, &format!("block at byte {offset}")))?;
+        let (bw, bh) = (block.index.pixel_size.0, block.index.pixel_size.1);
+        let channels = &header.channels.list;
+        let line_bytes: usize = channels.iter().map(|c| bw * bytes_of(c.sample_type)).sum();
+        if block.data.len() != line_bytes * bh {
+            return Err(invalid(
+                path,
+                format!("block at byte {offset} decodes to the wrong size"),
+            ));
+        }
+        let mut ch_off = Vec::with_capacity(channels.len());
+        let mut acc = 0;
+        for c in channels.iter() {
+            ch_off.push(acc);
+            acc += bw * bytes_of(c.sample_type);
+        }
+        let n = self.selected.len();
+        let mut out = vec![0.0f32; bh * n * bw];
+        for line in 0..bh {
+            for (k, sel) in self.selected.iter().enumerate() {
+                let t = channels[sel.index].sample_type;
+                let src = &block.data[line * line_bytes + ch_off[sel.index]..][..bw * bytes_of(t)];
+                let dst = &mut out[(line * n + k) * bw..][..bw];
+                convert(t, src, dst);
+            }
+        }
+        Ok(Decoded {
+            x0: block.index.pixel_position.0,
+            width: bw,
+            rows: out,
+            bytes: (offset, end),
+        })
+    }
+}
+
+/// One decompressed block: its first column, width, planar rows
+/// `[line][channel][x]` and the byte range it came from.
+struct Decoded {
+    x0: usize,
+    width: usize,
+    rows: Vec<f32>,
+    bytes: (usize, usize),
+}
+
+fn convert(t: SampleType, src: &[u8], dst: &mut [f32]) {
+    match t {
+        SampleType::F16 => {
+            for (d, b) in dst.iter_mut().zip(src.chunks_exact(2)) {
+                *d = half::f16::from_bits(u16::from_ne_bytes([b[0], b[1]])).to_f32();
+            }
+        }
+        SampleType::F32 => {
+            for (d, b) in dst.iter_mut().zip(src.chunks_exact(4)) {
+                *d = f32::from_ne_bytes([b[0], b[1], b[2], b[3]]);
+            }
+        }
+        SampleType::U32 => {
+            for (d, b) in dst.iter_mut().zip(src.chunks_exact(4)) {
+                *d = u32::from_ne_bytes([b[0], b[1], b[2], b[3]]) as f32;
+            }
+        }
+    }
+}
+
+fn base_name(name: &str) -> &str {
+    name.rsplit('.').next().unwrap_or(name)
+}
+
+/// R, G, B (+ A), or Y (+ A), unlayered names first, then one layer that has
+/// them; everything else is dropped (and listed).
+fn choose_channels(path: &Path, header: &Header) -> Result<(Vec<Selected>, Vec<String>)> {
+    let names: Vec<String> = header
+        .channels
+        .list
+        .iter()
+        .map(|c| c.name.to_string())
+        .collect();
+    let find = |n: &str| names.iter().position(|x| x == n);
+    let mut layers: Vec<String> = vec![String::new()];
+    for n in &names {
+        if let Some((layer, _)) = n.rsplit_once('.') {
+            let l = format!("{layer}.");
+            if !layers.contains(&l) {
+                layers.push(l);
+            }
+        }
+    }
+    for layer in &layers {
+        let get = |c: &str| find(&format!("{layer}{c}"));
+        let wanted: Option<Vec<&str>> = match (get("R"), get("G"), get("B"), get("Y")) {
+            (Some(_), Some(_), Some(_), _) => Some(vec!["R", "G", "B"]),
+            (_, _, _, Some(_)) => Some(vec!["Y"]),
+            _ => None,
+        };
+        if let Some(mut wanted) = wanted {
+            if get("A").is_some() {
+                wanted.push("A");
+            }
+            if wanted == ["Y"] || wanted == ["Y", "A"] {
+                if let (Some(_), Some(_)) = (get("RY"), get("BY")) {
+                    return Err(unsupported(
+                        path,
+                        "luminance/chroma (Y, RY, BY) images are not supported",
+                    ));
+                }
+            }
+            let selected: Vec<Selected> = wanted
+                .iter()
+                .map(|c| {
+                    let name = format!("{layer}{c}");
+                    Selected {
+                        index: find(&name).unwrap_or(0),
+                        name,
+                    }
+                })
+                .collect();
+            let dropped = names
+                .iter()
+                .filter(|n| !selected.iter().any(|s| &s.name == *n))
+                .cloned()
+                .collect();
+            return Ok((selected, dropped));
+        }
+    }
+    Err(unsupported(
+        path,
+        format!(
+            "no colour channels to filter (need R,G,B or Y; the file has: {})",
+            names.join(", ")
+        ),
+    ))
+}
+
+/// A [`Source`] over an [`ExrInput`].
+pub struct ExrSource<'a> {
+    input: &'a ExrInput,
+    next_row: usize,
+    buf: Vec<f32>,
+    buf_y0: usize,
+    row_len: usize,
+}
+
+impl Source for ExrSource<'_> {
+    fn next_strip(&mut self, max_rows: usize) -> Result<Option<Strip>> {
+        let (w, h) = self.input.size();
+        let nch = self.input.selected.len();
+        let buffered = |s: &Self| s.buf.len() / s.row_len;
+        // Decode whole block rows until the strip is covered; at least two
+        // chunks per worker at a time so small blocks still decode in parallel.
+        while buffered(self) < max_rows && self.next_row < self.input.rows.len() {
+            let want_chunks = 2 * rayon::current_num_threads();
+            let mut end = self.next_row;
+            let mut chunks = 0;
+            let mut rows = 0;
+            while end < self.input.rows.len()
+                && (chunks < want_chunks || buffered(self) + rows < max_rows)
+            {
+                chunks += self.input.rows[end].chunks.len();
+                rows += self.input.rows[end].y1 - self.input.rows[end].y0;
+                end += 1;
+            }
+            let batch = &self.input.rows[self.next_row..end];
+            let decoded: Vec<Result<Vec<_>>> =
+                batch.par_iter().map(|r| self.input.decode_row(r)).collect();
+            let mut span = (usize::MAX, 0usize);
+            for (row, blocks) in batch.iter().zip(decoded) {
+                let blocks = blocks?;
+                let lines = row.y1 - row.y0;
+                let base = self.buf.len();
+                self.buf.resize(base + lines * self.row_len, 0.0);
+                for Decoded {
+                    x0,
+                    width: bw,
+                    rows: data,
+                    bytes: (a, b),
+                } in blocks
+                {
+                    span = (span.0.min(a), span.1.max(b));
+                    if x0 + bw > w {
+                        return Err(invalid(
+                            &self.input.path,
+                            "a block lies outside the data window",
+                        ));
+                    }
+                    for line in 0..lines {
+                        for k in 0..nch {
+                            let src = &data[(line * nch + k) * bw..][..bw];
+                            let at = base + line * self.row_len + k * w + x0;
+                            self.buf[at..at + bw].copy_from_slice(src);
+                        }
+                    }
+                }
+            }
+            if span.0 < span.1 {
+                self.input.map.release(span.0, span.1);
+            }
+            self.next_row = end;
+        }
+        let n = max_rows.min(buffered(self));
+        if n == 0 {
+            return if self.buf_y0 >= h {
+                Ok(None)
+            } else {
+                Err(invalid(&self.input.path, "missing rows"))
+            };
+        }
+        let data: Vec<f32> = self.buf.drain(..n * self.row_len).collect();
+        let strip = Strip {
+            y0: self.buf_y0,
+            rows: n,
+            data,
+        };
+        self.buf_y0 += n;
+        Ok(Some(strip))
+    }
+}

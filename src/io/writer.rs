@@ -1,0 +1,318 @@
+//! Writing the filtered image: scan-line blocks compressed in parallel on the
+//! shared pool, written in increasing y by the `exr` chunk writer on its own
+//! thread, into a temporary file beside the destination. The file is renamed
+//! into place only by [`ExrOutput::commit`], after the caller has checked the
+//! energy ledger; dropped uncommitted, it is removed.
+
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+use std::thread::JoinHandle;
+
+use exr::block::chunk::Chunk;
+use exr::block::writer::ChunksWriter;
+use exr::block::{BlockIndex, UncompressedBlock};
+use exr::math::Vec2;
+use exr::meta::attribute::{ChannelDescription, ChannelList, IntegerBounds, LineOrder, SampleType};
+use exr::meta::header::Header;
+use exr::meta::BlockDescription;
+use exr::prelude::{Compression, SmallVec, Text};
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+use crate::pipeline::{Precision, Sink};
+
+/// What the output file looks like.
+#[derive(Clone, Debug)]
+pub struct OutputSettings {
+    /// Compression (None: same as the input).
+    pub compression: Option<Compression>,
+    /// Sample type.
+    pub precision: Precision,
+}
+
+/// An output file being written.
+pub struct ExrOutput {
+    dest: PathBuf,
+    temp: Option<tempfile::TempPath>,
+    headers: SmallVec<[Header; 3]>,
+    w: usize,
+    nch: usize,
+    /// For each header channel (sorted by name), its index in our rows.
+    order: Vec<usize>,
+    lines: usize,
+    precision: Precision,
+    pending: Vec<f32>,
+    pending_y0: usize,
+    tx: Option<crossbeam_channel::Sender<(usize, Chunk)>>,
+    thread: Option<JoinHandle<Result<()>>>,
+}
+
+fn floor_div(a: i32, s: i32) -> i32 {
+    a.div_euclid(s)
+}
+
+impl ExrOutput {
+    /// Start writing `dest` (through a temporary file in its directory) with
+    /// the input's header attributes that still hold.
+    pub fn create(
+        dest: &Path,
+        input_header: &Header,
+        s: usize,
+        channels: &[String],
+        settings: &OutputSettings,
+    ) -> Result<Self> {
+        let (w, h) = (input_header.layer_size.0 / s, input_header.layer_size.1 / s);
+        let compression = settings.compression.unwrap_or(input_header.compression);
+        let mut header = Self::fresh_header(w, h, channels, compression, settings.precision);
+        let si = s as i32;
+        // Keep what still holds: every attribute but the geometry we change and
+        // the preview (a picture of the input).
+        let mut own = input_header.own_attributes.clone();
+        let pos = own.layer_position;
+        own.layer_position = Vec2(floor_div(pos.0, si), floor_div(pos.1, si));
+        own.preview = None;
+        own.original_data_window = None;
+        header.own_attributes = own;
+        let mut shared = input_header.shared_attributes.clone();
+        let dw = shared.display_window;
+        let (x0, y0) = (floor_div(dw.position.0, si), floor_div(dw.position.1, si));
+        let x1 = floor_div(dw.position.0 + dw.size.0 as i32 + si - 1, si);
+        let y1 = floor_div(dw.position.1 + dw.size.1 as i32 + si - 1, si);
+        shared.display_window = IntegerBounds::new(
+            Vec2(x0, y0),
+            Vec2((x1 - x0).max(1) as usize, (y1 - y0).max(1) as usize),
+        );
+        header.shared_attributes = shared;
+        Self::start(dest, header, channels, settings.precision)
+    }
+
+    /// Start writing a new `w` x `h` image of `channels` (planar rows in that
+    /// order), with default attributes.
+    pub fn create_new(
+        dest: &Path,
+        w: usize,
+        h: usize,
+        channels: &[String],
+        compression: Compression,
+        precision: Precision,
+    ) -> Result<Self> {
+        let header = Self::fresh_header(w, h, channels, compression, precision);
+        Self::start(dest, header, channels, precision)
+    }
+
+    fn fresh_header(
+        w: usize,
+        h: usize,
+        channels: &[String],
+        compression: Compression,
+        precision: Precision,
+    ) -> Header {
+        let sample_type = match precision {
+            Precision::F32 => SampleType::F32,
+            Precision::F16 => SampleType::F16,
+        };
+        let mut sorted: Vec<&String> = channels.iter().collect();
+        sorted.sort_by(|a, b| a.as_bytes().cmp(b.as_bytes()));
+        let list: SmallVec<[ChannelDescription; 5]> = sorted
+            .iter()
+            .map(|n| {
+                let linear = n.rsplit('.').next() == Some("A");
+                ChannelDescription::new(Text::from(n.as_str()), sample_type, linear)
+            })
+            .collect();
+        let mut header = Header::new(Text::from(""), Vec2(w, h), list).with_encoding(
+            compression,
+            BlockDescription::ScanLines,
+            LineOrder::Increasing,
+        );
+        header.channels = ChannelList::new(header.channels.list.clone());
+        header.own_attributes.layer_name = None;
+        header
+    }
+
+    fn start(
+        dest: &Path,
+        header: Header,
+        channels: &[String],
+        precision: Precision,
+    ) -> Result<Self> {
+        let (w, _) = (header.layer_size.0, header.layer_size.1);
+        let dir = match dest.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let temp = tempfile::Builder::new()
+            .prefix(".epfilt-")
+            .suffix(".exr.tmp")
+            .tempfile_in(&dir)
+            .map_err(|e| Error::io(&dir, e))?;
+        let order: Vec<usize> = header
+            .channels
+            .list
+            .iter()
+            .map(|c| {
+                channels
+                    .iter()
+                    .position(|n| n.as_str() == c.name.to_string())
+                    .unwrap_or(0)
+            })
+            .collect();
+        let lines = header.compression.scan_lines_per_block();
+        let headers: SmallVec<[Header; 3]> = SmallVec::from_vec(vec![header]);
+
+        let file = temp
+            .as_file()
+            .try_clone()
+            .map_err(|e| Error::io(temp.path(), e))?;
+        let (tx, rx) = crossbeam_channel::bounded::<(usize, Chunk)>(16);
+        let thread_headers = headers.clone();
+        let tpath = temp.path().to_path_buf();
+        let thread = std::thread::Builder::new()
+            .name("epfilt-writer".into())
+            .spawn(move || -> Result<()> {
+                let out = BufWriter::with_capacity(1 << 20, file);
+                exr::block::write(out, thread_headers, false, |_meta, writer| {
+                    for (index, chunk) in rx.iter() {
+                        writer.write_chunk(index, chunk)?;
+                    }
+                    Ok(())
+                })
+                .map_err(|e| Error::from_exr(&tpath, e, "writing"))
+            })
+            .map_err(|e| Error::io(temp.path(), e))?;
+        Ok(ExrOutput {
+            dest: dest.to_path_buf(),
+            temp: Some(temp.into_temp_path()),
+            headers,
+            w,
+            nch: channels.len(),
+            order,
+            lines,
+            precision,
+            pending: Vec::new(),
+            pending_y0: 0,
+            tx: Some(tx),
+            thread: Some(thread),
+        })
+    }
+
+    fn flush_blocks(&mut self, all: bool) -> Result<()> {
+        let row_len = self.nch * self.w;
+        let rows = self.pending.len() / row_len;
+        let full = if all {
+            rows.div_ceil(self.lines)
+        } else {
+            rows / self.lines
+        };
+        if full == 0 {
+            return Ok(());
+        }
+        let (w, nch, lines, y0) = (self.w, self.nch, self.lines, self.pending_y0);
+        let headers = &self.headers;
+        let order = &self.order;
+        let pending = &self.pending;
+        let precision = self.precision;
+        let chunks: Vec<Result<(usize, Chunk)>> = (0..full)
+            .into_par_iter()
+            .map(|b| {
+                let r0 = b * lines;
+                let r1 = ((b + 1) * lines).min(rows);
+                let bytes_per = if precision == Precision::F16 { 2 } else { 4 };
+                let mut data = Vec::with_capacity((r1 - r0) * row_len * bytes_per);
+                for r in r0..r1 {
+                    for &c in order {
+                        let src = &pending[(r * nch + c) * w..][..w];
+                        match precision {
+                            Precision::F32 => src
+                                .iter()
+                                .for_each(|v| data.extend_from_slice(&v.to_ne_bytes())),
+                            Precision::F16 => src.iter().for_each(|v| {
+                                data.extend_from_slice(
+                                    &half::f16::from_f32(*v).to_bits().to_ne_bytes(),
+                                )
+                            }),
+                        }
+                    }
+                }
+                let y = y0 + r0;
+                let block = UncompressedBlock {
+                    index: BlockIndex {
+                        layer: 0,
+                        pixel_position: Vec2(0, y),
+                        pixel_size: Vec2(w, r1 - r0),
+                        level: Vec2(0, 0),
+                    },
+                    data,
+                };
+                let chunk = block
+                    .compress_to_chunk(headers)
+                    .map_err(|e| Error::from_exr(&self.dest, e, "compressing"))?;
+                Ok((y / lines, chunk))
+            })
+            .collect();
+        for c in chunks {
+            let c = c?;
+            let tx = self.tx.as_ref().ok_or(Error::Interrupted)?;
+            if tx.send(c).is_err() {
+                return self.join_writer();
+            }
+        }
+        let used = (full * lines).min(rows);
+        self.pending.drain(..used * row_len);
+        self.pending_y0 += used;
+        Ok(())
+    }
+
+    fn join_writer(&mut self) -> Result<()> {
+        self.tx = None;
+        match self.thread.take() {
+            Some(t) => t
+                .join()
+                .unwrap_or_else(|_| Err(Error::Config("writer thread panicked".into()))),
+            None => Ok(()),
+        }
+    }
+
+    /// Rename the finished file into place.
+    pub fn commit(mut self) -> Result<()> {
+        let temp = self.temp.take().ok_or(Error::Interrupted)?;
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let _ = std::fs::set_permissions(&temp, std::fs::Permissions::from_mode(0o644));
+        }
+        temp.persist(&self.dest)
+            .map_err(|e| Error::io(&self.dest, e.error))?;
+        Ok(())
+    }
+}
+
+impl Sink for ExrOutput {
+    fn write_rows(&mut self, _y0: usize, _rows: usize, data: &[f32]) -> Result<()> {
+        self.pending.extend_from_slice(data);
+        self.flush_blocks(false)
+    }
+
+    fn finish(&mut self) -> Result<()> {
+        self.flush_blocks(true)?;
+        let r = self.join_writer();
+        if let Some(t) = &self.temp {
+            File::open(t)
+                .map_err(|e| Error::io(t.to_path_buf(), e))?
+                .sync_all()
+                .ok();
+        }
+        r
+    }
+}
+
+impl Drop for ExrOutput {
+    fn drop(&mut self) {
+        self.tx = None;
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+        // An uncommitted TempPath deletes its file when dropped.
+    }
+}

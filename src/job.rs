@@ -1,0 +1,165 @@
+//! A filtering job from file to file: validate everything first, stream, check
+//! the ledger, and only then put the output in place.
+
+use std::path::{Path, PathBuf};
+
+use crate::error::{Error, Result};
+use crate::filter::FilterParams;
+use crate::geometry::Grid;
+use crate::io::{ExrInput, ExrOutput, OutputSettings, PartSelect};
+use crate::pipeline::{run, Job, PipelineConfig, Progress};
+use crate::stats::{peak_rss_bytes, Report};
+
+/// The ledger must balance to this relative error before rounding, or the
+/// output is not written. The engine's own bound is 1e-12 (each sample's
+/// weights sum to one within a few ulps, sums are compensated); 1e-9 leaves a
+/// wide margin and still catches any lost or doubled sample.
+pub const LEDGER_LIMIT: f64 = 1e-9;
+
+/// Everything a file-to-file run needs.
+#[derive(Clone, Debug)]
+pub struct FilterJob {
+    /// Input file.
+    pub input: PathBuf,
+    /// Output file.
+    pub output: PathBuf,
+    /// Filter settings.
+    pub params: FilterParams,
+    /// How the work is cut (does not change the result).
+    pub pipeline: PipelineConfig,
+    /// Output file settings.
+    pub output_settings: OutputSettings,
+    /// Part of a multi-part input.
+    pub part: Option<PartSelect>,
+}
+
+/// Refuse an output that is the input, also through a symbolic or hard link.
+pub fn check_not_same_file(input: &Path, output: &Path) -> Result<()> {
+    let same = match (std::fs::metadata(input), std::fs::metadata(output)) {
+        (Ok(a), Ok(b)) => {
+            #[cfg(unix)]
+            {
+                use std::os::unix::fs::MetadataExt;
+                a.dev() == b.dev() && a.ino() == b.ino()
+            }
+            #[cfg(not(unix))]
+            {
+                let _ = (a, b);
+                std::fs::canonicalize(input).ok() == std::fs::canonicalize(output).ok()
+            }
+        }
+        _ => false,
+    };
+    if same {
+        return Err(Error::Config(format!(
+            "the output {} is the input file; choose another output path",
+            output.display()
+        )));
+    }
+    Ok(())
+}
+
+/// Run `job`, reporting progress as (output rows done, output rows).
+pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
+    job.params.validate()?;
+    check_not_same_file(&job.input, &job.output)?;
+    let input = ExrInput::open(&job.input, job.part.as_ref())?;
+    let header = input.header();
+    let s = job.params.supersample;
+    let (w, h) = input.size();
+    let origin = header.own_attributes.layer_position;
+    if w < s || h < s {
+        return Err(Error::Config(format!(
+            "{}: --supersample {s} is larger than the image ({w}x{h})",
+            job.input.display()
+        )));
+    }
+    if w % s != 0
+        || h % s != 0
+        || origin.0.rem_euclid(s as i32) != 0
+        || origin.1.rem_euclid(s as i32) != 0
+    {
+        return Err(Error::Config(format!(
+            "{}: data window {w}x{h} at ({}, {}) is not a multiple of --supersample {s} in size and origin",
+            job.input.display(),
+            origin.0,
+            origin.1
+        )));
+    }
+    let channels = input.channels();
+    let pipe_job = Job {
+        grid: Grid {
+            in_w: w,
+            in_h: h,
+            s,
+        },
+        channels: channels.clone(),
+        luminance: input.luminance(),
+    };
+    let mut output = ExrOutput::create(&job.output, header, s, &channels, &job.output_settings)?;
+    let stats = run(
+        input.source(),
+        &mut output,
+        &pipe_job,
+        &job.params,
+        &job.pipeline,
+        progress,
+    )
+    .map_err(|e| match e {
+        Error::Value { path, reason } if path.as_os_str().is_empty() => Error::Value {
+            path: if reason.starts_with("output") {
+                job.output.clone()
+            } else {
+                job.input.clone()
+            },
+            reason,
+        },
+        e => e,
+    })?;
+    for l in &stats.ledger {
+        if !(l.rel_error <= LEDGER_LIMIT) {
+            return Err(Error::Ledger {
+                channel: l.channel.clone(),
+                rel_error: l.rel_error,
+            });
+        }
+    }
+    output.commit()?;
+    let threads = if job.pipeline.threads == 0 {
+        rayon::current_num_threads()
+    } else {
+        job.pipeline.threads
+    };
+    let mut report = Report {
+        input: job.input.display().to_string(),
+        output: job.output.display().to_string(),
+        method: job.params.method.name().into(),
+        supersample: s,
+        width: w,
+        height: h,
+        out_width: w / s,
+        out_height: h / s,
+        channels,
+        dropped_channels: input.dropped_channels().to_vec(),
+        tolerance: job.params.tolerance,
+        radius: job.params.radius,
+        max_radius: job.params.max_radius,
+        seconds: stats.seconds,
+        megapixels_per_second: (w * h) as f64 / stats.seconds.max(1e-9) / 1e6,
+        samples_noisy: stats.counters.noisy,
+        samples_spread: stats.counters.spread,
+        samples_capped: stats.counters.capped,
+        energy_in: vec![],
+        energy_out: vec![],
+        energy_rel_error: vec![],
+        energy_out_rounded: vec![],
+        energy_rel_error_rounded: vec![],
+        digest: format!("{:016x}", stats.digest),
+        tile: job.pipeline.tile,
+        strip_rows: job.pipeline.strip_rows,
+        threads,
+        peak_rss_bytes: peak_rss_bytes(),
+    };
+    report.set_ledger(&stats.ledger);
+    Ok(report)
+}
