@@ -473,7 +473,9 @@ impl Engine {
                         let dst = &mut hrow[c * w..(c + 1) * w];
                         for (x, d) in dst.iter_mut().enumerate() {
                             let (start, taps) = cols.taps(x);
-                            let mut acc = 0.0;
+                            // -0.0 is the additive identity: a sum of -0.0
+                            // samples stays -0.0 (an input -0.0 survives).
+                            let mut acc = -0.0;
                             for (t, &v) in taps.iter().zip(&src[start..start + taps.len()]) {
                                 acc += t * v as f64;
                             }
@@ -601,7 +603,7 @@ impl Engine {
                     let mut rounded = Sums::new(nch);
                     let mut digest = FNV_OFFSET;
                     for c in 0..nch {
-                        tmp.iter_mut().for_each(|v| *v = 0.0);
+                        tmp.iter_mut().for_each(|v| *v = -0.0);
                         for (t, &wt) in taps.iter().enumerate() {
                             let src = &hpass.get(j0 + t)[c * w..(c + 1) * w];
                             for (d, &v) in tmp.iter_mut().zip(src) {

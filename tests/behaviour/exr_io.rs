@@ -1,0 +1,309 @@
+//! Files in, files out: every layout and codec the reader handles gives the
+//! same result as filtering the decoded pixels in memory.
+
+use std::path::{Path, PathBuf};
+
+use crate::common::*;
+use epfilt::io::{OutputSettings, PartSelect};
+use epfilt::{filter_file, FilterJob, Method, PipelineConfig, Precision};
+use exr::prelude::*;
+
+pub fn tmpdir() -> tempfile::TempDir {
+    tempfile::tempdir().expect("tempdir")
+}
+
+/// Write an RGB image (planar rows) with the `exr` crate's high-level API.
+pub fn write_rgb(
+    path: &Path,
+    img: &Img,
+    compression: Compression,
+    blocks: Blocks,
+    half: bool,
+    order: LineOrder,
+) {
+    let (w, nch) = (img.w, img.nch);
+    let data = img.data.clone();
+    let px = move |Vec2(x, y): Vec2<usize>, c: usize| data[(y * nch + c) * w + x];
+    let enc = Encoding {
+        compression,
+        blocks,
+        line_order: order,
+    };
+    if half {
+        let ch = SpecificChannels::rgb(move |p| {
+            (
+                f16::from_f32(px(p, 0)),
+                f16::from_f32(px(p, 1)),
+                f16::from_f32(px(p, 2)),
+            )
+        });
+        let layer = Layer::new((img.w, img.h), LayerAttributes::named(""), enc, ch);
+        Image::from_layer(layer)
+            .write()
+            .to_file(path)
+            .expect("write test input");
+    } else {
+        let ch = SpecificChannels::rgb(move |p| (px(p, 0), px(p, 1), px(p, 2)));
+        let layer = Layer::new((img.w, img.h), LayerAttributes::named(""), enc, ch);
+        Image::from_layer(layer)
+            .write()
+            .to_file(path)
+            .expect("write test input");
+    }
+}
+
+/// Read R, G, B (or Y) of the first layer with `exr`'s high-level reader, as
+/// planar f32 rows: an independent check of our block reader.
+pub fn read_planar(path: &Path) -> Img {
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .expect("read");
+    let layer = image.layer_data;
+    let (w, h) = (layer.size.0, layer.size.1);
+    let find = |n: &str| {
+        layer
+            .channel_data
+            .list
+            .iter()
+            .find(|c| c.name.to_string() == n)
+    };
+    let chans: Vec<_> = if find("R").is_some() {
+        ["R", "G", "B"].iter().filter_map(|n| find(n)).collect()
+    } else {
+        vec![find("Y").expect("Y")]
+    };
+    let nch = chans.len();
+    Img::new(w, h, nch, |x, y, c| {
+        chans[c].sample_data.value_by_flat_index(y * w + x).to_f32()
+    })
+}
+
+pub fn job(input: &Path, output: &Path, method: Method, s: usize) -> FilterJob {
+    FilterJob {
+        input: input.into(),
+        output: output.into(),
+        params: params(method, s),
+        pipeline: PipelineConfig {
+            strip_rows: 13,
+            tile: 20,
+            ..Default::default()
+        },
+        output_settings: OutputSettings {
+            compression: Some(Compression::Uncompressed),
+            precision: Precision::F32,
+        },
+        part: None::<PartSelect>,
+    }
+}
+
+#[test]
+fn every_layout_and_codec_matches_the_in_memory_filter() {
+    let s = 3;
+    let img = fireflies(37 * s, 29 * s, 3, 0.01, 3);
+    let dir = tmpdir();
+    let layouts: Vec<(&str, Compression, Blocks, bool, LineOrder)> = vec![
+        (
+            "none",
+            Compression::Uncompressed,
+            Blocks::ScanLines,
+            false,
+            LineOrder::Increasing,
+        ),
+        (
+            "rle-half",
+            Compression::RLE,
+            Blocks::ScanLines,
+            true,
+            LineOrder::Increasing,
+        ),
+        (
+            "zips",
+            Compression::ZIP1,
+            Blocks::ScanLines,
+            false,
+            LineOrder::Increasing,
+        ),
+        (
+            "zip-dec",
+            Compression::ZIP16,
+            Blocks::ScanLines,
+            false,
+            LineOrder::Decreasing,
+        ),
+        (
+            "piz-half",
+            Compression::PIZ,
+            Blocks::ScanLines,
+            true,
+            LineOrder::Increasing,
+        ),
+        (
+            "pxr24",
+            Compression::PXR24,
+            Blocks::ScanLines,
+            false,
+            LineOrder::Increasing,
+        ),
+        (
+            "b44-half",
+            Compression::B44,
+            Blocks::ScanLines,
+            true,
+            LineOrder::Increasing,
+        ),
+        (
+            "dwaa-half",
+            Compression::DWAA(None),
+            Blocks::ScanLines,
+            true,
+            LineOrder::Increasing,
+        ),
+        (
+            "tiled16",
+            Compression::ZIP16,
+            Blocks::Tiles(Vec2(16, 16)),
+            false,
+            LineOrder::Increasing,
+        ),
+        (
+            "tiled-odd-dec",
+            Compression::RLE,
+            Blocks::Tiles(Vec2(7, 5)),
+            true,
+            LineOrder::Decreasing,
+        ),
+    ];
+    for (name, comp, blocks, half, order) in layouts {
+        let input = dir.path().join(format!("{name}.exr"));
+        // Half holds up to 65504: keep the fireflies below it there.
+        let mut src = img.clone();
+        if half {
+            src.data.iter_mut().for_each(|v| *v = v.min(6e4));
+        }
+        write_rgb(&input, &src, comp, blocks, half, order);
+        let decoded = read_planar(&input);
+        for m in [Method::EpGauss, Method::Box] {
+            let out = dir.path().join(format!("{name}-{}.exr", m.name()));
+            let report = filter_file(&job(&input, &out, m, s), &|_, _| {}).expect(name);
+            assert!(
+                report.energy_rel_error.iter().all(|e| *e <= 1e-12),
+                "{name}"
+            );
+            let got = read_planar(&out);
+            let want = run(&decoded, s, &params(m, s), &PipelineConfig::default()).0;
+            assert_eq!(bits(&got), bits(&want), "{name} {m:?}");
+        }
+    }
+}
+
+#[test]
+fn header_attributes_carry_over_and_windows_scale() {
+    let dir = tmpdir();
+    let input = dir.path().join("in.exr");
+    let img = Img::new(12, 9, 3, |x, y, c| (x + y + c) as f32);
+    let ch = {
+        let data = img.data.clone();
+        SpecificChannels::rgb(move |Vec2(x, y): Vec2<usize>| {
+            (
+                data[(y * 3) * 12 + x],
+                data[(y * 3 + 1) * 12 + x],
+                data[(y * 3 + 2) * 12 + x],
+            )
+        })
+    };
+    let mut attrs = LayerAttributes::named("beauty");
+    attrs.layer_position = Vec2(-6, 3);
+    attrs.comments = Some(Text::from("rendered overnight"));
+    attrs.owner = Some(Text::from("studio"));
+    attrs
+        .other
+        .insert(Text::from("renderer:spp"), AttributeValue::I32(64));
+    let layer = Layer::new((12, 9), attrs, Encoding::FAST_LOSSLESS, ch);
+    let mut image = Image::from_layer(layer);
+    image.attributes.chromaticities = Some(exr::meta::attribute::Chromaticities {
+        red: Vec2(0.708, 0.292),
+        green: Vec2(0.170, 0.797),
+        blue: Vec2(0.131, 0.046),
+        white: Vec2(0.3127, 0.3290),
+    });
+    image.attributes.display_window = IntegerBounds::new(Vec2(-6, 0), Vec2(18, 15));
+    image.write().to_file(&input).unwrap();
+    let out = dir.path().join("out.exr");
+    filter_file(&job(&input, &out, Method::Gauss, 3), &|_, _| {}).unwrap();
+    let meta = exr::meta::MetaData::read_from_file(&out, false).unwrap();
+    let h = &meta.headers[0];
+    assert_eq!(h.layer_size, Vec2(4, 3));
+    assert_eq!(h.own_attributes.layer_position, Vec2(-2, 1));
+    assert_eq!(
+        h.shared_attributes.display_window,
+        IntegerBounds::new(Vec2(-2, 0), Vec2(6, 5))
+    );
+    assert_eq!(
+        h.own_attributes.comments.as_ref().map(|t| t.to_string()),
+        Some("rendered overnight".into())
+    );
+    assert_eq!(
+        h.own_attributes.owner.as_ref().map(|t| t.to_string()),
+        Some("studio".into())
+    );
+    assert!(h
+        .own_attributes
+        .other
+        .contains_key(&Text::from("renderer:spp")));
+    assert!(h.shared_attributes.chromaticities.is_some());
+}
+
+#[test]
+fn f16_output_refuses_values_it_cannot_hold() {
+    let dir = tmpdir();
+    let input = dir.path().join("hot.exr");
+    let img = Img::new(9, 9, 3, |_, _, _| 1e5);
+    write_rgb(
+        &input,
+        &img,
+        Compression::Uncompressed,
+        Blocks::ScanLines,
+        false,
+        LineOrder::Increasing,
+    );
+    let out = dir.path().join("out.exr");
+    let mut j = job(&input, &out, Method::Box, 3);
+    j.output_settings.precision = Precision::F16;
+    j.pipeline.precision = Precision::F16;
+    let err = filter_file(&j, &|_, _| {}).unwrap_err().to_string();
+    assert!(err.contains("f16") && err.contains("out.exr"), "{err}");
+    assert!(!out.exists());
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        1,
+        "temporary file left behind"
+    );
+}
+
+#[test]
+fn size_not_a_multiple_of_s_is_refused() {
+    let dir = tmpdir();
+    let input = dir.path().join("odd.exr");
+    write_rgb(
+        &input,
+        &Img::new(10, 9, 3, |_, _, _| 1.0),
+        Compression::Uncompressed,
+        Blocks::ScanLines,
+        false,
+        LineOrder::Increasing,
+    );
+    let out = dir.path().join("out.exr");
+    let err = filter_file(&job(&input, &out, Method::Box, 3), &|_, _| {})
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("multiple of --supersample 3"), "{err}");
+}
+
+pub fn corpus_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/exr-corpus")
+}
