@@ -1,5 +1,6 @@
 //! Behaviour tests of epfilt, one binary with a module per theme.
 
+mod cli;
 mod common;
 mod corpus;
 mod energy;
