@@ -11,6 +11,7 @@ pub mod info;
 pub mod mapped;
 pub mod reader;
 pub mod writer;
+pub mod zip;
 
 pub use info::info;
 pub use reader::{ExrInput, PartSelect};

@@ -9,7 +9,7 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::thread::JoinHandle;
 
-use exr::block::chunk::Chunk;
+use exr::block::chunk::{Chunk, CompressedBlock, CompressedScanLineBlock};
 use exr::block::writer::ChunksWriter;
 use exr::block::{BlockIndex, UncompressedBlock};
 use exr::math::Vec2;
@@ -236,6 +236,17 @@ impl ExrOutput {
                     }
                 }
                 let y = y0 + r0;
+                let header = &headers[0];
+                if cfg!(target_endian = "little") && matches!(header.compression, Compression::ZIP1 | Compression::ZIP16) {
+                    let chunk = Chunk {
+                        layer_index: 0,
+                        compressed_block: CompressedBlock::ScanLine(CompressedScanLineBlock {
+                            y_coordinate: y as i32 + header.own_attributes.layer_position.1,
+                            compressed_pixels_le: super::zip::compress(&data, super::zip::ZIP_LEVEL),
+                        }),
+                    };
+                    return Ok((y / lines, chunk));
+                }
                 let block = UncompressedBlock {
                     index: BlockIndex {
                         layer: 0,

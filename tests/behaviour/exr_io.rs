@@ -189,7 +189,12 @@ fn every_layout_and_codec_matches_the_in_memory_filter() {
         let decoded = read_planar(&input);
         for m in [Method::EpGauss, Method::Box] {
             let out = dir.path().join(format!("{name}-{}.exr", m.name()));
-            let report = filter_file(&job(&input, &out, m, s), &|_, _| {}).expect(name);
+            let mut j = job(&input, &out, m, s);
+            if m == Method::Box {
+                // Our own ZIP encoder (one line per block).
+                j.output_settings.compression = Some(Compression::ZIP1);
+            }
+            let report = filter_file(&j, &|_, _| {}).expect(name);
             assert!(
                 report.energy_rel_error.iter().all(|e| *e <= 1e-12),
                 "{name}"

@@ -1,0 +1,52 @@
+//! Write a super-sampled test render with fireflies, streaming (flat memory):
+//!
+//! `cargo run --release --example fireflies -- OUT.exr WIDTH HEIGHT [FRACTION] [COMPRESSION]`
+//!
+//! WIDTH x HEIGHT are input samples. A smooth RGB background (0.2..1.0) with
+//! FRACTION (default 0.01) of the samples turned into fireflies 10x..1000x
+//! brighter (log-uniform), float samples, ZIP by default.
+
+use epfilt::io::{parse_compression, ExrOutput};
+use epfilt::pipeline::{Precision, Sink};
+
+fn hash(i: u64) -> u64 {
+    let mut z = i.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let a: Vec<String> = std::env::args().collect();
+    if a.len() < 4 {
+        return Err("usage: fireflies OUT.exr WIDTH HEIGHT [FRACTION] [COMPRESSION]".into());
+    }
+    let (w, h): (usize, usize) = (a[2].parse()?, a[3].parse()?);
+    let frac: f64 = a.get(4).map(|s| s.parse()).transpose()?.unwrap_or(0.01);
+    let comp = parse_compression(a.get(5).map(String::as_str).unwrap_or("zip")).ok_or("unknown compression")?;
+    let names: Vec<String> = ["R", "G", "B"].iter().map(|s| s.to_string()).collect();
+    let mut out = ExrOutput::create_new(std::path::Path::new(&a[1]), w, h, &names, comp, Precision::F32)?;
+    let rows = 64;
+    let mut y = 0;
+    while y < h {
+        let n = rows.min(h - y);
+        let mut data = vec![0.0f32; n * 3 * w];
+        for r in 0..n {
+            let j = y + r;
+            for i in 0..w {
+                let base = 0.6 + 0.4 * ((i as f32 * 0.003).sin() * (j as f32 * 0.002).cos());
+                let k = hash((j * w + i) as u64);
+                let u = (k >> 11) as f64 / (1u64 << 53) as f64;
+                let mag = if u < frac { 10f64.powf(1.0 + 2.0 * (hash(k) >> 11) as f64 / (1u64 << 53) as f64) } else { 1.0 };
+                for (c, tint) in [1.0f32, 0.9, 0.75].iter().enumerate() {
+                    data[(r * 3 + c) * w + i] = base * tint * mag as f32;
+                }
+            }
+        }
+        out.write_rows(y, n, &data)?;
+        y += n;
+    }
+    out.finish()?;
+    out.commit()?;
+    Ok(())
+}
