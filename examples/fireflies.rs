@@ -23,9 +23,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let (w, h): (usize, usize) = (a[2].parse()?, a[3].parse()?);
     let frac: f64 = a.get(4).map(|s| s.parse()).transpose()?.unwrap_or(0.01);
-    let comp = parse_compression(a.get(5).map(String::as_str).unwrap_or("zip")).ok_or("unknown compression")?;
+    let comp = parse_compression(a.get(5).map(String::as_str).unwrap_or("zip"))
+        .ok_or("unknown compression")?;
     let names: Vec<String> = ["R", "G", "B"].iter().map(|s| s.to_string()).collect();
-    let mut out = ExrOutput::create_new(std::path::Path::new(&a[1]), w, h, &names, comp, Precision::F32)?;
+    let mut out = ExrOutput::create_new(
+        std::path::Path::new(&a[1]),
+        w,
+        h,
+        &names,
+        comp,
+        Precision::F32,
+    )?;
     let rows = 64;
     let mut y = 0;
     while y < h {
@@ -37,7 +45,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let base = 0.6 + 0.4 * ((i as f32 * 0.003).sin() * (j as f32 * 0.002).cos());
                 let k = hash((j * w + i) as u64);
                 let u = (k >> 11) as f64 / (1u64 << 53) as f64;
-                let mag = if u < frac { 10f64.powf(1.0 + 2.0 * (hash(k) >> 11) as f64 / (1u64 << 53) as f64) } else { 1.0 };
+                let mag = if u < frac {
+                    10f64.powf(1.0 + 2.0 * (hash(k) >> 11) as f64 / (1u64 << 53) as f64)
+                } else {
+                    1.0
+                };
                 for (c, tint) in [1.0f32, 0.9, 0.75].iter().enumerate() {
                     data[(r * 3 + c) * w + i] = base * tint * mag as f32;
                 }

@@ -243,6 +243,24 @@ impl EpGauss {
         acc
     }
 
+    /// `xbar` at the base width for every pixel of row `y` (width `w`): the
+    /// stencil with its rows fetched once.
+    pub fn xbar0_row(&self, rows: &impl LumRows, y: i64, w: usize) -> Vec<f64> {
+        let pad = self.pad();
+        let sh = self.levels[0].shell as i64;
+        let mut out = vec![0.0; w];
+        for dy in -sh..=sh {
+            let row = rows.row(y + dy);
+            for &(dx, _, wt) in self.stencil.iter().filter(|t| t.1 as i64 == dy) {
+                let off = (pad as i64 + dx as i64) as usize;
+                for (o, &v) in out.iter_mut().zip(&row[off..off + w]) {
+                    *o += wt * v;
+                }
+            }
+        }
+        out
+    }
+
     /// Cheap path: is the sample noisy at the base width? Only the few that are
     /// go to [`EpGauss::search`].
     #[inline]
@@ -290,26 +308,9 @@ impl EpGauss {
         let (cx, cy) = (px as i64 + pad, py as i64);
         let mut grown: usize = 0; // shells 0..grown are in rs
         let mut grow = |to: usize, rs: &mut [f64]| {
-            while grown <= to {
-                let c = grown as i64;
-                if c == 0 {
-                    rs[self.bin_of[0] as usize] += rows.row(cy)[cx as usize];
-                } else {
-                    let c2 = (c * c) as usize;
-                    for vy in [cy - c, cy + c] {
-                        let r = rows.row(vy);
-                        for dx in -c..=c {
-                            rs[self.bin_of[c2 + (dx * dx) as usize] as usize] +=
-                                r[(cx + dx) as usize];
-                        }
-                    }
-                    for dy in 1 - c..c {
-                        let r = rows.row(cy + dy);
-                        let b = self.bin_of[c2 + (dy * dy) as usize] as usize;
-                        rs[b] += r[(cx - c) as usize] + r[(cx + c) as usize];
-                    }
-                }
-                grown += 1;
+            if to >= grown {
+                self.add_shells(rows, cx, cy, grown, to, rs);
+                grown = to + 1;
             }
         };
         let mut eval = |l: usize, rs: &mut [f64]| -> f64 {
@@ -370,6 +371,34 @@ impl EpGauss {
         let end = (self.bin_of[touched.min(self.bin_of.len() - 1)] as usize + 1).min(rs.len());
         rs[..end].iter_mut().for_each(|x| *x = 0.0);
         choice
+    }
+
+    /// Add the box luminance of ring shells `g..=c` (Chebyshev radius) about
+    /// padded column `cx`, row `cy` into the ring-sum bins, one row lookup per
+    /// row: rows `|dy| >= g` are new over `-c..=c`, the others only where
+    /// `|dx| >= g`.
+    fn add_shells(
+        &self,
+        rows: &impl LumRows,
+        cx: i64,
+        cy: i64,
+        g: usize,
+        c: usize,
+        rs: &mut [f64],
+    ) {
+        let (g, c) = (g as i64, c as i64);
+        for dy in -c..=c {
+            let r = rows.row(cy + dy);
+            let dy2 = (dy * dy) as usize;
+            let mut add = |dx: i64| {
+                rs[self.bin_of[dy2 + (dx * dx) as usize] as usize] += r[(cx + dx) as usize];
+            };
+            if dy.abs() >= g {
+                (-c..=c).for_each(&mut add);
+            } else {
+                (-c..=-g).chain(g..=c).for_each(&mut add);
+            }
+        }
     }
 
     /// The super-sampling factor.
@@ -485,6 +514,37 @@ mod tests {
                 assert!(below.rho < lv.rho);
             }
         }
+    }
+
+    #[test]
+    fn rings_grown_in_steps_equal_rings_grown_at_once() {
+        let ep = EpGauss::new(3, 0.6, 6.0, 3.0, 0.25, 0.1);
+        let f = Field::new(50, 45, ep.pad(), |x, y| {
+            ((x * 7919 + y * 104_729) % 1000) as f64 * 0.01 + 0.5
+        });
+        let (cx, cy) = (20 + ep.pad() as i64, 22);
+        let mut once = vec![0.0; ep.scratch_len()];
+        ep.add_shells(&f, cx, cy, 0, 14, &mut once);
+        for steps in [vec![0, 1, 2, 14], vec![3, 9, 14], vec![0, 13, 14]] {
+            let mut stepped = vec![0.0; ep.scratch_len()];
+            let mut g = 0;
+            for to in steps {
+                ep.add_shells(&f, cx, cy, g, to, &mut stepped);
+                g = to + 1;
+            }
+            for (a, b) in once.iter().zip(&stepped) {
+                assert!((a - b).abs() <= 1e-12 * a.abs().max(1.0), "{a} vs {b}");
+            }
+        }
+        // and the bins hold every point of the square exactly once
+        let total: f64 = once.iter().sum();
+        let mut direct = 0.0;
+        for dy in -14..=14 {
+            for dx in -14..=14 {
+                direct += f.row(cy + dy)[(cx + dx) as usize];
+            }
+        }
+        assert!((total - direct).abs() < 1e-9 * direct);
     }
 
     #[test]

@@ -237,12 +237,17 @@ impl ExrOutput {
                 }
                 let y = y0 + r0;
                 let header = &headers[0];
-                if cfg!(target_endian = "little") && matches!(header.compression, Compression::ZIP1 | Compression::ZIP16) {
+                if cfg!(target_endian = "little")
+                    && matches!(header.compression, Compression::ZIP1 | Compression::ZIP16)
+                {
                     let chunk = Chunk {
                         layer_index: 0,
                         compressed_block: CompressedBlock::ScanLine(CompressedScanLineBlock {
                             y_coordinate: y as i32 + header.own_attributes.layer_position.1,
-                            compressed_pixels_le: super::zip::compress(&data, super::zip::ZIP_LEVEL),
+                            compressed_pixels_le: super::zip::compress(
+                                &data,
+                                super::zip::ZIP_LEVEL,
+                            ),
                         }),
                     };
                     return Ok((y / lines, chunk));

@@ -18,7 +18,11 @@ pub fn compress(le: &[u8], level: u8) -> Vec<u8> {
     let mut buf = vec![0u8; n];
     {
         let (first, second) = buf.split_at_mut(half);
-        for ((a, b), pair) in first.iter_mut().zip(second.iter_mut()).zip(le.chunks_exact(2)) {
+        for ((a, b), pair) in first
+            .iter_mut()
+            .zip(second.iter_mut())
+            .zip(le.chunks_exact(2))
+        {
             *a = pair[0];
             *b = pair[1];
         }

@@ -280,13 +280,11 @@ impl Engine {
             .map(|row| {
                 let mut s = Sums::new(nch);
                 for c in 0..nch {
-                    for (x, &v) in row[c * in_w..(c + 1) * in_w].iter().enumerate() {
-                        if !v.is_finite() {
-                            return Err((x, c));
-                        }
-                        s.values[c].add(v as f64);
-                        s.mass[c].add((v as f64).abs());
+                    let ch = &row[c * in_w..(c + 1) * in_w];
+                    if let Some(x) = ch.iter().position(|v| !v.is_finite()) {
+                        return Err((x, c));
                     }
+                    s.add_slice(c, ch);
                 }
                 Ok(s)
             })
@@ -307,7 +305,7 @@ impl Engine {
             }
         }
         for row in strip.data.chunks(row_len) {
-            self.input.push(0.0).copy_from_slice(row);
+            self.input.push_copy(row);
         }
         self.rows_in += strip.rows;
         self.advance()
@@ -420,7 +418,7 @@ impl Engine {
     fn classify(&mut self, a: usize, b: usize) {
         let (s, w, in_w, nch, h) = (self.grid.s, self.w, self.grid.in_w, self.nch, self.h);
         for _ in a * s..b * s {
-            self.hpass.push(0.0);
+            self.hpass.push_stale(0.0); // every value is written below
         }
         let ep = self.ep.as_ref();
         let ybox = &self.ybox;
@@ -437,8 +435,9 @@ impl Engine {
                 let mut found = Vec::new();
                 if let Some(ep) = ep {
                     let view = YView { win: ybox, h };
+                    let xbars = ep.xbar0_row(&view, y as i64, w);
                     for px in 0..w {
-                        let xbar = ep.xbar0(&view, px, y as i64);
+                        let xbar = xbars[px];
                         for (b, row) in ins.iter_mut().enumerate() {
                             for i in px * s..(px + 1) * s {
                                 let mut x0 = 0.0;
@@ -611,11 +610,14 @@ impl Engine {
                             }
                         }
                         let dst = &mut out[c * w..(c + 1) * w];
-                        for (x, (d, &v)) in dst.iter_mut().zip(tmp.iter()).enumerate() {
-                            let mut val = v * inv;
+                        for (x, v) in tmp.iter_mut().enumerate() {
+                            *v *= inv;
                             if let Some(acc) = acc {
-                                val += acc.get(y)[x * nch + c];
+                                *v += acc.get(y)[x * nch + c];
                             }
+                        }
+                        raw.add_slice(c, tmp);
+                        for (x, (d, &val)) in dst.iter_mut().zip(tmp.iter()).enumerate() {
                             let r = round(val, precision).ok_or_else(|| Error::Value {
                                 path: Default::default(),
                                 reason: format!(
@@ -626,11 +628,8 @@ impl Engine {
                             })?;
                             *d = r;
                             digest = fnv(digest, val.to_bits());
-                            raw.values[c].add(val);
-                            raw.mass[c].add(val.abs());
-                            rounded.values[c].add(r as f64);
-                            rounded.mass[c].add((r as f64).abs());
                         }
+                        rounded.add_slice(c, dst);
                     }
                     Ok((raw, rounded, digest))
                 },

@@ -56,6 +56,33 @@ impl<T: Copy> RowWindow<T> {
             .unwrap_or(&mut [])
     }
 
+    /// Append a copy of `row` (of the window's row length).
+    pub fn push_copy(&mut self, row: &[T]) {
+        let mut v = self.spare.pop().unwrap_or_default();
+        v.clear();
+        v.extend_from_slice(row);
+        self.rows.push_back(v);
+        self.high_water = self.high_water.max(self.rows.len());
+    }
+
+    /// Append a row for a caller that overwrites every value: a recycled
+    /// buffer keeps its stale contents (no fill); a new one is filled with
+    /// `fill`.
+    pub fn push_stale(&mut self, fill: T) {
+        match self.spare.pop() {
+            Some(v) if v.len() == self.row_len => {
+                self.rows.push_back(v);
+                self.high_water = self.high_water.max(self.rows.len());
+            }
+            other => {
+                if let Some(v) = other {
+                    self.spare.push(v);
+                }
+                self.push(fill);
+            }
+        }
+    }
+
     /// Row `y` (absolute). Panics if not held: a halo bug, not an input error.
     #[inline]
     pub fn get(&self, y: usize) -> &[T] {

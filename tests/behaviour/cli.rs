@@ -8,12 +8,22 @@ use crate::exr_io::{corpus_dir, tmpdir, write_rgb};
 use exr::prelude::*;
 
 fn epfilt(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_epfilt")).args(args).output().expect("run epfilt")
+    Command::new(env!("CARGO_BIN_EXE_epfilt"))
+        .args(args)
+        .output()
+        .expect("run epfilt")
 }
 
 fn input(dir: &Path) -> String {
     let p = dir.join("in.exr");
-    write_rgb(&p, &fireflies(30, 21, 3, 0.02, 1), Compression::ZIP16, Blocks::ScanLines, false, LineOrder::Increasing);
+    write_rgb(
+        &p,
+        &fireflies(30, 21, 3, 0.02, 1),
+        Compression::ZIP16,
+        Blocks::ScanLines,
+        false,
+        LineOrder::Increasing,
+    );
     p.to_string_lossy().into()
 }
 
@@ -30,20 +40,46 @@ fn filter_writes_output_and_json_report() {
     let inp = input(dir.path());
     let out = dir.path().join("out.exr");
     let rep = dir.path().join("r.json");
-    let o = epfilt(&["filter", &inp, out.to_str().unwrap(), "-s", "3", "--report", rep.to_str().unwrap()]);
+    let o = epfilt(&[
+        "filter",
+        &inp,
+        out.to_str().unwrap(),
+        "-s",
+        "3",
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(String::from_utf8_lossy(&o.stderr).contains("energy ledger"));
-    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
     for key in [
-        "input", "output", "method", "supersample", "width", "height", "out_width", "out_height", "seconds",
-        "megapixels_per_second", "samples_spread", "samples_capped", "energy_in", "energy_out", "energy_rel_error",
+        "input",
+        "output",
+        "method",
+        "supersample",
+        "width",
+        "height",
+        "out_width",
+        "out_height",
+        "seconds",
+        "megapixels_per_second",
+        "samples_spread",
+        "samples_capped",
+        "energy_in",
+        "energy_out",
+        "energy_rel_error",
         "peak_rss_bytes",
     ] {
         assert!(json.get(key).is_some(), "report lacks {key}");
     }
     assert_eq!(json["out_width"], 10);
     assert_eq!(json["method"], "ep-gauss");
-    assert!(json["energy_rel_error"].as_array().unwrap().iter().all(|e| e.as_f64().unwrap() <= 1e-12));
+    assert!(json["energy_rel_error"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .all(|e| e.as_f64().unwrap() <= 1e-12));
     let o = epfilt(&["filter", &inp, out.to_str().unwrap(), "-s", "3", "-q"]);
     assert!(o.status.success() && o.stderr.is_empty());
 }
@@ -53,14 +89,29 @@ fn errors_are_one_line_naming_the_file() {
     let dir = tmpdir();
     let inp = input(dir.path());
     let missing = dir.path().join("nope.exr");
-    one_line_error(&epfilt(&["filter", missing.to_str().unwrap(), "o.exr"]), "nope.exr");
+    one_line_error(
+        &epfilt(&["filter", missing.to_str().unwrap(), "o.exr"]),
+        "nope.exr",
+    );
     let nodir = dir.path().join("no/such/dir/out.exr");
-    one_line_error(&epfilt(&["filter", &inp, nodir.to_str().unwrap()]), "no/such/dir");
-    one_line_error(&epfilt(&["filter", &inp, "x.exr", "-s", "9"]), "--supersample");
-    one_line_error(&epfilt(&["filter", &inp, "x.exr", "--method", "median"]), "unknown method");
+    one_line_error(
+        &epfilt(&["filter", &inp, nodir.to_str().unwrap()]),
+        "no/such/dir",
+    );
+    one_line_error(
+        &epfilt(&["filter", &inp, "x.exr", "-s", "9"]),
+        "--supersample",
+    );
+    one_line_error(
+        &epfilt(&["filter", &inp, "x.exr", "--method", "median"]),
+        "unknown method",
+    );
     let text = dir.path().join("text.exr");
     std::fs::write(&text, "this is not an image").unwrap();
-    one_line_error(&epfilt(&["filter", text.to_str().unwrap(), "x.exr"]), "text.exr");
+    one_line_error(
+        &epfilt(&["filter", text.to_str().unwrap(), "x.exr"]),
+        "text.exr",
+    );
 }
 
 #[test]
@@ -71,12 +122,22 @@ fn output_equal_to_input_is_refused_and_input_untouched() {
     one_line_error(&epfilt(&["filter", &inp, &inp]), "is the input file");
     let link = dir.path().join("link.exr");
     std::os::unix::fs::symlink(&inp, &link).unwrap();
-    one_line_error(&epfilt(&["filter", &inp, link.to_str().unwrap()]), "is the input file");
+    one_line_error(
+        &epfilt(&["filter", &inp, link.to_str().unwrap()]),
+        "is the input file",
+    );
     let hard = dir.path().join("hard.exr");
     std::fs::hard_link(&inp, &hard).unwrap();
-    one_line_error(&epfilt(&["filter", &inp, hard.to_str().unwrap()]), "is the input file");
+    one_line_error(
+        &epfilt(&["filter", &inp, hard.to_str().unwrap()]),
+        "is the input file",
+    );
     assert_eq!(std::fs::read(&inp).unwrap(), before);
-    let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().flatten().map(|e| e.file_name()).collect();
+    let names: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name())
+        .collect();
     assert_eq!(names.len(), 3, "stray files: {names:?}");
 }
 
@@ -86,5 +147,11 @@ fn info_describes_a_file() {
     let o = epfilt(&["info", f.to_str().unwrap()]);
     assert!(o.status.success());
     let s = String::from_utf8_lossy(&o.stdout);
-    assert!(s.contains("1262x860") && s.contains("piz") && s.contains("tiles 128x128") && s.contains("R half"), "{s}");
+    assert!(
+        s.contains("1262x860")
+            && s.contains("piz")
+            && s.contains("tiles 128x128")
+            && s.contains("R half"),
+        "{s}"
+    );
 }
