@@ -303,6 +303,7 @@ impl ExrInput {
             buf: Vec::new(),
             buf_y0: 0,
             row_len: self.selected.len() * w,
+            released: None,
         }
     }
 
@@ -485,6 +486,8 @@ pub struct ExrSource<'a> {
     buf: Vec<f32>,
     buf_y0: usize,
     row_len: usize,
+    /// Byte range of the file consumed (and released) so far.
+    released: Option<(usize, usize)>,
 }
 
 impl Source for ExrSource<'_> {
@@ -539,7 +542,22 @@ impl Source for ExrSource<'_> {
                 }
             }
             if span.0 < span.1 {
-                self.input.map.release(span.0, span.1);
+                // Grow the released region contiguously, so the pages that
+                // straddle two batches are dropped too.
+                let (lo, hi) = match self.released {
+                    None => span,
+                    Some((lo, hi)) => (lo.min(span.0), hi.max(span.1)),
+                };
+                let from = match self.released {
+                    Some((plo, phi)) if span.0 >= plo => (phi.min(span.0)).saturating_sub(4096),
+                    _ => lo,
+                };
+                let to = match self.released {
+                    Some((plo, _)) if span.0 < plo => (plo + 4096).min(hi),
+                    _ => hi,
+                };
+                self.input.map.release(from, to);
+                self.released = Some((lo, hi));
             }
             self.next_row = end;
         }

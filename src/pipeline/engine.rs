@@ -436,8 +436,7 @@ impl Engine {
                 if let Some(ep) = ep {
                     let view = YView { win: ybox, h };
                     let xbars = ep.xbar0_row(&view, y as i64, w);
-                    for px in 0..w {
-                        let xbar = xbars[px];
+                    for (px, &xbar) in xbars.iter().enumerate() {
                         for (b, row) in ins.iter_mut().enumerate() {
                             for i in px * s..(px + 1) * s {
                                 let mut x0 = 0.0;
