@@ -1,1 +1,114 @@
-fn main() {}
+//! Criterion benches of the hot paths: the base-width stencil, the width
+//! search (ring sums + Relation 14), and the whole engine in memory for each
+//! method. `cargo bench --bench kernels`.
+
+use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use epfilt::filter::ep_gauss::{EpGauss, LumRows};
+use epfilt::geometry::mirror;
+use epfilt::{filter_in_memory, FilterParams, Grid, Job, Method, PipelineConfig};
+
+struct Field {
+    h: usize,
+    rows: Vec<Vec<f64>>,
+}
+
+impl Field {
+    fn new(w: usize, h: usize, pad: usize, f: impl Fn(usize, usize) -> f64) -> Self {
+        let rows = (0..h)
+            .map(|y| {
+                (0..w + 2 * pad)
+                    .map(|i| f(mirror(i as i64 - pad as i64, w), y))
+                    .collect()
+            })
+            .collect();
+        Field { h, rows }
+    }
+}
+
+impl LumRows for Field {
+    fn row(&self, vy: i64) -> &[f64] {
+        &self.rows[mirror(vy, self.h)]
+    }
+}
+
+fn search(c: &mut Criterion) {
+    let ep = EpGauss::new(3, 0.6, 16.0, 3.0, 0.25, 0.1);
+    let mut g = c.benchmark_group("width_search");
+    for mag in [10.0, 100.0, 1000.0, 1e5] {
+        let f = Field::new(200, 200, ep.pad(), |x, y| {
+            if (x, y) == (100, 100) {
+                (8.0 + mag) / 9.0
+            } else {
+                1.0
+            }
+        });
+        let xb = ep.xbar0(&f, 100, 100);
+        g.bench_with_input(BenchmarkId::from_parameter(mag), &mag, |b, &mag| {
+            b.iter(|| black_box(ep.search(&f, 100, 100, black_box(mag), xb)))
+        });
+    }
+    g.finish();
+}
+
+fn base_stencil(c: &mut Criterion) {
+    let ep = EpGauss::new(3, 0.6, 16.0, 3.0, 0.25, 0.1);
+    let f = Field::new(2048, 8, ep.pad(), |x, y| {
+        1.0 + ((x * 31 + y * 17) % 7) as f64
+    });
+    let mut g = c.benchmark_group("base_stencil_row");
+    g.throughput(Throughput::Elements(2048));
+    g.bench_function("2048 px", |b| {
+        b.iter(|| black_box(ep.xbar0_row(&f, 4, 2048)))
+    });
+    g.finish();
+}
+
+fn engine(c: &mut Criterion) {
+    let (w, h, s) = (900, 600, 3);
+    let mut img = Vec::with_capacity(w * h * 3);
+    let mut k = 1u64;
+    for y in 0..h {
+        for ch in 0..3 {
+            for x in 0..w {
+                k = k
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let base = 0.6
+                    + 0.3 * ((x as f32 * 0.01).sin() * (y as f32 * 0.013).cos())
+                    + 0.05 * ch as f32;
+                let fire = if (k >> 33) % 100 == 0 {
+                    10f32.powf(1.0 + 2.0 * ((k >> 20) % 1000) as f32 / 1000.0)
+                } else {
+                    1.0
+                };
+                img.push(base * fire);
+            }
+        }
+    }
+    let job = Job {
+        grid: Grid {
+            in_w: w,
+            in_h: h,
+            s,
+        },
+        channels: vec!["R".into(), "G".into(), "B".into()],
+        luminance: vec![0.2126, 0.7152, 0.0722],
+    };
+    let mut g = c.benchmark_group("engine_900x600_s3_1pct_fireflies");
+    g.throughput(Throughput::Elements((w * h) as u64));
+    g.sample_size(20);
+    for m in [Method::Box, Method::Gauss, Method::EpGauss] {
+        let p = FilterParams::new(m, s);
+        g.bench_function(m.name(), |b| {
+            b.iter(|| {
+                black_box(
+                    filter_in_memory(img.clone(), &job, &p, &PipelineConfig::default()).unwrap(),
+                )
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, search, base_stencil, engine);
+criterion_main!(benches);

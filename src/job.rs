@@ -156,9 +156,18 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         energy_rel_error_rounded: vec![],
         digest: format!("{:016x}", stats.digest),
         tile: job.pipeline.tile,
-        strip_rows: job.pipeline.strip_rows,
+        strip_rows: match job.pipeline.strip_rows {
+            0 => crate::pipeline::auto_strip_rows(w, pipe_job.channels.len()),
+            n => n,
+        },
         threads,
         peak_rss_bytes: peak_rss_bytes(),
+        window_rows: stats.window_rows,
+        window_bytes: {
+            let (nch, ow) = (pipe_job.channels.len() as u64, (w / s) as u64);
+            let r = stats.window_rows.map(|v| v as u64);
+            r[0] * nch * w as u64 * 4 + r[1] * ow * 8 + (r[2] + r[3] + r[4]) * nch * ow * 8
+        },
     };
     report.set_ledger(&stats.ledger);
     Ok(report)

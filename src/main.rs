@@ -83,8 +83,8 @@ struct FilterArgs {
     /// Accumulator tile width in output pixels (does not change the result).
     #[arg(long, default_value_t = 256)]
     tile: usize,
-    /// Input rows per strip (does not change the result).
-    #[arg(long, default_value_t = 96)]
+    /// Input rows per strip, 0 = automatic (about 4 MiB of input; does not change the result).
+    #[arg(long, default_value_t = 0)]
     strip_rows: usize,
     /// Worker threads, 0 = one per core (does not change the result).
     #[arg(long, default_value_t = 0)]
@@ -97,7 +97,28 @@ struct FilterArgs {
     quiet: bool,
 }
 
+/// glibc keeps freed multi-megabyte row buffers in per-thread arenas (its
+/// mmap threshold grows with each such free), so at 32k-wide inputs peak RSS
+/// was ~60 MiB above the live heap. Buffers of 4 MiB and more now go straight
+/// back to the system; a 32 MiB trim threshold keeps the heap from shrinking
+/// and regrowing on every strip. Measured (32769-wide S=3, ep-gauss): peak RSS
+/// 284 -> 223 MiB; 6144^2 runs as fast as without tuning (2.1 s).
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+fn tune_allocator() {
+    // SAFETY: mallopt only changes glibc's allocation thresholds; it is called
+    // once, first thing in main, before any other thread exists.
+    #[allow(unsafe_code)]
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 4 * 1024 * 1024);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, 32 * 1024 * 1024);
+    }
+}
+
+#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+fn tune_allocator() {}
+
 fn main() {
+    tune_allocator();
     let cli = Cli::parse();
     if let Err(e) = dispatch(cli) {
         let chain: Vec<String> = e.chain().map(|c| c.to_string()).collect();

@@ -73,6 +73,11 @@ pub struct Report {
     pub threads: usize,
     /// Peak resident set size, where the platform tells it.
     pub peak_rss_bytes: Option<u64>,
+    /// Most rows each rolling window held: input, box luminance, horizontal
+    /// pass, base, accumulator (the halo in practice).
+    pub window_rows: [usize; 5],
+    /// Bytes those windows held at most.
+    pub window_bytes: u64,
 }
 
 impl Report {

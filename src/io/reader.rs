@@ -307,16 +307,33 @@ impl ExrInput {
         }
     }
 
+    /// Decode the tiles of one block row, each into its own buffer.
     fn decode_row(&self, row: &BlockRow) -> Result<Vec<Decoded>> {
         row.chunks
             .par_iter()
-            .map(|&(offset, expected)| self.decode_chunk(offset, expected))
+            .map(|&(offset, expected)| {
+                let mut rows = Vec::new();
+                let (x0, width, bytes) =
+                    self.decode_chunk(offset, expected, row.y1 - row.y0, Place::Own(&mut rows))?;
+                Ok(Decoded {
+                    x0,
+                    width,
+                    rows,
+                    bytes,
+                })
+            })
             .collect()
     }
 
-    /// Read, check and decompress one chunk; returns (x0, width, planar rows
-    /// `[line][channel][x]`, consumed byte range).
-    fn decode_chunk(&self, offset: usize, expected: TileCoordinates) -> Result<Decoded> {
+    /// Read, check and decompress one chunk of `lines` lines into `place`.
+    /// Returns (first column, width, consumed byte range).
+    fn decode_chunk(
+        &self,
+        offset: usize,
+        expected: TileCoordinates,
+        lines: usize,
+        place: Place<'_>,
+    ) -> Result<(usize, usize, (usize, usize))> {
         let path = &self.path;
         let bytes = self.map.bytes();
         let header = self.header();
@@ -350,7 +367,7 @@ impl ExrInput {
         let (bw, bh) = (block.index.pixel_size.0, block.index.pixel_size.1);
         let channels = &header.channels.list;
         let line_bytes: usize = channels.iter().map(|c| bw * bytes_of(c.sample_type)).sum();
-        if block.data.len() != line_bytes * bh {
+        if block.data.len() != line_bytes * bh || bh != lines {
             return Err(invalid(
                 path,
                 format!("block at byte {offset} decodes to the wrong size"),
@@ -363,22 +380,38 @@ impl ExrInput {
             acc += bw * bytes_of(c.sample_type);
         }
         let n = self.selected.len();
-        let mut out = vec![0.0f32; bh * n * bw];
+        let x0 = block.index.pixel_position.0;
+        let (dst, stride, at): (&mut [f32], usize, usize) = match place {
+            Place::InPlace { dst, width } if x0 + bw <= width => (dst, width, x0),
+            Place::InPlace { .. } => {
+                return Err(invalid(
+                    path,
+                    format!("block at byte {offset} lies outside the data window"),
+                ))
+            }
+            Place::Own(v) => {
+                v.clear();
+                v.resize(bh * n * bw, 0.0);
+                (v.as_mut_slice(), bw, 0)
+            }
+        };
         for line in 0..bh {
             for (k, sel) in self.selected.iter().enumerate() {
                 let t = channels[sel.index].sample_type;
                 let src = &block.data[line * line_bytes + ch_off[sel.index]..][..bw * bytes_of(t)];
-                let dst = &mut out[(line * n + k) * bw..][..bw];
-                convert(t, src, dst);
+                convert(t, src, &mut dst[(line * n + k) * stride + at..][..bw]);
             }
         }
-        Ok(Decoded {
-            x0: block.index.pixel_position.0,
-            width: bw,
-            rows: out,
-            bytes: (offset, end),
-        })
+        Ok((x0, bw, (offset, end)))
     }
+}
+
+/// Where a decoded block goes.
+enum Place<'a> {
+    /// Into rows of `width` columns, at the block's own columns.
+    InPlace { dst: &'a mut [f32], width: usize },
+    /// Into its own buffer, exactly the block's size.
+    Own(&'a mut Vec<f32>),
 }
 
 /// One decompressed block: its first column, width, planar rows
@@ -510,35 +543,67 @@ impl Source for ExrSource<'_> {
                 end += 1;
             }
             let batch = &self.input.rows[self.next_row..end];
-            let decoded: Vec<Result<Vec<_>>> =
-                batch.par_iter().map(|r| self.input.decode_row(r)).collect();
+            let total: usize = batch.iter().map(|r| r.y1 - r.y0).sum();
+            let base = self.buf.len();
+            self.buf.resize(base + total * self.row_len, 0.0);
             let mut span = (usize::MAX, 0usize);
-            for (row, blocks) in batch.iter().zip(decoded) {
-                let blocks = blocks?;
-                let lines = row.y1 - row.y0;
-                let base = self.buf.len();
-                self.buf.resize(base + lines * self.row_len, 0.0);
-                for Decoded {
-                    x0,
-                    width: bw,
-                    rows: data,
-                    bytes: (a, b),
-                } in blocks
-                {
+            if batch.iter().all(|r| r.chunks.len() == 1) {
+                // Scan lines: each block decodes straight into its rows.
+                let mut slices = Vec::with_capacity(batch.len());
+                let mut rest = &mut self.buf[base..];
+                for r in batch {
+                    let (head, tail) = rest.split_at_mut((r.y1 - r.y0) * self.row_len);
+                    slices.push(head);
+                    rest = tail;
+                }
+                let input = self.input;
+                let spans: Vec<Result<(usize, usize, (usize, usize))>> = batch
+                    .par_iter()
+                    .zip(slices.into_par_iter())
+                    .map(|(r, dst)| {
+                        let (offset, expected) = r.chunks[0];
+                        input.decode_chunk(
+                            offset,
+                            expected,
+                            r.y1 - r.y0,
+                            Place::InPlace { dst, width: w },
+                        )
+                    })
+                    .collect();
+                for sp in spans {
+                    let (_, _, (a, b)) = sp?;
                     span = (span.0.min(a), span.1.max(b));
-                    if x0 + bw > w {
-                        return Err(invalid(
-                            &self.input.path,
-                            "a block lies outside the data window",
-                        ));
-                    }
-                    for line in 0..lines {
-                        for k in 0..nch {
-                            let src = &data[(line * nch + k) * bw..][..bw];
-                            let at = base + line * self.row_len + k * w + x0;
-                            self.buf[at..at + bw].copy_from_slice(src);
+                }
+            } else {
+                // Tiles: decode each into its own buffer, then place it.
+                let decoded: Vec<Result<Vec<Decoded>>> =
+                    batch.par_iter().map(|r| self.input.decode_row(r)).collect();
+                let mut row_base = base;
+                for (row, blocks) in batch.iter().zip(decoded) {
+                    let lines = row.y1 - row.y0;
+                    for Decoded {
+                        x0,
+                        width: bw,
+                        rows: data,
+                        bytes: (a, b),
+                    } in blocks?
+                    {
+                        span = (span.0.min(a), span.1.max(b));
+                        if x0 + bw > w {
+                            return Err(invalid(
+                                &self.input.path,
+                                "a block lies outside the data window",
+                            ));
+                        }
+                        for line in 0..lines {
+                            for k in 0..nch {
+                                let src = &data[(line * nch + k) * bw..][..bw];
+                                let at = row_base + line * self.row_len + k * w + x0;
+                                self.buf[at..at + bw].copy_from_slice(src);
+                            }
                         }
                     }
+                    row_base += lines * self.row_len;
                 }
             }
             if span.0 < span.1 {
@@ -569,7 +634,14 @@ impl Source for ExrSource<'_> {
                 Err(invalid(&self.input.path, "missing rows"))
             };
         }
-        let data: Vec<f32> = self.buf.drain(..n * self.row_len).collect();
+        // Hand over the front rows, copying whichever part is smaller.
+        let k = n * self.row_len;
+        let data = if k >= self.buf.len() - k {
+            let rest = self.buf.split_off(k);
+            std::mem::replace(&mut self.buf, rest)
+        } else {
+            self.buf.drain(..k).collect()
+        };
         let strip = Strip {
             y0: self.buf_y0,
             rows: n,

@@ -113,6 +113,7 @@ pub struct Engine {
     input: RowWindow<f32>,
     ybox: RowWindow<f64>,
     hpass: RowWindow<f64>,
+    based: RowWindow<f64>,
     acc: RowWindow<f64>,
     pending: Vec<Noisy>,
     arena: Vec<f64>,
@@ -202,6 +203,7 @@ impl Engine {
             input: RowWindow::new(nch * grid.in_w),
             ybox: RowWindow::new(w + 2 * pad),
             hpass: RowWindow::new(nch * w),
+            based: RowWindow::new(nch * w),
             acc: RowWindow::new(nch * w),
             pending: Vec::new(),
             arena: Vec::new(),
@@ -248,12 +250,13 @@ impl Engine {
     }
 
     /// Most rows each window held at once: input, box luminance, horizontal
-    /// pass, accumulator.
-    pub fn high_water(&self) -> [usize; 4] {
+    /// pass, base rows, accumulator.
+    pub fn high_water(&self) -> [usize; 5] {
         [
             self.input.high_water(),
             self.ybox.high_water(),
             self.hpass.high_water(),
+            self.based.high_water(),
             self.acc.high_water(),
         ]
     }
@@ -343,26 +346,33 @@ impl Engine {
                 self.spread_done = sp_target;
             }
         }
-        // 4. output
+        // 4. base rows: the vertical gather, as soon as its input rows are
+        // classified; the short-lived horizontal-pass rows go, the (S times
+        // fewer) base rows wait for the spreading.
         let h = self.h;
-        let by_cls = if self.cls_done == h {
+        let base_target = if self.cls_done == h {
             h
         } else {
             self.cls_done.saturating_sub(self.halo.base_reach)
         };
+        if base_target > self.based.end() {
+            self.make_base_rows(self.based.end(), base_target);
+            self.hpass
+                .evict_below(base_target.saturating_sub(self.halo.base_reach) * s);
+        }
+        // 5. output: base plus spread noise, once no later row can reach it.
         let by_spread = match &self.ep {
             Some(_) if self.spread_done < h => {
                 self.spread_done.saturating_sub(self.halo.spread_reach)
             }
             _ => h,
         };
-        let out_target = by_cls.min(by_spread);
+        let out_target = self.based.end().min(by_spread);
         let mut out = None;
         if out_target > self.out_done {
             out = Some(self.finish_rows(self.out_done, out_target)?);
             self.out_done = out_target;
-            self.hpass
-                .evict_below(out_target.saturating_sub(self.halo.base_reach) * s);
+            self.based.evict_below(out_target);
             self.acc.evict_below(out_target);
         }
         let keep = if self.ep.is_some() {
@@ -498,15 +508,11 @@ impl Engine {
         let batch = &mut self.pending[..split];
         // Width search, one sample per task (each is independent of the rest).
         let view = YView { win: &self.ybox, h };
-        let scratch = ep.scratch_len();
-        batch.par_iter_mut().for_each_init(
-            || vec![0.0; scratch],
-            |rs, n| {
-                let c = ep.search(&view, n.i as usize / s, n.j as usize / s, n.x0, n.xbar0, rs);
-                n.level = c.level;
-                n.capped = c.capped;
-            },
-        );
+        batch.par_iter_mut().for_each(|n| {
+            let c = ep.search(&view, n.i as usize / s, n.j as usize / s, n.x0, n.xbar0);
+            n.level = c.level;
+            n.capped = c.capped;
+        });
         // Reflect each sample's kernel once, in order.
         self.arena.clear();
         let mut spreads = Vec::with_capacity(batch.len());
@@ -546,76 +552,107 @@ impl Engine {
         let (first, end) = (self.acc.first(), self.acc.end());
         let tile = self.tile;
         let ntiles = w.div_ceil(tile);
+        // Planar rows [c][x]: tile t owns columns t*tile.. of every channel of
+        // every row; its slices are listed row by row, channel by channel.
         let mut tiles: Vec<Vec<&mut [f64]>> = (0..ntiles)
-            .map(|_| Vec::with_capacity(end - first))
+            .map(|_| Vec::with_capacity((end - first) * nch))
             .collect();
         for row in self.acc.range_mut(first, end) {
-            for (t, part) in row.chunks_mut(tile * nch).enumerate() {
-                tiles[t].push(part);
+            for ch in row.chunks_mut(w) {
+                for (t, part) in ch.chunks_mut(tile).enumerate() {
+                    tiles[t].push(part);
+                }
             }
         }
         let arena = &self.arena;
-        tiles.into_par_iter().enumerate().for_each(|(t, mut rows)| {
-            let x0 = t * tile;
-            let x1 = (x0 + tile).min(w);
-            for sp in &spreads {
-                let (cx0, cx1) = (sp.xs.max(x0), (sp.xs + sp.xl).min(x1));
-                if cx0 >= cx1 {
-                    continue;
-                }
-                let wx = &arena[sp.off + cx0 - sp.xs..sp.off + cx1 - sp.xs];
-                let wy = &arena[sp.off + sp.xl..sp.off + sp.xl + sp.yl];
-                for (dy, &wyv) in wy.iter().enumerate() {
-                    let row = &mut rows[sp.ys + dy - first];
-                    let coef = sp.v.map(|v| v * wyv);
-                    let dst = &mut row[(cx0 - x0) * nch..(cx1 - x0) * nch];
-                    match nch {
-                        3 => scatter_row::<3>(dst, wx, &coef),
-                        4 => scatter_row::<4>(dst, wx, &coef),
-                        1 => scatter_row::<1>(dst, wx, &coef),
-                        _ => scatter_row::<2>(dst, wx, &coef),
+        tiles
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(t, mut parts)| {
+                let x0 = t * tile;
+                let x1 = (x0 + tile).min(w);
+                for sp in &spreads {
+                    let (cx0, cx1) = (sp.xs.max(x0), (sp.xs + sp.xl).min(x1));
+                    if cx0 >= cx1 {
+                        continue;
+                    }
+                    let wx = &arena[sp.off + cx0 - sp.xs..sp.off + cx1 - sp.xs];
+                    let wy = &arena[sp.off + sp.xl..sp.off + sp.xl + sp.yl];
+                    for (dy, &wyv) in wy.iter().enumerate() {
+                        let r = sp.ys + dy - first;
+                        for c in 0..nch {
+                            let coef = sp.v[c] * wyv;
+                            let dst = &mut parts[r * nch + c][cx0 - x0..cx1 - x0];
+                            for (d, &wv) in dst.iter_mut().zip(wx) {
+                                *d += coef * wv;
+                            }
+                        }
                     }
                 }
-            }
-        });
+            });
     }
 
-    fn finish_rows(&mut self, a: usize, b: usize) -> Result<OutRows> {
+    /// The vertical gather of the base kernel for output rows `a..b`:
+    /// `(sum of taps x horizontal-pass rows) / S^2`, summed in tap order.
+    fn make_base_rows(&mut self, a: usize, b: usize) {
         let (w, h, nch, in_h) = (self.w, self.h, self.nch, self.grid.in_h);
-        let mut data = vec![0.0f32; (b - a) * nch * w];
+        for _ in a..b {
+            self.based.push_stale(0.0); // every value is written below
+        }
         let base = &self.base;
         let hpass = &self.hpass;
-        let acc = self.ep.as_ref().map(|_| &self.acc);
         let inv = self.inv_s2;
+        let mut rows = self.based.range_mut(a, b);
+        rows.par_iter_mut()
+            .enumerate()
+            .for_each_init(Vec::new, |taps, (k, row)| {
+                let y = a + k;
+                let j0 = base.gather(y, h, in_h, taps);
+                for c in 0..nch {
+                    let dst = &mut row[c * w..(c + 1) * w];
+                    dst.iter_mut().for_each(|v| *v = -0.0);
+                    for (t, &wt) in taps.iter().enumerate() {
+                        let src = &hpass.get(j0 + t)[c * w..(c + 1) * w];
+                        for (d, &v) in dst.iter_mut().zip(src) {
+                            *d += wt * v;
+                        }
+                    }
+                    dst.iter_mut().for_each(|v| *v *= inv);
+                }
+            });
+    }
+
+    /// Output rows `a..b`: base plus accumulator, rounded, with the ledger.
+    fn finish_rows(&mut self, a: usize, b: usize) -> Result<OutRows> {
+        let (w, nch) = (self.w, self.nch);
+        let mut data = vec![0.0f32; (b - a) * nch * w];
+        let based = &self.based;
+        let acc = self.ep.as_ref().map(|_| &self.acc);
         let precision = self.precision;
         let names = &self.names;
         let sums: Vec<Result<(Sums, Sums, u64)>> = data
             .par_chunks_mut(nch * w)
             .enumerate()
             .map_init(
-                || (vec![0.0f64; w], Vec::new()),
-                |(tmp, taps), (k, out)| {
+                || vec![0.0f64; w],
+                |tmp, (k, out)| {
                     let y = a + k;
-                    let j0 = base.gather(y, h, in_h, taps);
                     let mut raw = Sums::new(nch);
                     let mut rounded = Sums::new(nch);
                     let mut digest = FNV_OFFSET;
                     for c in 0..nch {
-                        tmp.iter_mut().for_each(|v| *v = -0.0);
-                        for (t, &wt) in taps.iter().enumerate() {
-                            let src = &hpass.get(j0 + t)[c * w..(c + 1) * w];
-                            for (d, &v) in tmp.iter_mut().zip(src) {
-                                *d += wt * v;
+                        let base_row = &based.get(y)[c * w..(c + 1) * w];
+                        match acc {
+                            Some(acc) => {
+                                let n = &acc.get(y)[c * w..(c + 1) * w];
+                                for ((v, &b), &n) in tmp.iter_mut().zip(base_row).zip(n) {
+                                    *v = b + n;
+                                }
                             }
-                        }
-                        let dst = &mut out[c * w..(c + 1) * w];
-                        for (x, v) in tmp.iter_mut().enumerate() {
-                            *v *= inv;
-                            if let Some(acc) = acc {
-                                *v += acc.get(y)[x * nch + c];
-                            }
+                            None => tmp.copy_from_slice(base_row),
                         }
                         raw.add_slice(c, tmp);
+                        let dst = &mut out[c * w..(c + 1) * w];
                         for (x, (d, &val)) in dst.iter_mut().zip(tmp.iter()).enumerate() {
                             let r = round(val, precision).ok_or_else(|| Error::Value {
                                 path: Default::default(),
@@ -653,16 +690,6 @@ const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
 #[inline]
 fn fnv(h: u64, word: u64) -> u64 {
     (h ^ word).wrapping_mul(0x0000_0100_0000_01b3)
-}
-
-/// The hot loop of spreading: `dst[x][c] += coef[c] * wx[x]`.
-#[inline]
-fn scatter_row<const C: usize>(dst: &mut [f64], wx: &[f64], coef: &[f64; MAX_CHANNELS]) {
-    for (px, &wv) in dst.chunks_exact_mut(C).zip(wx) {
-        for c in 0..C {
-            px[c] += coef[c] * wv;
-        }
-    }
 }
 
 /// Round to the output type; `None` if the value does not fit.

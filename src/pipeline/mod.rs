@@ -73,7 +73,7 @@ impl Precision {
 pub struct PipelineConfig {
     /// Tile width of the accumulators, in output pixels.
     pub tile: usize,
-    /// Input rows per strip.
+    /// Input rows per strip (0: automatic, [`auto_strip_rows`]).
     pub strip_rows: usize,
     /// Worker threads (0: one per core).
     pub threads: usize,
@@ -87,7 +87,7 @@ impl Default for PipelineConfig {
     fn default() -> Self {
         PipelineConfig {
             tile: 256,
-            strip_rows: 96,
+            strip_rows: 0,
             threads: 0,
             precision: Precision::F32,
             cancel: None,
@@ -117,10 +117,20 @@ pub struct RunStats {
     pub seconds: f64,
     /// Halo of the job.
     pub halo: Halo,
-    /// Most rows each window held (input, luminance, horizontal pass, accumulator).
-    pub window_rows: [usize; 4],
+    /// Most rows each window held (input, luminance, horizontal pass, base, accumulator).
+    pub window_rows: [usize; 5],
     /// Digest of the unrounded output ([`Engine::digest`]).
     pub digest: u64,
+}
+
+/// Bytes of input one strip should hold by default: four strips are in
+/// flight at most (two queued, one being read, one being filtered), so this
+/// bounds their memory to 16 MiB whatever the width.
+pub const STRIP_BYTES: usize = 4 << 20;
+
+/// Default strip height: [`STRIP_BYTES`] of f32 rows, between 1 and 96 rows.
+pub fn auto_strip_rows(in_w: usize, channels: usize) -> usize {
+    (STRIP_BYTES / (in_w * channels * 4).max(1)).clamp(1, 96)
 }
 
 /// Progress callback: (output rows done, output rows in all).
@@ -144,9 +154,6 @@ pub fn run<S: Source, K: Sink>(
     cfg: &PipelineConfig,
     progress: Progress<'_>,
 ) -> Result<RunStats> {
-    if cfg.strip_rows == 0 {
-        return Err(Error::Config("--strip-rows must be at least 1".into()));
-    }
     let pool = thread_pool(cfg.threads)?;
     let start = Instant::now();
     let mut engine = Engine::new(
@@ -165,7 +172,10 @@ pub fn run<S: Source, K: Sink>(
     };
     let (strip_tx, strip_rx) = crossbeam_channel::bounded::<Result<Strip>>(2);
     let (row_tx, row_rx) = crossbeam_channel::bounded::<OutRows>(2);
-    let strip_rows = cfg.strip_rows;
+    let strip_rows = match cfg.strip_rows {
+        0 => auto_strip_rows(job.grid.in_w, job.channels.len()),
+        n => n,
+    };
     let pool = &pool;
 
     let result = std::thread::scope(|scope| -> Result<()> {

@@ -180,19 +180,16 @@ pub fn reference(img: &Img, s: usize, p: &FilterParams, lum: &[f64]) -> (Vec<f64
     } else {
         vec![p.radius]
     };
-    // xbar and w0 of Relation 14 at radius rho around pixel (x, y).
+    // xbar and w0 of Relation 14 at radius rho around pixel (x, y): Gaussian
+    // weights over the square |dx|, |dy| <= floor(cutoff * rho).
     let xbar_w0 = |x: usize, y: usize, rho: f64| -> (f64, f64) {
-        let lim = p.cutoff * rho;
-        let r = lim.floor() as i64;
+        let r = (p.cutoff * rho).floor() as i64;
         let (mut num, mut den) = (0.0, 0.0);
         for dy in -r..=r {
             for dx in -r..=r {
-                let d2 = (dx * dx + dy * dy) as f64;
-                if d2 <= lim * lim {
-                    let g = (-d2 / (rho * rho)).exp();
-                    num += g * ybox[mirror(y as i64 + dy, h) * w + mirror(x as i64 + dx, w)];
-                    den += g;
-                }
+                let g = (-((dx * dx + dy * dy) as f64) / (rho * rho)).exp();
+                num += g * ybox[mirror(y as i64 + dy, h) * w + mirror(x as i64 + dx, w)];
+                den += g;
             }
         }
         (num / den, 1.0 / ((s * s) as f64 * den))
