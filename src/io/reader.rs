@@ -313,7 +313,7 @@ impl ExrInput {
             .par_iter()
             .map(|&(offset, expected)| {
                 let mut rows = Vec::new();
-                let (x0, width, bytes) =
+                let Landed { x0, width, bytes } =
                     self.decode_chunk(offset, expected, row.y1 - row.y0, Place::Own(&mut rows))?;
                 Ok(Decoded {
                     x0,
@@ -333,7 +333,7 @@ impl ExrInput {
         expected: TileCoordinates,
         lines: usize,
         place: Place<'_>,
-    ) -> Result<(usize, usize, (usize, usize))> {
+    ) -> Result<Landed> {
         let path = &self.path;
         let bytes = self.map.bytes();
         let header = self.header();
@@ -402,8 +402,19 @@ impl ExrInput {
                 convert(t, src, &mut dst[(line * n + k) * stride + at..][..bw]);
             }
         }
-        Ok((x0, bw, (offset, end)))
+        Ok(Landed {
+            x0,
+            width: bw,
+            bytes: (offset, end),
+        })
     }
+}
+
+/// Where a decoded chunk landed: first column, width, bytes of the file.
+struct Landed {
+    x0: usize,
+    width: usize,
+    bytes: (usize, usize),
 }
 
 /// Where a decoded block goes.
@@ -557,7 +568,7 @@ impl Source for ExrSource<'_> {
                     rest = tail;
                 }
                 let input = self.input;
-                let spans: Vec<Result<(usize, usize, (usize, usize))>> = batch
+                let spans: Vec<Result<Landed>> = batch
                     .par_iter()
                     .zip(slices.into_par_iter())
                     .map(|(r, dst)| {
@@ -571,7 +582,7 @@ impl Source for ExrSource<'_> {
                     })
                     .collect();
                 for sp in spans {
-                    let (_, _, (a, b)) = sp?;
+                    let (a, b) = sp?.bytes;
                     span = (span.0.min(a), span.1.max(b));
                 }
             } else {
