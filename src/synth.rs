@@ -126,6 +126,28 @@ impl Scene {
         out
     }
 
+    /// The expected value of every sample cell (input resolution), rows
+    /// `j0..j0 + rows`, planar RGB: what an infinitely sampled render would
+    /// hold. Filtered with a method's base kernel it gives that method's
+    /// noise-free result.
+    pub fn expected_rows(&self, j0: usize, rows: usize) -> Vec<f32> {
+        let (iw, _) = self.input_size();
+        let d = 1.0 / self.s as f64;
+        let mut out = vec![0.0f32; rows * 3 * iw];
+        out.par_chunks_mut(3 * iw).enumerate().for_each(|(r, row)| {
+            let v = (j0 + r) as f64 * d;
+            for i in 0..iw {
+                let u = i as f64 * d;
+                let (p, l, col) = self.hot_at(u, v, d);
+                let base = self.base(u + d / 2.0, v + d / 2.0);
+                for c in 0..3 {
+                    row[c * iw + i] = (p * l * col[c] + (1.0 - p) * base * BASE_RGB[c]) as f32;
+                }
+            }
+        });
+        out
+    }
+
     /// Truth at output resolution, rows `y0..y0 + rows`, planar RGB.
     pub fn truth_rows(&self, y0: usize, rows: usize) -> Vec<f32> {
         let (s, w) = (self.s, self.w);

@@ -155,3 +155,45 @@ fn info_describes_a_file() {
         "{s}"
     );
 }
+
+#[test]
+fn output_files_are_byte_identical_for_any_tile_strip_and_threads() {
+    let dir = tmpdir();
+    let inp = input(dir.path());
+    let mut first: Option<(Vec<u8>, serde_json::Value)> = None;
+    for (k, cut) in [["256", "0", "1"], ["3", "1", "2"], ["7", "5", "4"]]
+        .iter()
+        .enumerate()
+    {
+        let out = dir.path().join(format!("o{k}.exr"));
+        let rep = dir.path().join(format!("r{k}.json"));
+        let o = epfilt(&[
+            "filter",
+            &inp,
+            out.to_str().unwrap(),
+            "-s",
+            "3",
+            "-q",
+            "--tile",
+            cut[0],
+            "--strip-rows",
+            cut[1],
+            "--threads",
+            cut[2],
+            "--report",
+            rep.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let bytes = std::fs::read(&out).unwrap();
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+        match &first {
+            None => first = Some((bytes, json)),
+            Some((b, j)) => {
+                assert!(bytes == *b, "output file differs for {cut:?}");
+                assert_eq!(json["digest"], j["digest"]);
+                assert_eq!(json["energy_out"], j["energy_out"]);
+            }
+        }
+    }
+}
