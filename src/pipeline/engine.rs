@@ -447,13 +447,16 @@ impl Engine {
                     let view = YView { win: ybox, h };
                     let xbars = ep.xbar0_row(&view, y as i64, w);
                     for (px, &xbar) in xbars.iter().enumerate() {
+                        let Some((hi, lo)) = ep.bounds(xbar) else {
+                            continue;
+                        };
                         for (b, row) in ins.iter_mut().enumerate() {
                             for i in px * s..(px + 1) * s {
                                 let mut x0 = 0.0;
                                 for c in 0..nch {
                                     x0 += lum[c] * row[c * in_w + i] as f64;
                                 }
-                                if ep.is_noisy(x0, xbar) {
+                                if x0 > 0.0 && (x0 > hi || x0 < lo) {
                                     let mut v = [0.0f32; MAX_CHANNELS];
                                     for c in 0..nch {
                                         v[c] = row[c * in_w + i];
