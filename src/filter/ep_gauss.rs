@@ -249,7 +249,7 @@ impl EpGauss {
     /// [`EpGauss::is_noisy`] but for rounding at the exact boundary.
     #[inline]
     pub fn bounds(&self, xbar: f64) -> Option<(f64, f64)> {
-        (xbar > 0.0 && xbar.is_finite()).then(|| (self.t_hi * xbar, self.t_lo * xbar))
+        (xbar > 0.0 && xbar.is_finite()).then_some((self.t_hi * xbar, self.t_lo * xbar))
     }
 
     /// Cheap path: is the sample noisy at the base width? Only the few that are
