@@ -165,7 +165,7 @@ impl ExrOutput {
             .as_file()
             .try_clone()
             .map_err(|e| Error::io(temp.path(), e))?;
-        let (tx, rx) = crossbeam_channel::bounded::<(usize, Chunk)>(16);
+        let (tx, rx) = crossbeam_channel::bounded::<(usize, Chunk)>(4);
         let thread_headers = headers.clone();
         let tpath = temp.path().to_path_buf();
         let thread = std::thread::Builder::new()
