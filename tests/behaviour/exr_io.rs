@@ -312,3 +312,30 @@ fn size_not_a_multiple_of_s_is_refused() {
 pub fn corpus_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/exr-corpus")
 }
+
+#[test]
+fn an_interrupted_run_leaves_nothing_behind() {
+    let dir = tmpdir();
+    let input = dir.path().join("in.exr");
+    write_rgb(
+        &input,
+        &Img::new(30, 30, 3, |_, _, _| 1.0),
+        Compression::ZIP16,
+        Blocks::ScanLines,
+        false,
+        LineOrder::Increasing,
+    );
+    let out = dir.path().join("out.exr");
+    let mut j = job(&input, &out, Method::EpGauss, 3);
+    j.pipeline.cancel = Some(std::sync::Arc::new(std::sync::atomic::AtomicBool::new(
+        true,
+    )));
+    let err = filter_file(&j, &|_, _| {}).unwrap_err();
+    assert!(matches!(err, epfilt::Error::Interrupted), "{err}");
+    let names: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name())
+        .collect();
+    assert_eq!(names, vec![std::ffi::OsString::from("in.exr")]);
+}
