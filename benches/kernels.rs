@@ -3,33 +3,10 @@
 //! method. `cargo bench --bench kernels`.
 
 use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use epfilt::filter::ep_gauss::{EpGauss, LumRows};
-use epfilt::geometry::mirror;
+use epfilt::filter::ep_gauss::{EpGauss, LumImage};
 use epfilt::{filter_in_memory, FilterParams, Grid, Job, Method, PipelineConfig};
 
-struct Field {
-    h: usize,
-    rows: Vec<Vec<f64>>,
-}
-
-impl Field {
-    fn new(w: usize, h: usize, pad: usize, f: impl Fn(usize, usize) -> f64) -> Self {
-        let rows = (0..h)
-            .map(|y| {
-                (0..w + 2 * pad)
-                    .map(|i| f(mirror(i as i64 - pad as i64, w), y))
-                    .collect()
-            })
-            .collect();
-        Field { h, rows }
-    }
-}
-
-impl LumRows for Field {
-    fn row(&self, vy: i64) -> &[f64] {
-        &self.rows[mirror(vy, self.h)]
-    }
-}
+type Field = LumImage;
 
 fn search(c: &mut Criterion) {
     let ep = EpGauss::new(3, 0.6, 16.0, 3.0, 0.25, 0.1);

@@ -100,6 +100,36 @@ pub trait LumRows {
     fn row(&self, vy: i64) -> &[f64];
 }
 
+/// An in-memory field of box luminance with mirrored rows and padded,
+/// mirrored columns: the [`LumRows`] of small jobs, tests and benches (the
+/// engine streams its own).
+#[derive(Clone, Debug)]
+pub struct LumImage {
+    h: usize,
+    rows: Vec<Vec<f64>>,
+}
+
+impl LumImage {
+    /// A `w` x `h` field with `pad` mirrored columns each side; `f(x, y)` gives
+    /// the value of pixel (x, y).
+    pub fn new(w: usize, h: usize, pad: usize, f: impl Fn(usize, usize) -> f64) -> Self {
+        let rows = (0..h)
+            .map(|y| {
+                (0..w + 2 * pad)
+                    .map(|i| f(crate::geometry::mirror(i as i64 - pad as i64, w), y))
+                    .collect()
+            })
+            .collect();
+        LumImage { h, rows }
+    }
+}
+
+impl LumRows for LumImage {
+    fn row(&self, vy: i64) -> &[f64] {
+        &self.rows[crate::geometry::mirror(vy, self.h)]
+    }
+}
+
 /// Precomputed tables of the filter: built once per job, read-only after.
 #[derive(Clone, Debug)]
 pub struct EpGauss {
@@ -357,29 +387,8 @@ impl EpGauss {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::mirror;
 
-    struct Field {
-        h: usize,
-        rows: Vec<Vec<f64>>,
-    }
-    impl Field {
-        fn new(w: usize, h: usize, pad: usize, f: impl Fn(usize, usize) -> f64) -> Self {
-            let rows = (0..h)
-                .map(|y| {
-                    (0..w + 2 * pad)
-                        .map(|i| f(mirror(i as i64 - pad as i64, w), y))
-                        .collect()
-                })
-                .collect();
-            Field { h, rows }
-        }
-    }
-    impl LumRows for Field {
-        fn row(&self, vy: i64) -> &[f64] {
-            &self.rows[mirror(vy, self.h)]
-        }
-    }
+    type Field = LumImage;
 
     /// Direct 2-D Gaussian average over the square support (the definition).
     fn direct_average(ep: &EpGauss, f: &Field, px: usize, py: usize, l: usize) -> f64 {
