@@ -33,6 +33,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         &names,
         comp,
         Precision::F32,
+        &[],
     )?;
     let rows = 64;
     let mut y = 0;

@@ -18,6 +18,10 @@ pub struct Comparison {
     /// Mean of `(a - b)^2 / (b^2 + eps)` with `eps = (0.01 * mean |b|)^2`,
     /// which keeps dark pixels from dominating.
     pub rel_mse: f64,
+    /// PSNR in dB of A against B after the display mapping of
+    /// [`crate::preview::Display`] set from B's average luminance (sRGB values
+    /// 0..1, not quantized); infinite when they map identically.
+    pub psnr: f64,
     /// Largest absolute difference.
     pub max_abs_diff: f64,
     /// `sum(A) / sum(B)` per channel.
@@ -26,6 +30,20 @@ pub struct Comparison {
     pub differing_pixels: u64,
     /// Bit-identical.
     pub identical: bool,
+}
+
+impl Comparison {
+    /// A small human table.
+    pub fn table(&self, channels: &[String]) -> String {
+        let mut s = format!(
+            "rmse              {:.6e}\nrel_mse           {:.6e}\npsnr              {:.2} dB\nmax_abs_diff      {:.6e}\ndiffering_pixels  {}\nidentical         {}\n",
+            self.rmse, self.rel_mse, self.psnr, self.max_abs_diff, self.differing_pixels, self.identical
+        );
+        for (c, r) in channels.iter().zip(&self.energy_ratio) {
+            s.push_str(&format!("energy_ratio {:<4} {:.15}\n", c, r));
+        }
+        s
+    }
 }
 
 /// Compare `a` against the reference `b` (same size and channels).
@@ -48,15 +66,23 @@ pub fn compare_files(a: &Path, b: &Path) -> Result<Comparison> {
     // Pass 1: mean |b| for the relative error's eps (a second read of B keeps
     // memory flat instead of holding per-pixel terms).
     let mut sum_b = CompensatedSum::default();
+    let mut lum_b = CompensatedSum::default();
+    let lum = ib.luminance();
     let mut n = 0u64;
     let mut sb = ib.source();
     while let Some(rb) = sb.next_strip(64)? {
-        for v in &rb.data {
+        for (k, v) in rb.data.iter().enumerate() {
             sum_b.add((*v as f64).abs());
+            lum_b.add(lum[(k / w) % nch] * *v as f64);
             n += 1;
         }
     }
     let mean_b = sum_b.value() / n.max(1) as f64;
+    let display = crate::preview::Display::for_average(
+        lum_b.value() / (n.max(1) / nch as u64).max(1) as f64,
+        0.0,
+    );
+    let mut disp_sq = CompensatedSum::default();
     let eps = (0.01 * mean_b).powi(2).max(f64::MIN_POSITIVE);
     // Pass 2: everything else.
     let (mut sa, mut sb) = (ia.source(), ib.source());
@@ -75,6 +101,8 @@ pub fn compare_files(a: &Path, b: &Path) -> Result<Comparison> {
                     diff |= ra.data[k].to_bits() != rb.data[k].to_bits();
                     let d = va - vb;
                     sum_sq.add(d * d);
+                    let dd = display.encode(va) - display.encode(vb);
+                    disp_sq.add(dd * dd);
                     rel.add(d * d / (vb * vb + eps));
                     max_abs = max_abs.max(d.abs());
                     ea[c].add(va);
@@ -87,6 +115,14 @@ pub fn compare_files(a: &Path, b: &Path) -> Result<Comparison> {
     let n = n.max(1) as f64;
     Ok(Comparison {
         rmse: (sum_sq.value() / n).sqrt(),
+        psnr: {
+            let mse = disp_sq.value() / n;
+            if mse > 0.0 {
+                -10.0 * mse.log10()
+            } else {
+                f64::INFINITY
+            }
+        },
         rel_mse: rel.value() / n,
         max_abs_diff: max_abs,
         energy_ratio: ea

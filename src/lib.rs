@@ -27,7 +27,8 @@
 //!
 //! Modules: [`geometry`] (grid, reflection, halo), [`filter`] (kernels and the
 //! noise rule), [`pipeline`] (windows, tiles, ledger, scheduling), [`io`] (EXR
-//! in and out), [`stats`] (reports), [`demo`].
+//! in and out), [`stats`] (reports), [`synth`] (scenes with exact truth),
+//! [`compare`], [`preview`] (display mapping, PNG), [`demo`].
 #![deny(missing_docs)]
 #![deny(unsafe_code)]
 // `!(x > 0.0)` is deliberate throughout: it is true for NaN, which must take
@@ -42,6 +43,7 @@ pub mod geometry;
 pub mod io;
 pub mod job;
 pub mod pipeline;
+pub mod preview;
 pub mod stats;
 pub mod synth;
 

@@ -9,6 +9,7 @@ use std::sync::Arc;
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
 use epfilt::io::{parse_compression, OutputSettings, PartSelect};
+use epfilt::synth::{Sampling, Scene, SceneKind, SynthJob};
 use epfilt::{FilterJob, FilterParams, Method, PipelineConfig, Precision};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -32,6 +33,34 @@ enum Command {
         /// EXR file.
         input: PathBuf,
     },
+    /// Render a noisy synthetic scene with exact ground truth (streamed: any size).
+    Synth(Box<SynthArgs>),
+    /// Compare an image with a reference: RMSE, relative MSE, PSNR, energy ratio.
+    Compare {
+        /// The image.
+        a: PathBuf,
+        /// The reference.
+        b: PathBuf,
+        /// Print JSON instead of a table.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Write an sRGB PNG of one EXR, or a labelled montage of several
+    /// (`preview A.exr B.exr ... OUT.png --montage`).
+    Preview {
+        /// Input EXR file(s), then the output PNG.
+        #[arg(required = true, num_args = 2..)]
+        paths: Vec<PathBuf>,
+        /// Exposure in stops on top of the average-to-mid-grey mapping.
+        #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+        exposure: f64,
+        /// Place the inputs side by side with labels (file names, or --labels).
+        #[arg(long)]
+        montage: bool,
+        /// Comma-separated labels for the montage.
+        #[arg(long)]
+        labels: Option<String>,
+    },
     /// Build a noisy scene with known truth, filter it with every method, and
     /// print how close each comes to the truth.
     Demo {
@@ -42,6 +71,47 @@ enum Command {
         #[arg(long, default_value = "320x200")]
         size: String,
     },
+}
+
+#[derive(Args)]
+struct SynthArgs {
+    /// Noisy output EXR.
+    #[arg(short = 'o', long)]
+    output: PathBuf,
+    /// Truth output EXR (output resolution, f32).
+    #[arg(long)]
+    truth: Option<PathBuf>,
+    /// light-edge, penumbra, glossy, caustic or mixed.
+    #[arg(long, default_value = "mixed")]
+    scene: String,
+    /// Output size in pixels, WxH.
+    #[arg(long, default_value = "512x512")]
+    size: String,
+    /// Samples per pixel along each axis: writes S*W x S*H, one sample each.
+    #[arg(long, short = 's', default_value_t = 3)]
+    supersample: usize,
+    /// Instead: the mean of N samples per pixel (W x H), for the ep-box filter.
+    #[arg(long)]
+    spp: Option<usize>,
+    /// With --spp: also write per-pixel sample variance (variance.R/G/B) and N
+    /// in the header attribute `spp`.
+    #[arg(long)]
+    variance: bool,
+    /// Random seed.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Hot radiance over the base (dynamic range), e.g. 1e3..1e5.
+    #[arg(long, default_value_t = 1e4)]
+    hot: f64,
+    /// Compression of the files.
+    #[arg(long, default_value = "zip")]
+    compression: String,
+    /// Worker threads, 0 = one per core (does not change the bytes).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// No progress bar and no summary.
+    #[arg(long, short = 'q')]
+    quiet: bool,
 }
 
 #[derive(Args)]
@@ -134,6 +204,46 @@ fn dispatch(cli: Cli) -> Result<()> {
             print!("{}", epfilt::io::info(&input)?);
             Ok(())
         }
+        Command::Synth(args) => synth(*args),
+        Command::Compare { a, b, json } => {
+            let cmp = epfilt::compare::compare_files(&a, &b)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&cmp)?);
+            } else {
+                let names = epfilt::io::ExrInput::open(&b, None)?.channels();
+                print!("{}", cmp.table(&names));
+            }
+            Ok(())
+        }
+        Command::Preview {
+            mut paths,
+            exposure,
+            montage,
+            labels,
+        } => {
+            let out = paths.pop().context("preview needs an output PNG")?;
+            if paths.len() > 1 && !montage {
+                anyhow::bail!("several inputs need --montage");
+            }
+            let labels: Vec<String> = match &labels {
+                Some(l) => l.split(',').map(|s| s.trim().to_string()).collect(),
+                None if montage => paths
+                    .iter()
+                    .map(|p| {
+                        p.file_stem()
+                            .map(|s| s.to_string_lossy().into_owned())
+                            .unwrap_or_default()
+                    })
+                    .collect(),
+                None => vec![String::new()],
+            };
+            if labels.len() != paths.len() {
+                anyhow::bail!("{} labels for {} inputs", labels.len(), paths.len());
+            }
+            let inputs: Vec<_> = paths.into_iter().zip(labels).collect();
+            epfilt::preview::write_png(&inputs, &out, exposure)?;
+            Ok(())
+        }
         Command::Demo { dir, size } => {
             let (w, h) = parse_size(&size)?;
             let text = epfilt::demo::run(&dir, w, h, &|line| eprintln!("{line}"))?;
@@ -148,6 +258,73 @@ fn parse_size(s: &str) -> Result<(usize, usize)> {
         .split_once('x')
         .with_context(|| format!("size {s:?} is not WxH"))?;
     Ok((w.parse().context("width")?, h.parse().context("height")?))
+}
+
+fn synth(a: SynthArgs) -> Result<()> {
+    let (w, h) = parse_size(&a.size)?;
+    let sampling = match a.spp {
+        Some(n) => Sampling::Spp(n),
+        None if a.variance => anyhow::bail!("--variance goes with --spp N"),
+        None => Sampling::Supersample(a.supersample),
+    };
+    let job = SynthJob {
+        scene: Scene {
+            kind: SceneKind::parse(&a.scene)?,
+            w,
+            h,
+            seed: a.seed,
+            hot: a.hot,
+        },
+        sampling,
+        output: a.output,
+        truth: a.truth,
+        variance: a.variance,
+        compression: parse_compression(&a.compression)
+            .with_context(|| format!("unknown --compression {:?}", a.compression))?,
+        threads: a.threads,
+    };
+    let bar = progress_bar(a.quiet);
+    let report = epfilt::synth::synth(&job, &|done, total| {
+        if let Some(b) = &bar {
+            b.set_length(total as u64);
+            b.set_position(done as u64);
+        }
+    });
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    let r = report?;
+    if !a.quiet {
+        eprintln!(
+            "{}: {}x{}{} in {:.2} s{}",
+            r.output,
+            r.width,
+            r.height,
+            r.truth
+                .as_ref()
+                .map(|t| format!(", truth {t}"))
+                .unwrap_or_default(),
+            r.seconds,
+            r.peak_rss_bytes
+                .map(|b| format!(", peak RSS {:.0} MiB", b as f64 / (1 << 20) as f64))
+                .unwrap_or_default()
+        );
+    }
+    Ok(())
+}
+
+fn progress_bar(quiet: bool) -> Option<ProgressBar> {
+    if quiet || !std::io::stderr().is_terminal() {
+        return None;
+    }
+    let b = ProgressBar::new(0);
+    b.set_style(
+        ProgressStyle::with_template(
+            "{spinner} {wide_bar} {pos}/{len} rows  {elapsed_precise} eta {eta}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    Some(b)
 }
 
 fn cancel_flag() -> Arc<AtomicBool> {

@@ -88,7 +88,7 @@ impl ExrOutput {
     }
 
     /// Start writing a new `w` x `h` image of `channels` (planar rows in that
-    /// order), with default attributes.
+    /// order), with default attributes plus the integer attributes `ints`.
     pub fn create_new(
         dest: &Path,
         w: usize,
@@ -96,8 +96,15 @@ impl ExrOutput {
         channels: &[String],
         compression: Compression,
         precision: Precision,
+        ints: &[(&str, i32)],
     ) -> Result<Self> {
-        let header = Self::fresh_header(w, h, channels, compression, precision);
+        let mut header = Self::fresh_header(w, h, channels, compression, precision);
+        for (name, v) in ints {
+            header.own_attributes.other.insert(
+                Text::from(*name),
+                exr::meta::attribute::AttributeValue::I32(*v),
+            );
+        }
         Self::start(dest, header, channels, precision)
     }
 

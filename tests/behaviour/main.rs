@@ -7,3 +7,4 @@ mod energy;
 mod exr_io;
 mod invariance;
 mod reference;
+mod synth;
