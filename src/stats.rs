@@ -65,7 +65,7 @@ pub struct Report {
     pub energy_rel_error_rounded: Vec<f64>,
     /// Digest of the unrounded output (equal digests: bit-identical results).
     pub digest: String,
-    /// Tile width, strip height, threads used.
+    /// Accumulator tile width used (output pixels).
     pub tile: usize,
     /// Input rows per strip.
     pub strip_rows: usize,
