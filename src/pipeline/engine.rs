@@ -37,6 +37,10 @@ use crate::filter::kernel::{ColumnTaps, Kernel1d};
 use crate::filter::{FilterParams, Method};
 use crate::geometry::{mirror, Grid, Halo};
 
+/// Noisy samples spread per chunk (bounds the folded-weight arena to about
+/// 4096 x 1.5 KiB at the widest kernel).
+const SPREAD_CHUNK: usize = 4096;
+
 /// Most channels one job filters (R, G, B, A).
 pub const MAX_CHANNELS: usize = 4;
 
@@ -516,83 +520,49 @@ impl Engine {
             n.level = c.level;
             n.capped = c.capped;
         });
-        // Reflect each sample's kernel once, in order.
-        self.arena.clear();
-        let mut spreads = Vec::with_capacity(batch.len());
-        let mut tmp = Vec::new();
-        for n in batch.iter() {
-            self.counters.noisy += 1;
-            self.counters.spread += (n.level > 0) as u64;
-            self.counters.capped += n.capped as u64;
-            let k = &ep.levels()[n.level as usize].kernel;
-            let (i, j) = (n.i as usize, n.j as usize);
-            let off = self.arena.len();
-            let xs = k.fold(i % s, i / s, w, &mut tmp);
-            let xl = tmp.len();
-            self.arena.extend_from_slice(&tmp);
-            let ys = k.fold(j % s, j / s, h, &mut tmp);
-            let yl = tmp.len();
-            self.arena.extend_from_slice(&tmp);
-            let mut v = [0.0; MAX_CHANNELS];
-            for (d, &x) in v.iter_mut().zip(&n.v).take(nch) {
-                *d = x as f64 * self.inv_s2;
-            }
-            spreads.push(Spread {
-                xs,
-                xl,
-                ys,
-                yl,
-                off,
-                v,
-            });
-        }
-        self.pending.drain(..split);
         // Accumulator rows down to the widest reach of this batch.
         let need = (target + self.halo.spread_reach).min(h);
         while self.acc.end() < need {
             self.acc.push(-0.0);
         }
-        let (first, end) = (self.acc.first(), self.acc.end());
-        let tile = self.tile;
-        let ntiles = w.div_ceil(tile);
-        // Planar rows [c][x]: tile t owns columns t*tile.. of every channel of
-        // every row; its slices are listed row by row, channel by channel.
-        let mut tiles: Vec<Vec<&mut [f64]>> = (0..ntiles)
-            .map(|_| Vec::with_capacity((end - first) * nch))
-            .collect();
-        for row in self.acc.range_mut(first, end) {
-            for ch in row.chunks_mut(w) {
-                for (t, part) in ch.chunks_mut(tile).enumerate() {
-                    tiles[t].push(part);
+        // Spread in chunks of the (row-major) batch: the folded weights of one
+        // chunk at a time bound the arena, and the order of contributions to
+        // every pixel stays the batch order.
+        let mut spreads = Vec::with_capacity(SPREAD_CHUNK.min(split));
+        let mut tmp = Vec::new();
+        for c0 in (0..split).step_by(SPREAD_CHUNK) {
+            // Reflect each sample's kernel once, in order.
+            self.arena.clear();
+            spreads.clear();
+            for n in &self.pending[c0..(c0 + SPREAD_CHUNK).min(split)] {
+                self.counters.noisy += 1;
+                self.counters.spread += (n.level > 0) as u64;
+                self.counters.capped += n.capped as u64;
+                let k = &ep.levels()[n.level as usize].kernel;
+                let (i, j) = (n.i as usize, n.j as usize);
+                let off = self.arena.len();
+                let xs = k.fold(i % s, i / s, w, &mut tmp);
+                let xl = tmp.len();
+                self.arena.extend_from_slice(&tmp);
+                let ys = k.fold(j % s, j / s, h, &mut tmp);
+                let yl = tmp.len();
+                self.arena.extend_from_slice(&tmp);
+                let mut v = [0.0; MAX_CHANNELS];
+                for (d, &x) in v.iter_mut().zip(&n.v).take(nch) {
+                    *d = x as f64 * self.inv_s2;
                 }
+                spreads.push(Spread {
+                    xs,
+                    xl,
+                    ys,
+                    yl,
+                    off,
+                    v,
+                });
             }
+            scatter(&mut self.acc, &self.arena, &spreads, w, nch, self.tile);
         }
-        let arena = &self.arena;
-        tiles
-            .into_par_iter()
-            .enumerate()
-            .for_each(|(t, mut parts)| {
-                let x0 = t * tile;
-                let x1 = (x0 + tile).min(w);
-                for sp in &spreads {
-                    let (cx0, cx1) = (sp.xs.max(x0), (sp.xs + sp.xl).min(x1));
-                    if cx0 >= cx1 {
-                        continue;
-                    }
-                    let wx = &arena[sp.off + cx0 - sp.xs..sp.off + cx1 - sp.xs];
-                    let wy = &arena[sp.off + sp.xl..sp.off + sp.xl + sp.yl];
-                    for (dy, &wyv) in wy.iter().enumerate() {
-                        let r = sp.ys + dy - first;
-                        for c in 0..nch {
-                            let coef = sp.v[c] * wyv;
-                            let dst = &mut parts[r * nch + c][cx0 - x0..cx1 - x0];
-                            for (d, &wv) in dst.iter_mut().zip(wx) {
-                                *d += coef * wv;
-                            }
-                        }
-                    }
-                }
-            });
+        self.pending.drain(..split);
     }
 
     /// The vertical gather of the base kernel for output rows `a..b`:
@@ -686,6 +656,57 @@ impl Engine {
             data,
         })
     }
+}
+
+/// Add `spreads` (in order) into the accumulator, one task per tile of
+/// columns: each pixel receives its contributions in the given order.
+fn scatter(
+    acc: &mut RowWindow<f64>,
+    arena: &[f64],
+    spreads: &[Spread],
+    w: usize,
+    nch: usize,
+    tile: usize,
+) {
+    let (first, end) = (acc.first(), acc.end());
+    let ntiles = w.div_ceil(tile);
+    // Planar rows [c][x]: tile t owns columns t*tile.. of every channel of
+    // every row; its slices are listed row by row, channel by channel.
+    let mut tiles: Vec<Vec<&mut [f64]>> = (0..ntiles)
+        .map(|_| Vec::with_capacity((end - first) * nch))
+        .collect();
+    for row in acc.range_mut(first, end) {
+        for ch in row.chunks_mut(w) {
+            for (t, part) in ch.chunks_mut(tile).enumerate() {
+                tiles[t].push(part);
+            }
+        }
+    }
+    tiles
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(t, mut parts)| {
+            let x0 = t * tile;
+            let x1 = (x0 + tile).min(w);
+            for sp in spreads {
+                let (cx0, cx1) = (sp.xs.max(x0), (sp.xs + sp.xl).min(x1));
+                if cx0 >= cx1 {
+                    continue;
+                }
+                let wx = &arena[sp.off + cx0 - sp.xs..sp.off + cx1 - sp.xs];
+                let wy = &arena[sp.off + sp.xl..sp.off + sp.xl + sp.yl];
+                for (dy, &wyv) in wy.iter().enumerate() {
+                    let r = sp.ys + dy - first;
+                    for c in 0..nch {
+                        let coef = sp.v[c] * wyv;
+                        let dst = &mut parts[r * nch + c][cx0 - x0..cx1 - x0];
+                        for (d, &wv) in dst.iter_mut().zip(wx) {
+                            *d += coef * wv;
+                        }
+                    }
+                }
+            }
+        });
 }
 
 const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
