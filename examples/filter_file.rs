@@ -26,6 +26,7 @@ fn main() {
             precision: Precision::F32,
         },
         part: None,
+        max_memory: None,
     };
     match filter_file(&job, &|done, total| eprint!("\r{done}/{total} rows")) {
         Ok(report) => eprint!("\n{}", report.summary()),

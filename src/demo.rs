@@ -88,6 +88,7 @@ pub fn run(dir: &Path, w: usize, h: usize, log: &dyn Fn(&str)) -> Result<String>
             precision: Precision::F32,
         },
         part: None,
+        max_memory: None,
     };
     filter_file(&job(&expected, &truth_gauss, Method::Gauss), &|_, _| {})?;
     std::fs::remove_file(&expected).map_err(|e| Error::io(&expected, e))?;

@@ -31,6 +31,19 @@ pub struct FilterJob {
     pub output_settings: OutputSettings,
     /// Part of a multi-part input.
     pub part: Option<PartSelect>,
+    /// Refuse a job whose estimated memory exceeds this many bytes
+    /// ([`crate::pipeline::estimate_bytes`]); `None`: [`default_max_memory`].
+    pub max_memory: Option<u64>,
+}
+
+/// Half the machine's memory (at least 1 GiB), or 8 GiB where it cannot be read.
+pub fn default_max_memory() -> u64 {
+    let total = std::fs::read_to_string("/proc/meminfo").ok().and_then(|m| {
+        m.lines()
+            .find(|l| l.starts_with("MemTotal:"))
+            .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
+    });
+    total.map_or(8 << 30, |kb| (kb * 1024 / 2).max(1 << 30))
 }
 
 /// Refuse an output that is the input, also through a symbolic or hard link.
@@ -96,6 +109,17 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         channels: channels.clone(),
         luminance: input.luminance(),
     };
+    let need =
+        crate::pipeline::estimate_bytes(&pipe_job, &job.params, &job.pipeline, input.block_bytes());
+    let limit = job.max_memory.unwrap_or_else(default_max_memory);
+    if need > limit {
+        return Err(Error::Config(format!(
+            "{}: filtering this {w}x{h} image needs about {} MiB, more than the {} MiB allowed (--max-memory)",
+            job.input.display(),
+            need >> 20,
+            limit >> 20
+        )));
+    }
     let mut output = ExrOutput::create(&job.output, header, s, &channels, &job.output_settings)?;
     let stats = run(
         input.source(),

@@ -150,6 +150,9 @@ struct FilterArgs {
     /// Part of a multi-part input, by name or index.
     #[arg(long)]
     part: Option<String>,
+    /// Refuse jobs estimated to need more memory than this, in MiB [default: half the machine's memory].
+    #[arg(long)]
+    max_memory: Option<u64>,
     /// Accumulator tile width in output pixels (does not change the result).
     #[arg(long, default_value_t = 256)]
     tile: usize,
@@ -189,6 +192,7 @@ fn tune_allocator() {}
 
 fn main() {
     tune_allocator();
+    epfilt::io::reader::quiet_decoder_panics();
     let cli = Cli::parse();
     if let Err(e) = dispatch(cli) {
         let chain: Vec<String> = e.chain().map(|c| c.to_string()).collect();
@@ -372,6 +376,7 @@ fn filter(a: FilterArgs) -> Result<()> {
             precision,
         },
         part: a.part.as_deref().map(PartSelect::parse),
+        max_memory: a.max_memory.map(|m| m.saturating_mul(1 << 20)),
     };
     let bar = if !a.quiet && std::io::stderr().is_terminal() {
         let b = ProgressBar::new(0);

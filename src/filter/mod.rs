@@ -59,6 +59,28 @@ pub fn default_tolerance(s: usize) -> f64 {
     }
 }
 
+/// The halo of a job from its settings alone (no kernels built): what the
+/// engine will need, for sizing memory before anything is allocated. Equal to
+/// [`crate::pipeline::Engine::halo`] (tested).
+pub fn halo(p: &FilterParams) -> crate::geometry::Halo {
+    let reach = |rho: f64| (p.cutoff * rho + 0.5).floor().max(0.0) as usize;
+    let shell = |rho: f64| (p.cutoff * rho).floor().max(0.0) as usize;
+    let max_rho = p.max_radius.max(p.radius);
+    match p.method {
+        Method::Box => crate::geometry::Halo::default(),
+        Method::Gauss => crate::geometry::Halo {
+            base_reach: reach(p.radius),
+            ..Default::default()
+        },
+        Method::EpGauss => crate::geometry::Halo {
+            xbar_reach: shell(p.radius),
+            base_reach: reach(p.radius),
+            search_reach: shell(max_rho),
+            spread_reach: reach(max_rho),
+        },
+    }
+}
+
 /// Validated filter settings.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FilterParams {

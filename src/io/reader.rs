@@ -22,6 +22,24 @@ use super::mapped::MappedFile;
 use crate::error::{Error, Result};
 use crate::pipeline::{Source, Strip};
 
+thread_local! {
+    /// Set while a codec decodes a block on this thread.
+    static IN_DECODER: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Keep the default panic message quiet for panics inside a codec: the
+/// reader turns them into one clear error line (damaged B44 data, for one,
+/// makes the `exr` crate's decoder panic). Other panics print as before. For
+/// programs (the `epfilt` binary calls it once at start-up).
+pub fn quiet_decoder_panics() {
+    let previous = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        if !IN_DECODER.with(|f| f.get()) {
+            previous(info);
+        }
+    }));
+}
+
 /// Which part of a multi-part file to read.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum PartSelect {
@@ -269,6 +287,19 @@ impl ExrInput {
         (s.0, s.1)
     }
 
+    /// Bytes of one decompressed block of this file (all channels), as the
+    /// header claims: what a decoder allocates for it.
+    pub fn block_bytes(&self) -> u64 {
+        let h = self.header();
+        let px = match h.blocks {
+            exr::meta::BlockDescription::ScanLines => {
+                h.layer_size.0 as u64 * h.compression.scan_lines_per_block() as u64
+            }
+            exr::meta::BlockDescription::Tiles(t) => t.tile_size.0 as u64 * t.tile_size.1 as u64,
+        };
+        px.saturating_mul(h.channels.bytes_per_pixel as u64)
+    }
+
     /// Names of the channels that will be filtered, in strip order.
     pub fn channels(&self) -> Vec<String> {
         self.selected.iter().map(|s| s.name.clone()).collect()
@@ -362,7 +393,21 @@ impl ExrInput {
                 ),
             ));
         }
-        let block = UncompressedBlock::decompress_chunk(chunk, &self.meta, false)
+        // A damaged block must give an error, never take the process down: a
+        // panic inside a codec becomes an error naming the block.
+        let meta = &self.meta;
+        IN_DECODER.with(|f| f.set(true));
+        let block = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            UncompressedBlock::decompress_chunk(chunk, meta, false)
+        }));
+        IN_DECODER.with(|f| f.set(false));
+        let block = block
+            .map_err(|_| {
+                invalid(
+                    path,
+                    format!("block at byte {offset}: the decoder failed on damaged data"),
+                )
+            })?
             .map_err(|e| Error::from_exr(path, e, &format!("block at byte {offset}")))?;
         let (bw, bh) = (block.index.pixel_size.0, block.index.pixel_size.1);
         let channels = &header.channels.list;

@@ -44,6 +44,38 @@ const SPREAD_CHUNK: usize = 4096;
 /// Most channels one job filters (R, G, B, A).
 pub const MAX_CHANNELS: usize = 4;
 
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn halo_from_params_equals_the_engines() {
+        for m in [Method::EpGauss, Method::Gauss, Method::Box] {
+            for (s, r, mr, cut) in [
+                (3, 0.6, 16.0, 3.0),
+                (4, 0.9, 5.5, 2.5),
+                (2, 0.3, 0.3, 1.0),
+                (1, 2.0, 40.0, 6.0),
+            ] {
+                let mut p = FilterParams::new(m, s);
+                (p.radius, p.max_radius, p.cutoff) = (r, mr, cut);
+                let grid = Grid {
+                    in_w: 30 * s,
+                    in_h: 20 * s,
+                    s,
+                };
+                let e =
+                    Engine::new(grid, vec!["Y".into()], vec![1.0], &p, 16, Precision::F32).unwrap();
+                assert_eq!(
+                    e.halo(),
+                    crate::filter::halo(&p),
+                    "{m:?} {s} {r} {mr} {cut}"
+                );
+            }
+        }
+    }
+}
+
 #[derive(Clone, Copy, Debug)]
 struct Noisy {
     i: u32,

@@ -133,6 +133,45 @@ pub fn auto_strip_rows(in_w: usize, channels: usize) -> usize {
     (STRIP_BYTES / (in_w * channels * 4).max(1)).clamp(1, 96)
 }
 
+/// Bytes a job will hold at most, from its sizes alone: the strips in flight,
+/// the engine's windows (input rows, horizontal pass, base, accumulator, box
+/// luminance) and the decoder's and encoder's blocks (`block_bytes`: one
+/// decompressed input block). Checked against `--max-memory` before anything
+/// is allocated, so a header claiming an absurd size gives an error instead of
+/// an allocation failure (which would abort the process).
+pub fn estimate_bytes(
+    job: &Job,
+    params: &FilterParams,
+    cfg: &PipelineConfig,
+    block_bytes: u64,
+) -> u64 {
+    let halo = crate::filter::halo(params);
+    let s = job.grid.s as u64;
+    let nch = job.channels.len() as u64;
+    let (w, ow) = (
+        job.grid.in_w as u64,
+        (job.grid.in_w / job.grid.s.max(1)) as u64,
+    );
+    let strip = match cfg.strip_rows {
+        0 => auto_strip_rows(job.grid.in_w.max(1), job.channels.len().max(1)),
+        n => n,
+    } as u64;
+    let in_row = w.saturating_mul(nch).saturating_mul(4);
+    let out_row = ow.saturating_mul(nch).saturating_mul(8);
+    let lag = (halo.lag() + halo.spread_reach) as u64 + strip / s + 4;
+    let windows = in_row.saturating_mul(s * (halo.xbar_reach as u64 + 1) + strip)
+        + out_row.saturating_mul(s * (2 * halo.base_reach as u64 + 1) + strip)
+        + out_row.saturating_mul(2 * lag)
+        + (ow + 2 * halo.search_reach as u64)
+            .saturating_mul(8 * (2 * halo.search_reach as u64 + strip / s + 4));
+    let strips = in_row.saturating_mul(strip).saturating_mul(4);
+    let blocks = block_bytes.saturating_mul(3 * 4);
+    windows
+        .saturating_add(strips)
+        .saturating_add(blocks)
+        .saturating_add(out_row.saturating_mul(16 * 4))
+}
+
 /// Progress callback: (output rows done, output rows in all).
 pub type Progress<'a> = &'a (dyn Fn(usize, usize) + Sync);
 

@@ -98,6 +98,7 @@ pub fn job(input: &Path, output: &Path, method: Method, s: usize) -> FilterJob {
             precision: Precision::F32,
         },
         part: None::<PartSelect>,
+        max_memory: None,
     }
 }
 

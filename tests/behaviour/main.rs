@@ -7,4 +7,5 @@ mod energy;
 mod exr_io;
 mod invariance;
 mod reference;
+mod robust;
 mod synth;

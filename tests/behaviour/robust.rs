@@ -1,0 +1,96 @@
+//! Damaged input: every variant gives a clear error or a correct result,
+//! never a panic or an abort (an abort would end this test binary).
+
+use crate::common::*;
+use crate::exr_io::{job, tmpdir, write_rgb};
+use epfilt::{filter_file, Method};
+use exr::prelude::*;
+
+fn find(hay: &[u8], needle: &[u8]) -> Option<usize> {
+    hay.windows(needle.len()).position(|w| w == needle)
+}
+
+#[test]
+fn a_header_claiming_a_huge_image_is_refused_before_allocating() {
+    let dir = tmpdir();
+    let good = dir.path().join("good.exr");
+    write_rgb(
+        &good,
+        &Img::new(12, 9, 3, |_, _, _| 1.0),
+        Compression::ZIP1,
+        Blocks::ScanLines,
+        false,
+        LineOrder::Increasing,
+    );
+    let mut bytes = std::fs::read(&good).unwrap();
+    // dataWindow box2i: xMin yMin xMax yMax after the attribute's name, type and size.
+    let at = find(&bytes, b"dataWindow\0box2i\0").unwrap() + "dataWindow\0box2i\0".len() + 4;
+    bytes[at + 8..at + 12].copy_from_slice(&((1i32 << 30) - 1).to_le_bytes());
+    let bad = dir.path().join("huge.exr");
+    std::fs::write(&bad, &bytes).unwrap();
+    let out = dir.path().join("o.exr");
+    let err = filter_file(&job(&bad, &out, Method::EpGauss, 3), &|_, _| {})
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("huge.exr"), "{err}");
+    assert!(!out.exists());
+}
+
+#[test]
+fn truncated_and_bit_flipped_files_never_panic() {
+    let dir = tmpdir();
+    let img = fireflies(36, 27, 3, 0.02, 11);
+    let mut tried = 0;
+    for (name, comp, blocks) in [
+        ("zip", Compression::ZIP16, Blocks::ScanLines),
+        ("piz", Compression::PIZ, Blocks::ScanLines),
+        ("rle", Compression::RLE, Blocks::Tiles(Vec2(8, 8))),
+        ("b44", Compression::B44, Blocks::ScanLines),
+    ] {
+        let good = dir.path().join(format!("{name}.exr"));
+        let mut half = img.clone();
+        half.data.iter_mut().for_each(|v| *v = v.min(6e4));
+        write_rgb(
+            &good,
+            &half,
+            comp,
+            blocks,
+            name == "b44" || name == "piz",
+            LineOrder::Increasing,
+        );
+        let bytes = std::fs::read(&good).unwrap();
+        let bad = dir.path().join("bad.exr");
+        let out = dir.path().join("out.exr");
+        let mut variants: Vec<Vec<u8>> = (0..bytes.len())
+            .step_by(bytes.len() / 60 + 1)
+            .map(|n| bytes[..n].to_vec())
+            .collect();
+        let mut rng = Rng(7);
+        for _ in 0..120 {
+            let mut v = bytes.clone();
+            let k = (rng.next_u64() % v.len() as u64) as usize;
+            v[k] ^= 1 << (rng.next_u64() % 8);
+            variants.push(v);
+        }
+        for v in variants {
+            std::fs::write(&bad, &v).unwrap();
+            let r = std::panic::catch_unwind(|| {
+                filter_file(&job(&bad, &out, Method::EpGauss, 3), &|_, _| {})
+            });
+            match r {
+                Err(_) => panic!("{name}: panic on a damaged file"),
+                Ok(Err(e)) => {
+                    let msg = e.to_string();
+                    assert!(
+                        msg.contains("bad.exr") && !msg.contains('\n'),
+                        "{name}: unclear error: {msg}"
+                    );
+                }
+                Ok(Ok(report)) => assert!(report.energy_rel_error.iter().all(|e| *e <= 1e-12)),
+            }
+            tried += 1;
+        }
+    }
+    eprintln!("damaged variants tried: {tried}");
+    assert!(tried > 600);
+}
