@@ -186,6 +186,10 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         },
         threads,
         peak_rss_bytes: peak_rss_bytes(),
+        nonfinite_zeroed: stats.nonfinite_zeroed.clone(),
+        first_nonfinite: stats
+            .first_nonfinite
+            .map(|(x, y, c)| (x, y, pipe_job.channels[c].clone())),
         window_rows: stats.window_rows,
         window_bytes: {
             let (nch, ow) = (pipe_job.channels.len() as u64, (w / s) as u64);

@@ -9,6 +9,7 @@ use std::sync::Arc;
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
 use epfilt::io::{parse_compression, OutputSettings, PartSelect};
+use epfilt::pipeline::NonFinite;
 use epfilt::synth::{Sampling, Scene, SceneKind, SynthJob};
 use epfilt::{FilterJob, FilterParams, Method, PipelineConfig, Precision};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -150,6 +151,9 @@ struct FilterArgs {
     /// Part of a multi-part input, by name or index.
     #[arg(long)]
     part: Option<String>,
+    /// NaN and infinite input samples: error (refuse, naming the first) or zero (count them).
+    #[arg(long, default_value = "error")]
+    nonfinite: String,
     /// Refuse jobs estimated to need more memory than this, in MiB [default: half the machine's memory].
     #[arg(long)]
     max_memory: Option<u64>,
@@ -370,6 +374,11 @@ fn filter(a: FilterArgs) -> Result<()> {
             threads: a.threads,
             precision,
             cancel: Some(cancel_flag()),
+            nonfinite: match a.nonfinite.as_str() {
+                "error" => NonFinite::Error,
+                "zero" => NonFinite::Zero,
+                other => anyhow::bail!("--nonfinite must be error or zero, not {other:?}"),
+            },
         },
         output_settings: OutputSettings {
             compression,

@@ -78,6 +78,10 @@ pub struct Report {
     pub window_rows: [usize; 5],
     /// Bytes those windows held at most.
     pub window_bytes: u64,
+    /// NaN/infinite input samples treated as zero (`--nonfinite zero`), per channel.
+    pub nonfinite_zeroed: Vec<u64>,
+    /// Where the first of them was: `[x, y]` in the data window, and its channel.
+    pub first_nonfinite: Option<(usize, usize, String)>,
 }
 
 impl Report {
@@ -123,6 +127,22 @@ impl Report {
             s.push_str(&format!(
                 "  peak RSS {:.1} MiB\n",
                 r as f64 / (1 << 20) as f64
+            ));
+        }
+        if self.nonfinite_zeroed.iter().any(|&n| n > 0) {
+            let first = self
+                .first_nonfinite
+                .as_ref()
+                .map(|(x, y, c)| format!(", first at ({x}, {y}) in {c}"))
+                .unwrap_or_default();
+            s.push_str(&format!(
+                "  non-finite input samples treated as zero: {}{first}\n",
+                self.channels
+                    .iter()
+                    .zip(&self.nonfinite_zeroed)
+                    .map(|(c, n)| format!("{c} {n}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
             ));
         }
         if !self.dropped_channels.is_empty() {

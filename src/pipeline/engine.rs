@@ -30,7 +30,7 @@ use rayon::prelude::*;
 
 use super::ledger::{Ledger, Sums};
 use super::window::RowWindow;
-use super::{Precision, Strip};
+use super::{NonFinite, Precision, Strip};
 use crate::error::{Error, Result};
 use crate::filter::ep_gauss::{EpGauss, LumRows};
 use crate::filter::kernel::{ColumnTaps, Kernel1d};
@@ -160,6 +160,9 @@ pub struct Engine {
     ledger: Ledger,
     counters: Counters,
     digest: u64,
+    nonfinite: NonFinite,
+    zeroed: Vec<u64>,
+    first_nonfinite: Option<(usize, usize, usize)>,
 }
 
 impl Engine {
@@ -250,6 +253,9 @@ impl Engine {
             ledger: Ledger::new(nch),
             counters: Counters::default(),
             digest: FNV_OFFSET,
+            nonfinite: NonFinite::Error,
+            zeroed: vec![0; nch],
+            first_nonfinite: None,
         })
     }
 
@@ -271,6 +277,21 @@ impl Engine {
     /// The ledger so far.
     pub fn ledger(&self) -> &Ledger {
         &self.ledger
+    }
+
+    /// What to do with NaN and infinite input samples.
+    pub fn set_nonfinite(&mut self, n: NonFinite) {
+        self.nonfinite = n;
+    }
+
+    /// Non-finite input samples treated as zero so far, per channel.
+    pub fn nonfinite_zeroed(&self) -> &[u64] {
+        &self.zeroed
+    }
+
+    /// The first non-finite input sample treated as zero: (x, y, channel).
+    pub fn first_nonfinite(&self) -> Option<(usize, usize, usize)> {
+        self.first_nonfinite
     }
 
     /// FNV-1a digest of the bits of every unrounded (f64) output value, in
@@ -298,7 +319,7 @@ impl Engine {
     }
 
     /// Feed the next strip of input rows; returns the output rows it finished.
-    pub fn push(&mut self, strip: Strip) -> Result<Option<OutRows>> {
+    pub fn push(&mut self, mut strip: Strip) -> Result<Option<OutRows>> {
         let (nch, in_w) = (self.nch, self.grid.in_w);
         let row_len = nch * in_w;
         if strip.y0 != self.rows_in
@@ -311,6 +332,20 @@ impl Engine {
                 strip.y0 + strip.rows,
                 self.rows_in
             )));
+        }
+        if self.nonfinite == NonFinite::Zero {
+            // Zero them (counted, first one kept) before anything reads them.
+            for (r, row) in strip.data.chunks_mut(row_len).enumerate() {
+                for c in 0..nch {
+                    for (x, v) in row[c * in_w..(c + 1) * in_w].iter_mut().enumerate() {
+                        if !v.is_finite() {
+                            *v = 0.0;
+                            self.zeroed[c] += 1;
+                            self.first_nonfinite.get_or_insert((x, strip.y0 + r, c));
+                        }
+                    }
+                }
+            }
         }
         // Ledger of the input, row by row in parallel, merged in order.
         let sums: Vec<std::result::Result<Sums, (usize, usize)>> = strip
@@ -335,7 +370,8 @@ impl Engine {
                     return Err(Error::Value {
                         path: Default::default(),
                         reason: format!(
-                            "non-finite input value at sample ({x}, {}) in channel {}",
+                            "non-finite input value at sample ({x}, {}) in channel {} \
+                             (--nonfinite zero treats such samples as 0 and counts them)",
                             strip.y0 + r,
                             self.names[c]
                         ),

@@ -68,6 +68,16 @@ impl Precision {
     }
 }
 
+/// What to do with NaN and infinite input samples.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum NonFinite {
+    /// Refuse the input, naming the first such sample (default).
+    #[default]
+    Error,
+    /// Treat them as zero, and count them (per channel) in the report.
+    Zero,
+}
+
 /// How the work is cut up; none of it changes the result.
 #[derive(Clone, Debug)]
 pub struct PipelineConfig {
@@ -81,6 +91,8 @@ pub struct PipelineConfig {
     pub precision: Precision,
     /// Set to stop the run early (e.g. on SIGINT).
     pub cancel: Option<Arc<AtomicBool>>,
+    /// NaN and infinite input samples.
+    pub nonfinite: NonFinite,
 }
 
 impl Default for PipelineConfig {
@@ -91,6 +103,7 @@ impl Default for PipelineConfig {
             threads: 0,
             precision: Precision::F32,
             cancel: None,
+            nonfinite: NonFinite::Error,
         }
     }
 }
@@ -121,6 +134,10 @@ pub struct RunStats {
     pub window_rows: [usize; 5],
     /// Digest of the unrounded output ([`Engine::digest`]).
     pub digest: u64,
+    /// Non-finite input samples treated as zero, per channel (`NonFinite::Zero`).
+    pub nonfinite_zeroed: Vec<u64>,
+    /// The first of them: (x, y, channel index).
+    pub first_nonfinite: Option<(usize, usize, usize)>,
 }
 
 /// Bytes of input one strip should hold by default: four strips are in
@@ -203,6 +220,7 @@ pub fn run<S: Source, K: Sink>(
         cfg.tile,
         cfg.precision,
     )?;
+    engine.set_nonfinite(cfg.nonfinite);
     let total = job.grid.out_h();
     let cancelled = || {
         cfg.cancel
@@ -284,6 +302,8 @@ pub fn run<S: Source, K: Sink>(
         halo: engine.halo(),
         window_rows: engine.high_water(),
         digest: engine.digest(),
+        nonfinite_zeroed: engine.nonfinite_zeroed().to_vec(),
+        first_nonfinite: engine.first_nonfinite(),
     })
 }
 

@@ -94,3 +94,45 @@ fn truncated_and_bit_flipped_files_never_panic() {
     eprintln!("damaged variants tried: {tried}");
     assert!(tried > 600);
 }
+
+#[test]
+fn nonfinite_samples_are_refused_or_counted_as_zero() {
+    use epfilt::pipeline::NonFinite;
+    let dir = tmpdir();
+    let input = dir.path().join("nan.exr");
+    let mut img = Img::new(30, 21, 3, |_, _, _| 0.5);
+    img.set(7, 4, 1, f32::NAN);
+    img.set(29, 20, 0, f32::INFINITY);
+    img.set(0, 0, 2, f32::NEG_INFINITY);
+    write_rgb(
+        &input,
+        &img,
+        Compression::ZIP16,
+        Blocks::ScanLines,
+        false,
+        LineOrder::Increasing,
+    );
+    let out = dir.path().join("out.exr");
+    let err = filter_file(&job(&input, &out, Method::EpGauss, 3), &|_, _| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("nan.exr") && err.contains("(0, 0)") && err.contains("channel B"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    let mut j = job(&input, &out, Method::EpGauss, 3);
+    j.pipeline.nonfinite = NonFinite::Zero;
+    let report = filter_file(&j, &|_, _| {}).unwrap();
+    assert_eq!(report.nonfinite_zeroed, vec![1, 1, 1]);
+    assert_eq!(report.first_nonfinite, Some((0, 0, "B".to_string())));
+    assert!(report.energy_rel_error.iter().all(|e| *e <= 1e-12));
+    let got = crate::exr_io::read_planar(&out);
+    assert!(got.data.iter().all(|v| v.is_finite()));
+    // The corpus file full of NaN and Inf filters too.
+    let rings = crate::exr_io::corpus_dir().join("TestImages/BrightRingsNanInf.exr");
+    let mut j = job(&rings, &out, Method::EpGauss, 1);
+    j.pipeline.nonfinite = NonFinite::Zero;
+    let report = filter_file(&j, &|_, _| {}).unwrap();
+    assert!(report.nonfinite_zeroed.iter().sum::<u64>() > 0);
+}
