@@ -387,18 +387,7 @@ fn filter(a: FilterArgs) -> Result<()> {
         part: a.part.as_deref().map(PartSelect::parse),
         max_memory: a.max_memory.map(|m| m.saturating_mul(1 << 20)),
     };
-    let bar = if !a.quiet && std::io::stderr().is_terminal() {
-        let b = ProgressBar::new(0);
-        b.set_style(
-            ProgressStyle::with_template(
-                "{spinner} {wide_bar} {pos}/{len} rows  {elapsed_precise} eta {eta}",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-        );
-        Some(b)
-    } else {
-        None
-    };
+    let bar = progress_bar(a.quiet);
     let progress = |done: usize, total: usize| {
         if let Some(b) = &bar {
             b.set_length(total as u64);

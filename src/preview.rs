@@ -99,15 +99,7 @@ pub fn write_png(inputs: &[(PathBuf, String)], output: &Path, exposure: f64) -> 
             "preview of {width}x{height} pixels is too large"
         )));
     }
-    let dir = match output.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let temp = tempfile::Builder::new()
-        .prefix(".epfilt-")
-        .suffix(".png.tmp")
-        .tempfile_in(&dir)
-        .map_err(|e| Error::io(&dir, e))?;
+    let temp = crate::io::temp_beside(output, ".png.tmp")?;
     let png_err = |e: png::EncodingError| Error::io(output, std::io::Error::other(e));
     {
         let file = temp
@@ -169,9 +161,7 @@ pub fn write_png(inputs: &[(PathBuf, String)], output: &Path, exposure: f64) -> 
         }
         stream.finish().map_err(png_err)?;
     }
-    temp.persist(output)
-        .map_err(|e| Error::io(output, e.error))?;
-    Ok(())
+    crate::io::persist(temp.into_temp_path(), output)
 }
 
 /// Draw `text` in white 8x8 glyphs into band row `gy` (glyph row) of a panel

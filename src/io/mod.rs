@@ -17,8 +17,36 @@ pub use info::info;
 pub use reader::{ExrInput, PartSelect};
 pub use writer::{ExrOutput, OutputSettings};
 
+use std::path::{Path, PathBuf};
+
 use exr::meta::attribute::Chromaticities;
 use exr::prelude::Compression;
+
+/// A temporary file in `dest`'s directory (so the final rename is atomic),
+/// named `.epfilt-*<suffix>`; removed if dropped before [`persist`].
+pub fn temp_beside(dest: &Path, suffix: &str) -> crate::Result<tempfile::NamedTempFile> {
+    let dir = match dest.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    tempfile::Builder::new()
+        .prefix(".epfilt-")
+        .suffix(suffix)
+        .tempfile_in(&dir)
+        .map_err(|e| crate::Error::io(&dir, e))
+}
+
+/// Give a finished temporary file ordinary permissions (0644) and rename it
+/// to `dest`.
+pub fn persist(temp: tempfile::TempPath, dest: &Path) -> crate::Result<()> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let _ = std::fs::set_permissions(&temp, std::fs::Permissions::from_mode(0o644));
+    }
+    temp.persist(dest)
+        .map_err(|e| crate::Error::io(dest, e.error))
+}
 
 /// Luminance weights (the Y row of the RGB→XYZ matrix) of a file's
 /// chromaticities; Rec. 709 / sRGB primaries when absent or degenerate.

@@ -145,15 +145,7 @@ impl ExrOutput {
         precision: Precision,
     ) -> Result<Self> {
         let (w, _) = (header.layer_size.0, header.layer_size.1);
-        let dir = match dest.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        let temp = tempfile::Builder::new()
-            .prefix(".epfilt-")
-            .suffix(".exr.tmp")
-            .tempfile_in(&dir)
-            .map_err(|e| Error::io(&dir, e))?;
+        let temp = super::temp_beside(dest, ".exr.tmp")?;
         let order: Vec<usize> = header
             .channels
             .list
@@ -300,14 +292,7 @@ impl ExrOutput {
     /// Rename the finished file into place.
     pub fn commit(mut self) -> Result<()> {
         let temp = self.temp.take().ok_or(Error::Interrupted)?;
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::PermissionsExt;
-            let _ = std::fs::set_permissions(&temp, std::fs::Permissions::from_mode(0o644));
-        }
-        temp.persist(&self.dest)
-            .map_err(|e| Error::io(&self.dest, e.error))?;
-        Ok(())
+        super::persist(temp, &self.dest)
     }
 }
 
