@@ -5,6 +5,7 @@ mod common;
 mod corpus;
 mod energy;
 mod exr_io;
+mod extremes;
 mod invariance;
 mod reference;
 mod robust;
