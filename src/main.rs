@@ -194,13 +194,37 @@ fn tune_allocator() {
 #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
 fn tune_allocator() {}
 
+/// A file-size limit (`ulimit -f`) must be an ordinary write error, so the
+/// temporary file is removed and the user gets one line: by default SIGXFSZ
+/// kills the process and leaves the temporary file behind.
+#[cfg(unix)]
+fn ignore_file_size_signal() {
+    // SAFETY: setting a signal's disposition to SIG_IGN installs no handler
+    // code; done once, first thing in main.
+    #[allow(unsafe_code)]
+    unsafe {
+        libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+    }
+}
+
+#[cfg(not(unix))]
+fn ignore_file_size_signal() {}
+
 fn main() {
     tune_allocator();
+    ignore_file_size_signal();
     epfilt::io::reader::quiet_decoder_panics();
     let cli = Cli::parse();
     if let Err(e) = dispatch(cli) {
-        let chain: Vec<String> = e.chain().map(|c| c.to_string()).collect();
-        eprintln!("epfilt: {}", chain.join(": "));
+        // One line: the error and the causes it does not already spell out.
+        let mut line = e.to_string();
+        for cause in e.chain().skip(1) {
+            let c = cause.to_string();
+            if !line.contains(&c) {
+                line = format!("{line}: {c}");
+            }
+        }
+        eprintln!("epfilt: {line}");
         std::process::exit(2);
     }
 }

@@ -166,7 +166,7 @@ impl ExrOutput {
             .map_err(|e| Error::io(temp.path(), e))?;
         let (tx, rx) = crossbeam_channel::bounded::<(usize, Chunk)>(4);
         let thread_headers = headers.clone();
-        let tpath = temp.path().to_path_buf();
+        let tpath = dest.to_path_buf();
         let thread = std::thread::Builder::new()
             .name("epfilt-writer".into())
             .spawn(move || -> Result<()> {

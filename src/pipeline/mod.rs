@@ -259,6 +259,7 @@ pub fn run<S: Source, K: Sink>(
             pool.install(|| sink.finish())
         });
         let mut engine_result = Ok(());
+        let mut writer_failed = false;
         for strip in strip_rx.iter() {
             if cancelled() {
                 engine_result = Err(Error::Interrupted);
@@ -268,7 +269,8 @@ pub fn run<S: Source, K: Sink>(
                 Ok(Some(rows)) => {
                     progress(rows.y0 + rows.rows, total);
                     if row_tx.send(rows).is_err() {
-                        break; // the writer failed; its error is reported below
+                        writer_failed = true; // its error is reported below
+                        break;
                     }
                 }
                 Ok(None) => {}
@@ -279,7 +281,7 @@ pub fn run<S: Source, K: Sink>(
             }
         }
         drop(strip_rx);
-        if engine_result.is_ok() && engine.rows_out() != total {
+        if engine_result.is_ok() && !writer_failed && engine.rows_out() != total {
             engine_result = Err(Error::Config(format!(
                 "the source ended after {} of {} output rows",
                 engine.rows_out(),

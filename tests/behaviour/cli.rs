@@ -197,3 +197,49 @@ fn output_files_are_byte_identical_for_any_tile_strip_and_threads() {
         }
     }
 }
+
+#[test]
+fn a_full_disk_is_one_clear_error_and_leaves_no_file() {
+    // A file-size limit (ulimit -f, in 512- or 1024-byte blocks depending on the
+    // shell) stands in for a full disk: the 50x40 float output is ~24 KB.
+    let dir = tmpdir();
+    let inp = dir.path().join("in.exr");
+    write_rgb(
+        &inp,
+        &fireflies(150, 120, 3, 0.01, 2),
+        Compression::ZIP16,
+        Blocks::ScanLines,
+        false,
+        LineOrder::Increasing,
+    );
+    let out = dir.path().join("out.exr");
+    let o = Command::new("sh")
+        .args(["-c", "ulimit -f 8; exec \"$0\" \"$@\""])
+        .arg(env!("CARGO_BIN_EXE_epfilt"))
+        .args([
+            "filter",
+            inp.to_str().unwrap(),
+            out.to_str().unwrap(),
+            "--compression",
+            "none",
+            "-q",
+        ])
+        .output()
+        .expect("sh");
+    one_line_error(&o, "out.exr");
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("too large"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let names: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name())
+        .collect();
+    assert_eq!(
+        names,
+        vec![std::ffi::OsString::from("in.exr")],
+        "left behind: {names:?}"
+    );
+}
