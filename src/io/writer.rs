@@ -199,6 +199,15 @@ impl ExrOutput {
     fn flush_blocks(&mut self, all: bool) -> Result<()> {
         let row_len = self.nch * self.w;
         let rows = self.pending.len() / row_len;
+        let height = self.headers[0].layer_size.1;
+        if all && self.pending_y0 + rows != height {
+            // Only the image's last block may be short.
+            return Err(Error::Config(format!(
+                "{}: output incomplete ({} of {height} rows)",
+                self.dest.display(),
+                self.pending_y0 + rows
+            )));
+        }
         let full = if all {
             rows.div_ceil(self.lines)
         } else {

@@ -253,10 +253,19 @@ pub fn run<S: Source, K: Sink>(
         });
         let writer = scope.spawn(move || -> Result<()> {
             let mut sink = sink;
+            let mut written = 0;
             for rows in row_rx.iter() {
                 pool.install(|| sink.write_rows(rows.y0, rows.rows, &rows.data))?;
+                written += rows.rows;
             }
-            pool.install(|| sink.finish())
+            // Finish only a complete image: when the engine stopped early its
+            // error is the one reported, and the sink is dropped unfinished
+            // (an EXR output then removes its temporary file).
+            if written == total {
+                pool.install(|| sink.finish())
+            } else {
+                Ok(())
+            }
         });
         let mut engine_result = Ok(());
         let mut writer_failed = false;
@@ -290,10 +299,14 @@ pub fn run<S: Source, K: Sink>(
         }
         drop(row_tx);
         let _ = reader.join();
-        let write_result = writer
-            .join()
-            .unwrap_or_else(|_| Err(Error::Config("writer thread panicked".into())));
-        engine_result.and(write_result)
+        // A panic on the writer thread is a bug: report it first, never
+        // behind another error.
+        match writer.join() {
+            Ok(write_result) => engine_result.and(write_result),
+            Err(_) => Err(Error::Config(
+                "internal error: the writer thread panicked (please report this file)".into(),
+            )),
+        }
     });
     result?;
     let s2 = (job.grid.s * job.grid.s) as f64;

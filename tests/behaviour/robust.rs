@@ -136,3 +136,33 @@ fn nonfinite_samples_are_refused_or_counted_as_zero() {
     let report = filter_file(&j, &|_, _| {}).unwrap();
     assert!(report.nonfinite_zeroed.iter().sum::<u64>() > 0);
 }
+
+/// Inputs the fuzzer (`scripts/fuzz`) crashed epfilt with, kept once fixed:
+/// every method at S = 1..3 must give an error or a result, never a panic.
+#[test]
+fn fuzzer_regressions_never_panic() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz");
+    let out_dir = tmpdir();
+    let mut n = 0;
+    for entry in std::fs::read_dir(&dir).expect("tests/data/fuzz") {
+        let file = entry.unwrap().path();
+        for s in 1..=3 {
+            for m in [Method::EpGauss, Method::Gauss, Method::Box] {
+                let out = out_dir.path().join("o.exr");
+                // As the fuzz target runs it: output compressed like the input.
+                let mut j = job(&file, &out, m, s);
+                j.output_settings.compression = None;
+                j.pipeline.threads = 1;
+                let r = std::panic::catch_unwind(|| filter_file(&j, &|_, _| {}));
+                let r =
+                    r.unwrap_or_else(|_| panic!("panic on {} with {m:?} S={s}", file.display()));
+                // A panic on a worker thread surfaces as an error mentioning it.
+                if let Err(e) = r {
+                    assert!(!e.to_string().contains("panicked"), "{m:?} S={s}: {e}");
+                }
+                n += 1;
+            }
+        }
+    }
+    assert!(n >= 9);
+}

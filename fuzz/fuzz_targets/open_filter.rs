@@ -1,0 +1,30 @@
+//! Open and filter arbitrary bytes as an EXR: any panic or abort is a bug.
+//! Run with `scripts/fuzz SECONDS` (not in CI).
+#![no_main]
+
+use epfilt::io::OutputSettings;
+use epfilt::{filter_file, FilterJob, FilterParams, Method, PipelineConfig, Precision};
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    let Ok(dir) = tempfile::tempdir() else { return };
+    let input = dir.path().join("in.exr");
+    if std::fs::write(&input, data).is_err() {
+        return;
+    }
+    // The first byte picks the method and super-sampling, so one corpus
+    // exercises every path.
+    let pick = data.first().copied().unwrap_or(0);
+    let method = [Method::EpGauss, Method::Gauss, Method::Box][(pick % 3) as usize];
+    let s = 1 + (pick as usize / 3) % 3;
+    let job = FilterJob {
+        input,
+        output: dir.path().join("out.exr"),
+        params: FilterParams::new(method, s),
+        pipeline: PipelineConfig { threads: 1, ..Default::default() },
+        output_settings: OutputSettings { compression: None, precision: Precision::F32 },
+        part: Some(epfilt::io::PartSelect::Index(0)),
+        max_memory: Some(256 << 20),
+    };
+    let _ = filter_file(&job, &|_, _| {});
+});
