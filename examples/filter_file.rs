@@ -6,8 +6,7 @@
 //! same code filters a gigapixel render on a small server (make one with the
 //! `fireflies` example: `fireflies big.exr 32769 30000`).
 
-use epfilt::io::OutputSettings;
-use epfilt::{filter_file, FilterJob, FilterParams, Method, PipelineConfig, Precision};
+use epfilt::{filter_file, FilterJob, FilterParams, Method};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -16,18 +15,7 @@ fn main() {
         std::process::exit(2);
     }
     let s: usize = args.get(3).and_then(|v| v.parse().ok()).unwrap_or(3);
-    let job = FilterJob {
-        input: args[1].clone().into(),
-        output: args[2].clone().into(),
-        params: FilterParams::new(Method::EpGauss, s),
-        pipeline: PipelineConfig::default(),
-        output_settings: OutputSettings {
-            compression: None,
-            precision: Precision::F32,
-        },
-        part: None,
-        max_memory: None,
-    };
+    let job = FilterJob::new(&args[1], &args[2], FilterParams::new(Method::EpGauss, s));
     match filter_file(&job, &|done, total| eprint!("\r{done}/{total} rows")) {
         Ok(report) => eprint!("\n{}", report.summary()),
         Err(e) => {

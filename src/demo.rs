@@ -10,9 +10,9 @@ use exr::prelude::Compression;
 use crate::compare::compare_files;
 use crate::error::{Error, Result};
 use crate::filter::{FilterParams, Method};
-use crate::io::{ExrOutput, OutputSettings};
+use crate::io::ExrOutput;
 use crate::job::{filter_file, FilterJob};
-use crate::pipeline::{PipelineConfig, Precision, Sink};
+use crate::pipeline::{Precision, Sink};
 use crate::synth::{synth, Sampling, Scene, SceneKind, SynthJob};
 
 /// Run the demo in `dir` at `w` x `h` output pixels; `log` receives progress
@@ -78,17 +78,8 @@ pub fn run(dir: &Path, w: usize, h: usize, log: &dyn Fn(&str)) -> Result<String>
         out.finish()?;
         out.commit()?;
     }
-    let job = |input: &Path, output: &Path, m: Method| FilterJob {
-        input: input.into(),
-        output: output.into(),
-        params: FilterParams::new(m, s),
-        pipeline: PipelineConfig::default(),
-        output_settings: OutputSettings {
-            compression: None,
-            precision: Precision::F32,
-        },
-        part: None,
-        max_memory: None,
+    let job = |input: &Path, output: &Path, m: Method| {
+        FilterJob::new(input, output, FilterParams::new(m, s))
     };
     filter_file(&job(&expected, &truth_gauss, Method::Gauss), &|_, _| {})?;
     std::fs::remove_file(&expected).map_err(|e| Error::io(&expected, e))?;

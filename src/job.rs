@@ -36,6 +36,30 @@ pub struct FilterJob {
     pub max_memory: Option<u64>,
 }
 
+impl FilterJob {
+    /// `input` to `output` with `params`, and defaults for the rest: automatic
+    /// strips and threads, f32 output compressed like the input, part 0 of a
+    /// single-part file, [`default_max_memory`].
+    pub fn new(
+        input: impl Into<PathBuf>,
+        output: impl Into<PathBuf>,
+        params: FilterParams,
+    ) -> Self {
+        FilterJob {
+            input: input.into(),
+            output: output.into(),
+            params,
+            pipeline: PipelineConfig::default(),
+            output_settings: OutputSettings {
+                compression: None,
+                precision: crate::pipeline::Precision::F32,
+            },
+            part: None,
+            max_memory: None,
+        }
+    }
+}
+
 /// Half the machine's memory (at least 1 GiB), or 8 GiB where it cannot be read.
 pub fn default_max_memory() -> u64 {
     let total = std::fs::read_to_string("/proc/meminfo").ok().and_then(|m| {

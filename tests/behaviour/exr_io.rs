@@ -84,22 +84,14 @@ pub fn read_planar(path: &Path) -> Img {
 }
 
 pub fn job(input: &Path, output: &Path, method: Method, s: usize) -> FilterJob {
-    FilterJob {
-        input: input.into(),
-        output: output.into(),
-        params: params(method, s),
-        pipeline: PipelineConfig {
-            strip_rows: 13,
-            tile: 20,
-            ..Default::default()
-        },
-        output_settings: OutputSettings {
-            compression: Some(Compression::Uncompressed),
-            precision: Precision::F32,
-        },
-        part: None::<PartSelect>,
-        max_memory: None,
-    }
+    let mut j = FilterJob::new(input, output, params(method, s));
+    j.pipeline = PipelineConfig {
+        strip_rows: 13,
+        tile: 20,
+        ..Default::default()
+    };
+    j.output_settings.compression = Some(Compression::Uncompressed);
+    j
 }
 
 #[test]

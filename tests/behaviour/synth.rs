@@ -254,11 +254,9 @@ fn synth_cli_writes_supersampled_and_spp_files() {
     assert_eq!(o.status.code(), Some(2));
 }
 
-#[test]
-fn compare_reports_identity_and_differences_as_json() {
-    let dir = tmpdir();
-    let d = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
-    assert!(epfilt(&[
+/// A 40x30 `mixed` scene (S=3) with its truth as n.exr and t.exr.
+fn synth_small(d: &dyn Fn(&str) -> String) {
+    let o = epfilt(&[
         "synth",
         "-o",
         &d("n.exr"),
@@ -266,10 +264,16 @@ fn compare_reports_identity_and_differences_as_json() {
         &d("t.exr"),
         "--size",
         "40x30",
-        "-q"
-    ])
-    .status
-    .success());
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+#[test]
+fn compare_reports_identity_and_differences_as_json() {
+    let dir = tmpdir();
+    let d = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
+    synth_small(&d);
     assert!(epfilt(&["filter", &d("n.exr"), &d("f.exr"), "-q"])
         .status
         .success());
@@ -300,18 +304,7 @@ fn compare_reports_identity_and_differences_as_json() {
 fn preview_and_montage_write_pngs_of_the_right_size() {
     let dir = tmpdir();
     let d = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
-    assert!(epfilt(&[
-        "synth",
-        "-o",
-        &d("n.exr"),
-        "--truth",
-        &d("t.exr"),
-        "--size",
-        "40x30",
-        "-q"
-    ])
-    .status
-    .success());
+    synth_small(&d);
     assert!(epfilt(&["preview", &d("t.exr"), &d("t.png")])
         .status
         .success());
