@@ -4,7 +4,6 @@
 use std::path::{Path, PathBuf};
 
 use crate::common::*;
-use epfilt::io::{OutputSettings, PartSelect};
 use epfilt::{filter_file, FilterJob, Method, PipelineConfig, Precision};
 use exr::prelude::*;
 
