@@ -33,7 +33,13 @@ pub fn temp_beside(dest: &Path, suffix: &str) -> crate::Result<tempfile::NamedTe
         .prefix(".epfilt-")
         .suffix(suffix)
         .tempfile_in(&dir)
-        .map_err(|e| crate::Error::io(&dir, e))
+        // tempfile appends "at path <temp name>" to the cause: the folder is
+        // what the user named, so report the bare OS error against it.
+        .map_err(|e| {
+            let text = e.to_string();
+            let cause = text.split(" at path ").next().unwrap_or(&text).to_string();
+            crate::Error::io(&dir, std::io::Error::new(e.kind(), cause))
+        })
 }
 
 /// Give a finished temporary file ordinary permissions (0644) and rename it

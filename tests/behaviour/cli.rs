@@ -243,3 +243,41 @@ fn a_full_disk_is_one_clear_error_and_leaves_no_file() {
         "left behind: {names:?}"
     );
 }
+
+/// A directory the process may not write into: a 0555 folder, or, where
+/// permissions are not enforced (root), `/sys`, which refuses file creation to
+/// root too. `None` if neither is available.
+fn read_only_dir(dir: &Path) -> Option<std::path::PathBuf> {
+    use std::os::unix::fs::PermissionsExt;
+    let ro = dir.join("ro");
+    std::fs::create_dir(&ro).unwrap();
+    std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o555)).unwrap();
+    if std::fs::write(ro.join("probe"), b"x").is_err() {
+        return Some(ro);
+    }
+    let sys = Path::new("/sys");
+    (sys.is_dir() && std::fs::write(sys.join("epfilt-probe"), b"x").is_err())
+        .then(|| sys.to_path_buf())
+}
+
+#[test]
+fn read_only_destination_is_one_line_and_leaves_nothing() {
+    let dir = tmpdir();
+    let inp = input(dir.path());
+    let before = std::fs::read(&inp).unwrap();
+    let Some(ro) = read_only_dir(dir.path()) else {
+        eprintln!("no read-only directory on this machine; skipped");
+        return;
+    };
+    let out = ro.join("out.exr");
+    let o = epfilt(&["filter", &inp, out.to_str().unwrap(), "-q"]);
+    one_line_error(&o, &ro.display().to_string());
+    assert!(!out.exists());
+    let leftovers: Vec<_> = std::fs::read_dir(&ro)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains("epfilt"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+    assert_eq!(std::fs::read(&inp).unwrap(), before);
+}
