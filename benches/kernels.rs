@@ -62,15 +62,15 @@ fn engine(c: &mut Criterion) {
             }
         }
     }
-    let job = Job {
-        grid: Grid {
+    let job = Job::new(
+        Grid {
             in_w: w,
             in_h: h,
             s,
         },
-        channels: vec!["R".into(), "G".into(), "B".into()],
-        luminance: vec![0.2126, 0.7152, 0.0722],
-    };
+        vec!["R".into(), "G".into(), "B".into()],
+        vec![0.2126, 0.7152, 0.0722],
+    );
     let mut g = c.benchmark_group("engine_900x600_s3_1pct_fireflies");
     g.throughput(Throughput::Elements((w * h) as u64));
     g.sample_size(20);

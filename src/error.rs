@@ -31,6 +31,15 @@ pub enum Error {
         reason: String,
     },
 
+    /// The file lacks channels (or metadata) the job needs.
+    #[error("{path}: {reason}")]
+    Channels {
+        /// The file.
+        path: PathBuf,
+        /// What is missing, and what the file has.
+        reason: String,
+    },
+
     /// A sample value that the filter or the output cannot handle.
     #[error("{path}: {reason}")]
     Value {

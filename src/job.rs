@@ -4,11 +4,14 @@
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
-use crate::filter::FilterParams;
+use crate::filter::ep_box::{Spp, StatsLayout};
+use crate::filter::{FilterParams, Method};
 use crate::geometry::Grid;
-use crate::io::{ExrInput, ExrOutput, OutputSettings, PartSelect};
+use crate::io::{
+    find_stats, ExrInput, ExrOutput, OutputSettings, PartSelect, SppFrom, StatsRequest,
+};
 use crate::pipeline::{run, Job, PipelineConfig, Progress};
-use crate::stats::{peak_rss_bytes, Report};
+use crate::stats::{peak_rss_bytes, EpBoxReport, Report};
 
 /// The ledger must balance to this relative error before rounding, or the
 /// output is not written. The engine's own bound is 1e-12 (each sample's
@@ -34,6 +37,8 @@ pub struct FilterJob {
     /// Refuse a job whose estimated memory exceeds this many bytes
     /// ([`crate::pipeline::estimate_bytes`]); `None`: [`default_max_memory`].
     pub max_memory: Option<u64>,
+    /// Where `ep-box` finds its statistics (found by name when empty).
+    pub stats: StatsRequest,
 }
 
 impl FilterJob {
@@ -56,6 +61,7 @@ impl FilterJob {
             },
             part: None,
             max_memory: None,
+            stats: StatsRequest::default(),
         }
     }
 }
@@ -100,7 +106,21 @@ pub fn check_not_same_file(input: &Path, output: &Path) -> Result<()> {
 pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     job.params.validate()?;
     check_not_same_file(&job.input, &job.output)?;
-    let input = ExrInput::open(&job.input, job.part.as_ref())?;
+    let mut input = ExrInput::open(&job.input, job.part.as_ref())?;
+    let mut params = job.params.clone();
+    let found = if params.method == Method::EpBox {
+        let found = find_stats(&job.input, input.header(), &job.stats)?;
+        let mut aux = found.variance.clone();
+        aux.extend(found.mean_y.clone());
+        if let SppFrom::Channel(c) = &found.spp {
+            aux.push(c.clone());
+        }
+        input.add_aux_channels(&aux)?;
+        Some(found)
+    } else {
+        None
+    };
+    let input = input;
     let header = input.header();
     let s = job.params.supersample;
     let (w, h) = input.size();
@@ -124,17 +144,41 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         )));
     }
     let channels = input.channels();
-    let pipe_job = Job {
-        grid: Grid {
+    let mut pipe_job = Job::new(
+        Grid {
             in_w: w,
             in_h: h,
             s,
         },
-        channels: channels.clone(),
-        luminance: input.luminance(),
-    };
+        channels.clone(),
+        input.luminance(),
+    );
+    if let Some(found) = &found {
+        let aux = input.aux_channels();
+        let at = |name: &str| channels.len() + aux.iter().position(|a| a == name).unwrap_or(0);
+        if found.variance.len() == 3 && pipe_job.luminance.iter().filter(|&&l| l > 0.0).count() != 3
+        {
+            return Err(Error::Channels {
+                path: job.input.clone(),
+                reason: format!(
+                    "three variance channels ({}) need an R, G, B image; name a luminance variance with --variance-channel",
+                    found.variance.join(", ")
+                ),
+            });
+        }
+        pipe_job.stats = Some(StatsLayout {
+            variance: found.variance.iter().map(|v| at(v)).collect(),
+            kind: found.kind,
+            mean_y: found.mean_y.as_deref().map(at),
+            spp: match &found.spp {
+                SppFrom::Fixed(n, _) => Spp::Fixed(*n),
+                SppFrom::Channel(c) => Spp::Channel(at(c)),
+            },
+        });
+        pipe_job.aux = aux;
+    }
     let need =
-        crate::pipeline::estimate_bytes(&pipe_job, &job.params, &job.pipeline, input.block_bytes());
+        crate::pipeline::estimate_bytes(&pipe_job, &params, &job.pipeline, input.block_bytes());
     let limit = job.max_memory.unwrap_or_else(default_max_memory);
     if need > limit {
         return Err(Error::Config(format!(
@@ -144,12 +188,29 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
             limit >> 20
         )));
     }
+    // ep-box: the first pass, for L_ave (Eq. 9).
+    let mut l_ave = None;
+    if params.method == Method::EpBox && params.ep_box.ltvis.is_none() {
+        let mean =
+            crate::pipeline::mean_luminance(input.source(), &pipe_job, job.pipeline.strip_rows)?;
+        l_ave = Some(mean);
+        let l = crate::filter::ep_box::ltvis(mean, params.ep_box.nmid);
+        if !(l.is_finite() && l > 0.0) {
+            return Err(Error::Value {
+                path: job.input.clone(),
+                reason: format!(
+                    "the mean luminance is {mean:e}, so L_tvis = L_ave / N_MID is not positive; give --ltvis"
+                ),
+            });
+        }
+        params.ep_box.ltvis = Some(l);
+    }
     let mut output = ExrOutput::create(&job.output, header, s, &channels, &job.output_settings)?;
     let stats = run(
         input.source(),
         &mut output,
         &pipe_job,
-        &job.params,
+        &params,
         &job.pipeline,
         progress,
     )
@@ -205,18 +266,38 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         digest: format!("{:016x}", stats.digest),
         tile: job.pipeline.tile,
         strip_rows: match job.pipeline.strip_rows {
-            0 => crate::pipeline::auto_strip_rows(w, pipe_job.channels.len()),
+            0 => crate::pipeline::auto_strip_rows(w, pipe_job.strip_channels()),
             n => n,
         },
         threads,
         peak_rss_bytes: peak_rss_bytes(),
         nonfinite_zeroed: stats.nonfinite_zeroed.clone(),
-        first_nonfinite: stats
-            .first_nonfinite
-            .map(|(x, y, c)| (x, y, pipe_job.channels[c].clone())),
+        first_nonfinite: stats.first_nonfinite.map(|(x, y, c)| {
+            let name = pipe_job.channels.iter().chain(&pipe_job.aux).nth(c);
+            (x, y, name.cloned().unwrap_or_default())
+        }),
+        stats_channels: pipe_job.aux.clone(),
+        ep_box: found.as_ref().map(|f| EpBoxReport {
+            l_ave,
+            l_tvis: params.ep_box.ltvis.unwrap_or(f64::NAN),
+            d: params.ep_box.d,
+            nmid: params.ep_box.nmid,
+            confidence: params.ep_box.confidence,
+            guard: params.ep_box.guard.name().into(),
+            variance_channels: f.variance.clone(),
+            variance_kind: f.kind.name().into(),
+            spp_from: match &f.spp {
+                SppFrom::Fixed(n, from) => format!("{n} ({from})"),
+                SppFrom::Channel(c) => format!("channel {c}"),
+            },
+            guarded: stats.counters.guarded,
+            unresolved: stats.counters.unresolved,
+            passes_allowed: params.ep_box.passes,
+            passes_used: stats.counters.passes,
+        }),
         window_rows: stats.window_rows,
         window_bytes: {
-            let (nch, ow) = (pipe_job.channels.len() as u64, (w / s) as u64);
+            let (nch, ow) = (pipe_job.strip_channels() as u64, (w / s) as u64);
             let r = stats.window_rows.map(|v| v as u64);
             r[0] * nch * w as u64 * 4 + r[1] * ow * 8 + (r[2] + r[3] + r[4]) * nch * ow * 8
         },

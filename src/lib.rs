@@ -17,7 +17,7 @@
 //! // A 6x6 grey image, super-sampled 3x3, with one firefly.
 //! let mut img = vec![1.0f32; 36];
 //! img[14] = 1000.0;
-//! let job = Job { grid: Grid { in_w: 6, in_h: 6, s: 3 }, channels: vec!["Y".into()], luminance: vec![1.0] };
+//! let job = Job::new(Grid { in_w: 6, in_h: 6, s: 3 }, vec!["Y".into()], vec![1.0]);
 //! let params = FilterParams::new(Method::EpGauss, 3);
 //! let (out, stats) = filter_in_memory(img, &job, &params, &PipelineConfig::default()).unwrap();
 //! assert_eq!(out.len(), 4);
@@ -43,6 +43,7 @@ pub mod geometry;
 pub mod io;
 pub mod job;
 pub mod pipeline;
+pub mod plan;
 pub mod preview;
 pub mod stats;
 pub mod synth;

@@ -62,6 +62,9 @@ enum Command {
         #[arg(long)]
         labels: Option<String>,
     },
+    /// Plan a render from a pilot with variance (§5.1, Eqs. 8-10): L_tvis, the
+    /// mean standard error, and the samples per pixel needed for ±D.
+    Plan(Box<PlanArgs>),
     /// Build a noisy scene with known truth, filter it with every method, and
     /// print how close each comes to the truth.
     Demo {
@@ -115,27 +118,121 @@ struct SynthArgs {
     quiet: bool,
 }
 
+/// Statistics and noise test of ep-box, shared by `filter` and `plan`.
+#[derive(Args)]
+struct StatsArgs {
+    /// ep-box: variance channel (luminance) or layer with .R/.G/.B [default: found by name].
+    #[arg(long)]
+    variance_channel: Option<String>,
+    /// ep-box: what the variance holds: sample (of single samples), mean (of the
+    /// pixel mean) or moment (E[Y^2]) [default: guessed from the name].
+    #[arg(long)]
+    variance_kind: Option<String>,
+    /// ep-box: samples per pixel [default: the header's spp/samples attribute].
+    #[arg(long)]
+    spp: Option<u32>,
+    /// ep-box: channel holding each pixel's sample count.
+    #[arg(long)]
+    spp_channel: Option<String>,
+    /// ep-box: allowed interval ±D, in units of L_tvis.
+    #[arg(long, default_value_t = 5.0)]
+    d: f64,
+    /// ep-box: N_MID, the display level the mean luminance maps to (Eq. 9).
+    #[arg(long, default_value_t = 128.0)]
+    nmid: f64,
+    /// ep-box: confidence of the noise test (0.8, 80 or 80%).
+    #[arg(long, default_value = "80%")]
+    confidence: String,
+}
+
+impl StatsArgs {
+    fn request(&self) -> Result<epfilt::io::StatsRequest> {
+        Ok(epfilt::io::StatsRequest {
+            variance_channel: self.variance_channel.clone(),
+            kind: self
+                .variance_kind
+                .as_deref()
+                .map(epfilt::filter::ep_box::VarianceKind::parse)
+                .transpose()?,
+            spp: self.spp,
+            spp_channel: self.spp_channel.clone(),
+        })
+    }
+
+    fn params(&self) -> Result<epfilt::filter::ep_box::EpBoxParams> {
+        let c = self.confidence.trim();
+        let (num, pct) = match c.strip_suffix('%') {
+            Some(n) => (n, true),
+            None => (c, false),
+        };
+        let v: f64 = num
+            .trim()
+            .parse()
+            .with_context(|| format!("--confidence {c:?} is not a number"))?;
+        let confidence = if pct || v > 1.0 { v / 100.0 } else { v };
+        let p = epfilt::filter::ep_box::EpBoxParams {
+            d: self.d,
+            nmid: self.nmid,
+            confidence,
+            ..Default::default()
+        };
+        p.validate()?;
+        Ok(p)
+    }
+}
+
+#[derive(Args)]
+struct PlanArgs {
+    /// Pilot render with variance (e.g. 100x100 at 16 samples per pixel).
+    input: PathBuf,
+    #[command(flatten)]
+    stats: StatsArgs,
+    /// Largest radiance, for Purgathofer's worst case (Eq. 8) [default: the pilot's brightest pixel].
+    #[arg(long)]
+    lmax: Option<f64>,
+    /// Part of a multi-part input, by name or index.
+    #[arg(long)]
+    part: Option<String>,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
 #[derive(Args)]
 struct FilterArgs {
     /// Input EXR (super-sampled render).
     input: PathBuf,
     /// Output EXR (written to a temporary file, renamed on success).
     output: PathBuf,
-    /// Method: ep-gauss (§5.2), gauss (linear foil) or box (S x S average).
+    /// Method: ep-gauss (§5.2), ep-box (§5.1, pixels with variance), gauss
+    /// (linear foil) or box (S x S average).
     #[arg(long, default_value = "ep-gauss")]
     method: String,
-    /// Input samples per output pixel along each axis (1..=8).
-    #[arg(long, short = 's', default_value_t = 3)]
-    supersample: usize,
+    /// Input samples per output pixel along each axis (1..=8) [default: 3; 1 for ep-box].
+    #[arg(long, short = 's')]
+    supersample: Option<usize>,
     /// Relation 14 tolerance [default: 0.25 at S=3, 0.15 at S=4; 0.25*(3/S)^1.776 otherwise].
     #[arg(long)]
     tolerance: Option<f64>,
     /// Base Gaussian radius in output pixels (weight exp(-(d/r)^2)).
     #[arg(long, default_value_t = 0.6)]
     radius: f64,
-    /// Largest Gaussian radius a noisy sample may get, in output pixels.
+    /// Largest Gaussian radius a noisy sample may get, in output pixels
+    /// (ep-box: the largest spread radius, in pixels).
     #[arg(long, default_value_t = 16.0)]
     max_radius: f64,
+    #[command(flatten)]
+    stats: StatsArgs,
+    /// ep-box: the visibility threshold L_tvis [default: mean luminance / N_MID, Eq. 9].
+    #[arg(long)]
+    ltvis: Option<f64>,
+    /// ep-box: most passes over clusters of noisy pixels.
+    #[arg(long, default_value_t = 8)]
+    passes: usize,
+    /// ep-box: guard against spreading real features: none (§5.1 as written),
+    /// range, stderr or both.
+    #[arg(long, default_value = "range")]
+    guard: String,
     /// Kernel cut-off in radii.
     #[arg(long, default_value_t = 3.0)]
     cutoff: f64,
@@ -276,6 +373,21 @@ fn dispatch(cli: Cli) -> Result<()> {
             epfilt::preview::write_png(&inputs, &out, exposure)?;
             Ok(())
         }
+        Command::Plan(a) => {
+            let plan = epfilt::plan::plan_file(
+                &a.input,
+                a.part.as_deref().map(PartSelect::parse).as_ref(),
+                &a.stats.request()?,
+                &a.stats.params()?,
+                a.lmax,
+            )?;
+            if a.json {
+                println!("{}", serde_json::to_string_pretty(&plan)?);
+            } else {
+                print!("{}", plan.table());
+            }
+            Ok(())
+        }
         Command::Demo { dir, size } => {
             let (w, h) = parse_size(&size)?;
             let text = epfilt::demo::run(&dir, w, h, &|line| eprintln!("{line}"))?;
@@ -368,7 +480,16 @@ fn cancel_flag() -> Arc<AtomicBool> {
 
 fn filter(a: FilterArgs) -> Result<()> {
     let method = Method::parse(&a.method)?;
-    let mut params = FilterParams::new(method, a.supersample);
+    let s = a
+        .supersample
+        .unwrap_or(if method == Method::EpBox { 1 } else { 3 });
+    let mut params = FilterParams::new(method, s);
+    params.ep_box = epfilt::filter::ep_box::EpBoxParams {
+        ltvis: a.ltvis,
+        passes: a.passes,
+        guard: epfilt::filter::ep_box::Guard::parse(&a.guard)?,
+        ..a.stats.params()?
+    };
     params.radius = a.radius;
     params.max_radius = a.max_radius;
     params.cutoff = a.cutoff;
@@ -410,6 +531,7 @@ fn filter(a: FilterArgs) -> Result<()> {
         },
         part: a.part.as_deref().map(PartSelect::parse),
         max_memory: a.max_memory.map(|m| m.saturating_mul(1 << 20)),
+        stats: a.stats.request()?,
     };
     let bar = progress_bar(a.quiet);
     let progress = |done: usize, total: usize| {

@@ -82,6 +82,41 @@ pub struct Report {
     pub nonfinite_zeroed: Vec<u64>,
     /// Where the first of them was: `[x, y]` in the data window, and its channel.
     pub first_nonfinite: Option<(usize, usize, String)>,
+    /// Statistics channels read (ep-box), after `channels` in `nonfinite_zeroed`.
+    pub stats_channels: Vec<String>,
+    /// The ep-box run's settings and findings.
+    pub ep_box: Option<EpBoxReport>,
+}
+
+/// What an `ep-box` run used and found.
+#[derive(Clone, Debug, Serialize)]
+pub struct EpBoxReport {
+    /// Mean luminance of the image (`None` when `--ltvis` was given).
+    pub l_ave: Option<f64>,
+    /// Visibility threshold (Eq. 9).
+    pub l_tvis: f64,
+    /// Allowed interval, in units of L_tvis.
+    pub d: f64,
+    /// N_MID of Eq. 9.
+    pub nmid: f64,
+    /// Confidence of the noise test.
+    pub confidence: f64,
+    /// Guard name.
+    pub guard: String,
+    /// Variance channels and what they hold.
+    pub variance_channels: Vec<String>,
+    /// sample, mean or moment.
+    pub variance_kind: String,
+    /// Where the sample count came from.
+    pub spp_from: String,
+    /// Noisy pixels a guard left alone.
+    pub guarded: u64,
+    /// Noisy pixels with no converged pixel within the passes' reach (left alone).
+    pub unresolved: u64,
+    /// Most passes allowed.
+    pub passes_allowed: usize,
+    /// Most passes a pixel needed.
+    pub passes_used: u64,
 }
 
 impl Report {
@@ -123,6 +158,21 @@ impl Report {
                 self.energy_rel_error_rounded[k]
             ));
         }
+        if let Some(e) = &self.ep_box {
+            s.push_str(&format!(
+                "  ep-box: L_tvis {:.4e}{}, D {}, {}% confidence, guard {}; noisy pixels {}, spread {}, guarded {}, unresolved {}, passes {}\n",
+                e.l_tvis,
+                e.l_ave.map(|l| format!(" (L_ave {l:.4e})")).unwrap_or_default(),
+                e.d,
+                e.confidence * 100.0,
+                e.guard,
+                self.samples_noisy,
+                self.samples_spread,
+                e.guarded,
+                e.unresolved,
+                e.passes_used
+            ));
+        }
         if let Some(r) = self.peak_rss_bytes {
             s.push_str(&format!(
                 "  peak RSS {:.1} MiB\n",
@@ -139,6 +189,7 @@ impl Report {
                 "  non-finite input samples treated as zero: {}{first}\n",
                 self.channels
                     .iter()
+                    .chain(&self.stats_channels)
                     .zip(&self.nonfinite_zeroed)
                     .map(|(c, n)| format!("{c} {n}"))
                     .collect::<Vec<_>>()

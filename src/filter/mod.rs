@@ -3,11 +3,14 @@
 //! * [`kernel`]: separable, normalized, border-reflected 1-D kernels (every
 //!   sample's weights sum to one: energy is exact by construction).
 //! * [`ep_gauss`]: §5.2 of the paper, Relation 14 and the width search.
+//! * [`ep_box`]: §5.1, excess spreading for path-traced images with variance,
+//!   and the sample planning of Eqs. 8–10.
 //!
-//! Methods: `ep-gauss` (the paper's filter, default), `gauss` (the same base
-//! Gaussian for every sample: the linear foil) and `box` (S x S average: the
-//! I/O floor).
+//! Methods: `ep-gauss` (the paper's filter, default), `ep-box` (§5.1, pixel
+//! resolution input with variance), `gauss` (the same base Gaussian for every
+//! sample: the linear foil) and `box` (S x S average: the I/O floor).
 
+pub mod ep_box;
 pub mod ep_gauss;
 pub mod kernel;
 
@@ -18,6 +21,8 @@ use crate::error::{Error, Result};
 pub enum Method {
     /// Energy-preserving variable-width Gaussian (§5.2).
     EpGauss,
+    /// Energy-preserving excess spreading with a box (§5.1).
+    EpBox,
     /// Fixed-width normalized Gaussian.
     Gauss,
     /// S x S box average.
@@ -29,6 +34,7 @@ impl Method {
     pub fn name(self) -> &'static str {
         match self {
             Method::EpGauss => "ep-gauss",
+            Method::EpBox => "ep-box",
             Method::Gauss => "gauss",
             Method::Box => "box",
         }
@@ -38,10 +44,11 @@ impl Method {
     pub fn parse(s: &str) -> Result<Self> {
         match s {
             "ep-gauss" => Ok(Method::EpGauss),
+            "ep-box" => Ok(Method::EpBox),
             "gauss" => Ok(Method::Gauss),
             "box" => Ok(Method::Box),
             _ => Err(Error::Config(format!(
-                "unknown method {s:?} (choose ep-gauss, gauss or box)"
+                "unknown method {s:?} (choose ep-gauss, ep-box, gauss or box)"
             ))),
         }
     }
@@ -78,6 +85,11 @@ pub fn halo(p: &FilterParams) -> crate::geometry::Halo {
             search_reach: shell(max_rho),
             spread_reach: reach(max_rho),
         },
+        Method::EpBox => crate::geometry::Halo {
+            search_reach: p.ep_box.passes + ep_box::GUARD_REACH,
+            spread_reach: p.max_radius.max(0.0).floor() as usize,
+            ..Default::default()
+        },
     }
 }
 
@@ -98,6 +110,8 @@ pub struct FilterParams {
     pub max_radius: f64,
     /// Relative spacing of the ladder of widths the search chooses from.
     pub width_step: f64,
+    /// Settings of `ep-box` (§5.1); `max_radius` is its spread radius.
+    pub ep_box: ep_box::EpBoxParams,
 }
 
 impl FilterParams {
@@ -113,6 +127,7 @@ impl FilterParams {
             tolerance: default_tolerance(s.max(1)),
             max_radius: 16.0,
             width_step: 0.1,
+            ep_box: ep_box::EpBoxParams::default(),
         }
     }
 
@@ -151,6 +166,21 @@ impl FilterParams {
                 "--max-radius must be between --radius ({}) and 128 output pixels, got {}",
                 self.radius, self.max_radius
             ));
+        }
+        if self.method == Method::EpBox {
+            if self.supersample != 1 {
+                return bad(format!(
+                    "ep-box filters pixel-resolution renders with variance: use --supersample 1, not {}",
+                    self.supersample
+                ));
+            }
+            if !(1.0..=128.0).contains(&self.max_radius) {
+                return bad(format!(
+                    "--max-radius must be in 1..=128 pixels for ep-box, got {}",
+                    self.max_radius
+                ));
+            }
+            self.ep_box.validate()?;
         }
         if !(self.width_step.is_finite() && (0.005..=1.0).contains(&self.width_step)) {
             return bad(format!(

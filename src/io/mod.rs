@@ -10,11 +10,13 @@
 pub mod info;
 pub mod mapped;
 pub mod reader;
+pub mod variance;
 pub mod writer;
 pub mod zip;
 
 pub use info::info;
 pub use reader::{ExrInput, PartSelect};
+pub use variance::{find_stats, SppFrom, StatsChannels, StatsRequest};
 pub use writer::{ExrOutput, OutputSettings};
 
 use std::path::{Path, PathBuf};

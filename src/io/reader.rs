@@ -83,6 +83,8 @@ pub struct ExrInput {
     selected: Vec<Selected>,
     rows: Vec<BlockRow>,
     dropped: Vec<String>,
+    /// The last `aux` selected channels are statistics (read, not filtered).
+    aux: usize,
 }
 
 fn invalid(path: &Path, reason: impl Into<String>) -> Error {
@@ -268,6 +270,7 @@ impl ExrInput {
             selected,
             rows,
             dropped,
+            aux: 0,
         })
     }
 
@@ -302,7 +305,48 @@ impl ExrInput {
 
     /// Names of the channels that will be filtered, in strip order.
     pub fn channels(&self) -> Vec<String> {
-        self.selected.iter().map(|s| s.name.clone()).collect()
+        let n = self.selected.len() - self.aux;
+        self.selected[..n].iter().map(|s| s.name.clone()).collect()
+    }
+
+    /// Names of the statistics channels read after the filtered ones.
+    pub fn aux_channels(&self) -> Vec<String> {
+        let n = self.selected.len() - self.aux;
+        self.selected[n..].iter().map(|s| s.name.clone()).collect()
+    }
+
+    /// Every channel name of the chosen part, in header order.
+    pub fn all_channels(&self) -> Vec<String> {
+        self.header()
+            .channels
+            .list
+            .iter()
+            .map(|c| c.name.to_string())
+            .collect()
+    }
+
+    /// Also read `names` (after the filtered channels, in this order), as
+    /// statistics: they are not filtered and not written.
+    pub fn add_aux_channels(&mut self, names: &[String]) -> Result<()> {
+        let all = self.all_channels();
+        for name in names {
+            let index = all.iter().position(|n| n == name).ok_or_else(|| {
+                unsupported(
+                    &self.path,
+                    format!("no channel {name:?} (the file has: {})", all.join(", ")),
+                )
+            })?;
+            if self.selected.iter().any(|s| s.index == index) {
+                continue;
+            }
+            self.selected.push(Selected {
+                name: name.clone(),
+                index,
+            });
+            self.aux += 1;
+            self.dropped.retain(|d| d != name);
+        }
+        Ok(())
     }
 
     /// Channels of the file that are not filtered (and not written).
@@ -313,7 +357,7 @@ impl ExrInput {
     /// Luminance weight of each filtered channel.
     pub fn luminance(&self) -> Vec<f64> {
         let rgb = super::luminance_weights(self.header().shared_attributes.chromaticities.as_ref());
-        self.selected
+        self.selected[..self.selected.len() - self.aux]
             .iter()
             .map(|s| match base_name(&s.name) {
                 "R" => rgb[0],

@@ -112,12 +112,21 @@ impl LumRows for YView<'_> {
 /// Counters of a run.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Counters {
-    /// Samples that failed the base test.
+    /// Samples that failed the base test (ep-box: pixels that failed the
+    /// noise test).
     pub noisy: u64,
-    /// Samples spread wider than the base kernel (m > 1).
+    /// Samples spread wider than the base kernel (m > 1; ep-box: pixels whose
+    /// excess was spread).
     pub spread: u64,
-    /// Samples that still failed Relation 14 at the cap.
+    /// Samples that still failed Relation 14 at the cap (ep-box: pixels
+    /// whose excess did not fit under `L_tvis` per pixel within the radius).
     pub capped: u64,
+    /// ep-box: noisy pixels a guard left alone.
+    pub guarded: u64,
+    /// ep-box: noisy pixels with no converged pixel within the passes' reach.
+    pub unresolved: u64,
+    /// ep-box: the most passes any pixel needed.
+    pub passes: u64,
 }
 
 /// A finished batch of output rows, `[row][channel][x]`.
@@ -333,52 +342,15 @@ impl Engine {
                 self.rows_in
             )));
         }
-        if self.nonfinite == NonFinite::Zero {
-            // Zero them (counted, first one kept) before anything reads them.
-            for (r, row) in strip.data.chunks_mut(row_len).enumerate() {
-                for c in 0..nch {
-                    for (x, v) in row[c * in_w..(c + 1) * in_w].iter_mut().enumerate() {
-                        if !v.is_finite() {
-                            *v = 0.0;
-                            self.zeroed[c] += 1;
-                            self.first_nonfinite.get_or_insert((x, strip.y0 + r, c));
-                        }
-                    }
-                }
-            }
-        }
-        // Ledger of the input, row by row in parallel, merged in order.
-        let sums: Vec<std::result::Result<Sums, (usize, usize)>> = strip
-            .data
-            .par_chunks(row_len)
-            .map(|row| {
-                let mut s = Sums::new(nch);
-                for c in 0..nch {
-                    let ch = &row[c * in_w..(c + 1) * in_w];
-                    if let Some(x) = ch.iter().position(|v| !v.is_finite()) {
-                        return Err((x, c));
-                    }
-                    s.add_slice(c, ch);
-                }
-                Ok(s)
-            })
-            .collect();
-        for (r, s) in sums.into_iter().enumerate() {
-            match s {
-                Ok(s) => self.ledger.input.merge(&s),
-                Err((x, c)) => {
-                    return Err(Error::Value {
-                        path: Default::default(),
-                        reason: format!(
-                            "non-finite input value at sample ({x}, {}) in channel {} \
-                             (--nonfinite zero treats such samples as 0 and counts them)",
-                            strip.y0 + r,
-                            self.names[c]
-                        ),
-                    })
-                }
-            }
-        }
+        let sums = ingest(
+            &mut strip,
+            in_w,
+            &self.names,
+            self.nonfinite,
+            &mut self.zeroed,
+            &mut self.first_nonfinite,
+        )?;
+        self.ledger.input.merge(&sums);
         for row in strip.data.chunks(row_len) {
             self.input.push_copy(row);
         }
@@ -665,65 +637,164 @@ impl Engine {
 
     /// Output rows `a..b`: base plus accumulator, rounded, with the ledger.
     fn finish_rows(&mut self, a: usize, b: usize) -> Result<OutRows> {
-        let (w, nch) = (self.w, self.nch);
-        let mut data = vec![0.0f32; (b - a) * nch * w];
-        let based = &self.based;
         let acc = self.ep.as_ref().map(|_| &self.acc);
-        let precision = self.precision;
-        let names = &self.names;
-        let sums: Vec<Result<(Sums, Sums, u64)>> = data
-            .par_chunks_mut(nch * w)
-            .enumerate()
-            .map_init(
-                || vec![0.0f64; w],
-                |tmp, (k, out)| {
-                    let y = a + k;
-                    let mut raw = Sums::new(nch);
-                    let mut rounded = Sums::new(nch);
-                    let mut digest = FNV_OFFSET;
-                    for c in 0..nch {
-                        let base_row = &based.get(y)[c * w..(c + 1) * w];
-                        match acc {
-                            Some(acc) => {
-                                let n = &acc.get(y)[c * w..(c + 1) * w];
-                                for ((v, &b), &n) in tmp.iter_mut().zip(base_row).zip(n) {
-                                    *v = b + n;
-                                }
-                            }
-                            None => tmp.copy_from_slice(base_row),
-                        }
-                        raw.add_slice(c, tmp);
-                        let dst = &mut out[c * w..(c + 1) * w];
-                        for (x, (d, &val)) in dst.iter_mut().zip(tmp.iter()).enumerate() {
-                            let r = round(val, precision).ok_or_else(|| Error::Value {
-                                path: Default::default(),
-                                reason: format!(
-                                    "output value {val:e} at pixel ({x}, {y}) in channel {} does not fit in {}",
-                                    names[c],
-                                    precision.name()
-                                ),
-                            })?;
-                            *d = r;
-                            digest = fnv(digest, val.to_bits());
-                        }
-                        rounded.add_slice(c, dst);
-                    }
-                    Ok((raw, rounded, digest))
-                },
-            )
-            .collect();
-        for s in sums {
-            let (raw, rounded, digest) = s?;
-            self.digest = fnv(self.digest, digest);
-            self.ledger.output.merge(&raw);
-            self.ledger.rounded.merge(&rounded);
+        let (out, raw, rounded, digest) =
+            finish_rows(&self.based, acc, a, b, self.w, &self.names, self.precision)?;
+        for d in digest {
+            self.digest = fnv(self.digest, d);
         }
-        Ok(OutRows {
+        self.ledger.output.merge(&raw);
+        self.ledger.rounded.merge(&rounded);
+        Ok(out)
+    }
+}
+
+/// Check a strip's samples (all its channels) for NaN and infinities — refuse
+/// them, or zero and count them — and return the sums of its first
+/// `names.len()` channels (the filtered ones) for the ledger.
+pub(crate) fn ingest(
+    strip: &mut Strip,
+    in_w: usize,
+    names: &[String],
+    nonfinite: NonFinite,
+    zeroed: &mut [u64],
+    first_nonfinite: &mut Option<(usize, usize, usize)>,
+) -> Result<Sums> {
+    let nall = zeroed.len();
+    let row_len = nall * in_w;
+    let nch = names.len();
+    if nonfinite == NonFinite::Zero {
+        // Zero them (counted, first one kept) before anything reads them.
+        for (r, row) in strip.data.chunks_mut(row_len).enumerate() {
+            for c in 0..nall {
+                for (x, v) in row[c * in_w..(c + 1) * in_w].iter_mut().enumerate() {
+                    if !v.is_finite() {
+                        *v = 0.0;
+                        zeroed[c] += 1;
+                        first_nonfinite.get_or_insert((x, strip.y0 + r, c));
+                    }
+                }
+            }
+        }
+    }
+    // Ledger of the input, row by row in parallel, merged in order.
+    let sums: Vec<std::result::Result<Sums, (usize, usize)>> = strip
+        .data
+        .par_chunks(row_len)
+        .map(|row| {
+            let mut s = Sums::new(nch);
+            for c in 0..nall {
+                let ch = &row[c * in_w..(c + 1) * in_w];
+                if let Some(x) = ch.iter().position(|v| !v.is_finite()) {
+                    return Err((x, c));
+                }
+                if c < nch {
+                    s.add_slice(c, ch);
+                }
+            }
+            Ok(s)
+        })
+        .collect();
+    let mut total = Sums::new(nch);
+    for (r, s) in sums.into_iter().enumerate() {
+        match s {
+            Ok(s) => total.merge(&s),
+            Err((x, c)) => {
+                return Err(Error::Value {
+                    path: Default::default(),
+                    reason: format!(
+                        "non-finite input value at sample ({x}, {}) in channel {} \
+                         (--nonfinite zero treats such samples as 0 and counts them)",
+                        strip.y0 + r,
+                        channel_name(names, c)
+                    ),
+                })
+            }
+        }
+    }
+    Ok(total)
+}
+
+fn channel_name(names: &[String], c: usize) -> String {
+    names
+        .get(c)
+        .cloned()
+        .unwrap_or_else(|| format!("#{c} (statistics)"))
+}
+
+/// Output rows `a..b`: `based + acc` (or `based`), rounded to `precision`,
+/// with their raw and rounded sums and each row's digest of its unrounded
+/// values (fold them in row order: the result does not depend on batching).
+pub(crate) fn finish_rows(
+    based: &RowWindow<f64>,
+    acc: Option<&RowWindow<f64>>,
+    a: usize,
+    b: usize,
+    w: usize,
+    names: &[String],
+    precision: Precision,
+) -> Result<(OutRows, Sums, Sums, Vec<u64>)> {
+    let nch = names.len();
+    let mut data = vec![0.0f32; (b - a) * nch * w];
+    let sums: Vec<Result<(Sums, Sums, u64)>> = data
+        .par_chunks_mut(nch * w)
+        .enumerate()
+        .map_init(
+            || vec![0.0f64; w],
+            |tmp, (k, out)| {
+                let y = a + k;
+                let mut raw = Sums::new(nch);
+                let mut rounded = Sums::new(nch);
+                let mut digest = FNV_OFFSET;
+                for c in 0..nch {
+                    let base_row = &based.get(y)[c * w..(c + 1) * w];
+                    match acc {
+                        Some(acc) => {
+                            let n = &acc.get(y)[c * w..(c + 1) * w];
+                            for ((v, &b), &n) in tmp.iter_mut().zip(base_row).zip(n) {
+                                *v = b + n;
+                            }
+                        }
+                        None => tmp.copy_from_slice(base_row),
+                    }
+                    raw.add_slice(c, tmp);
+                    let dst = &mut out[c * w..(c + 1) * w];
+                    for (x, (d, &val)) in dst.iter_mut().zip(tmp.iter()).enumerate() {
+                        let r = round(val, precision).ok_or_else(|| Error::Value {
+                            path: Default::default(),
+                            reason: format!(
+                                "output value {val:e} at pixel ({x}, {y}) in channel {} does not fit in {}",
+                                names[c],
+                                precision.name()
+                            ),
+                        })?;
+                        *d = r;
+                        digest = fnv(digest, val.to_bits());
+                    }
+                    rounded.add_slice(c, dst);
+                }
+                Ok((raw, rounded, digest))
+            },
+        )
+        .collect();
+    let (mut raw_all, mut rounded_all) = (Sums::new(nch), Sums::new(nch));
+    let mut digest = Vec::with_capacity(b - a);
+    for s in sums {
+        let (raw, rounded, d) = s?;
+        digest.push(d);
+        raw_all.merge(&raw);
+        rounded_all.merge(&rounded);
+    }
+    Ok((
+        OutRows {
             y0: a,
             rows: b - a,
             data,
-        })
-    }
+        },
+        raw_all,
+        rounded_all,
+        digest,
+    ))
 }
 
 /// Add `spreads` (in order) into the accumulator, one task per tile of
@@ -777,10 +848,10 @@ fn scatter(
         });
 }
 
-const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+pub(crate) const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
 
 #[inline]
-fn fnv(h: u64, word: u64) -> u64 {
+pub(crate) fn fnv(h: u64, word: u64) -> u64 {
     (h ^ word).wrapping_mul(0x0000_0100_0000_01b3)
 }
 

@@ -10,6 +10,7 @@
 //! rows (`[row][channel][x]`). Back-pressure through the two-slot channels,
 //! not the image size, bounds memory.
 
+pub mod box_engine;
 pub mod engine;
 pub mod ledger;
 pub mod window;
@@ -18,9 +19,13 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
+use rayon::prelude::*;
+
 use crate::error::{Error, Result};
-use crate::filter::FilterParams;
+use crate::filter::ep_box::StatsLayout;
+use crate::filter::{FilterParams, Method};
 use crate::geometry::{Grid, Halo};
+pub use box_engine::BoxEngine;
 pub use engine::{Counters, Engine, OutRows};
 pub use ledger::{ChannelLedger, Ledger};
 
@@ -117,6 +122,29 @@ pub struct Job {
     pub channels: Vec<String>,
     /// Luminance weight of each channel (0 for alpha).
     pub luminance: Vec<f64>,
+    /// Channels read after `channels` but not written: the statistics of
+    /// `ep-box` (variance, sample count).
+    pub aux: Vec<String>,
+    /// Where the statistics are (indices into `channels` then `aux`).
+    pub stats: Option<StatsLayout>,
+}
+
+impl Job {
+    /// A job over `channels` with no statistics channels.
+    pub fn new(grid: Grid, channels: Vec<String>, luminance: Vec<f64>) -> Self {
+        Job {
+            grid,
+            channels,
+            luminance,
+            aux: Vec::new(),
+            stats: None,
+        }
+    }
+
+    /// Channels per strip row: filtered ones, then statistics.
+    pub fn strip_channels(&self) -> usize {
+        self.channels.len() + self.aux.len()
+    }
 }
 
 /// The result of a run.
@@ -163,6 +191,9 @@ pub fn estimate_bytes(
     block_bytes: u64,
 ) -> u64 {
     let halo = crate::filter::halo(params);
+    if params.method == Method::EpBox {
+        return estimate_box_bytes(job, cfg, block_bytes, halo);
+    }
     let s = job.grid.s as u64;
     let nch = job.channels.len() as u64;
     let (w, ow) = (
@@ -189,6 +220,36 @@ pub fn estimate_bytes(
         .saturating_add(out_row.saturating_mul(16 * 4))
 }
 
+fn estimate_box_bytes(job: &Job, cfg: &PipelineConfig, block_bytes: u64, halo: Halo) -> u64 {
+    let w = job.grid.in_w as u64;
+    let (nch, nall) = (job.channels.len() as u64, job.strip_channels() as u64);
+    let strip = match cfg.strip_rows {
+        0 => auto_strip_rows(job.grid.in_w.max(1), job.strip_channels().max(1)),
+        n => n,
+    } as u64;
+    let (p, r) = (halo.search_reach as u64, halo.spread_reach as u64);
+    let threads = if cfg.threads == 0 {
+        rayon::current_num_threads()
+    } else {
+        cfg.threads
+    } as u64;
+    // Input rows with their luminance, t*S_p and flag; kept and accumulator
+    // rows; each task's band arrays; strips in flight; the codec's blocks.
+    let per_in = w.saturating_mul(nall * 4 + 8 + 8 + 1);
+    let windows = per_in.saturating_mul(2 * p + strip + 2)
+        + w.saturating_mul(nch * 8)
+            .saturating_mul(2 * (2 * r + strip + 2));
+    let bands = w
+        .saturating_mul(9 + 4)
+        .saturating_mul((32 + 2 * p) * threads.max(1));
+    let strips = w.saturating_mul(nall * 4).saturating_mul(strip * 4);
+    windows
+        .saturating_add(bands)
+        .saturating_add(strips)
+        .saturating_add(block_bytes.saturating_mul(3 * 4))
+        .saturating_add(w.saturating_mul(nch * 8 * 16 * 4))
+}
+
 /// Progress callback: (output rows done, output rows in all).
 pub type Progress<'a> = &'a (dyn Fn(usize, usize) + Sync);
 
@@ -212,15 +273,7 @@ pub fn run<S: Source, K: Sink>(
 ) -> Result<RunStats> {
     let pool = thread_pool(cfg.threads)?;
     let start = Instant::now();
-    let mut engine = Engine::new(
-        job.grid,
-        job.channels.clone(),
-        job.luminance.clone(),
-        params,
-        cfg.tile,
-        cfg.precision,
-    )?;
-    engine.set_nonfinite(cfg.nonfinite);
+    let mut engine = AnyEngine::new(job, params, cfg)?;
     let total = job.grid.out_h();
     let cancelled = || {
         cfg.cancel
@@ -230,7 +283,7 @@ pub fn run<S: Source, K: Sink>(
     let (strip_tx, strip_rx) = crossbeam_channel::bounded::<Result<Strip>>(2);
     let (row_tx, row_rx) = crossbeam_channel::bounded::<OutRows>(2);
     let strip_rows = match cfg.strip_rows {
-        0 => auto_strip_rows(job.grid.in_w, job.channels.len()),
+        0 => auto_strip_rows(job.grid.in_w, job.strip_channels()),
         n => n,
     };
     let pool = &pool;
@@ -322,6 +375,140 @@ pub fn run<S: Source, K: Sink>(
     })
 }
 
+/// The engine of a job's method.
+enum AnyEngine {
+    Gauss(Box<Engine>),
+    Box(Box<BoxEngine>),
+}
+
+macro_rules! delegate {
+    ($self:ident, $e:ident => $body:expr) => {
+        match $self {
+            AnyEngine::Gauss($e) => $body,
+            AnyEngine::Box($e) => $body,
+        }
+    };
+}
+
+impl AnyEngine {
+    fn new(job: &Job, params: &FilterParams, cfg: &PipelineConfig) -> Result<Self> {
+        let mut e = if params.method == Method::EpBox {
+            params.validate()?;
+            let stats = job
+                .stats
+                .clone()
+                .ok_or_else(|| Error::Config("ep-box needs per-pixel variance channels".into()))?;
+            let ltvis = params.ep_box.ltvis.ok_or_else(|| {
+                Error::Config("ep-box needs L_tvis: measure L_ave first (mean_luminance)".into())
+            })?;
+            AnyEngine::Box(Box::new(BoxEngine::new(
+                job.grid.in_w,
+                job.grid.in_h,
+                job.channels.clone(),
+                job.luminance.clone(),
+                job.aux.len(),
+                stats,
+                &params.ep_box,
+                ltvis,
+                params.max_radius,
+                cfg.tile,
+                cfg.precision,
+            )?))
+        } else {
+            if !job.aux.is_empty() {
+                return Err(Error::Config(format!(
+                    "{} reads no statistics channels",
+                    params.method.name()
+                )));
+            }
+            AnyEngine::Gauss(Box::new(Engine::new(
+                job.grid,
+                job.channels.clone(),
+                job.luminance.clone(),
+                params,
+                cfg.tile,
+                cfg.precision,
+            )?))
+        };
+        let r = &mut e;
+        delegate!(r, x => x.set_nonfinite(cfg.nonfinite));
+        Ok(e)
+    }
+    fn push(&mut self, strip: Strip) -> Result<Option<OutRows>> {
+        delegate!(self, e => e.push(strip))
+    }
+    fn rows_out(&self) -> usize {
+        delegate!(self, e => e.rows_out())
+    }
+    fn counters(&self) -> Counters {
+        delegate!(self, e => e.counters())
+    }
+    fn ledger(&self) -> &Ledger {
+        delegate!(self, e => e.ledger())
+    }
+    fn names(&self) -> &[String] {
+        delegate!(self, e => e.names())
+    }
+    fn halo(&self) -> Halo {
+        delegate!(self, e => e.halo())
+    }
+    fn high_water(&self) -> [usize; 5] {
+        delegate!(self, e => e.high_water())
+    }
+    fn digest(&self) -> u64 {
+        delegate!(self, e => e.digest())
+    }
+    fn nonfinite_zeroed(&self) -> &[u64] {
+        delegate!(self, e => e.nonfinite_zeroed())
+    }
+    fn first_nonfinite(&self) -> Option<(usize, usize, usize)> {
+        delegate!(self, e => e.first_nonfinite())
+    }
+}
+
+/// The mean luminance of a source's filtered channels (the first pass of
+/// `ep-box`, for `L_ave` of Eq. 9), summed exactly (compensated) in row order.
+pub fn mean_luminance<S: Source>(mut source: S, job: &Job, strip_rows: usize) -> Result<f64> {
+    let w = job.grid.in_w;
+    let nall = job.strip_channels();
+    let strip_rows = match strip_rows {
+        0 => auto_strip_rows(w, nall),
+        n => n,
+    };
+    let mut total = ledger::CompensatedSum::default();
+    let mut count = 0usize;
+    while let Some(strip) = source.next_strip(strip_rows)? {
+        let sums: Vec<ledger::CompensatedSum> = strip
+            .data
+            .par_chunks(nall * w)
+            .map(|row| {
+                let mut s = ledger::CompensatedSum::default();
+                for x in 0..w {
+                    let mut y = 0.0;
+                    for (c, &l) in job.luminance.iter().enumerate() {
+                        let v = row[c * w + x] as f64;
+                        // Non-finite samples are the filter's to report.
+                        if v.is_finite() {
+                            y += l * v;
+                        }
+                    }
+                    s.add(y);
+                }
+                s
+            })
+            .collect();
+        for s in &sums {
+            total.merge(s);
+        }
+        count += strip.rows * w;
+    }
+    Ok(if count == 0 {
+        0.0
+    } else {
+        total.value() / count as f64
+    })
+}
+
 /// An in-memory source: a whole planar image (`[row][channel][x]`).
 #[derive(Clone, Debug)]
 pub struct MemorySource {
@@ -395,13 +582,19 @@ pub fn filter_in_memory(
     params: &FilterParams,
     cfg: &PipelineConfig,
 ) -> Result<(Vec<f32>, RunStats)> {
-    let row_len = job.channels.len() * job.grid.in_w;
+    let row_len = job.strip_channels() * job.grid.in_w;
+    let mut params = params.clone();
+    if params.method == Method::EpBox && params.ep_box.ltvis.is_none() {
+        let source = MemorySource::new(data.clone(), row_len);
+        let l_ave = mean_luminance(source, job, cfg.strip_rows)?;
+        params.ep_box.ltvis = Some(crate::filter::ep_box::ltvis(l_ave, params.ep_box.nmid));
+    }
     let mut sink = MemorySink::default();
     let stats = run(
         MemorySource::new(data, row_len),
         &mut sink,
         job,
-        params,
+        &params,
         cfg,
         &|_, _| {},
     )?;

@@ -50,38 +50,38 @@ impl Img {
 }
 
 pub fn rgb_job(w: usize, h: usize, s: usize) -> Job {
-    Job {
-        grid: Grid {
+    Job::new(
+        Grid {
             in_w: w,
             in_h: h,
             s,
         },
-        channels: vec!["R".into(), "G".into(), "B".into()],
-        luminance: vec![0.2126, 0.7152, 0.0722],
-    }
+        vec!["R".into(), "G".into(), "B".into()],
+        vec![0.2126, 0.7152, 0.0722],
+    )
 }
 
 pub fn job_for(img: &Img, s: usize) -> Job {
     match img.nch {
         3 => rgb_job(img.w, img.h, s),
-        4 => Job {
-            grid: Grid {
+        4 => Job::new(
+            Grid {
                 in_w: img.w,
                 in_h: img.h,
                 s,
             },
-            channels: vec!["R".into(), "G".into(), "B".into(), "A".into()],
-            luminance: vec![0.2126, 0.7152, 0.0722, 0.0],
-        },
-        _ => Job {
-            grid: Grid {
+            vec!["R".into(), "G".into(), "B".into(), "A".into()],
+            vec![0.2126, 0.7152, 0.0722, 0.0],
+        ),
+        _ => Job::new(
+            Grid {
                 in_w: img.w,
                 in_h: img.h,
                 s,
             },
-            channels: vec!["Y".into()],
-            luminance: vec![1.0],
-        },
+            vec!["Y".into()],
+            vec![1.0],
+        ),
     }
 }
 

@@ -54,6 +54,7 @@ fn identity_job(input: &Path, output: &Path, part: Option<PartSelect>) -> Filter
         },
         part,
         max_memory: None,
+        stats: Default::default(),
     }
 }
 

@@ -4,6 +4,7 @@ mod cli;
 mod common;
 mod corpus;
 mod energy;
+mod ep_box;
 mod exr_io;
 mod extremes;
 mod invariance;

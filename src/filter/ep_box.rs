@@ -1,0 +1,433 @@
+//! §5.1 of the paper: the excess-spreading box filter for path-traced images
+//! that carry a per-pixel variance, and the sample planning of Eqs. 8–10.
+//!
+//! * **Visibility threshold** (Eq. 9): `L_tvis = L_ave / N_MID`.
+//! * **Noise test** (Eqs. 5–6): a pixel is noisy when `t * S_p > D * L_tvis`,
+//!   `S_p` the standard error of its mean and `t` the Student-t factor
+//!   `t_{1-α/2, n-1}` for the confidence `α`.
+//! * **Excess**: `L_excess = Y_u - mean(neighbours) - D * L_tvis`, the mean
+//!   taken over the reference values of the 8-neighbours that count as
+//!   converged in this pass ([`Pass`]). A positive excess leaves the pixel and
+//!   is shared equally by the `ceil(L_excess / L_tvis)` in-image pixels
+//!   nearest to it, in [`Ring`] order (the pixel itself first), each channel in
+//!   proportion to the pixel's own values (its colour is kept).
+//! * **Guards** against the rule's known failure, real bright features taken
+//!   for noise ([`Guard`]).
+//!
+//! Passes: converged pixels are pass 0; a noisy pixel is treated in pass `k`
+//! when its Chebyshev distance to the nearest converged pixel is `k` (it then
+//! has a neighbour treated in pass `k - 1`). Its neighbour mean uses pass `< k`
+//! neighbours only, each at its reference value: the original luminance of a
+//! converged pixel, the kept luminance (`Y_u - L_excess`) of a treated one.
+//! Spread energy never enters a mean. So the result depends only on the
+//! input within `passes` pixels, not on any traversal order, and a pixel
+//! further than `passes` from every converged pixel is left as it is
+//! (counted as unresolved).
+
+use statrs::distribution::{ContinuousCDF, StudentsT};
+
+use crate::error::{Error, Result};
+
+/// What keeps a real bright feature from being spread as noise.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Guard {
+    /// The paper's rule as written (§5.1).
+    None,
+    /// Leave alone a noisy pixel whose luminance does not exceed the brightest
+    /// converged pixel within [`GUARD_REACH`] pixels: it lies between a bright
+    /// converged feature and its surroundings (a light source's edge, the rim
+    /// of a highlight with a converged core), it is not an outlier above
+    /// everything near it.
+    Range,
+    /// Spread at most `t * S_p` of the excess: the part the pixel's own
+    /// standard error can explain; the rest is taken to be real.
+    StdError,
+    /// Both: `Range` first, then `StdError`.
+    Both,
+}
+
+impl Guard {
+    /// Name as on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Guard::None => "none",
+            Guard::Range => "range",
+            Guard::StdError => "stderr",
+            Guard::Both => "both",
+        }
+    }
+
+    /// Parse a command-line name.
+    pub fn parse(s: &str) -> Result<Self> {
+        match s {
+            "none" => Ok(Guard::None),
+            "range" => Ok(Guard::Range),
+            "stderr" => Ok(Guard::StdError),
+            "both" => Ok(Guard::Both),
+            _ => Err(Error::Config(format!(
+                "unknown --guard {s:?} (choose none, range, stderr or both)"
+            ))),
+        }
+    }
+}
+
+/// Chebyshev radius of the `range` guard's look at converged pixels.
+pub const GUARD_REACH: usize = 2;
+
+/// Settings of the `ep-box` filter (and of `epfilt plan`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct EpBoxParams {
+    /// Allowed interval `±D` in units of `L_tvis`.
+    pub d: f64,
+    /// `N_MID` of Eq. 9: the display level the mean luminance maps to.
+    pub nmid: f64,
+    /// Confidence `α` of the noise test, in (0, 1).
+    pub confidence: f64,
+    /// `L_tvis` given directly instead of `L_ave / N_MID`.
+    pub ltvis: Option<f64>,
+    /// Most passes over noisy clusters (the reach of the neighbour rule).
+    pub passes: usize,
+    /// Guard against spreading real features.
+    pub guard: Guard,
+}
+
+impl Default for EpBoxParams {
+    /// `D = 5`, `N_MID = 128`, 80% confidence (the paper's and Purgathofer's
+    /// figures), 8 passes, the `range` guard (see `docs/tradeoff.md`).
+    fn default() -> Self {
+        EpBoxParams {
+            d: 5.0,
+            nmid: 128.0,
+            confidence: 0.8,
+            ltvis: None,
+            passes: 8,
+            guard: Guard::Range,
+        }
+    }
+}
+
+impl EpBoxParams {
+    /// Check every field.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::Config(m));
+        if !(self.d.is_finite() && self.d >= 0.0) {
+            return bad(format!("--d must be a finite number >= 0, got {}", self.d));
+        }
+        if !(self.nmid.is_finite() && self.nmid > 0.0) {
+            return bad(format!("--nmid must be > 0, got {}", self.nmid));
+        }
+        if !(self.confidence > 0.0 && self.confidence < 1.0) {
+            return bad(format!(
+                "--confidence must be in (0, 1) (e.g. 0.8), got {}",
+                self.confidence
+            ));
+        }
+        if let Some(l) = self.ltvis {
+            if !(l.is_finite() && l > 0.0) {
+                return bad(format!("--ltvis must be a finite number > 0, got {l}"));
+            }
+        }
+        if !(1..=64).contains(&self.passes) {
+            return bad(format!("--passes must be 1..=64, got {}", self.passes));
+        }
+        Ok(())
+    }
+}
+
+/// `L_tvis = L_ave / N_MID` (Eq. 9).
+pub fn ltvis(l_ave: f64, nmid: f64) -> f64 {
+    l_ave / nmid
+}
+
+/// Student-t factors `t_{(1+α)/2, n-1}` by sample count, tabled once.
+#[derive(Clone, Debug)]
+pub struct TFactor {
+    table: Vec<f64>,
+    z: f64,
+    p: f64,
+}
+
+/// Sample counts up to this are tabled from statrs; beyond, the
+/// Cornish–Fisher expansion in `1/ν` (within 1e-7 of statrs there).
+const T_TABLE: usize = 4096;
+
+impl TFactor {
+    /// Factors for two-sided confidence `confidence` (0.8 → the 0.9 quantile).
+    pub fn new(confidence: f64) -> Self {
+        let p = 0.5 + confidence / 2.0;
+        let mut table = vec![f64::NAN; T_TABLE + 1];
+        for (n, t) in table.iter_mut().enumerate().skip(2) {
+            *t = student_t_quantile(p, (n - 1) as f64);
+        }
+        let z = statrs::distribution::Normal::standard().inverse_cdf(p);
+        TFactor { table, z, p }
+    }
+
+    /// The factor for `n` samples (`n >= 2`; NaN below).
+    #[inline]
+    pub fn get(&self, n: f64) -> f64 {
+        if !(n >= 2.0) {
+            return f64::NAN;
+        }
+        let k = n.floor();
+        if k <= T_TABLE as f64 {
+            return self.table[k as usize];
+        }
+        let (z, v) = (self.z, k - 1.0);
+        let z3 = z * z * z;
+        let z5 = z3 * z * z;
+        z + (z3 + z) / (4.0 * v) + (5.0 * z5 + 16.0 * z3 + 3.0 * z) / (96.0 * v * v)
+    }
+
+    /// The quantile this table holds (`(1 + α) / 2`).
+    pub fn quantile(&self) -> f64 {
+        self.p
+    }
+}
+
+/// The `p` quantile of Student's t with `dof` degrees of freedom.
+pub fn student_t_quantile(p: f64, dof: f64) -> f64 {
+    match StudentsT::new(0.0, 1.0, dof) {
+        Ok(t) => t.inverse_cdf(p),
+        Err(_) => f64::NAN,
+    }
+}
+
+/// Pixels nearest to a centre, in a fixed order: by squared distance, then
+/// row offset, then column offset; all within a radius.
+#[derive(Clone, Debug)]
+pub struct Ring {
+    offsets: Vec<(i32, i32)>,
+    /// `reach_x[m]`: largest `|dx|` among the first `m + 1` offsets.
+    reach_x: Vec<u32>,
+    radius: usize,
+}
+
+impl Ring {
+    /// Every offset within `radius` pixels (Euclidean) of the centre.
+    pub fn new(radius: f64) -> Self {
+        let r = radius.max(0.0).floor() as i32;
+        let r2 = (radius * radius).floor() as i64;
+        let mut offsets = Vec::new();
+        for dy in -r..=r {
+            for dx in -r..=r {
+                if (dx as i64 * dx as i64 + dy as i64 * dy as i64) <= r2 {
+                    offsets.push((dx, dy));
+                }
+            }
+        }
+        offsets.sort_by_key(|&(dx, dy)| (dx * dx + dy * dy, dy, dx));
+        let mut reach_x = Vec::with_capacity(offsets.len());
+        let mut m = 0u32;
+        for &(dx, _) in &offsets {
+            m = m.max(dx.unsigned_abs());
+            reach_x.push(m);
+        }
+        Ring {
+            offsets,
+            reach_x,
+            radius: r.max(0) as usize,
+        }
+    }
+
+    /// The offsets `(dx, dy)` in order.
+    pub fn offsets(&self) -> &[(i32, i32)] {
+        &self.offsets
+    }
+
+    /// Largest `|dx|` of the first `m` offsets (`m >= 1`).
+    pub fn reach_x(&self, m: usize) -> usize {
+        self.reach_x[m.clamp(1, self.offsets.len()) - 1] as usize
+    }
+
+    /// Rows (and columns) the ring reaches either side.
+    pub fn radius(&self) -> usize {
+        self.radius
+    }
+
+    /// How many offsets a spread to `n` in-image pixels around `(x, y)` walks
+    /// in a `w x h` image, and how many in-image pixels it finds (`< n` when
+    /// the ring runs out: the spread is capped).
+    pub fn prefix(&self, x: usize, y: usize, w: usize, h: usize, n: usize) -> (usize, usize) {
+        let r = self.radius;
+        if x >= r && y >= r && x + r < w && y + r < h {
+            let m = n.min(self.offsets.len());
+            return (m, m);
+        }
+        let mut found = 0;
+        for (k, &(dx, dy)) in self.offsets.iter().enumerate() {
+            let (tx, ty) = (x as i64 + dx as i64, y as i64 + dy as i64);
+            if tx >= 0 && ty >= 0 && (tx as usize) < w && (ty as usize) < h {
+                found += 1;
+                if found == n {
+                    return (k + 1, found);
+                }
+            }
+        }
+        (self.offsets.len(), found)
+    }
+}
+
+/// The sample count, from the header, a channel or the command line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Spp {
+    /// The same count for every pixel.
+    Fixed(f64),
+    /// Per pixel, in this channel (index in the strip's channel list).
+    Channel(usize),
+}
+
+/// What the variance channels hold.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum VarianceKind {
+    /// The sample variance of single samples (`s^2`): `S_p^2 = s^2 / n`.
+    Sample,
+    /// The variance of the pixel mean (`S_p^2` itself; RenderMan's `mse`).
+    OfMean,
+    /// The raw second moment `E[Y^2]` of single samples (Mitsuba's `m2_*`):
+    /// `s^2 = (E[Y^2] - E[Y]^2) n / (n - 1)`.
+    SecondMoment,
+}
+
+impl VarianceKind {
+    /// Name as on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            VarianceKind::Sample => "sample",
+            VarianceKind::OfMean => "mean",
+            VarianceKind::SecondMoment => "moment",
+        }
+    }
+
+    /// Parse a command-line name.
+    pub fn parse(s: &str) -> Result<Self> {
+        match s {
+            "sample" => Ok(VarianceKind::Sample),
+            "mean" => Ok(VarianceKind::OfMean),
+            "moment" => Ok(VarianceKind::SecondMoment),
+            _ => Err(Error::Config(format!(
+                "unknown --variance-kind {s:?} (choose sample, mean or moment)"
+            ))),
+        }
+    }
+}
+
+/// Where the statistics of each pixel are in a strip's channel list.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StatsLayout {
+    /// One luminance variance channel, or one per colour channel (R, G, B).
+    pub variance: Vec<usize>,
+    /// What they hold.
+    pub kind: VarianceKind,
+    /// With `SecondMoment`: the channel of the mean luminance `E[Y]` that the
+    /// moment goes with (`None`: the luminance of the colour channels).
+    pub mean_y: Option<usize>,
+    /// The sample count.
+    pub spp: Spp,
+}
+
+/// Squared standard error of a pixel mean's luminance from its statistics.
+///
+/// With one variance per colour channel, the luminance's deviation is taken
+/// as `sum w_c s_c` (fully correlated channels: a path that hits a light is
+/// bright in every channel), an upper bound of the true value.
+#[inline]
+pub fn se2(kind: VarianceKind, var: &[f64], w: &[f64], mean_y: f64, n: f64) -> f64 {
+    let v = if var.len() == 1 {
+        var[0]
+    } else {
+        let sd: f64 = var
+            .iter()
+            .zip(w)
+            .map(|(&v, &w)| w * v.max(0.0).sqrt())
+            .sum();
+        sd * sd
+    };
+    let v = v.max(0.0);
+    match kind {
+        VarianceKind::Sample => v / n,
+        VarianceKind::OfMean => v,
+        VarianceKind::SecondMoment => ((v - mean_y * mean_y).max(0.0) * n / (n - 1.0)) / n,
+    }
+}
+
+/// Purgathofer's worst-case trial count (Eq. 8): `log(1 - α) / log(1 - d)`,
+/// `d` the interval on samples scaled to 0..1; rounded up.
+pub fn purgathofer_trials(confidence: f64, d: f64) -> f64 {
+    ((1.0 - confidence).ln() / (1.0 - d).ln()).ceil()
+}
+
+/// Trials for `±D` (Eq. 10) from a pilot of `pilot_spp` samples per pixel
+/// whose mean standard error is `mean_se`: the error shrinks as
+/// `sqrt(pilot_spp / M)`, so `M_t = pilot_spp (S̄ / (D L_tvis))^2` — the
+/// paper's `(4 S̄ / (D L_tvis))^2` at its 16-sample pilot.
+pub fn trials_eq10(mean_se: f64, pilot_spp: f64, d: f64, ltvis: f64) -> f64 {
+    let r = mean_se / (d * ltvis);
+    pilot_spp * r * r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn purgathofer_matches_the_papers_worked_figures() {
+        // §4.1: d = 1e-4 at 80% gives 16,094 trials; d = 0.05 gives 32.
+        assert_eq!(purgathofer_trials(0.8, 1e-4), 16094.0);
+        assert_eq!(purgathofer_trials(0.8, 0.05), 32.0);
+        assert_eq!(purgathofer_trials(0.8, 13.0 / 255.0), 31.0);
+    }
+
+    #[test]
+    fn eq10_is_the_papers_form_at_16_samples() {
+        let (s, d, l) = (0.3f64, 5.0f64, 0.01f64);
+        let paper = (4.0 * s / (d * l)).powi(2);
+        assert!((trials_eq10(s, 16.0, d, l) - paper).abs() <= 1e-9 * paper);
+    }
+
+    #[test]
+    fn student_t_factors() {
+        let t = TFactor::new(0.8);
+        // Tables: t_{0.9, 15} = 1.3406, t_{0.9, 63} = 1.2951, z_{0.9} = 1.2816.
+        assert!((t.get(16.0) - 1.340_606).abs() < 1e-5);
+        assert!((t.get(64.0) - 1.295_134).abs() < 1e-5);
+        let far = t.get(1e6);
+        assert!((far - 1.281_552).abs() < 1e-5, "{far}");
+        // The expansion joins the table: within 1e-7, the accuracy of statrs's
+        // numerical inversion (1.4e-8 apart at 4096 samples).
+        let (a, b) = (t.get(T_TABLE as f64), t.get(T_TABLE as f64 + 1.0));
+        let exact = student_t_quantile(0.9, T_TABLE as f64);
+        assert!((b - exact).abs() < 1e-7, "{b} vs {exact}");
+        assert!(a >= b);
+        assert!(t.get(1.0).is_nan());
+    }
+
+    #[test]
+    fn ring_order_is_by_distance_then_row_then_column() {
+        let r = Ring::new(2.0);
+        assert_eq!(r.offsets().len(), 13);
+        assert_eq!(
+            &r.offsets()[..5],
+            &[(0, 0), (0, -1), (-1, 0), (1, 0), (0, 1)]
+        );
+        assert_eq!(r.reach_x(1), 0);
+        assert_eq!(r.reach_x(13), 2);
+        // A corner pixel: the ring's in-image offsets only.
+        assert_eq!(r.prefix(0, 0, 10, 10, 3), (5, 3));
+        assert_eq!(r.prefix(5, 5, 10, 10, 3), (3, 3));
+        assert_eq!(r.prefix(0, 0, 2, 1, 5), (13, 2));
+    }
+
+    #[test]
+    fn standard_error_of_each_kind() {
+        let w = [0.2126, 0.7152, 0.0722];
+        assert_eq!(se2(VarianceKind::Sample, &[4.0], &w, 0.0, 16.0), 0.25);
+        assert_eq!(se2(VarianceKind::OfMean, &[0.25], &w, 0.0, 16.0), 0.25);
+        // E[Y^2] = 5, E[Y] = 1: s^2 = 4 * 16/15.
+        let m = se2(VarianceKind::SecondMoment, &[5.0], &w, 1.0, 16.0);
+        assert!((m - 4.0 / 15.0).abs() < 1e-12);
+        // Equal colour deviations: the luminance deviation is theirs.
+        let c = se2(VarianceKind::Sample, &[4.0, 4.0, 4.0], &w, 0.0, 16.0);
+        assert!((c - 0.25).abs() < 1e-12);
+    }
+}

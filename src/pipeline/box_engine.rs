@@ -1,0 +1,638 @@
+//! The streaming engine of the `ep-box` filter (§5.1; the rules are in
+//! [`crate::filter::ep_box`]).
+//!
+//! Input is at pixel resolution: colour channels, then the statistics channels
+//! (variance, and perhaps the sample count), all in one strip row. Three
+//! cursors over pixel rows:
+//!
+//! 1. **statistics** of row `y` on arrival: luminance, `t * S_p` and the noise
+//!    flag;
+//! 2. **treatment** of row `y` once rows `y + passes` are in: the passes over
+//!    the band `y ± passes` decide each noisy pixel's excess (see the module
+//!    above), the pixel keeps the rest, and the excess goes into accumulator
+//!    tiles that own columns, source pixels in row-major order;
+//! 3. **output** of row `y` once every row within the spread radius `R` has
+//!    been treated: kept values plus accumulator.
+//!
+//! The treatment of a pixel reads only the input within `passes` of it, and the
+//! accumulator receives spreads in row-major order whatever the tiles, so the
+//! output is bit-identical across `--tile`, `--strip-rows` and `--threads`.
+//! Pixels that are neither treated nor reached keep their input bits exactly.
+
+use rayon::prelude::*;
+
+use super::engine::{finish_rows, fnv, ingest, Counters, OutRows, FNV_OFFSET, MAX_CHANNELS};
+use super::ledger::Ledger;
+use super::window::RowWindow;
+use super::{NonFinite, Precision, Strip};
+use crate::error::{Error, Result};
+use crate::filter::ep_box::{
+    se2, EpBoxParams, Guard, Ring, Spp, StatsLayout, TFactor, VarianceKind,
+};
+use crate::geometry::Halo;
+
+/// Rows treated per task: each task recomputes `2 * passes` rows of band
+/// around its own, so tasks should be several times taller than that.
+const TREAT_ROWS: usize = 32;
+
+/// A pixel whose excess is spread.
+#[derive(Clone, Copy, Debug)]
+struct Source {
+    x: u32,
+    y: u32,
+    /// Offsets of the ring walked.
+    m: u32,
+    /// What each in-image pixel of the walk receives, per channel.
+    share: [f64; MAX_CHANNELS],
+}
+
+/// The `ep-box` filter state between strips.
+pub struct BoxEngine {
+    w: usize,
+    h: usize,
+    nch: usize,
+    nall: usize,
+    names: Vec<String>,
+    lum: Vec<f64>,
+    stats: StatsLayout,
+    params: EpBoxParams,
+    ltvis: f64,
+    dl: f64,
+    t: TFactor,
+    ring: Ring,
+    passes: usize,
+    reach: usize,
+    tile: usize,
+    precision: Precision,
+    input: RowWindow<f32>,
+    ylum: RowWindow<f64>,
+    tse: RowWindow<f64>,
+    noisy: RowWindow<u8>,
+    kept: RowWindow<f64>,
+    acc: RowWindow<f64>,
+    rows_in: usize,
+    treat_done: usize,
+    out_done: usize,
+    ledger: Ledger,
+    counters: Counters,
+    digest: u64,
+    nonfinite: NonFinite,
+    zeroed: Vec<u64>,
+    first_nonfinite: Option<(usize, usize, usize)>,
+}
+
+#[allow(clippy::too_many_arguments)]
+impl BoxEngine {
+    /// Build the engine for a `w x h` image whose strips hold `names` (the
+    /// filtered colour channels, with luminance weights `lum`) followed by
+    /// `aux` statistics channels laid out as `stats` says. `ltvis` is the
+    /// visibility threshold (Eq. 9), `max_radius` the spread radius in pixels.
+    pub fn new(
+        w: usize,
+        h: usize,
+        names: Vec<String>,
+        lum: Vec<f64>,
+        aux: usize,
+        stats: StatsLayout,
+        params: &EpBoxParams,
+        ltvis: f64,
+        max_radius: f64,
+        tile: usize,
+        precision: Precision,
+    ) -> Result<Self> {
+        params.validate()?;
+        let nch = names.len();
+        if nch == 0 || nch > MAX_CHANNELS || lum.len() != nch {
+            return Err(Error::Config(format!(
+                "1..={MAX_CHANNELS} channels with luminance weights needed, got {nch}"
+            )));
+        }
+        let nall = nch + aux;
+        let in_range = |i: usize| i >= nch && i < nall;
+        let var_ok = (stats.variance.len() == 1 || stats.variance.len() == 3)
+            && stats.variance.iter().all(|&i| in_range(i))
+            && stats.mean_y.is_none_or(in_range)
+            && match stats.spp {
+                Spp::Channel(i) => in_range(i),
+                Spp::Fixed(n) => n.is_finite() && n >= 2.0,
+            };
+        if !var_ok {
+            return Err(Error::Config(
+                "ep-box needs one or three variance channels and a sample count of at least 2"
+                    .into(),
+            ));
+        }
+        if stats.variance.len() == 3 && lum.iter().filter(|&&l| l > 0.0).count() != 3 {
+            return Err(Error::Config(
+                "three variance channels need three colour channels (R, G, B)".into(),
+            ));
+        }
+        if w == 0 || h == 0 {
+            return Err(Error::Config("the image is empty".into()));
+        }
+        if tile == 0 {
+            return Err(Error::Config("--tile must be at least 1".into()));
+        }
+        if !(ltvis.is_finite() && ltvis > 0.0) {
+            return Err(Error::Config(format!(
+                "the visibility threshold L_tvis is {ltvis:e}: the image's mean luminance is not positive; give --ltvis"
+            )));
+        }
+        if !(max_radius.is_finite() && (1.0..=128.0).contains(&max_radius)) {
+            return Err(Error::Config(format!(
+                "--max-radius must be in 1..=128 pixels for ep-box, got {max_radius}"
+            )));
+        }
+        let ring = Ring::new(max_radius);
+        Ok(BoxEngine {
+            w,
+            h,
+            nch,
+            nall,
+            names,
+            lum,
+            stats,
+            params: params.clone(),
+            ltvis,
+            dl: params.d * ltvis,
+            t: TFactor::new(params.confidence),
+            passes: params.passes,
+            reach: ring.radius(),
+            ring,
+            tile,
+            precision,
+            input: RowWindow::new(nall * w),
+            ylum: RowWindow::new(w),
+            tse: RowWindow::new(w),
+            noisy: RowWindow::new(w),
+            kept: RowWindow::new(nch * w),
+            acc: RowWindow::new(nch * w),
+            rows_in: 0,
+            treat_done: 0,
+            out_done: 0,
+            ledger: Ledger::new(nch),
+            counters: Counters::default(),
+            digest: FNV_OFFSET,
+            nonfinite: NonFinite::Error,
+            zeroed: vec![0; nall],
+            first_nonfinite: None,
+        })
+    }
+
+    /// The halo: `search_reach` is the passes' reach, `spread_reach` the ring's.
+    pub fn halo(&self) -> Halo {
+        Halo {
+            xbar_reach: 0,
+            base_reach: 0,
+            search_reach: self.passes + GUARD_REACH,
+            spread_reach: self.reach,
+        }
+    }
+
+    /// The visibility threshold in use.
+    pub fn ltvis(&self) -> f64 {
+        self.ltvis
+    }
+
+    /// Output rows finished so far.
+    pub fn rows_out(&self) -> usize {
+        self.out_done
+    }
+
+    /// Counters so far.
+    pub fn counters(&self) -> Counters {
+        self.counters
+    }
+
+    /// The ledger so far.
+    pub fn ledger(&self) -> &Ledger {
+        &self.ledger
+    }
+
+    /// Filtered channel names.
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// What to do with NaN and infinite input samples.
+    pub fn set_nonfinite(&mut self, n: NonFinite) {
+        self.nonfinite = n;
+    }
+
+    /// Non-finite input samples treated as zero, per input channel (colour,
+    /// then statistics).
+    pub fn nonfinite_zeroed(&self) -> &[u64] {
+        &self.zeroed
+    }
+
+    /// The first of them: (x, y, input channel).
+    pub fn first_nonfinite(&self) -> Option<(usize, usize, usize)> {
+        self.first_nonfinite
+    }
+
+    /// Digest of the unrounded output, as [`super::Engine::digest`].
+    pub fn digest(&self) -> u64 {
+        self.digest
+    }
+
+    /// Most rows each window held: input, luminance, kept, accumulator, flags.
+    pub fn high_water(&self) -> [usize; 5] {
+        [
+            self.input.high_water(),
+            self.ylum.high_water(),
+            self.kept.high_water(),
+            self.acc.high_water(),
+            self.noisy.high_water(),
+        ]
+    }
+
+    /// Feed the next strip of rows; returns the output rows it finished.
+    pub fn push(&mut self, mut strip: Strip) -> Result<Option<OutRows>> {
+        let row_len = self.nall * self.w;
+        if strip.y0 != self.rows_in
+            || strip.data.len() != strip.rows * row_len
+            || self.rows_in + strip.rows > self.h
+        {
+            return Err(Error::Config(format!(
+                "source delivered rows {}..{} but row {} was expected (source bug)",
+                strip.y0,
+                strip.y0 + strip.rows,
+                self.rows_in
+            )));
+        }
+        let sums = ingest(
+            &mut strip,
+            self.w,
+            &self.names,
+            self.nonfinite,
+            &mut self.zeroed,
+            &mut self.first_nonfinite,
+        )?;
+        self.ledger.input.merge(&sums);
+        let a = self.rows_in;
+        for row in strip.data.chunks(row_len) {
+            self.input.push_copy(row);
+            self.ylum.push_stale(0.0);
+            self.tse.push_stale(0.0);
+            self.noisy.push_stale(0);
+        }
+        self.rows_in += strip.rows;
+        self.statistics(a, self.rows_in);
+        self.advance()
+    }
+
+    /// Luminance, `t * S_p` and the noise flag of rows `a..b`.
+    fn statistics(&mut self, a: usize, b: usize) {
+        let (w, nch) = (self.w, self.nch);
+        let (input, lum, stats, t, dl) = (&self.input, &self.lum, &self.stats, &self.t, self.dl);
+        let ys = self.ylum.range_mut(a, b);
+        let ts = self.tse.range_mut(a, b);
+        let fs = self.noisy.range_mut(a, b);
+        ys.into_par_iter()
+            .zip(ts)
+            .zip(fs)
+            .enumerate()
+            .for_each(|(k, ((yrow, trow), frow))| {
+                let row = input.get(a + k);
+                let ch = |c: usize, x: usize| row[c * w + x] as f64;
+                let mut var = [0.0f64; 3];
+                let nv = stats.variance.len();
+                for x in 0..w {
+                    let mut y = 0.0;
+                    for (c, &l) in lum.iter().enumerate().take(nch) {
+                        y += l * ch(c, x);
+                    }
+                    yrow[x] = y;
+                    let n = match stats.spp {
+                        Spp::Fixed(n) => n,
+                        Spp::Channel(i) => ch(i, x),
+                    };
+                    for (v, &i) in var.iter_mut().zip(&stats.variance) {
+                        *v = ch(i, x);
+                    }
+                    let mean_y = match (stats.kind, stats.mean_y) {
+                        (VarianceKind::SecondMoment, Some(i)) => ch(i, x),
+                        _ => y,
+                    };
+                    let weights = if nv == 3 { &lum[..3] } else { &lum[..1] };
+                    let tse = t.get(n) * se2(stats.kind, &var[..nv], weights, mean_y, n).sqrt();
+                    // NaN (fewer than 2 samples) is not noisy: it cannot be tested.
+                    trow[x] = tse;
+                    frow[x] = u8::from(tse > dl);
+                }
+            });
+    }
+
+    fn advance(&mut self) -> Result<Option<OutRows>> {
+        let h = self.h;
+        let treat_target = if self.rows_in == h {
+            h
+        } else {
+            self.rows_in.saturating_sub(self.passes + GUARD_REACH)
+        };
+        if treat_target > self.treat_done {
+            self.treat(self.treat_done, treat_target);
+            self.treat_done = treat_target;
+            let keep = self.treat_done.saturating_sub(self.passes + GUARD_REACH);
+            self.input.evict_below(keep);
+            self.ylum.evict_below(keep);
+            self.tse.evict_below(keep);
+            self.noisy.evict_below(keep);
+        }
+        let out_target = if self.treat_done == h {
+            h
+        } else {
+            self.treat_done.saturating_sub(self.reach)
+        };
+        if out_target > self.out_done {
+            let (out, raw, rounded, digests) = finish_rows(
+                &self.kept,
+                Some(&self.acc),
+                self.out_done,
+                out_target,
+                self.w,
+                &self.names,
+                self.precision,
+            )?;
+            for d in digests {
+                self.digest = fnv(self.digest, d);
+            }
+            self.ledger.output.merge(&raw);
+            self.ledger.rounded.merge(&rounded);
+            self.out_done = out_target;
+            self.kept.evict_below(out_target);
+            self.acc.evict_below(out_target);
+            return Ok(Some(out));
+        }
+        Ok(None)
+    }
+
+    /// Decide the excess of every noisy pixel of rows `a..b`, write their kept
+    /// rows, and spread the excess.
+    fn treat(&mut self, a: usize, b: usize) {
+        let (w, h, nch) = (self.w, self.h, self.nch);
+        for _ in a..b {
+            self.kept.push_stale(0.0);
+        }
+        while self.acc.end() < (b + self.reach).min(h) {
+            self.acc.push(-0.0);
+        }
+        let kept = self.kept.range_mut(a, b);
+        let ctx = Band {
+            w,
+            h,
+            nch,
+            input: &self.input,
+            ylum: &self.ylum,
+            tse: &self.tse,
+            noisy: &self.noisy,
+            lum: &self.lum,
+            passes: self.passes,
+            dl: self.dl,
+            ltvis: self.ltvis,
+            guard: self.params.guard,
+            ring: &self.ring,
+        };
+        let mut chunks: Vec<(usize, Vec<&mut [f64]>)> = Vec::new();
+        let mut rows = kept.into_iter();
+        let mut y = a;
+        while y < b {
+            let n = TREAT_ROWS.min(b - y);
+            chunks.push((y, rows.by_ref().take(n).collect()));
+            y += n;
+        }
+        let results: Vec<(Vec<Source>, Counters)> = chunks
+            .into_par_iter()
+            .map(|(c0, rows)| ctx.treat_rows(c0, rows))
+            .collect();
+        let mut sources = Vec::new();
+        for (s, c) in results {
+            sources.extend(s);
+            let k = &mut self.counters;
+            k.noisy += c.noisy;
+            k.spread += c.spread;
+            k.capped += c.capped;
+            k.guarded += c.guarded;
+            k.unresolved += c.unresolved;
+            k.passes = k.passes.max(c.passes);
+        }
+        scatter_ring(&mut self.acc, &self.ring, &sources, w, h, nch, self.tile);
+    }
+}
+
+/// What one treatment task reads.
+struct Band<'a> {
+    w: usize,
+    h: usize,
+    nch: usize,
+    input: &'a RowWindow<f32>,
+    ylum: &'a RowWindow<f64>,
+    tse: &'a RowWindow<f64>,
+    noisy: &'a RowWindow<u8>,
+    lum: &'a [f64],
+    passes: usize,
+    dl: f64,
+    ltvis: f64,
+    guard: Guard,
+    ring: &'a Ring,
+}
+
+const UNSET: u8 = u8::MAX;
+
+pub use crate::filter::ep_box::GUARD_REACH;
+
+impl Band<'_> {
+    /// Treat rows `c0..c0 + kept.len()`: the passes over the band of rows
+    /// `c0 - passes .. c1 + passes`, which holds everything those rows'
+    /// decisions read (see `filter::ep_box`).
+    fn treat_rows(&self, c0: usize, mut kept: Vec<&mut [f64]>) -> (Vec<Source>, Counters) {
+        let (w, h, nch) = (self.w, self.h, self.nch);
+        let c1 = c0 + kept.len();
+        let margin = self.passes + GUARD_REACH;
+        let ba = c0.saturating_sub(margin);
+        let bb = (c1 + margin).min(h);
+        let bh = bb - ba;
+        let mut counters = Counters::default();
+        // Originals first: kept values start as the input.
+        for (k, row) in kept.iter_mut().enumerate() {
+            let src = self.input.get(c0 + k);
+            for (d, &v) in row.iter_mut().zip(&src[..nch * w]) {
+                *d = v as f64;
+            }
+        }
+        let mut dist = vec![0u8; bh * w];
+        let mut refv = vec![0.0f64; bh * w];
+        let mut pending: Vec<u32> = Vec::new();
+        for r in 0..bh {
+            let (fl, yl) = (self.noisy.get(ba + r), self.ylum.get(ba + r));
+            refv[r * w..(r + 1) * w].copy_from_slice(yl);
+            for x in 0..w {
+                if fl[x] != 0 {
+                    dist[r * w + x] = UNSET;
+                    pending.push((r * w + x) as u32);
+                }
+            }
+        }
+        let in_target = |r: usize| (c0..c1).contains(&(ba + r));
+        counters.noisy = pending
+            .iter()
+            .filter(|&&i| in_target(i as usize / w))
+            .count() as u64;
+        let mut sources = Vec::new();
+        let mut next = Vec::with_capacity(pending.len());
+        for k in 1..=self.passes.min(UNSET as usize - 1) as u8 {
+            if pending.is_empty() {
+                break;
+            }
+            next.clear();
+            for &i in &pending {
+                let i = i as usize;
+                let (r, x) = (i / w, i % w);
+                let (mut count, mut sum, mut max) = (0u32, 0.0f64, f64::NEG_INFINITY);
+                for dy in -1i64..=1 {
+                    let rr = r as i64 + dy;
+                    if rr < 0 || rr >= bh as i64 {
+                        continue;
+                    }
+                    for dx in -1i64..=1 {
+                        let xx = x as i64 + dx;
+                        if (dx == 0 && dy == 0) || xx < 0 || xx >= w as i64 {
+                            continue;
+                        }
+                        let j = rr as usize * w + xx as usize;
+                        if dist[j] < k {
+                            count += 1;
+                            sum += refv[j];
+                        }
+                    }
+                }
+                if count == 0 {
+                    next.push(i as u32);
+                    continue;
+                }
+                dist[i] = k;
+                let y = self.ylum.get(ba + r)[x];
+                let mean = sum / count as f64;
+                let mut excess = y - mean - self.dl;
+                let target = in_target(r);
+                if target {
+                    counters.passes = counters.passes.max(k as u64);
+                }
+                if matches!(self.guard, Guard::Range | Guard::Both) && excess > 0.0 {
+                    // The brightest converged input within GUARD_REACH.
+                    for rr in r.saturating_sub(GUARD_REACH)..(r + GUARD_REACH + 1).min(bh) {
+                        let (fl, yl) = (self.noisy.get(ba + rr), self.ylum.get(ba + rr));
+                        for xx in x.saturating_sub(GUARD_REACH)..(x + GUARD_REACH + 1).min(w) {
+                            if fl[xx] == 0 {
+                                max = max.max(yl[xx]);
+                            }
+                        }
+                    }
+                }
+                if matches!(self.guard, Guard::Range | Guard::Both) && excess > 0.0 && y <= max {
+                    if target {
+                        counters.guarded += 1;
+                    }
+                    excess = 0.0;
+                }
+                if matches!(self.guard, Guard::StdError | Guard::Both) {
+                    excess = excess.min(self.tse.get(ba + r)[x]);
+                }
+                // Below one visibility step it would come back to the pixel
+                // itself: nothing to spread.
+                let wanted = (excess / self.ltvis).ceil();
+                if !(excess > 0.0 && y > 0.0 && wanted >= 2.0) {
+                    continue;
+                }
+                refv[i] = y - excess;
+                if !target {
+                    continue;
+                }
+                let f = excess / y;
+                let yy = ba + r;
+                let wanted = wanted.min(self.ring.offsets().len() as f64 + 1.0) as usize;
+                let (m, found) = self.ring.prefix(x, yy, w, h, wanted);
+                counters.spread += 1;
+                counters.capped += u64::from(found < wanted);
+                let row = &mut kept[yy - c0];
+                let mut share = [0.0f64; MAX_CHANNELS];
+                for c in 0..nch {
+                    if self.lum[c] == 0.0 {
+                        continue;
+                    }
+                    let v = &mut row[c * w + x];
+                    let removed = *v * f;
+                    *v -= removed;
+                    share[c] = removed / found as f64;
+                }
+                sources.push(Source {
+                    x: x as u32,
+                    y: yy as u32,
+                    m: m as u32,
+                    share,
+                });
+            }
+            std::mem::swap(&mut pending, &mut next);
+        }
+        counters.unresolved = pending
+            .iter()
+            .filter(|&&i| in_target(i as usize / w))
+            .count() as u64;
+        sources.sort_by_key(|s| (s.y, s.x));
+        (sources, counters)
+    }
+}
+
+/// Add each source's share to the in-image pixels of its ring prefix, one task
+/// per tile of columns; every pixel receives its shares in source order.
+fn scatter_ring(
+    acc: &mut RowWindow<f64>,
+    ring: &Ring,
+    sources: &[Source],
+    w: usize,
+    h: usize,
+    nch: usize,
+    tile: usize,
+) {
+    if sources.is_empty() {
+        return;
+    }
+    let (first, end) = (acc.first(), acc.end());
+    let ntiles = w.div_ceil(tile);
+    let mut tiles: Vec<Vec<&mut [f64]>> = (0..ntiles)
+        .map(|_| Vec::with_capacity((end - first) * nch))
+        .collect();
+    for row in acc.range_mut(first, end) {
+        for ch in row.chunks_mut(w) {
+            for (t, part) in ch.chunks_mut(tile).enumerate() {
+                tiles[t].push(part);
+            }
+        }
+    }
+    let offsets = ring.offsets();
+    tiles
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(t, mut parts)| {
+            let x0 = t * tile;
+            let x1 = (x0 + tile).min(w);
+            for s in sources {
+                let (sx, sy, m) = (s.x as usize, s.y as usize, s.m as usize);
+                let rx = ring.reach_x(m);
+                if sx + rx < x0 || sx >= x1 + rx {
+                    continue;
+                }
+                for &(dx, dy) in &offsets[..m] {
+                    let tx = sx as i64 + dx as i64;
+                    let ty = sy as i64 + dy as i64;
+                    if tx < x0 as i64 || tx >= x1 as i64 || ty < 0 || ty >= h as i64 {
+                        continue;
+                    }
+                    let r = ty as usize - first;
+                    for c in 0..nch {
+                        parts[r * nch + c][tx as usize - x0] += s.share[c];
+                    }
+                }
+            }
+        });
+}

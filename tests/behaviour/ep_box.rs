@@ -1,0 +1,658 @@
+//! The ep-box filter (§5.1): energy, invariance, minimal disruption, colour,
+//! order independence, passes, and the plan.
+#![allow(clippy::needless_range_loop)] // pixel loops read clearer with indices
+
+use epfilt::filter::ep_box::{se2, Guard, Ring, Spp, StatsLayout, TFactor, VarianceKind};
+use epfilt::{filter_in_memory, FilterParams, Grid, Job, Method, PipelineConfig, RunStats};
+use proptest::prelude::*;
+
+use crate::common::*;
+
+const LUM: [f64; 3] = [0.2126, 0.7152, 0.0722];
+
+/// An RGB image with per-colour sample variances: channels R, G, B, vR, vG, vB.
+fn rgbv(w: usize, h: usize) -> Img {
+    Img::new(w, h, 6, |_, _, c| if c < 3 { 1.0 } else { 0.0 })
+}
+
+fn job(w: usize, h: usize, spp: f64) -> Job {
+    let mut j = Job::new(
+        Grid {
+            in_w: w,
+            in_h: h,
+            s: 1,
+        },
+        vec!["R".into(), "G".into(), "B".into()],
+        LUM.to_vec(),
+    );
+    j.aux = vec![
+        "variance.R".into(),
+        "variance.G".into(),
+        "variance.B".into(),
+    ];
+    j.stats = Some(StatsLayout {
+        variance: vec![3, 4, 5],
+        kind: VarianceKind::Sample,
+        mean_y: None,
+        spp: Spp::Fixed(spp),
+    });
+    j
+}
+
+fn params(guard: Guard, ltvis: f64, radius: f64) -> FilterParams {
+    let mut p = FilterParams::new(Method::EpBox, 1);
+    p.max_radius = radius;
+    p.ep_box.guard = guard;
+    p.ep_box.ltvis = Some(ltvis);
+    p
+}
+
+fn cfg(tile: usize, strip: usize, threads: usize) -> PipelineConfig {
+    PipelineConfig {
+        tile,
+        strip_rows: strip,
+        threads,
+        ..Default::default()
+    }
+}
+
+fn filter(img: &Img, spp: f64, p: &FilterParams, c: &PipelineConfig) -> (Img, RunStats) {
+    let (out, stats) =
+        filter_in_memory(img.data.clone(), &job(img.w, img.h, spp), p, c).expect("ep-box");
+    (
+        Img {
+            w: img.w,
+            h: img.h,
+            nch: 3,
+            data: out,
+        },
+        stats,
+    )
+}
+
+/// A firefly of colour `rgb` at (x, y): a pixel whose mean holds one hot
+/// sample of `n`, with the matching sample variance.
+fn firefly(img: &mut Img, x: usize, y: usize, rgb: [f32; 3], n: f32) {
+    for c in 0..3 {
+        let base = img.at(x, y, c);
+        let hot = rgb[c];
+        // n - 1 samples at `base`, one at `hot`: mean and unbiased variance.
+        let mean = base + (hot - base) / n;
+        let var = (hot - base) * (hot - base) / n;
+        img.set(x, y, c, mean);
+        img.set(x, y, 3 + c, var);
+    }
+}
+
+fn lum(img: &Img, x: usize, y: usize) -> f64 {
+    (0..3).map(|c| LUM[c] * img.at(x, y, c) as f64).sum()
+}
+
+/// The §5.1 rule written for clarity over the whole image: pass numbers by
+/// repeated dilation, noisy pixels visited in a *shuffled* order within each
+/// pass (the result must not depend on it), then every excess spread to its
+/// ring. Returns the output (f64) and the number of unresolved pixels.
+fn reference(img: &Img, spp: f64, p: &FilterParams, seed: u64) -> (Vec<f64>, usize) {
+    let (w, h) = (img.w, img.h);
+    let e = &p.ep_box;
+    let ltvis = e.ltvis.unwrap();
+    let dl = e.d * ltvis;
+    let t = TFactor::new(e.confidence);
+    let idx = |x: usize, y: usize| y * w + x;
+    let mut noisy = vec![false; w * h];
+    let mut tse = vec![0.0; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let var: Vec<f64> = (3..6).map(|c| img.at(x, y, c) as f64).collect();
+            let s = t.get(spp) * se2(VarianceKind::Sample, &var, &LUM, 0.0, spp).sqrt();
+            tse[idx(x, y)] = s;
+            noisy[idx(x, y)] = s > dl;
+        }
+    }
+    let mut pass = vec![0usize; w * h];
+    let mut refv: Vec<f64> = (0..w * h).map(|i| lum(img, i % w, i / w)).collect();
+    let mut out: Vec<f64> = Vec::with_capacity(w * h * 3);
+    for y in 0..h {
+        for c in 0..3 {
+            for x in 0..w {
+                out.push(img.at(x, y, c) as f64);
+            }
+        }
+    }
+    let mut excess = vec![0.0f64; w * h];
+    let mut pending: Vec<usize> = (0..w * h).filter(|&i| noisy[i]).collect();
+    for v in &pending {
+        pass[*v] = usize::MAX;
+    }
+    let mut rng = Rng(seed);
+    for k in 1..=e.passes {
+        // Shuffle: the order of visits must not matter.
+        for i in (1..pending.len()).rev() {
+            let j = (rng.next_u64() % (i as u64 + 1)) as usize;
+            pending.swap(i, j);
+        }
+        let mut rest = Vec::new();
+        for &i in &pending {
+            let (x, y) = (i % w, i / w);
+            let mut nb = Vec::new();
+            for dy in -1i64..=1 {
+                for dx in -1i64..=1 {
+                    let (xx, yy) = (x as i64 + dx, y as i64 + dy);
+                    if (dx, dy) == (0, 0) || xx < 0 || yy < 0 || xx >= w as i64 || yy >= h as i64 {
+                        continue;
+                    }
+                    let j = idx(xx as usize, yy as usize);
+                    if pass[j] < k {
+                        nb.push(refv[j]);
+                    }
+                }
+            }
+            if nb.is_empty() {
+                rest.push(i);
+                continue;
+            }
+            pass[i] = k;
+            let yv = lum(img, x, y);
+            let mean = nb.iter().sum::<f64>() / nb.len() as f64;
+            // The brightest converged input within 2 pixels.
+            let mut max = f64::NEG_INFINITY;
+            for yy in y.saturating_sub(2)..(y + 3).min(h) {
+                for xx in x.saturating_sub(2)..(x + 3).min(w) {
+                    if !noisy[idx(xx, yy)] {
+                        max = max.max(lum(img, xx, yy));
+                    }
+                }
+            }
+            let mut ex = yv - mean - dl;
+            if matches!(e.guard, Guard::Range | Guard::Both) && yv <= max {
+                ex = 0.0;
+            }
+            if matches!(e.guard, Guard::StdError | Guard::Both) {
+                ex = ex.min(tse[i]);
+            }
+            if ex > 0.0 && yv > 0.0 && (ex / ltvis).ceil() >= 2.0 {
+                excess[i] = ex;
+                refv[i] = yv - ex;
+            }
+        }
+        pending = rest;
+    }
+    // Spread, source by source in row-major order.
+    let ring = Ring::new(p.max_radius);
+    for i in 0..w * h {
+        if excess[i] <= 0.0 {
+            continue;
+        }
+        let (x, y) = (i % w, i / w);
+        let f = excess[i] / lum(img, x, y);
+        let wanted = (excess[i] / ltvis).ceil() as usize;
+        let targets: Vec<(usize, usize)> = ring
+            .offsets()
+            .iter()
+            .map(|&(dx, dy)| (x as i64 + dx as i64, y as i64 + dy as i64))
+            .filter(|&(tx, ty)| tx >= 0 && ty >= 0 && tx < w as i64 && ty < h as i64)
+            .map(|(tx, ty)| (tx as usize, ty as usize))
+            .take(wanted)
+            .collect();
+        for c in 0..3 {
+            // Of the pixel's own value: what others spread onto it stays.
+            let removed = img.at(x, y, c) as f64 * f;
+            out[(y * 3 + c) * w + x] -= removed;
+            for &(tx, ty) in &targets {
+                out[(ty * 3 + c) * w + tx] += removed / targets.len() as f64;
+            }
+        }
+    }
+    (out, pending.len())
+}
+
+/// Background 1.0 with `count` random fireflies of random colours and sizes.
+fn scene(w: usize, h: usize, count: usize, seed: u64) -> Img {
+    let mut rng = Rng(seed);
+    let mut img = rgbv(w, h);
+    for y in 0..h {
+        for x in 0..w {
+            let g = 0.5 + rng.unit() as f32;
+            for c in 0..3 {
+                img.set(x, y, c, g);
+                img.set(x, y, 3 + c, 1e-6);
+            }
+        }
+    }
+    for _ in 0..count {
+        let (x, y) = (rng.next_u64() as usize % w, rng.next_u64() as usize % h);
+        let hot = (10f64).powf(1.0 + 3.0 * rng.unit()) as f32;
+        let rgb = [hot, hot * rng.unit() as f32, hot * rng.unit() as f32];
+        firefly(&mut img, x, y, rgb, 16.0);
+    }
+    img
+}
+
+#[test]
+fn matches_the_reference_in_any_visiting_order() {
+    for (seed, guard) in [
+        (1, Guard::None),
+        (2, Guard::Range),
+        (3, Guard::StdError),
+        (4, Guard::Both),
+    ] {
+        let img = scene(40, 33, 60, seed);
+        let p = params(guard, 0.01, 6.0);
+        let (out, stats) = filter(&img, 16.0, &p, &cfg(256, 0, 2));
+        for order in 0..3 {
+            let (want, unresolved) = reference(&img, 16.0, &p, seed * 10 + order);
+            assert_eq!(unresolved as u64, stats.counters.unresolved);
+            for (k, (&a, &b)) in out.data.iter().zip(&want).enumerate() {
+                // f32 rounding of the output (6e-8 relative) plus the
+                // reference's own summation order (a few ulps of f64).
+                let tol = 1e-6 * b.abs().max(1.0);
+                assert!(
+                    (a as f64 - b).abs() <= tol,
+                    "{guard:?} order {order} value {k}: {a} vs {b}"
+                );
+            }
+        }
+        assert!(stats.counters.spread > 0, "{guard:?}: nothing spread");
+    }
+}
+
+#[test]
+fn energy_is_exact_and_every_cut_gives_the_same_bits() {
+    let img = scene(70, 45, 120, 7);
+    let p = params(Guard::None, 0.005, 9.0);
+    let (a, sa) = filter(&img, 16.0, &p, &cfg(256, 0, 1));
+    for l in &sa.ledger {
+        // Compensated sums and shares that sum to the excess within a few
+        // ulps: 1e-12 relative is far above the ~1e-16 seen, far below a
+        // lost or doubled pixel (1e-4 here).
+        assert!(l.rel_error <= 1e-12, "{}: {:e}", l.channel, l.rel_error);
+    }
+    assert!(sa.counters.spread > 50);
+    for (tile, strip, threads) in [(1, 1, 2), (7, 5, 3), (16, 13, 1), (64, 200, 4)] {
+        let (b, sb) = filter(&img, 16.0, &p, &cfg(tile, strip, threads));
+        assert_eq!(
+            bits(&a),
+            bits(&b),
+            "tile {tile} strip {strip} threads {threads}"
+        );
+        assert_eq!(sa.digest, sb.digest);
+    }
+}
+
+#[test]
+fn untouched_pixels_keep_their_bits_and_spread_is_a_box_of_the_pixels_colour() {
+    let (w, h) = (41, 41);
+    let mut img = rgbv(w, h);
+    for y in 0..h {
+        for x in 0..w {
+            for c in 0..3 {
+                img.set(
+                    x,
+                    y,
+                    c,
+                    [0.25, 0.5, 0.75][c] + 0.001 * ((x * 7 + y * 3) % 5) as f32,
+                );
+            }
+        }
+    }
+    let rgb = [400.0, 200.0, 100.0];
+    firefly(&mut img, 20, 20, rgb, 16.0);
+    let ltvis = 0.1;
+    let p = params(Guard::Range, ltvis, 12.0);
+    let (out, stats) = filter(&img, 16.0, &p, &cfg(8, 3, 2));
+    assert_eq!((stats.counters.noisy, stats.counters.spread), (1, 1));
+    // The excess over the 8 neighbours' mean and D L_tvis, spread equally
+    // over ceil(excess / L_tvis) pixels in ring order.
+    let y0 = lum(&img, 20, 20);
+    let mean: f64 = [
+        (19, 19),
+        (20, 19),
+        (21, 19),
+        (19, 20),
+        (21, 20),
+        (19, 21),
+        (20, 21),
+        (21, 21),
+    ]
+    .iter()
+    .map(|&(x, y)| lum(&img, x, y))
+    .sum::<f64>()
+        / 8.0;
+    let excess = y0 - mean - 5.0 * ltvis;
+    let n = (excess / ltvis).ceil() as usize;
+    let ring = Ring::new(12.0);
+    assert!(n < ring.offsets().len());
+    let reached: Vec<(usize, usize)> = ring.offsets()[..n]
+        .iter()
+        .map(|&(dx, dy)| ((20 + dx) as usize, (20 + dy) as usize))
+        .collect();
+    let f = excess / y0;
+    for y in 0..h {
+        for x in 0..w {
+            let inside = reached.contains(&(x, y));
+            for c in 0..3 {
+                let (a, b) = (out.at(x, y, c), img.at(x, y, c));
+                if !inside {
+                    assert_eq!(a.to_bits(), b.to_bits(), "({x}, {y}) changed");
+                    continue;
+                }
+                // Each reached pixel gains removed/n of the firefly's own
+                // channel: its colour, not grey.
+                let gain = img.at(20, 20, c) as f64 * f / n as f64;
+                let want = b as f64 + gain
+                    - if (x, y) == (20, 20) {
+                        img.at(20, 20, c) as f64 * f
+                    } else {
+                        0.0
+                    };
+                assert!(
+                    (a as f64 - want).abs() <= 1e-6 * want.abs().max(1.0),
+                    "({x}, {y}) channel {c}: {a} vs {want}"
+                );
+            }
+        }
+    }
+    // The added colour has the firefly's chromaticity.
+    let (x, y) = reached[n / 2];
+    let d: Vec<f64> = (0..3)
+        .map(|c| out.at(x, y, c) as f64 - img.at(x, y, c) as f64)
+        .collect();
+    let src: Vec<f64> = (0..3).map(|c| img.at(20, 20, c) as f64).collect();
+    for c in 1..3 {
+        // f32 output rounding of values near 0.5 (6e-8) over gains of ~0.003.
+        assert!(
+            (d[c] / d[0] - src[c] / src[0]).abs() < 1e-3,
+            "{d:?} vs {src:?}"
+        );
+    }
+}
+
+#[test]
+fn a_cluster_without_converged_neighbours_resolves_over_passes() {
+    let (w, h) = (21, 21);
+    let mut img = rgbv(w, h);
+    // A 5x5 block of noisy pixels: its centre is 3 pixels from the nearest
+    // converged one.
+    for y in 8..13 {
+        for x in 8..13 {
+            firefly(&mut img, x, y, [50.0, 50.0, 50.0], 16.0);
+        }
+    }
+    let mut p = params(Guard::None, 0.01, 8.0);
+    let (_, s) = filter(&img, 16.0, &p, &cfg(256, 0, 1));
+    assert_eq!(
+        (s.counters.noisy, s.counters.unresolved, s.counters.passes),
+        (25, 0, 3)
+    );
+    assert_eq!(s.counters.spread, 25);
+    // Two passes: the centre waits, and stays as it was.
+    p.ep_box.passes = 2;
+    let (out, s) = filter(&img, 16.0, &p, &cfg(256, 0, 1));
+    assert_eq!((s.counters.unresolved, s.counters.passes), (1, 2));
+    for l in &s.ledger {
+        assert!(l.rel_error <= 1e-12);
+    }
+    // The centre's own value changes only by what neighbours spread onto it.
+    assert!(out.at(10, 10, 0) >= img.at(10, 10, 0));
+}
+
+#[test]
+fn light_edge_is_left_alone_by_the_range_guard_and_hazed_by_the_papers_rule() {
+    // A light (1000) beside a dim wall (1); two columns between them see the
+    // light through a quarter and three quarters of each pixel.
+    let (w, h) = (30, 20);
+    let mut img = rgbv(w, h);
+    let var = 998_001.0 * 0.1875; // (1000 - 1)^2 p (1 - p), p = 1/4 or 3/4
+    for y in 0..h {
+        for x in 0..w {
+            let (v, s2) = match x {
+                0..=14 => (1.0, 0.0),
+                15 => (250.75, var),
+                16 => (750.25, var),
+                _ => (1000.0, 0.0),
+            };
+            for c in 0..3 {
+                img.set(x, y, c, v);
+                img.set(x, y, 3 + c, s2);
+            }
+        }
+    }
+    let colour_only = Img {
+        nch: 3,
+        data: img
+            .data
+            .chunks(w)
+            .enumerate()
+            .filter(|(i, _)| i % 6 < 3)
+            .flat_map(|(_, row)| row.to_vec())
+            .collect(),
+        ..img.clone()
+    };
+    let (guarded, s) = filter(
+        &img,
+        64.0,
+        &params(Guard::Range, 2.0, 16.0),
+        &cfg(256, 0, 2),
+    );
+    assert_eq!((s.counters.noisy, s.counters.spread), (40, 0));
+    assert_eq!(s.counters.guarded, 20, "the quarter-lit column");
+    assert_eq!(bits(&guarded), bits(&colour_only));
+    let (hazed, s) = filter(&img, 64.0, &params(Guard::None, 2.0, 16.0), &cfg(256, 0, 2));
+    assert_eq!(s.counters.spread, 20);
+    // The paper's rule moves the edge's energy into the dim wall.
+    assert!(hazed.at(12, 10, 1) > 2.0, "{}", hazed.at(12, 10, 1));
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 24, .. ProptestConfig::default() })]
+
+    /// Random sizes, fireflies, guards and cuts: the ledger balances and the
+    /// bits do not depend on tiles, strips or threads.
+    #[test]
+    fn energy_and_invariance_hold_for_random_renders(
+        w in 1usize..30, h in 1usize..30, count in 0usize..40, seed in any::<u64>(),
+        guard in 0u8..4, radius in 1.0f64..12.0, passes in 1usize..5,
+        tile in 1usize..20, strip in 1usize..40, threads in 1usize..4,
+    ) {
+        let img = scene(w, h, count, seed);
+        let guard = [Guard::None, Guard::Range, Guard::StdError, Guard::Both][guard as usize];
+        let mut p = params(guard, 0.01, radius);
+        p.ep_box.passes = passes;
+        let (a, sa) = filter(&img, 16.0, &p, &cfg(256, 0, 1));
+        for l in &sa.ledger {
+            prop_assert!(l.rel_error <= 1e-12, "{}: {:e}", l.channel, l.rel_error);
+        }
+        prop_assert!(a.data.iter().all(|v| v.is_finite()));
+        let (b, sb) = filter(&img, 16.0, &p, &cfg(tile, strip, threads));
+        prop_assert_eq!(bits(&a), bits(&b));
+        prop_assert_eq!(sa.digest, sb.digest);
+    }
+}
+
+mod files {
+    use std::path::Path;
+    use std::process::Command;
+
+    use epfilt::io::ExrOutput;
+    use epfilt::pipeline::Sink;
+    use epfilt::Precision;
+    use exr::prelude::Compression;
+
+    use crate::exr_io::tmpdir;
+
+    fn epfilt(args: &[&str]) -> std::process::Output {
+        Command::new(env!("CARGO_BIN_EXE_epfilt"))
+            .args(args)
+            .output()
+            .expect("run epfilt")
+    }
+
+    /// A `w x h` file of `channels`, each pixel's values from `f(x, y, c)`.
+    fn write(
+        path: &Path,
+        w: usize,
+        h: usize,
+        channels: &[&str],
+        ints: &[(&str, i32)],
+        f: impl Fn(usize, usize, usize) -> f32,
+    ) {
+        let names: Vec<String> = channels.iter().map(|s| s.to_string()).collect();
+        let mut out =
+            ExrOutput::create_new(path, w, h, &names, Compression::ZIP16, Precision::F32, ints)
+                .unwrap();
+        let mut data = Vec::new();
+        for y in 0..h {
+            for c in 0..channels.len() {
+                for x in 0..w {
+                    data.push(f(x, y, c));
+                }
+            }
+        }
+        out.write_rows(0, h, &data).unwrap();
+        out.finish().unwrap();
+        out.commit().unwrap();
+    }
+
+    const RGBV: [&str; 6] = ["R", "G", "B", "variance.R", "variance.G", "variance.B"];
+
+    #[test]
+    fn plan_matches_hand_computed_figures() {
+        let dir = tmpdir();
+        let pilot = dir.path().join("pilot.exr");
+        // 100x100 at 16 samples, as the paper's pilot: every pixel 0.5 grey
+        // with sample variance 0.01 in each channel.
+        write(&pilot, 100, 100, &RGBV, &[("spp", 16)], |_, _, c| {
+            if c < 3 {
+                0.5
+            } else {
+                0.01
+            }
+        });
+        let o = epfilt(&["plan", pilot.to_str().unwrap(), "--json"]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let get = |k: &str| j[k].as_f64().unwrap_or_else(|| panic!("no key {k}: {j}"));
+        // By hand: L_ave = 0.5 (the weights sum to 1); L_tvis = 0.5 / 128;
+        // S̄ = sqrt(0.01 / 16) = 0.025; M_t = (4 * 0.025 / (5 * 0.00390625))^2
+        // = 5.12^2 = 26.2144; ceiling 4 M_t = 104.8576; Eq. 8 with
+        // d = 5 * 0.00390625 / 0.5 = 0.0390625: ln 0.2 / ln 0.9609375 = 40.39 -> 41.
+        // Tolerance 1e-9 relative: f32 inputs 0.5 and 0.01 are exact and
+        // 0.01 f32 differs from 0.01 by 2e-10 relative.
+        for (k, want) in [
+            ("l_ave", 0.5),
+            ("l_tvis", 0.00390625),
+            ("mean_std_error", 0.025),
+            ("m_t", 26.2144),
+            ("m_t_ceiling", 104.8576),
+            ("m_t_worst_case", 41.0),
+        ] {
+            let got = get(k);
+            assert!((got - want).abs() <= 1e-6 * want, "{k}: {got} vs {want}");
+        }
+        let table = epfilt(&["plan", pilot.to_str().unwrap(), "--d", "1"]);
+        let text = String::from_utf8_lossy(&table.stdout);
+        // D = 1: M_t = 25^2 * 26.2144 / 25... = (5.12 * 5)^2 = 655.36 -> 656.
+        assert!(
+            text.contains("M_t (Eq. 10)") && text.contains("656"),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn filter_finds_variance_by_name_or_says_what_the_file_has() {
+        let dir = tmpdir();
+        let inp = dir.path().join("pt.exr");
+        write(&inp, 40, 30, &RGBV, &[("spp", 64)], |x, y, c| {
+            let hot = (x, y) == (20, 15);
+            match (c < 3, hot) {
+                (true, true) => 200.0,
+                (true, false) => 1.0,
+                (false, true) => 2.5e6,
+                (false, false) => 0.0,
+            }
+        });
+        let out = dir.path().join("out.exr");
+        let report = dir.path().join("r.json");
+        let o = epfilt(&[
+            "filter",
+            inp.to_str().unwrap(),
+            out.to_str().unwrap(),
+            "--method",
+            "ep-box",
+            "-q",
+            "--report",
+            report.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        assert_eq!(r["samples_spread"], 1);
+        assert_eq!(r["ep_box"]["variance_channels"][0], "variance.R");
+        assert!(r["ep_box"]["spp_from"].as_str().unwrap().contains("spp"));
+        assert_eq!(r["channels"].as_array().unwrap().len(), 3);
+        assert!(r["energy_rel_error"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|e| e.as_f64().unwrap() <= 1e-12));
+        // The same with the channel and count named, and --spp overriding.
+        let named = dir.path().join("named.exr");
+        let o = epfilt(&[
+            "filter",
+            inp.to_str().unwrap(),
+            named.to_str().unwrap(),
+            "--method",
+            "ep-box",
+            "--variance-channel",
+            "variance",
+            "--spp",
+            "64",
+            "-q",
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&named).unwrap());
+        // No variance: one line listing the channels the file has.
+        let plain = dir.path().join("plain.exr");
+        write(&plain, 8, 8, &["R", "G", "B", "Z"], &[], |_, _, _| 1.0);
+        let o = epfilt(&[
+            "filter",
+            plain.to_str().unwrap(),
+            "x.exr",
+            "--method",
+            "ep-box",
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2));
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(
+            err.contains("plain.exr")
+                && err.contains("no variance channels")
+                && err.contains("B, G, R, Z"),
+            "{err}"
+        );
+        // No sample count anywhere.
+        let nospp = dir.path().join("nospp.exr");
+        write(&nospp, 8, 8, &RGBV, &[], |_, _, _| 1.0);
+        let o = epfilt(&[
+            "filter",
+            nospp.to_str().unwrap(),
+            "x.exr",
+            "--method",
+            "ep-box",
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains("--spp"), "{err}");
+        // A wrong channel name lists the channels.
+        let o = epfilt(&[
+            "filter",
+            inp.to_str().unwrap(),
+            "x.exr",
+            "--method",
+            "ep-box",
+            "--variance-channel",
+            "var.Y",
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains("var.Y") && err.contains("variance.G"), "{err}");
+    }
+}
