@@ -205,7 +205,8 @@ struct FilterArgs {
     /// Output EXR (written to a temporary file, renamed on success).
     output: PathBuf,
     /// Method: ep-gauss (§5.2), ep-box (§5.1, pixels with variance), gauss
-    /// (linear foil) or box (S x S average).
+    /// (linear foil), box (S x S average), or the energy-losing foils clamp,
+    /// median and alpha-trim.
     #[arg(long, default_value = "ep-gauss")]
     method: String,
     /// Input samples per output pixel along each axis (1..=8) [default: 3; 1 for ep-box].
@@ -223,6 +224,12 @@ struct FilterArgs {
     max_radius: f64,
     #[command(flatten)]
     stats: StatsArgs,
+    /// clamp: the largest sample value kept, per channel (then the base Gaussian).
+    #[arg(long, default_value_t = 10.0)]
+    clamp: f64,
+    /// alpha-trim: the fraction of the sorted samples trimmed from each end (0..0.5).
+    #[arg(long, default_value_t = 0.25)]
+    alpha: f64,
     /// ep-box: the visibility threshold L_tvis [default: mean luminance / N_MID, Eq. 9].
     #[arg(long)]
     ltvis: Option<f64>,
@@ -491,6 +498,8 @@ fn filter(a: FilterArgs) -> Result<()> {
         ..a.stats.params()?
     };
     params.radius = a.radius;
+    params.clamp = a.clamp;
+    params.alpha = a.alpha;
     params.max_radius = a.max_radius;
     params.cutoff = a.cutoff;
     params.width_step = a.width_step;

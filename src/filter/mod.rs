@@ -27,6 +27,15 @@ pub enum Method {
     Gauss,
     /// S x S box average.
     Box,
+    /// Foil: clamp each sample to `--clamp` (renderers' "clamp"), then the
+    /// base Gaussian. Loses energy.
+    Clamp,
+    /// Foil: per-channel median of the S x S samples (3 x 3 pixels at S = 1).
+    /// Loses energy.
+    Median,
+    /// Foil: Lee & Redner's alpha-trimmed mean of the same samples, `--alpha`
+    /// trimmed from each end. Loses energy.
+    AlphaTrim,
 }
 
 impl Method {
@@ -37,8 +46,28 @@ impl Method {
             Method::EpBox => "ep-box",
             Method::Gauss => "gauss",
             Method::Box => "box",
+            Method::Clamp => "clamp",
+            Method::Median => "median",
+            Method::AlphaTrim => "alpha-trim",
         }
     }
+
+    /// Whether the method keeps the image's energy (the foils do not: their
+    /// ledger reports the loss and the output is written anyway).
+    pub fn preserves_energy(self) -> bool {
+        !matches!(self, Method::Clamp | Method::Median | Method::AlphaTrim)
+    }
+
+    /// Every method, in the order of the docs.
+    pub const ALL: [Method; 7] = [
+        Method::EpGauss,
+        Method::EpBox,
+        Method::Gauss,
+        Method::Box,
+        Method::Clamp,
+        Method::Median,
+        Method::AlphaTrim,
+    ];
 
     /// Parse a command-line name.
     pub fn parse(s: &str) -> Result<Self> {
@@ -47,8 +76,11 @@ impl Method {
             "ep-box" => Ok(Method::EpBox),
             "gauss" => Ok(Method::Gauss),
             "box" => Ok(Method::Box),
+            "clamp" => Ok(Method::Clamp),
+            "median" => Ok(Method::Median),
+            "alpha-trim" => Ok(Method::AlphaTrim),
             _ => Err(Error::Config(format!(
-                "unknown method {s:?} (choose ep-gauss, ep-box, gauss or box)"
+                "unknown method {s:?} (choose ep-gauss, ep-box, gauss, box, clamp, median or alpha-trim)"
             ))),
         }
     }
@@ -75,8 +107,12 @@ pub fn halo(p: &FilterParams) -> crate::geometry::Halo {
     let max_rho = p.max_radius.max(p.radius);
     match p.method {
         Method::Box => crate::geometry::Halo::default(),
-        Method::Gauss => crate::geometry::Halo {
+        Method::Gauss | Method::Clamp => crate::geometry::Halo {
             base_reach: reach(p.radius),
+            ..Default::default()
+        },
+        Method::Median | Method::AlphaTrim => crate::geometry::Halo {
+            base_reach: usize::from(p.supersample == 1),
             ..Default::default()
         },
         Method::EpGauss => crate::geometry::Halo {
@@ -112,6 +148,10 @@ pub struct FilterParams {
     pub width_step: f64,
     /// Settings of `ep-box` (§5.1); `max_radius` is its spread radius.
     pub ep_box: ep_box::EpBoxParams,
+    /// `clamp`: the largest sample value kept (per channel).
+    pub clamp: f64,
+    /// `alpha-trim`: the fraction trimmed from each end, in 0..0.5.
+    pub alpha: f64,
 }
 
 impl FilterParams {
@@ -128,6 +168,8 @@ impl FilterParams {
             max_radius: 16.0,
             width_step: 0.1,
             ep_box: ep_box::EpBoxParams::default(),
+            clamp: 10.0,
+            alpha: 0.25,
         }
     }
 
@@ -166,6 +208,15 @@ impl FilterParams {
                 "--max-radius must be between --radius ({}) and 128 output pixels, got {}",
                 self.radius, self.max_radius
             ));
+        }
+        if !(self.clamp.is_finite() && self.clamp >= 0.0) {
+            return bad(format!(
+                "--clamp must be a finite number >= 0, got {}",
+                self.clamp
+            ));
+        }
+        if !(0.0..0.5).contains(&self.alpha) {
+            return bad(format!("--alpha must be in 0..0.5, got {}", self.alpha));
         }
         if self.method == Method::EpBox {
             if self.supersample != 1 {

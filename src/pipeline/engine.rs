@@ -172,6 +172,7 @@ pub struct Engine {
     nonfinite: NonFinite,
     zeroed: Vec<u64>,
     first_nonfinite: Option<(usize, usize, usize)>,
+    clamp: Option<f32>,
 }
 
 impl Engine {
@@ -265,6 +266,7 @@ impl Engine {
             nonfinite: NonFinite::Error,
             zeroed: vec![0; nch],
             first_nonfinite: None,
+            clamp: (params.method == Method::Clamp).then_some(params.clamp as f32),
         })
     }
 
@@ -351,6 +353,17 @@ impl Engine {
             &mut self.first_nonfinite,
         )?;
         self.ledger.input.merge(&sums);
+        if let Some(limit) = self.clamp {
+            // The clamp foil: colour samples above the limit are cut (after
+            // the ledger took the input, so the loss shows).
+            for row in strip.data.chunks_mut(row_len) {
+                for (c, ch) in row.chunks_mut(in_w).enumerate() {
+                    if self.lum[c] != 0.0 {
+                        ch.iter_mut().for_each(|v| *v = v.min(limit));
+                    }
+                }
+            }
+        }
         for row in strip.data.chunks(row_len) {
             self.input.push_copy(row);
         }

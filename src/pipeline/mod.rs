@@ -13,6 +13,7 @@
 pub mod box_engine;
 pub mod engine;
 pub mod ledger;
+pub mod order_engine;
 pub mod window;
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -379,6 +380,7 @@ pub fn run<S: Source, K: Sink>(
 enum AnyEngine {
     Gauss(Box<Engine>),
     Box(Box<BoxEngine>),
+    Order(Box<order_engine::OrderEngine>),
 }
 
 macro_rules! delegate {
@@ -386,6 +388,7 @@ macro_rules! delegate {
         match $self {
             AnyEngine::Gauss($e) => $body,
             AnyEngine::Box($e) => $body,
+            AnyEngine::Order($e) => $body,
         }
     };
 }
@@ -412,6 +415,24 @@ impl AnyEngine {
                 ltvis,
                 params.max_radius,
                 cfg.tile,
+                cfg.precision,
+            )?))
+        } else if matches!(params.method, Method::Median | Method::AlphaTrim) {
+            params.validate()?;
+            let trim = match params.method {
+                Method::Median => order_engine::Trim::Median,
+                _ => order_engine::Trim::Alpha(params.alpha),
+            };
+            if job.grid.in_w < job.grid.s || job.grid.in_h < job.grid.s {
+                return Err(Error::Config(format!(
+                    "--supersample {} is larger than the image ({}x{} samples)",
+                    job.grid.s, job.grid.in_w, job.grid.in_h
+                )));
+            }
+            AnyEngine::Order(Box::new(order_engine::OrderEngine::new(
+                job.grid,
+                job.channels.clone(),
+                trim,
                 cfg.precision,
             )?))
         } else {

@@ -7,6 +7,7 @@ mod energy;
 mod ep_box;
 mod exr_io;
 mod extremes;
+mod foils;
 mod invariance;
 mod reference;
 mod robust;
