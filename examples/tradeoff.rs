@@ -1,0 +1,621 @@
+//! The speed/accuracy trade study behind `scripts/tradeoff`: runs the built
+//! `epfilt` binary over a grid of settings on `synth` scenes with exact truth,
+//! and writes `tradeoff.csv`, `tradeoff.png` (error against time, one series
+//! per method, the Pareto front marked) and `tradeoff.md`.
+//!
+//! ```text
+//! cargo run --release --example tradeoff -- [--quick] [--out DIR] [--bin PATH] [--repeat N]
+//! ```
+//!
+//! Every scene is made twice with the same budget of 9 samples per pixel: as
+//! 3x3 super-samples (for ep-gauss, gauss, box and the foils) and as the mean
+//! and variance of 9 samples (for ep-box), each scored against its own exact
+//! truth. Time is the wall time of the whole `epfilt filter` process (both
+//! passes of ep-box, decoding and encoding included); `mpx_per_s` is output
+//! megapixels per second of it.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use plotters::prelude::*;
+use serde_json::Value;
+
+const METHODS: [&str; 7] = [
+    "ep-gauss",
+    "ep-box",
+    "gauss",
+    "box",
+    "clamp",
+    "median",
+    "alpha-trim",
+];
+const SETTINGS: [&str; 9] = [
+    "tolerance",
+    "width_step",
+    "max_radius",
+    "cutoff",
+    "d",
+    "confidence",
+    "guard",
+    "clamp",
+    "alpha",
+];
+
+#[derive(Clone, Debug)]
+struct Run {
+    scene: String,
+    method: String,
+    /// Setting name -> value, as passed on the command line.
+    settings: BTreeMap<&'static str, String>,
+    /// Whether every setting is the method's default.
+    default: bool,
+}
+
+#[derive(Clone, Debug)]
+struct Row {
+    run: Run,
+    seconds: f64,
+    mpx_per_s: f64,
+    peak_rss_bytes: u64,
+    rel_mse: f64,
+    rmse: f64,
+    psnr: f64,
+    energy_ratio: f64,
+    samples_noisy: u64,
+    samples_spread: u64,
+    samples_capped: u64,
+}
+
+fn defaults(method: &str) -> BTreeMap<&'static str, String> {
+    let mut m = BTreeMap::new();
+    let mut set = |k: &'static str, v: &str| {
+        m.insert(k, v.to_string());
+    };
+    match method {
+        "ep-gauss" => {
+            set("tolerance", "0.25");
+            set("width_step", "0.1");
+            set("max_radius", "16");
+            set("cutoff", "3");
+        }
+        "ep-box" => {
+            set("d", "5");
+            set("confidence", "0.8");
+            set("max_radius", "16");
+            set("guard", "range");
+        }
+        "gauss" => set("cutoff", "3"),
+        "clamp" => set("clamp", "10"),
+        "alpha-trim" => set("alpha", "0.25"),
+        _ => {}
+    }
+    m
+}
+
+/// One-at-a-time variations around each method's defaults.
+fn grid(quick: bool) -> Vec<(&'static str, Vec<(&'static str, Vec<&'static str>)>)> {
+    if quick {
+        vec![
+            (
+                "ep-gauss",
+                vec![
+                    ("tolerance", vec!["0.1", "0.25", "1"]),
+                    ("width_step", vec!["0.1", "0.4"]),
+                    ("max_radius", vec!["4", "16"]),
+                ],
+            ),
+            (
+                "ep-box",
+                vec![
+                    ("d", vec!["2", "5", "20"]),
+                    ("max_radius", vec!["4", "16"]),
+                    ("guard", vec!["none", "range"]),
+                ],
+            ),
+            ("gauss", vec![]),
+            ("box", vec![]),
+            ("clamp", vec![("clamp", vec!["10"])]),
+            ("median", vec![]),
+            ("alpha-trim", vec![]),
+        ]
+    } else {
+        vec![
+            (
+                "ep-gauss",
+                vec![
+                    ("tolerance", vec!["0.05", "0.1", "0.15", "0.25", "0.4", "0.6", "1"]),
+                    ("width_step", vec!["0.02", "0.05", "0.1", "0.2", "0.4"]),
+                    ("max_radius", vec!["2", "4", "8", "16", "32", "64"]),
+                    ("cutoff", vec!["2", "2.5", "3", "4"]),
+                ],
+            ),
+            (
+                "ep-box",
+                vec![
+                    ("d", vec!["1", "2", "5", "10", "20"]),
+                    ("confidence", vec!["0.5", "0.8", "0.95", "0.99"]),
+                    ("max_radius", vec!["2", "4", "8", "16", "32", "64"]),
+                    ("guard", vec!["none", "range", "stderr", "both"]),
+                ],
+            ),
+            ("gauss", vec![("cutoff", vec!["2", "3", "4"])]),
+            ("box", vec![]),
+            ("clamp", vec![("clamp", vec!["1", "10", "100", "1000"])]),
+            ("median", vec![]),
+            ("alpha-trim", vec![("alpha", vec!["0.1", "0.25", "0.4"])]),
+        ]
+    }
+}
+
+fn runs(scenes: &[&str], quick: bool) -> Vec<Run> {
+    let mut out = Vec::new();
+    for scene in scenes {
+        for (method, axes) in grid(quick) {
+            let base = defaults(method);
+            let mut seen: Vec<BTreeMap<&'static str, String>> = vec![base.clone()];
+            for (key, values) in &axes {
+                for v in values {
+                    let mut s = base.clone();
+                    s.insert(key, v.to_string());
+                    if !seen.contains(&s) {
+                        seen.push(s);
+                    }
+                }
+            }
+            for s in seen {
+                out.push(Run {
+                    scene: scene.to_string(),
+                    method: method.to_string(),
+                    default: s == base,
+                    settings: s,
+                });
+            }
+        }
+    }
+    out
+}
+
+fn run_cmd(bin: &Path, args: &[String]) -> Result<String> {
+    let o = Command::new(bin)
+        .args(args)
+        .output()
+        .with_context(|| format!("run {}", bin.display()))?;
+    if !o.status.success() {
+        bail!(
+            "epfilt {}: {}",
+            args.join(" "),
+            String::from_utf8_lossy(&o.stderr).trim()
+        );
+    }
+    Ok(String::from_utf8_lossy(&o.stdout).into_owned())
+}
+
+fn main() -> Result<()> {
+    let mut quick = false;
+    let mut out_dir = PathBuf::from("docs");
+    let mut bin = PathBuf::from("target/release/epfilt");
+    let mut repeat = 1usize;
+    let mut size: Option<String> = None;
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--quick" => quick = true,
+            "--out" => out_dir = args.next().context("--out DIR")?.into(),
+            "--bin" => bin = args.next().context("--bin PATH")?.into(),
+            "--repeat" => repeat = args.next().context("--repeat N")?.parse()?,
+            "--size" => size = Some(args.next().context("--size WxH")?),
+            other => bail!("unknown argument {other:?}"),
+        }
+    }
+    let size = size.unwrap_or_else(|| if quick { "512x512" } else { "1024x1024" }.into());
+    let (w, h) = size
+        .split_once('x')
+        .and_then(|(a, b)| Some((a.parse::<usize>().ok()?, b.parse::<usize>().ok()?)))
+        .context("--size WxH")?;
+    std::fs::create_dir_all(&out_dir)?;
+    let work = tempfile::Builder::new()
+        .prefix("tradeoff-")
+        .tempdir_in(&out_dir)?;
+    let scenes = ["mixed", "caustic"];
+    let s = |p: &Path| p.to_string_lossy().into_owned();
+    for scene in scenes {
+        let d = work.path();
+        eprintln!("synth {scene} {size} (3x3 and 9 spp with variance)");
+        run_cmd(
+            &bin,
+            &[
+                "synth", "-q", "--scene", scene, "--size", &size, "-s", "3", "-o",
+                &s(&d.join(format!("{scene}-s3.exr"))),
+                "--truth", &s(&d.join(format!("{scene}-s3-truth.exr"))),
+            ]
+            .map(String::from),
+        )?;
+        run_cmd(
+            &bin,
+            &[
+                "synth", "-q", "--scene", scene, "--size", &size, "--spp", "9", "--variance", "-o",
+                &s(&d.join(format!("{scene}-spp.exr"))),
+                "--truth", &s(&d.join(format!("{scene}-spp-truth.exr"))),
+            ]
+            .map(String::from),
+        )?;
+    }
+    let all = runs(&scenes, quick);
+    let mut rows = Vec::new();
+    let started = Instant::now();
+    for (k, run) in all.iter().enumerate() {
+        let d = work.path();
+        let spp = run.method == "ep-box";
+        let tag = if spp { "spp" } else { "s3" };
+        let input = d.join(format!("{}-{tag}.exr", run.scene));
+        let truth = d.join(format!("{}-{tag}-truth.exr", run.scene));
+        let output = d.join("out.exr");
+        let report = d.join("report.json");
+        let mut a: Vec<String> = [
+            "filter",
+            &s(&input),
+            &s(&output),
+            "-q",
+            "--method",
+            &run.method,
+            "-s",
+            if spp { "1" } else { "3" },
+            "--report",
+            &s(&report),
+        ]
+        .map(String::from)
+        .to_vec();
+        for (key, v) in &run.settings {
+            a.push(format!("--{}", key.replace('_', "-")));
+            a.push(v.clone());
+        }
+        let mut best = f64::INFINITY;
+        for _ in 0..repeat.max(1) {
+            let t = Instant::now();
+            run_cmd(&bin, &a)?;
+            best = best.min(t.elapsed().as_secs_f64());
+        }
+        let r: Value = serde_json::from_str(&std::fs::read_to_string(&report)?)?;
+        let c: Value = serde_json::from_str(&run_cmd(
+            &bin,
+            &["compare", &s(&output), &s(&truth), "--json"].map(String::from),
+        )?)?;
+        let sum = |k: &str| -> f64 {
+            r[k].as_array()
+                .map(|v| v.iter().filter_map(|x| x.as_f64()).sum())
+                .unwrap_or(f64::NAN)
+        };
+        let f = |v: &Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+        let u = |k: &str| r[k].as_u64().unwrap_or(0);
+        rows.push(Row {
+            run: run.clone(),
+            seconds: best,
+            mpx_per_s: (w * h) as f64 / best / 1e6,
+            peak_rss_bytes: u("peak_rss_bytes"),
+            rel_mse: f(&c, "rel_mse"),
+            rmse: f(&c, "rmse"),
+            psnr: f(&c, "psnr"),
+            energy_ratio: sum("energy_out") / sum("energy_in"),
+            samples_noisy: u("samples_noisy"),
+            samples_spread: u("samples_spread"),
+            samples_capped: u("samples_capped"),
+        });
+        eprintln!(
+            "[{}/{}] {:>5.1} s  {} {} {:?}: {:.3} s, rmse {:.4}",
+            k + 1,
+            all.len(),
+            started.elapsed().as_secs_f64(),
+            run.scene,
+            run.method,
+            run.settings,
+            best,
+            rows.last().map_or(0.0, |r| r.rmse)
+        );
+    }
+    write_csv(&out_dir.join("tradeoff.csv"), &rows)?;
+    plot(&out_dir.join("tradeoff.png"), &rows, &scenes)?;
+    let md = markdown(&rows, &scenes, &size, quick);
+    std::fs::write(out_dir.join("tradeoff.md"), &md)?;
+    print!("{md}");
+    Ok(())
+}
+
+fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
+    let mut s = String::from("scene,method,default");
+    for k in SETTINGS {
+        write!(s, ",{k}")?;
+    }
+    s.push_str(",seconds,mpx_per_s,peak_rss_bytes,rel_mse,rmse,psnr,energy_ratio,samples_noisy,samples_spread,samples_capped\n");
+    for r in rows {
+        write!(s, "{},{},{}", r.run.scene, r.run.method, r.run.default)?;
+        for k in SETTINGS {
+            write!(s, ",{}", r.run.settings.get(k).map_or("", |v| v.as_str()))?;
+        }
+        writeln!(
+            s,
+            ",{:.4},{:.3},{},{:.6e},{:.6e},{:.3},{:.15},{},{},{}",
+            r.seconds,
+            r.mpx_per_s,
+            r.peak_rss_bytes,
+            r.rel_mse,
+            r.rmse,
+            r.psnr,
+            r.energy_ratio,
+            r.samples_noisy,
+            r.samples_spread,
+            r.samples_capped
+        )?;
+    }
+    std::fs::write(path, s)?;
+    Ok(())
+}
+
+/// Rows not beaten on both time and RMSE by another row of the same scene.
+fn pareto(rows: &[&Row]) -> Vec<usize> {
+    let mut front: Vec<usize> = (0..rows.len())
+        .filter(|&i| {
+            !rows.iter().any(|o| {
+                (o.seconds <= rows[i].seconds && o.rmse < rows[i].rmse)
+                    || (o.seconds < rows[i].seconds && o.rmse <= rows[i].rmse)
+            })
+        })
+        .collect();
+    front.sort_by(|&a, &b| rows[a].seconds.total_cmp(&rows[b].seconds));
+    front
+}
+
+fn colour(m: &str) -> RGBColor {
+    match m {
+        "ep-gauss" => RGBColor(214, 39, 40),
+        "ep-box" => RGBColor(255, 127, 14),
+        "gauss" => RGBColor(31, 119, 180),
+        "box" => RGBColor(127, 127, 127),
+        "clamp" => RGBColor(44, 160, 44),
+        "median" => RGBColor(148, 103, 189),
+        _ => RGBColor(140, 86, 75),
+    }
+}
+
+/// 8x8 text into an RGB buffer (plotters is built without a font engine).
+fn text(buf: &mut [u8], w: usize, x0: usize, y0: usize, s: &str, c: RGBColor) {
+    use font8x8::UnicodeFonts;
+    for (k, ch) in s.chars().enumerate() {
+        let Some(glyph) = font8x8::BASIC_FONTS.get(ch) else {
+            continue;
+        };
+        for (gy, bits) in glyph.iter().enumerate() {
+            for bx in 0..8 {
+                let (x, y) = (x0 + k * 8 + bx, y0 + gy);
+                if bits & (1 << bx) != 0 && x < w && (y * w + x) * 3 + 3 <= buf.len() {
+                    buf[(y * w + x) * 3..(y * w + x) * 3 + 3].copy_from_slice(&[c.0, c.1, c.2]);
+                }
+            }
+        }
+    }
+}
+
+fn plot(path: &Path, rows: &[Row], scenes: &[&str]) -> Result<()> {
+    let (pw, ph) = (560usize, 440usize);
+    let (w, h) = (pw * scenes.len(), ph + 40);
+    let mut buf = vec![255u8; w * h * 3];
+    let mut labels: Vec<(usize, usize, String, RGBColor)> = Vec::new();
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w as u32, h as u32)).into_drawing_area();
+        let panels = root.split_evenly((1, scenes.len()));
+        for (p, (area, scene)) in panels.iter().zip(scenes).enumerate() {
+            let pts: Vec<&Row> = rows.iter().filter(|r| r.run.scene == *scene).collect();
+            let (t0, t1) = pts.iter().fold((f64::INFINITY, 0.0f64), |(a, b), r| {
+                (a.min(r.seconds), b.max(r.seconds))
+            });
+            let (e0, e1) = pts.iter().fold((f64::INFINITY, 0.0f64), |(a, b), r| {
+                (a.min(r.rmse), b.max(r.rmse))
+            });
+            let (ml, mt, mb) = (60u32, 40u32, 50u32);
+            let mut chart = ChartBuilder::on(area)
+                .margin_left(ml)
+                .margin_top(mt)
+                .margin_bottom(mb)
+                .margin_right(20)
+                .build_cartesian_2d(
+                    (t0 * 0.8..t1 * 1.25).log_scale(),
+                    (e0 * 0.8..e1 * 1.25).log_scale(),
+                )?;
+            // Grid lines where the figures are written (below): 5 per axis,
+            // evenly spaced in log.
+            let (xa, xb, ya, yb) = (t0 * 0.8, t1 * 1.25, e0 * 0.8, e1 * 1.25);
+            let grey = RGBColor(225, 225, 225);
+            for k in 0..=4 {
+                let f = k as f64 / 4.0;
+                let t = xa * (xb / xa).powf(f);
+                let e = ya * (yb / ya).powf(f);
+                chart.draw_series(LineSeries::new(vec![(t, ya), (t, yb)], grey))?;
+                chart.draw_series(LineSeries::new(vec![(xa, e), (xb, e)], grey))?;
+            }
+            for m in METHODS {
+                let c = colour(m);
+                let series: Vec<(f64, f64)> = pts
+                    .iter()
+                    .filter(|r| r.run.method == m)
+                    .map(|r| (r.seconds, r.rmse))
+                    .collect();
+                chart.draw_series(series.iter().map(|&xy| Circle::new(xy, 4, c.filled())))?;
+                for r in pts.iter().filter(|r| r.run.method == m && r.run.default) {
+                    chart.draw_series(std::iter::once(Cross::new(
+                        (r.seconds, r.rmse),
+                        7,
+                        BLACK.stroke_width(2),
+                    )))?;
+                }
+            }
+            let front = pareto(&pts);
+            let line: Vec<(f64, f64)> = front
+                .iter()
+                .map(|&i| (pts[i].seconds, pts[i].rmse))
+                .collect();
+            chart.draw_series(LineSeries::new(line.clone(), BLACK.stroke_width(1)))?;
+            chart.draw_series(line.iter().map(|&xy| Circle::new(xy, 7, BLACK.stroke_width(1))))?;
+            // Axis figures and labels, drawn as text afterwards.
+            let x0 = p * pw;
+            let plot_w = pw as f64 - ml as f64 - 20.0;
+            let plot_h = (ph + 40) as f64 - mt as f64 - mb as f64;
+            let lx = |t: f64| (t / xa).ln() / (xb / xa).ln();
+            let ly = |e: f64| (e / ya).ln() / (yb / ya).ln();
+            for k in 0..=4 {
+                let t = xa * (xb / xa).powf(k as f64 / 4.0);
+                let x = x0 + ml as usize + (lx(t) * plot_w) as usize;
+                labels.push((x.saturating_sub(16), h - mb as usize + 6, format!("{t:.2}"), BLACK));
+                let e = ya * (yb / ya).powf(k as f64 / 4.0);
+                let y = mt as usize + ((1.0 - ly(e)) * plot_h) as usize;
+                labels.push((x0 + 2, y.saturating_sub(4), format!("{e:.3}"), BLACK));
+            }
+            labels.push((x0 + ml as usize, 8, format!("scene {scene}: RMSE vs truth (log) against seconds (log)"), BLACK));
+            labels.push((x0 + ml as usize + 120, h - 22, "wall seconds per run".into(), BLACK));
+            let mut ly0 = mt as usize + 6;
+            for m in METHODS {
+                labels.push((x0 + pw - 130, ly0, format!("o {m}"), colour(m)));
+                ly0 += 11;
+            }
+            labels.push((x0 + pw - 130, ly0, "x default".into(), BLACK));
+            labels.push((x0 + pw - 130, ly0 + 11, "O Pareto front".into(), BLACK));
+        }
+        root.present()?;
+    }
+    for (x, y, s, c) in labels {
+        text(&mut buf, w, x, y, &s, c);
+    }
+    let file = std::fs::File::create(path)?;
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w as u32, h as u32);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    enc.write_header()?.write_image_data(&buf)?;
+    Ok(())
+}
+
+fn settings_text(r: &Row) -> String {
+    r.run
+        .settings
+        .iter()
+        .map(|(k, v)| format!("{}={v}", k.replace('_', "-")))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+fn markdown(rows: &[Row], scenes: &[&str], size: &str, quick: bool) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "# Speed/accuracy trade ({}run, {size} output pixels, 9 samples per pixel)\n",
+        if quick { "quick " } else { "" }
+    );
+    let _ = writeln!(
+        s,
+        "Written by `scripts/tradeoff`; data in `tradeoff.csv`, plot in `tradeoff.png`. Time is the wall \
+         time of the whole `epfilt filter` process on 2 cores; errors are against each input's exact truth.\n"
+    );
+    for scene in scenes {
+        let pts: Vec<&Row> = rows.iter().filter(|r| r.run.scene == *scene).collect();
+        let front = pareto(&pts);
+        let _ = writeln!(s, "## Scene `{scene}`: each method at its defaults\n");
+        let _ = writeln!(s, "| method | RMSE | rel. MSE | PSNR | energy out/in | seconds | Mpx/s | peak RSS | spread | capped |");
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
+        for m in METHODS {
+            for r in pts.iter().filter(|r| r.run.method == m && r.run.default) {
+                let _ = writeln!(
+                    s,
+                    "| {m} | {:.4} | {:.4} | {:.2} dB | {:.6} | {:.3} | {:.2} | {:.0} MiB | {} | {} |",
+                    r.rmse,
+                    r.rel_mse,
+                    r.psnr,
+                    r.energy_ratio,
+                    r.seconds,
+                    r.mpx_per_s,
+                    r.peak_rss_bytes as f64 / 1048576.0,
+                    r.samples_spread,
+                    r.samples_capped
+                );
+            }
+        }
+        let ep: Vec<&&Row> = pts.iter().filter(|r| r.run.method == "ep-gauss").collect();
+        if let Some(best) = ep.iter().min_by(|a, b| a.rmse.total_cmp(&b.rmse)) {
+            let fast = ep
+                .iter()
+                .filter(|r| r.rmse <= best.rmse * 1.05)
+                .min_by(|a, b| a.seconds.total_cmp(&b.seconds));
+            let _ = writeln!(
+                s,
+                "\nBest ep-gauss: RMSE {:.4} at `{}` ({:.3} s).",
+                best.rmse,
+                settings_text(best),
+                best.seconds
+            );
+            if let Some(f) = fast {
+                let _ = writeln!(
+                    s,
+                    "Fastest ep-gauss within 5% of that error: RMSE {:.4} at `{}` ({:.3} s, {:.2} Mpx/s).",
+                    f.rmse,
+                    settings_text(f),
+                    f.seconds,
+                    f.mpx_per_s
+                );
+            }
+        }
+        let foils: Vec<&&Row> = pts
+            .iter()
+            .filter(|r| matches!(r.run.method.as_str(), "clamp" | "median" | "alpha-trim"))
+            .collect();
+        if !foils.is_empty() {
+            let _ = writeln!(s, "\nEnergy the foils lose:\n");
+            for r in foils {
+                let _ = writeln!(
+                    s,
+                    "* {} `{}`: keeps {:.1}% of the energy (loses {:.1}%), RMSE {:.4}",
+                    r.run.method,
+                    settings_text(r),
+                    r.energy_ratio * 100.0,
+                    (1.0 - r.energy_ratio) * 100.0,
+                    r.rmse
+                );
+            }
+        }
+        let _ = writeln!(s, "\nPareto front (time, RMSE):\n");
+        let _ = writeln!(s, "| method | settings | seconds | RMSE | rel. MSE |");
+        let _ = writeln!(s, "|---|---|---|---|---|");
+        for &i in &front {
+            let r = pts[i];
+            let _ = writeln!(
+                s,
+                "| {} | `{}` | {:.3} | {:.4} | {:.4} |",
+                r.run.method,
+                settings_text(r),
+                r.seconds,
+                r.rmse,
+                r.rel_mse
+            );
+        }
+        let _ = writeln!(s, "\nAll runs:\n");
+        let _ = writeln!(s, "| method | settings | seconds | RMSE | rel. MSE | PSNR | energy out/in | spread | capped |");
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|");
+        for r in &pts {
+            let _ = writeln!(
+                s,
+                "| {}{} | `{}` | {:.3} | {:.4} | {:.4} | {:.2} | {:.6} | {} | {} |",
+                r.run.method,
+                if r.run.default { " (default)" } else { "" },
+                settings_text(r),
+                r.seconds,
+                r.rmse,
+                r.rel_mse,
+                r.psnr,
+                r.energy_ratio,
+                r.samples_spread,
+                r.samples_capped
+            );
+        }
+        s.push('\n');
+    }
+    s
+}
