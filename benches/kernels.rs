@@ -1,8 +1,10 @@
-//! Criterion benches of the hot paths: the base-width stencil, the width
-//! search (ring sums + Relation 14), and the whole engine in memory for each
-//! method. `cargo bench --bench kernels`.
+//! Criterion benches of the hot paths: the base-width stencil (the ring sums
+//! of Relation 14), the width search, the ep-box ring walk, and the whole
+//! engine in memory for each method (the scatter of ep-gauss and ep-box is
+//! the difference to `gauss`). `cargo bench --bench kernels`.
 
 use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use epfilt::filter::ep_box::{Ring, Spp, StatsLayout, VarianceKind};
 use epfilt::filter::ep_gauss::{EpGauss, LumImage};
 use epfilt::{filter_in_memory, FilterParams, Grid, Job, Method, PipelineConfig};
 
@@ -74,7 +76,14 @@ fn engine(c: &mut Criterion) {
     let mut g = c.benchmark_group("engine_900x600_s3_1pct_fireflies");
     g.throughput(Throughput::Elements((w * h) as u64));
     g.sample_size(20);
-    for m in [Method::Box, Method::Gauss, Method::EpGauss] {
+    for m in [
+        Method::Box,
+        Method::Gauss,
+        Method::EpGauss,
+        Method::Clamp,
+        Method::Median,
+        Method::AlphaTrim,
+    ] {
         let p = FilterParams::new(m, s);
         g.bench_function(m.name(), |b| {
             b.iter(|| {
@@ -87,5 +96,76 @@ fn engine(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, search, base_stencil, engine);
+fn ring(c: &mut Criterion) {
+    let r = Ring::new(16.0);
+    let mut g = c.benchmark_group("ep_box_ring_prefix");
+    g.bench_function("interior 400 px", |b| {
+        b.iter(|| black_box(r.prefix(black_box(100), 100, 300, 200, 400)))
+    });
+    g.bench_function("corner 400 px", |b| {
+        b.iter(|| black_box(r.prefix(black_box(0), 0, 300, 200, 400)))
+    });
+    g.finish();
+}
+
+/// ep-box on 600x400 pixels (9 spp mean + variance), 1% fireflies of 10x..1000x.
+fn ep_box_engine(c: &mut Criterion) {
+    let (w, h) = (600, 400);
+    let mut img = Vec::with_capacity(w * h * 6);
+    let mut k = 7u64;
+    for y in 0..h {
+        let mut row = vec![0.0f32; 6 * w];
+        for x in 0..w {
+            k = k
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let base = 0.6 + 0.3 * ((x as f32 * 0.01).sin() * (y as f32 * 0.013).cos());
+            let hot = if (k >> 33) % 100 == 0 {
+                10f32.powf(1.0 + 2.0 * ((k >> 20) % 1000) as f32 / 1000.0)
+            } else {
+                0.0
+            };
+            for c in 0..3 {
+                // 8 samples at `base`, one at `base + hot`.
+                row[c * w + x] = base + hot / 9.0;
+                row[(3 + c) * w + x] = hot * hot / 9.0 + 1e-6;
+            }
+        }
+        img.extend(row);
+    }
+    let mut job = Job::new(
+        Grid {
+            in_w: w,
+            in_h: h,
+            s: 1,
+        },
+        vec!["R".into(), "G".into(), "B".into()],
+        vec![0.2126, 0.7152, 0.0722],
+    );
+    job.aux = vec!["vR".into(), "vG".into(), "vB".into()];
+    job.stats = Some(StatsLayout {
+        variance: vec![3, 4, 5],
+        kind: VarianceKind::Sample,
+        mean_y: None,
+        spp: Spp::Fixed(9.0),
+    });
+    let mut g = c.benchmark_group("ep_box_engine_600x400_1pct_fireflies");
+    g.throughput(Throughput::Elements((w * h) as u64));
+    g.sample_size(20);
+    for r in [4.0, 16.0] {
+        let mut p = FilterParams::new(Method::EpBox, 1);
+        p.max_radius = r;
+        p.ep_box.ltvis = Some(0.6 / 128.0);
+        g.bench_with_input(BenchmarkId::new("max_radius", r), &r, |b, _| {
+            b.iter(|| {
+                black_box(
+                    filter_in_memory(img.clone(), &job, &p, &PipelineConfig::default()).unwrap(),
+                )
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, search, base_stencil, ring, engine, ep_box_engine);
 criterion_main!(benches);

@@ -96,8 +96,11 @@ fn defaults(method: &str) -> BTreeMap<&'static str, String> {
     m
 }
 
+/// A setting and the values it takes.
+type Axis = (&'static str, Vec<&'static str>);
+
 /// One-at-a-time variations around each method's defaults.
-fn grid(quick: bool) -> Vec<(&'static str, Vec<(&'static str, Vec<&'static str>)>)> {
+fn grid(quick: bool) -> Vec<(&'static str, Vec<Axis>)> {
     if quick {
         vec![
             (
@@ -127,7 +130,10 @@ fn grid(quick: bool) -> Vec<(&'static str, Vec<(&'static str, Vec<&'static str>)
             (
                 "ep-gauss",
                 vec![
-                    ("tolerance", vec!["0.05", "0.1", "0.15", "0.25", "0.4", "0.6", "1"]),
+                    (
+                        "tolerance",
+                        vec!["0.05", "0.1", "0.15", "0.25", "0.4", "0.6", "1"],
+                    ),
                     ("width_step", vec!["0.02", "0.05", "0.1", "0.2", "0.4"]),
                     ("max_radius", vec!["2", "4", "8", "16", "32", "64"]),
                     ("cutoff", vec!["2", "2.5", "3", "4"]),
@@ -228,18 +234,37 @@ fn main() -> Result<()> {
         run_cmd(
             &bin,
             &[
-                "synth", "-q", "--scene", scene, "--size", &size, "-s", "3", "-o",
+                "synth",
+                "-q",
+                "--scene",
+                scene,
+                "--size",
+                &size,
+                "-s",
+                "3",
+                "-o",
                 &s(&d.join(format!("{scene}-s3.exr"))),
-                "--truth", &s(&d.join(format!("{scene}-s3-truth.exr"))),
+                "--truth",
+                &s(&d.join(format!("{scene}-s3-truth.exr"))),
             ]
             .map(String::from),
         )?;
         run_cmd(
             &bin,
             &[
-                "synth", "-q", "--scene", scene, "--size", &size, "--spp", "9", "--variance", "-o",
+                "synth",
+                "-q",
+                "--scene",
+                scene,
+                "--size",
+                &size,
+                "--spp",
+                "9",
+                "--variance",
+                "-o",
                 &s(&d.join(format!("{scene}-spp.exr"))),
-                "--truth", &s(&d.join(format!("{scene}-spp-truth.exr"))),
+                "--truth",
+                &s(&d.join(format!("{scene}-spp-truth.exr"))),
             ]
             .map(String::from),
         )?;
@@ -457,7 +482,10 @@ fn plot(path: &Path, rows: &[Row], scenes: &[&str]) -> Result<()> {
                 .map(|&i| (pts[i].seconds, pts[i].rmse))
                 .collect();
             chart.draw_series(LineSeries::new(line.clone(), BLACK.stroke_width(1)))?;
-            chart.draw_series(line.iter().map(|&xy| Circle::new(xy, 7, BLACK.stroke_width(1))))?;
+            chart.draw_series(
+                line.iter()
+                    .map(|&xy| Circle::new(xy, 7, BLACK.stroke_width(1))),
+            )?;
             // Axis figures and labels, drawn as text afterwards.
             let x0 = p * pw;
             let plot_w = pw as f64 - ml as f64 - 20.0;
@@ -467,13 +495,28 @@ fn plot(path: &Path, rows: &[Row], scenes: &[&str]) -> Result<()> {
             for k in 0..=4 {
                 let t = xa * (xb / xa).powf(k as f64 / 4.0);
                 let x = x0 + ml as usize + (lx(t) * plot_w) as usize;
-                labels.push((x.saturating_sub(16), h - mb as usize + 6, format!("{t:.2}"), BLACK));
+                labels.push((
+                    x.saturating_sub(16),
+                    h - mb as usize + 6,
+                    format!("{t:.2}"),
+                    BLACK,
+                ));
                 let e = ya * (yb / ya).powf(k as f64 / 4.0);
                 let y = mt as usize + ((1.0 - ly(e)) * plot_h) as usize;
                 labels.push((x0 + 2, y.saturating_sub(4), format!("{e:.3}"), BLACK));
             }
-            labels.push((x0 + ml as usize, 8, format!("scene {scene}: RMSE vs truth (log) against seconds (log)"), BLACK));
-            labels.push((x0 + ml as usize + 120, h - 22, "wall seconds per run".into(), BLACK));
+            labels.push((
+                x0 + ml as usize,
+                8,
+                format!("scene {scene}: RMSE vs truth (log) against seconds (log)"),
+                BLACK,
+            ));
+            labels.push((
+                x0 + ml as usize + 120,
+                h - 22,
+                "wall seconds per run".into(),
+                BLACK,
+            ));
             let mut ly0 = mt as usize + 6;
             for m in METHODS {
                 labels.push((x0 + pw - 130, ly0, format!("o {m}"), colour(m)));
