@@ -20,8 +20,8 @@ fuzz_target!(
     // The first byte picks the method and super-sampling, so one corpus
     // exercises every path.
     let pick = data.first().copied().unwrap_or(0);
-    let method = [Method::EpGauss, Method::Gauss, Method::Box][(pick % 3) as usize];
-    let s = 1 + (pick as usize / 3) % 3;
+    let method = Method::ALL[(pick % 7) as usize];
+    let s = if method == Method::EpBox { 1 } else { 1 + (pick as usize / 7) % 3 };
     let job = FilterJob {
         input,
         output: dir.path().join("out.exr"),
@@ -30,6 +30,13 @@ fuzz_target!(
         output_settings: OutputSettings { compression: None, precision: Precision::F32 },
         part: Some(epfilt::io::PartSelect::Index(0)),
         max_memory: Some(256 << 20),
+        // ep-box: the first colour channel doubles as a luminance variance,
+        // so any file with colour reaches the engine.
+        stats: epfilt::io::StatsRequest {
+            variance_channel: Some(if pick & 0x80 == 0 { "R" } else { "Y" }.into()),
+            spp: Some(16),
+            ..Default::default()
+        },
     };
     let _ = filter_file(&job, &|_, _| {});
     }

@@ -336,7 +336,9 @@ impl ExrInput {
                     format!("no channel {name:?} (the file has: {})", all.join(", ")),
                 )
             })?;
-            if self.selected.iter().any(|s| s.index == index) {
+            // A colour channel may serve as a statistic too (read twice).
+            let colour = self.selected.len() - self.aux;
+            if self.selected[colour..].iter().any(|s| s.index == index) {
                 continue;
             }
             self.selected.push(Selected {

@@ -611,6 +611,18 @@ mod files {
         ]);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&named).unwrap());
+        // A colour channel may double as the (luminance) variance.
+        let o = epfilt(&[
+            "filter",
+            inp.to_str().unwrap(),
+            dir.path().join("r.exr").to_str().unwrap(),
+            "--method",
+            "ep-box",
+            "--variance-channel",
+            "R",
+            "-q",
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         // No variance: one line listing the channels the file has.
         let plain = dir.path().join("plain.exr");
         write(&plain, 8, 8, &["R", "G", "B", "Z"], &[], |_, _, _| 1.0);
