@@ -85,7 +85,7 @@ fn defaults(method: &str) -> BTreeMap<&'static str, String> {
         "ep-box" => {
             set("d", "5");
             set("confidence", "0.8");
-            set("max_radius", "16");
+            set("max_radius", "8");
             set("guard", "range");
         }
         "gauss" => set("cutoff", "3"),

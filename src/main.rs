@@ -219,9 +219,9 @@ struct FilterArgs {
     #[arg(long, default_value_t = 0.6)]
     radius: f64,
     /// Largest Gaussian radius a noisy sample may get, in output pixels
-    /// (ep-box: the largest spread radius, in pixels).
-    #[arg(long, default_value_t = 16.0)]
-    max_radius: f64,
+    /// (ep-box: the largest spread radius, in pixels) [default: 16; ep-box: 8].
+    #[arg(long)]
+    max_radius: Option<f64>,
     #[command(flatten)]
     stats: StatsArgs,
     /// clamp: the largest sample value kept, per channel (then the base Gaussian).
@@ -500,7 +500,9 @@ fn filter(a: FilterArgs) -> Result<()> {
     params.radius = a.radius;
     params.clamp = a.clamp;
     params.alpha = a.alpha;
-    params.max_radius = a.max_radius;
+    if let Some(r) = a.max_radius {
+        params.max_radius = r;
+    }
     params.cutoff = a.cutoff;
     params.width_step = a.width_step;
     if let Some(t) = a.tolerance {

@@ -71,6 +71,10 @@ impl Guard {
     }
 }
 
+/// Default spread radius of `ep-box`, in pixels (`docs/tradeoff.md`: the
+/// error-time front of the trade study).
+pub const DEFAULT_MAX_RADIUS: f64 = 8.0;
+
 /// Chebyshev radius of the `range` guard's look at converged pixels.
 pub const GUARD_REACH: usize = 2;
 

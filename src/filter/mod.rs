@@ -165,7 +165,11 @@ impl FilterParams {
             radius: 0.6,
             cutoff: 3.0,
             tolerance: default_tolerance(s.max(1)),
-            max_radius: 16.0,
+            max_radius: if method == Method::EpBox {
+                ep_box::DEFAULT_MAX_RADIUS
+            } else {
+                16.0
+            },
             width_step: 0.1,
             ep_box: ep_box::EpBoxParams::default(),
             clamp: 10.0,
