@@ -103,7 +103,7 @@ fn errors_are_one_line_naming_the_file() {
         "--supersample",
     );
     one_line_error(
-        &epfilt(&["filter", &inp, "x.exr", "--method", "median"]),
+        &epfilt(&["filter", &inp, "x.exr", "--method", "sharpen"]),
         "unknown method",
     );
     let text = dir.path().join("text.exr");
