@@ -21,10 +21,10 @@
 
 use rayon::prelude::*;
 
-use super::engine::{finish_rows, fnv, ingest, Counters, OutRows, FNV_OFFSET, MAX_CHANNELS};
-use super::ledger::Ledger;
+use super::books::Books;
+use super::engine::{Counters, OutRows, MAX_CHANNELS};
 use super::window::RowWindow;
-use super::{NonFinite, Precision, Strip};
+use super::{Precision, Strip};
 use crate::error::{Error, Result};
 use crate::filter::ep_box::{
     se2, EpBoxParams, Guard, Ring, Spp, StatsLayout, TFactor, VarianceKind,
@@ -52,7 +52,6 @@ pub struct BoxEngine {
     h: usize,
     nch: usize,
     nall: usize,
-    names: Vec<String>,
     lum: Vec<f64>,
     stats: StatsLayout,
     params: EpBoxParams,
@@ -73,12 +72,8 @@ pub struct BoxEngine {
     rows_in: usize,
     treat_done: usize,
     out_done: usize,
-    ledger: Ledger,
     counters: Counters,
-    digest: u64,
-    nonfinite: NonFinite,
-    zeroed: Vec<u64>,
-    first_nonfinite: Option<(usize, usize, usize)>,
+    books: Books,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -149,7 +144,6 @@ impl BoxEngine {
             h,
             nch,
             nall,
-            names,
             lum,
             stats,
             params: params.clone(),
@@ -170,12 +164,8 @@ impl BoxEngine {
             rows_in: 0,
             treat_done: 0,
             out_done: 0,
-            ledger: Ledger::new(nch),
             counters: Counters::default(),
-            digest: FNV_OFFSET,
-            nonfinite: NonFinite::Error,
-            zeroed: vec![0; nall],
-            first_nonfinite: None,
+            books: Books::new(names, nall),
         })
     }
 
@@ -204,35 +194,14 @@ impl BoxEngine {
         self.counters
     }
 
-    /// The ledger so far.
-    pub fn ledger(&self) -> &Ledger {
-        &self.ledger
+    /// Names, ledger, digest and non-finite counts.
+    pub fn books(&self) -> &Books {
+        &self.books
     }
 
-    /// Filtered channel names.
-    pub fn names(&self) -> &[String] {
-        &self.names
-    }
-
-    /// What to do with NaN and infinite input samples.
-    pub fn set_nonfinite(&mut self, n: NonFinite) {
-        self.nonfinite = n;
-    }
-
-    /// Non-finite input samples treated as zero, per input channel (colour,
-    /// then statistics).
-    pub fn nonfinite_zeroed(&self) -> &[u64] {
-        &self.zeroed
-    }
-
-    /// The first of them: (x, y, input channel).
-    pub fn first_nonfinite(&self) -> Option<(usize, usize, usize)> {
-        self.first_nonfinite
-    }
-
-    /// Digest of the unrounded output, as [`super::Engine::digest`].
-    pub fn digest(&self) -> u64 {
-        self.digest
+    /// The same, to set the non-finite policy.
+    pub fn books_mut(&mut self) -> &mut Books {
+        &mut self.books
     }
 
     /// Most rows each window held: input, luminance, kept, accumulator, flags.
@@ -249,26 +218,7 @@ impl BoxEngine {
     /// Feed the next strip of rows; returns the output rows it finished.
     pub fn push(&mut self, mut strip: Strip) -> Result<Option<OutRows>> {
         let row_len = self.nall * self.w;
-        if strip.y0 != self.rows_in
-            || strip.data.len() != strip.rows * row_len
-            || self.rows_in + strip.rows > self.h
-        {
-            return Err(Error::Config(format!(
-                "source delivered rows {}..{} but row {} was expected (source bug)",
-                strip.y0,
-                strip.y0 + strip.rows,
-                self.rows_in
-            )));
-        }
-        let sums = ingest(
-            &mut strip,
-            self.w,
-            &self.names,
-            self.nonfinite,
-            &mut self.zeroed,
-            &mut self.first_nonfinite,
-        )?;
-        self.ledger.input.merge(&sums);
+        self.books.take(&mut strip, self.rows_in, self.w, self.h)?;
         let a = self.rows_in;
         for row in strip.data.chunks(row_len) {
             self.input.push_copy(row);
@@ -345,20 +295,14 @@ impl BoxEngine {
             self.treat_done.saturating_sub(self.reach)
         };
         if out_target > self.out_done {
-            let (out, raw, rounded, digests) = finish_rows(
+            let out = self.books.finish(
                 &self.kept,
                 Some(&self.acc),
                 self.out_done,
                 out_target,
                 self.w,
-                &self.names,
                 self.precision,
             )?;
-            for d in digests {
-                self.digest = fnv(self.digest, d);
-            }
-            self.ledger.output.merge(&raw);
-            self.ledger.rounded.merge(&rounded);
             self.out_done = out_target;
             self.kept.evict_below(out_target);
             self.acc.evict_below(out_target);

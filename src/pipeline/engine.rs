@@ -28,9 +28,9 @@
 
 use rayon::prelude::*;
 
-use super::ledger::{Ledger, Sums};
+use super::books::Books;
 use super::window::RowWindow;
-use super::{NonFinite, Precision, Strip};
+use super::{Precision, Strip};
 use crate::error::{Error, Result};
 use crate::filter::ep_gauss::{EpGauss, LumRows};
 use crate::filter::kernel::{ColumnTaps, Kernel1d};
@@ -147,7 +147,6 @@ pub struct Engine {
     nch: usize,
     inv_s2: f64,
     lum: Vec<f64>,
-    names: Vec<String>,
     base: Kernel1d,
     cols: ColumnTaps,
     ep: Option<EpGauss>,
@@ -166,12 +165,8 @@ pub struct Engine {
     cls_done: usize,
     spread_done: usize,
     out_done: usize,
-    ledger: Ledger,
     counters: Counters,
-    digest: u64,
-    nonfinite: NonFinite,
-    zeroed: Vec<u64>,
-    first_nonfinite: Option<(usize, usize, usize)>,
+    books: Books,
     clamp: Option<f32>,
 }
 
@@ -241,7 +236,6 @@ impl Engine {
             nch,
             inv_s2: 1.0 / (s * s) as f64,
             lum,
-            names,
             base,
             cols,
             ep,
@@ -260,12 +254,8 @@ impl Engine {
             cls_done: 0,
             spread_done: 0,
             out_done: 0,
-            ledger: Ledger::new(nch),
             counters: Counters::default(),
-            digest: FNV_OFFSET,
-            nonfinite: NonFinite::Error,
-            zeroed: vec![0; nch],
-            first_nonfinite: None,
+            books: Books::new(names, nch),
             clamp: (params.method == Method::Clamp).then_some(params.clamp as f32),
         })
     }
@@ -285,36 +275,14 @@ impl Engine {
         self.counters
     }
 
-    /// The ledger so far.
-    pub fn ledger(&self) -> &Ledger {
-        &self.ledger
+    /// Names, ledger, digest and non-finite counts.
+    pub fn books(&self) -> &Books {
+        &self.books
     }
 
-    /// What to do with NaN and infinite input samples.
-    pub fn set_nonfinite(&mut self, n: NonFinite) {
-        self.nonfinite = n;
-    }
-
-    /// Non-finite input samples treated as zero so far, per channel.
-    pub fn nonfinite_zeroed(&self) -> &[u64] {
-        &self.zeroed
-    }
-
-    /// The first non-finite input sample treated as zero: (x, y, channel).
-    pub fn first_nonfinite(&self) -> Option<(usize, usize, usize)> {
-        self.first_nonfinite
-    }
-
-    /// FNV-1a digest of the bits of every unrounded (f64) output value, in
-    /// row-major order: equal digests mean bit-identical results before
-    /// rounding, which the f32 output alone cannot show.
-    pub fn digest(&self) -> u64 {
-        self.digest
-    }
-
-    /// Channel names.
-    pub fn names(&self) -> &[String] {
-        &self.names
+    /// The same, to set the non-finite policy.
+    pub fn books_mut(&mut self) -> &mut Books {
+        &mut self.books
     }
 
     /// Most rows each window held at once: input, box luminance, horizontal
@@ -333,26 +301,8 @@ impl Engine {
     pub fn push(&mut self, mut strip: Strip) -> Result<Option<OutRows>> {
         let (nch, in_w) = (self.nch, self.grid.in_w);
         let row_len = nch * in_w;
-        if strip.y0 != self.rows_in
-            || strip.data.len() != strip.rows * row_len
-            || self.rows_in + strip.rows > self.grid.in_h
-        {
-            return Err(Error::Config(format!(
-                "source delivered rows {}..{} but row {} was expected (source bug)",
-                strip.y0,
-                strip.y0 + strip.rows,
-                self.rows_in
-            )));
-        }
-        let sums = ingest(
-            &mut strip,
-            in_w,
-            &self.names,
-            self.nonfinite,
-            &mut self.zeroed,
-            &mut self.first_nonfinite,
-        )?;
-        self.ledger.input.merge(&sums);
+        self.books
+            .take(&mut strip, self.rows_in, in_w, self.grid.in_h)?;
         if let Some(limit) = self.clamp {
             // The clamp foil: colour samples above the limit are cut (after
             // the ledger took the input, so the loss shows).
@@ -651,163 +601,9 @@ impl Engine {
     /// Output rows `a..b`: base plus accumulator, rounded, with the ledger.
     fn finish_rows(&mut self, a: usize, b: usize) -> Result<OutRows> {
         let acc = self.ep.as_ref().map(|_| &self.acc);
-        let (out, raw, rounded, digest) =
-            finish_rows(&self.based, acc, a, b, self.w, &self.names, self.precision)?;
-        for d in digest {
-            self.digest = fnv(self.digest, d);
-        }
-        self.ledger.output.merge(&raw);
-        self.ledger.rounded.merge(&rounded);
-        Ok(out)
+        self.books
+            .finish(&self.based, acc, a, b, self.w, self.precision)
     }
-}
-
-/// Check a strip's samples (all its channels) for NaN and infinities — refuse
-/// them, or zero and count them — and return the sums of its first
-/// `names.len()` channels (the filtered ones) for the ledger.
-pub(crate) fn ingest(
-    strip: &mut Strip,
-    in_w: usize,
-    names: &[String],
-    nonfinite: NonFinite,
-    zeroed: &mut [u64],
-    first_nonfinite: &mut Option<(usize, usize, usize)>,
-) -> Result<Sums> {
-    let nall = zeroed.len();
-    let row_len = nall * in_w;
-    let nch = names.len();
-    if nonfinite == NonFinite::Zero {
-        // Zero them (counted, first one kept) before anything reads them.
-        for (r, row) in strip.data.chunks_mut(row_len).enumerate() {
-            for c in 0..nall {
-                for (x, v) in row[c * in_w..(c + 1) * in_w].iter_mut().enumerate() {
-                    if !v.is_finite() {
-                        *v = 0.0;
-                        zeroed[c] += 1;
-                        first_nonfinite.get_or_insert((x, strip.y0 + r, c));
-                    }
-                }
-            }
-        }
-    }
-    // Ledger of the input, row by row in parallel, merged in order.
-    let sums: Vec<std::result::Result<Sums, (usize, usize)>> = strip
-        .data
-        .par_chunks(row_len)
-        .map(|row| {
-            let mut s = Sums::new(nch);
-            for c in 0..nall {
-                let ch = &row[c * in_w..(c + 1) * in_w];
-                if let Some(x) = ch.iter().position(|v| !v.is_finite()) {
-                    return Err((x, c));
-                }
-                if c < nch {
-                    s.add_slice(c, ch);
-                }
-            }
-            Ok(s)
-        })
-        .collect();
-    let mut total = Sums::new(nch);
-    for (r, s) in sums.into_iter().enumerate() {
-        match s {
-            Ok(s) => total.merge(&s),
-            Err((x, c)) => {
-                return Err(Error::Value {
-                    path: Default::default(),
-                    reason: format!(
-                        "non-finite input value at sample ({x}, {}) in channel {} \
-                         (--nonfinite zero treats such samples as 0 and counts them)",
-                        strip.y0 + r,
-                        channel_name(names, c)
-                    ),
-                })
-            }
-        }
-    }
-    Ok(total)
-}
-
-fn channel_name(names: &[String], c: usize) -> String {
-    names
-        .get(c)
-        .cloned()
-        .unwrap_or_else(|| format!("#{c} (statistics)"))
-}
-
-/// Output rows `a..b`: `based + acc` (or `based`), rounded to `precision`,
-/// with their raw and rounded sums and each row's digest of its unrounded
-/// values (fold them in row order: the result does not depend on batching).
-pub(crate) fn finish_rows(
-    based: &RowWindow<f64>,
-    acc: Option<&RowWindow<f64>>,
-    a: usize,
-    b: usize,
-    w: usize,
-    names: &[String],
-    precision: Precision,
-) -> Result<(OutRows, Sums, Sums, Vec<u64>)> {
-    let nch = names.len();
-    let mut data = vec![0.0f32; (b - a) * nch * w];
-    let sums: Vec<Result<(Sums, Sums, u64)>> = data
-        .par_chunks_mut(nch * w)
-        .enumerate()
-        .map_init(
-            || vec![0.0f64; w],
-            |tmp, (k, out)| {
-                let y = a + k;
-                let mut raw = Sums::new(nch);
-                let mut rounded = Sums::new(nch);
-                let mut digest = FNV_OFFSET;
-                for c in 0..nch {
-                    let base_row = &based.get(y)[c * w..(c + 1) * w];
-                    match acc {
-                        Some(acc) => {
-                            let n = &acc.get(y)[c * w..(c + 1) * w];
-                            for ((v, &b), &n) in tmp.iter_mut().zip(base_row).zip(n) {
-                                *v = b + n;
-                            }
-                        }
-                        None => tmp.copy_from_slice(base_row),
-                    }
-                    raw.add_slice(c, tmp);
-                    let dst = &mut out[c * w..(c + 1) * w];
-                    for (x, (d, &val)) in dst.iter_mut().zip(tmp.iter()).enumerate() {
-                        let r = round(val, precision).ok_or_else(|| Error::Value {
-                            path: Default::default(),
-                            reason: format!(
-                                "output value {val:e} at pixel ({x}, {y}) in channel {} does not fit in {}",
-                                names[c],
-                                precision.name()
-                            ),
-                        })?;
-                        *d = r;
-                        digest = fnv(digest, val.to_bits());
-                    }
-                    rounded.add_slice(c, dst);
-                }
-                Ok((raw, rounded, digest))
-            },
-        )
-        .collect();
-    let (mut raw_all, mut rounded_all) = (Sums::new(nch), Sums::new(nch));
-    let mut digest = Vec::with_capacity(b - a);
-    for s in sums {
-        let (raw, rounded, d) = s?;
-        digest.push(d);
-        raw_all.merge(&raw);
-        rounded_all.merge(&rounded);
-    }
-    Ok((
-        OutRows {
-            y0: a,
-            rows: b - a,
-            data,
-        },
-        raw_all,
-        rounded_all,
-        digest,
-    ))
 }
 
 /// Add `spreads` (in order) into the accumulator, one task per tile of
@@ -859,26 +655,4 @@ fn scatter(
                 }
             }
         });
-}
-
-pub(crate) const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
-
-#[inline]
-pub(crate) fn fnv(h: u64, word: u64) -> u64 {
-    (h ^ word).wrapping_mul(0x0000_0100_0000_01b3)
-}
-
-/// Round to the output type; `None` if the value does not fit.
-#[inline]
-fn round(v: f64, p: Precision) -> Option<f32> {
-    match p {
-        Precision::F32 => {
-            let f = v as f32;
-            f.is_finite().then_some(f)
-        }
-        Precision::F16 => {
-            let f = half::f16::from_f64(v);
-            f.is_finite().then(|| f.to_f32())
-        }
-    }
 }

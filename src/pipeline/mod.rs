@@ -10,6 +10,7 @@
 //! rows (`[row][channel][x]`). Back-pressure through the two-slot channels,
 //! not the image size, bounds memory.
 
+pub mod books;
 pub mod box_engine;
 pub mod engine;
 pub mod ledger;
@@ -452,7 +453,7 @@ impl AnyEngine {
             )?))
         };
         let r = &mut e;
-        delegate!(r, x => x.set_nonfinite(cfg.nonfinite));
+        delegate!(r, x => x.books_mut().set_nonfinite(cfg.nonfinite));
         Ok(e)
     }
     fn push(&mut self, strip: Strip) -> Result<Option<OutRows>> {
@@ -465,10 +466,10 @@ impl AnyEngine {
         delegate!(self, e => e.counters())
     }
     fn ledger(&self) -> &Ledger {
-        delegate!(self, e => e.ledger())
+        delegate!(self, e => e.books().ledger())
     }
     fn names(&self) -> &[String] {
-        delegate!(self, e => e.names())
+        delegate!(self, e => e.books().names())
     }
     fn halo(&self) -> Halo {
         delegate!(self, e => e.halo())
@@ -477,13 +478,13 @@ impl AnyEngine {
         delegate!(self, e => e.high_water())
     }
     fn digest(&self) -> u64 {
-        delegate!(self, e => e.digest())
+        delegate!(self, e => e.books().digest())
     }
     fn nonfinite_zeroed(&self) -> &[u64] {
-        delegate!(self, e => e.nonfinite_zeroed())
+        delegate!(self, e => e.books().nonfinite_zeroed())
     }
     fn first_nonfinite(&self) -> Option<(usize, usize, usize)> {
-        delegate!(self, e => e.first_nonfinite())
+        delegate!(self, e => e.books().first_nonfinite())
     }
 }
 

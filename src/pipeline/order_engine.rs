@@ -6,10 +6,10 @@
 
 use rayon::prelude::*;
 
-use super::engine::{finish_rows, fnv, ingest, Counters, OutRows, FNV_OFFSET};
-use super::ledger::Ledger;
+use super::books::Books;
+use super::engine::{Counters, OutRows};
 use super::window::RowWindow;
-use super::{NonFinite, Precision, Strip};
+use super::{Precision, Strip};
 use crate::error::{Error, Result};
 use crate::geometry::{mirror, Grid, Halo};
 
@@ -42,18 +42,13 @@ pub struct OrderEngine {
     w: usize,
     h: usize,
     nch: usize,
-    names: Vec<String>,
     trim: Trim,
     precision: Precision,
     input: RowWindow<f32>,
     out: RowWindow<f64>,
     rows_in: usize,
     out_done: usize,
-    ledger: Ledger,
-    digest: u64,
-    nonfinite: NonFinite,
-    zeroed: Vec<u64>,
-    first_nonfinite: Option<(usize, usize, usize)>,
+    books: Books,
 }
 
 impl OrderEngine {
@@ -80,18 +75,13 @@ impl OrderEngine {
             w: grid.out_w(),
             h: grid.out_h(),
             nch,
-            names,
             trim,
             precision,
             input: RowWindow::new(nch * grid.in_w),
             out: RowWindow::new(nch * grid.out_w()),
             rows_in: 0,
             out_done: 0,
-            ledger: Ledger::new(nch),
-            digest: FNV_OFFSET,
-            nonfinite: NonFinite::Error,
-            zeroed: vec![0; nch],
-            first_nonfinite: None,
+            books: Books::new(names, nch),
         })
     }
 
@@ -110,59 +100,24 @@ impl OrderEngine {
     pub fn counters(&self) -> Counters {
         Counters::default()
     }
-    /// The ledger so far.
-    pub fn ledger(&self) -> &Ledger {
-        &self.ledger
-    }
-    /// Channel names.
-    pub fn names(&self) -> &[String] {
-        &self.names
-    }
     /// Input and output rows held at most.
     pub fn high_water(&self) -> [usize; 5] {
         [self.input.high_water(), 0, 0, self.out.high_water(), 0]
     }
-    /// Digest of the unrounded output.
-    pub fn digest(&self) -> u64 {
-        self.digest
+    /// Names, ledger, digest and non-finite counts.
+    pub fn books(&self) -> &Books {
+        &self.books
     }
-    /// What to do with NaN and infinite input.
-    pub fn set_nonfinite(&mut self, n: NonFinite) {
-        self.nonfinite = n;
-    }
-    /// Non-finite samples zeroed, per channel.
-    pub fn nonfinite_zeroed(&self) -> &[u64] {
-        &self.zeroed
-    }
-    /// The first of them.
-    pub fn first_nonfinite(&self) -> Option<(usize, usize, usize)> {
-        self.first_nonfinite
+    /// The same, to set the non-finite policy.
+    pub fn books_mut(&mut self) -> &mut Books {
+        &mut self.books
     }
 
     /// Feed a strip; returns the output rows it finished.
     pub fn push(&mut self, mut strip: Strip) -> Result<Option<OutRows>> {
         let (in_w, in_h, s) = (self.grid.in_w, self.grid.in_h, self.grid.s);
         let row_len = self.nch * in_w;
-        if strip.y0 != self.rows_in
-            || strip.data.len() != strip.rows * row_len
-            || self.rows_in + strip.rows > in_h
-        {
-            return Err(Error::Config(format!(
-                "source delivered rows {}..{} but row {} was expected (source bug)",
-                strip.y0,
-                strip.y0 + strip.rows,
-                self.rows_in
-            )));
-        }
-        let sums = ingest(
-            &mut strip,
-            in_w,
-            &self.names,
-            self.nonfinite,
-            &mut self.zeroed,
-            &mut self.first_nonfinite,
-        )?;
-        self.ledger.input.merge(&sums);
+        self.books.take(&mut strip, self.rows_in, in_w, in_h)?;
         for row in strip.data.chunks(row_len) {
             self.input.push_copy(row);
         }
@@ -207,13 +162,9 @@ impl OrderEngine {
                     }
                 }
             });
-        let (out, raw, rounded, digests) =
-            finish_rows(&self.out, None, a, b, w, &self.names, self.precision)?;
-        for d in digests {
-            self.digest = fnv(self.digest, d);
-        }
-        self.ledger.output.merge(&raw);
-        self.ledger.rounded.merge(&rounded);
+        let out = self
+            .books
+            .finish(&self.out, None, a, b, w, self.precision)?;
         self.out_done = b;
         self.out.evict_below(b);
         // Keep the last input row used (S = 1 reads row y - 1 of the next).
