@@ -99,6 +99,16 @@ pub fn run(img: &Img, s: usize, params: &FilterParams, cfg: &PipelineConfig) -> 
     )
 }
 
+/// How the work is cut: tile width, strip rows (0: automatic), threads.
+pub fn cfg(tile: usize, strip_rows: usize, threads: usize) -> PipelineConfig {
+    PipelineConfig {
+        tile,
+        strip_rows,
+        threads,
+        ..Default::default()
+    }
+}
+
 pub fn params(method: Method, s: usize) -> FilterParams {
     FilterParams::new(method, s)
 }

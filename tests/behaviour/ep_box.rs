@@ -47,15 +47,6 @@ fn params(guard: Guard, ltvis: f64, radius: f64) -> FilterParams {
     p
 }
 
-fn cfg(tile: usize, strip: usize, threads: usize) -> PipelineConfig {
-    PipelineConfig {
-        tile,
-        strip_rows: strip,
-        threads,
-        ..Default::default()
-    }
-}
-
 fn filter(img: &Img, spp: f64, p: &FilterParams, c: &PipelineConfig) -> (Img, RunStats) {
     let (out, stats) =
         filter_in_memory(img.data.clone(), &job(img.w, img.h, spp), p, c).expect("ep-box");

@@ -2,17 +2,8 @@
 //! Same pipeline and seam guarantees; their ledger shows the energy they lose.
 
 use crate::common::*;
-use epfilt::{Method, PipelineConfig};
+use epfilt::Method;
 use proptest::prelude::*;
-
-fn cfg(tile: usize, strip_rows: usize, threads: usize) -> PipelineConfig {
-    PipelineConfig {
-        tile,
-        strip_rows,
-        threads,
-        ..Default::default()
-    }
-}
 
 #[test]
 fn clamp_loses_exactly_what_it_cuts() {

@@ -1,7 +1,7 @@
 //! Bit-identical output whatever the tile size, strip height and thread count.
 
 use crate::common::*;
-use epfilt::{Method, PipelineConfig};
+use epfilt::Method;
 use proptest::prelude::*;
 
 /// The f32 output hides differences in the last bits of the f64 sums behind
@@ -15,15 +15,6 @@ fn ledger_bits(stats: &epfilt::RunStats) -> Vec<u64> {
         .collect();
     v.push(stats.digest);
     v
-}
-
-fn cfg(tile: usize, strip_rows: usize, threads: usize) -> PipelineConfig {
-    PipelineConfig {
-        tile,
-        strip_rows,
-        threads,
-        ..Default::default()
-    }
 }
 
 #[test]
