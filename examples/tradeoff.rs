@@ -172,6 +172,25 @@ fn runs(scenes: &[&str], quick: bool) -> Vec<Run> {
                     }
                 }
             }
+            // ep-gauss: the cheaper knobs again at its most accurate tolerance,
+            // to find the fastest setting near its best error.
+            if method == "ep-gauss" && !quick {
+                for (ws, mr) in [
+                    ("0.2", "16"),
+                    ("0.4", "16"),
+                    ("0.1", "8"),
+                    ("0.4", "8"),
+                    ("0.4", "4"),
+                ] {
+                    let mut s = base.clone();
+                    s.insert("tolerance", "0.05".into());
+                    s.insert("width_step", ws.into());
+                    s.insert("max_radius", mr.into());
+                    if !seen.contains(&s) {
+                        seen.push(s);
+                    }
+                }
+            }
             for s in seen {
                 out.push(Run {
                     scene: scene.to_string(),
