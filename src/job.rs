@@ -34,6 +34,8 @@ pub struct FilterJob {
     pub output_settings: OutputSettings,
     /// Part of a multi-part input.
     pub part: Option<PartSelect>,
+    /// Layer whose colour channels are filtered (see [`ExrInput::open_layer`]).
+    pub layer: Option<String>,
     /// Refuse a job whose estimated memory exceeds this many bytes
     /// ([`crate::pipeline::estimate_bytes`]); `None`: [`default_max_memory`].
     pub max_memory: Option<u64>,
@@ -60,6 +62,7 @@ impl FilterJob {
                 precision: crate::pipeline::Precision::F32,
             },
             part: None,
+            layer: None,
             max_memory: None,
             stats: StatsRequest::default(),
         }
@@ -106,7 +109,7 @@ pub fn check_not_same_file(input: &Path, output: &Path) -> Result<()> {
 pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     job.params.validate()?;
     check_not_same_file(&job.input, &job.output)?;
-    let mut input = ExrInput::open(&job.input, job.part.as_ref())?;
+    let mut input = ExrInput::open_layer(&job.input, job.part.as_ref(), job.layer.as_deref())?;
     let mut params = job.params.clone();
     let found = if params.method == Method::EpBox {
         let found = find_stats(&job.input, input.header(), &job.stats)?;

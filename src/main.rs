@@ -193,6 +193,10 @@ struct PlanArgs {
     /// Part of a multi-part input, by name or index.
     #[arg(long)]
     part: Option<String>,
+    /// Layer whose R,G,B (or Y) channels are filtered, e.g. ViewLayer.Combined
+    /// [default: the unlayered channels, else a beauty-named layer, else the only one].
+    #[arg(long)]
+    layer: Option<String>,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
@@ -255,6 +259,10 @@ struct FilterArgs {
     /// Part of a multi-part input, by name or index.
     #[arg(long)]
     part: Option<String>,
+    /// Layer whose R,G,B (or Y) channels are filtered, e.g. ViewLayer.Combined
+    /// [default: the unlayered channels, else a beauty-named layer, else the only one].
+    #[arg(long)]
+    layer: Option<String>,
     /// NaN and infinite input samples: error (refuse, naming the first) or zero (count them).
     #[arg(long, default_value = "error")]
     nonfinite: String,
@@ -384,6 +392,7 @@ fn dispatch(cli: Cli) -> Result<()> {
             let plan = epfilt::plan::plan_file(
                 &a.input,
                 a.part.as_deref().map(PartSelect::parse).as_ref(),
+                a.layer.as_deref(),
                 &a.stats.request()?,
                 &a.stats.params()?,
                 a.lmax,
@@ -541,6 +550,7 @@ fn filter(a: FilterArgs) -> Result<()> {
             precision,
         },
         part: a.part.as_deref().map(PartSelect::parse),
+        layer: a.layer.clone(),
         max_memory: a.max_memory.map(|m| m.saturating_mul(1 << 20)),
         stats: a.stats.request()?,
     };

@@ -128,12 +128,13 @@ impl Plan {
 pub fn plan_file(
     path: &Path,
     part: Option<&PartSelect>,
+    layer: Option<&str>,
     req: &StatsRequest,
     params: &EpBoxParams,
     lmax: Option<f64>,
 ) -> Result<Plan> {
     params.validate()?;
-    let mut input = ExrInput::open(path, part)?;
+    let mut input = ExrInput::open_layer(path, part, layer)?;
     let found = find_stats(path, input.header(), req)?;
     let mut aux = found.variance.clone();
     aux.extend(found.mean_y.clone());

@@ -29,6 +29,7 @@ fuzz_target!(
         pipeline: PipelineConfig { threads: 1, ..Default::default() },
         output_settings: OutputSettings { compression: None, precision: Precision::F32 },
         part: Some(epfilt::io::PartSelect::Index(0)),
+        layer: None,
         max_memory: Some(256 << 20),
         // ep-box: the first colour channel doubles as a luminance variance,
         // so any file with colour reaches the engine.

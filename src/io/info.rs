@@ -27,11 +27,14 @@ pub fn info(path: &std::path::Path) -> crate::Result<String> {
                 )
             }
         };
-        let _ =
-            writeln!(
+        let _ = writeln!(
             s,
             "part {i}{}: {}x{} data window ({}, {})..({}, {}), display window ({}, {})..({}, {})",
-            h.own_attributes.layer_name.as_ref().map(|n| format!(" {n:?}")).unwrap_or_default(),
+            h.own_attributes
+                .layer_name
+                .as_ref()
+                .map(|n| format!(" {:?}", n.to_string()))
+                .unwrap_or_default(),
             dw.size.0,
             dw.size.1,
             dw.position.0,
@@ -71,6 +74,24 @@ pub fn info(path: &std::path::Path) -> crate::Result<String> {
             })
             .collect();
         let _ = writeln!(s, "  channels: {}", chans.join(", "));
+        let _ = match super::reader::choose_channels(path, h, None) {
+            Ok((chosen, _)) => {
+                let names: Vec<&str> = chosen.iter().map(|c| c.name.as_str()).collect();
+                writeln!(s, "  filtered: {}", names.join(", "))
+            }
+            Err(crate::Error::Unsupported { reason, .. }) => {
+                writeln!(s, "  filtered: nothing ({reason})")
+            }
+            Err(e) => {
+                let e = e.to_string();
+                let prefix = format!("{}: ", path.display());
+                writeln!(
+                    s,
+                    "  filtered: nothing by default ({})",
+                    e.trim_start_matches(&prefix)
+                )
+            }
+        };
         let ch = h.shared_attributes.chromaticities.as_ref();
         let lw = luminance_weights(ch);
         let _ = writeln!(

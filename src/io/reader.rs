@@ -67,8 +67,8 @@ struct BlockRow {
 }
 
 #[derive(Clone, Debug)]
-struct Selected {
-    name: String,
+pub(crate) struct Selected {
+    pub(crate) name: String,
     /// Index in the header's channel list.
     index: usize,
 }
@@ -118,7 +118,16 @@ fn part_name(h: &Header) -> String {
 
 impl ExrInput {
     /// Open and check `path`; `part` chooses a part of a multi-part file.
+    /// The colour layer is chosen as [`ExrInput::open_layer`] does without one.
     pub fn open(path: &Path, part: Option<&PartSelect>) -> Result<Self> {
+        Self::open_layer(path, part, None)
+    }
+
+    /// Open and check `path`; `part` chooses a part of a multi-part file and
+    /// `layer` the layer whose R, G, B (or Y) channels are filtered (e.g.
+    /// `ViewLayer.Combined`; by default the unlayered channels, else a layer
+    /// named as the beauty, else the only layer with colour).
+    pub fn open_layer(path: &Path, part: Option<&PartSelect>, layer: Option<&str>) -> Result<Self> {
         let map = MappedFile::open(path)?;
         let bytes = map.bytes();
         let exr_err = |e| Error::from_exr(path, e, "");
@@ -223,7 +232,7 @@ impl ExrInput {
                 format!("{:?} compression", header.compression),
             ));
         }
-        let (selected, dropped) = choose_channels(path, header)?;
+        let (selected, dropped) = choose_channels(path, header, layer)?;
 
         // Level-0 block rows in increasing y, with checked offsets.
         let table = &tables[part];
@@ -549,69 +558,165 @@ fn base_name(name: &str) -> &str {
     name.rsplit('.').next().unwrap_or(name)
 }
 
-/// R, G, B (+ A), or Y (+ A), unlayered names first, then one layer that has
-/// them; everything else is dropped (and listed).
-fn choose_channels(path: &Path, header: &Header) -> Result<(Vec<Selected>, Vec<String>)> {
+/// Layer names (last dot-component, any case) that renderers give the beauty
+/// image: Blender's `ViewLayer.Combined`, `beauty`/`RGBA` (Arnold, Houdini),
+/// RenderMan's `Ci`, and the generic ones.
+const BEAUTY_LAYERS: &[&str] = &[
+    "combined",
+    "beauty",
+    "rgba",
+    "rgb",
+    "ci",
+    "color",
+    "colour",
+    "composite",
+    "image",
+];
+
+/// The colour channels of `layer` ("" or ending in '.'): R, G, B (+ A), or
+/// Y (+ A); `None` when it has neither.
+fn layer_colour(names: &[String], layer: &str) -> Option<Vec<&'static str>> {
+    let has = |c: &str| names.iter().any(|n| *n == format!("{layer}{c}"));
+    let mut wanted = if has("R") && has("G") && has("B") {
+        vec!["R", "G", "B"]
+    } else if has("Y") {
+        vec!["Y"]
+    } else {
+        return None;
+    };
+    if has("A") {
+        wanted.push("A");
+    }
+    Some(wanted)
+}
+
+/// The channels to filter: R, G, B (+ A), or Y (+ A) of one layer, and the
+/// rest (dropped, and listed). The layer is `layer` when given; otherwise the
+/// unlayered channels, else a layer with a beauty name ([`BEAUTY_LAYERS`]),
+/// else the only layer with colour; several candidates and no beauty is an
+/// error that lists them (filtering an AOV by mistake would be silent).
+pub(crate) fn choose_channels(
+    path: &Path,
+    header: &Header,
+    layer: Option<&str>,
+) -> Result<(Vec<Selected>, Vec<String>)> {
     let names: Vec<String> = header
         .channels
         .list
         .iter()
         .map(|c| c.name.to_string())
         .collect();
-    let find = |n: &str| names.iter().position(|x| x == n);
     let mut layers: Vec<String> = vec![String::new()];
     for n in &names {
-        if let Some((layer, _)) = n.rsplit_once('.') {
-            let l = format!("{layer}.");
+        if let Some((l, _)) = n.rsplit_once('.') {
+            let l = format!("{l}.");
             if !layers.contains(&l) {
                 layers.push(l);
             }
         }
     }
-    for layer in &layers {
-        let get = |c: &str| find(&format!("{layer}{c}"));
-        let wanted: Option<Vec<&str>> = match (get("R"), get("G"), get("B"), get("Y")) {
-            (Some(_), Some(_), Some(_), _) => Some(vec!["R", "G", "B"]),
-            (_, _, _, Some(_)) => Some(vec!["Y"]),
-            _ => None,
+    let coloured: Vec<(&String, Vec<&str>)> = layers
+        .iter()
+        .filter_map(|l| layer_colour(&names, l).map(|c| (l, c)))
+        .collect();
+    let shown = |l: &str| {
+        if l.is_empty() {
+            "(unlayered)".to_string()
+        } else {
+            l.trim_end_matches('.').to_string()
+        }
+    };
+    let list = || {
+        coloured
+            .iter()
+            .map(|(l, _)| shown(l))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let chosen = if let Some(want) = layer {
+        let want = want.trim_end_matches('.');
+        let key = if want.is_empty() {
+            String::new()
+        } else {
+            format!("{want}.")
         };
-        if let Some(mut wanted) = wanted {
-            if get("A").is_some() {
-                wanted.push("A");
+        match coloured.iter().find(|(l, _)| **l == key) {
+            Some(c) => c,
+            None if coloured.is_empty() => {
+                return Err(unsupported(
+                    path,
+                    format!(
+                        "no colour channels to filter (need R,G,B or Y; the file has: {})",
+                        names.join(", ")
+                    ),
+                ))
             }
-            if wanted == ["Y"] || wanted == ["Y", "A"] {
-                if let (Some(_), Some(_)) = (get("RY"), get("BY")) {
+            None => {
+                return Err(Error::Config(format!(
+                    "{}: --layer {want:?} has no R,G,B or Y channels (layers with colour: {})",
+                    path.display(),
+                    list()
+                )))
+            }
+        }
+    } else {
+        let beauty = |l: &str| {
+            let last = l.trim_end_matches('.').rsplit('.').next().unwrap_or("");
+            BEAUTY_LAYERS.iter().any(|b| last.eq_ignore_ascii_case(b))
+        };
+        match coloured
+            .iter()
+            .find(|(l, _)| l.is_empty())
+            .or_else(|| coloured.iter().find(|(l, _)| beauty(l)))
+        {
+            Some(c) => c,
+            None => match coloured.as_slice() {
+                [only] => only,
+                [] => {
                     return Err(unsupported(
                         path,
-                        "luminance/chroma (Y, RY, BY) images are not supported",
-                    ));
+                        format!(
+                            "no colour channels to filter (need R,G,B or Y; the file has: {})",
+                            names.join(", ")
+                        ),
+                    ))
                 }
-            }
-            let selected: Vec<Selected> = wanted
-                .iter()
-                .map(|c| {
-                    let name = format!("{layer}{c}");
-                    Selected {
-                        index: find(&name).unwrap_or(0),
-                        name,
-                    }
-                })
-                .collect();
-            let dropped = names
-                .iter()
-                .filter(|n| !selected.iter().any(|s| &s.name == *n))
-                .cloned()
-                .collect();
-            return Ok((selected, dropped));
+                _ => {
+                    return Err(Error::Config(format!(
+                        "{}: several layers have colour and none is named as the beauty ({}): choose one with --layer NAME",
+                        path.display(),
+                        list()
+                    )))
+                }
+            },
+        }
+    };
+    let (layer, wanted) = chosen;
+    if wanted[0] == "Y" {
+        let has = |c: &str| names.iter().any(|n| *n == format!("{layer}{c}"));
+        if has("RY") && has("BY") {
+            return Err(unsupported(
+                path,
+                "luminance/chroma (Y, RY, BY) images are not supported",
+            ));
         }
     }
-    Err(unsupported(
-        path,
-        format!(
-            "no colour channels to filter (need R,G,B or Y; the file has: {})",
-            names.join(", ")
-        ),
-    ))
+    let selected: Vec<Selected> = wanted
+        .iter()
+        .map(|c| {
+            let name = format!("{layer}{c}");
+            Selected {
+                index: names.iter().position(|x| *x == name).unwrap_or(0),
+                name,
+            }
+        })
+        .collect();
+    let dropped = names
+        .iter()
+        .filter(|n| !selected.iter().any(|s| &s.name == *n))
+        .cloned()
+        .collect();
+    Ok((selected, dropped))
 }
 
 /// A [`Source`] over an [`ExrInput`].

@@ -151,7 +151,8 @@ fn info_describes_a_file() {
         s.contains("1262x860")
             && s.contains("piz")
             && s.contains("tiles 128x128")
-            && s.contains("R half"),
+            && s.contains("R half")
+            && s.contains("filtered: R, G, B"),
         "{s}"
     );
 }

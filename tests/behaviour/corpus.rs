@@ -53,6 +53,7 @@ fn identity_job(input: &Path, output: &Path, part: Option<PartSelect>) -> Filter
             precision: Precision::F32,
         },
         part,
+        layer: None,
         max_memory: None,
         stats: Default::default(),
     }

@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::common::*;
+use epfilt::pipeline::Sink;
 use epfilt::{filter_file, FilterJob, Method, PipelineConfig, Precision};
 use exr::prelude::*;
 
@@ -330,4 +331,156 @@ fn an_interrupted_run_leaves_nothing_behind() {
         .map(|e| e.file_name())
         .collect();
     assert_eq!(names, vec![std::ffi::OsString::from("in.exr")]);
+}
+
+/// A file with the named channels (f32, any order: the writer sorts them);
+/// channel `c` of pixel (x, y) holds `f(x, y, c)`.
+fn write_named(
+    path: &Path,
+    w: usize,
+    h: usize,
+    names: &[&str],
+    f: impl Fn(usize, usize, usize) -> f32,
+) {
+    let names: Vec<String> = names.iter().map(|s| s.to_string()).collect();
+    let mut out = epfilt::io::ExrOutput::create_new(
+        path,
+        w,
+        h,
+        &names,
+        Compression::ZIP16,
+        Precision::F32,
+        &[],
+    )
+    .unwrap();
+    let mut data = Vec::new();
+    for y in 0..h {
+        for c in 0..names.len() {
+            for x in 0..w {
+                data.push(f(x, y, c));
+            }
+        }
+    }
+    out.write_rows(0, h, &data).unwrap();
+    out.finish().unwrap();
+    out.commit().unwrap();
+}
+
+#[test]
+fn the_beauty_layer_is_filtered_not_an_aov_that_sorts_before_it() {
+    let dir = tmpdir();
+    // Blender's channel names: ViewLayer.AO sorts before ViewLayer.Combined.
+    let names = [
+        "ViewLayer.AO.R",
+        "ViewLayer.AO.G",
+        "ViewLayer.AO.B",
+        "ViewLayer.Combined.R",
+        "ViewLayer.Combined.G",
+        "ViewLayer.Combined.B",
+        "ViewLayer.Combined.A",
+        "ViewLayer.Depth.Z",
+    ];
+    let input = dir.path().join("blender.exr");
+    // Each channel holds its index: the output tells which were read.
+    write_named(&input, 6, 4, &names, |_, _, c| c as f32);
+    let out = dir.path().join("out.exr");
+    let r = filter_file(&job(&input, &out, Method::Box, 1), &|_, _| {}).unwrap();
+    assert_eq!(
+        r.channels,
+        [
+            "ViewLayer.Combined.R",
+            "ViewLayer.Combined.G",
+            "ViewLayer.Combined.B",
+            "ViewLayer.Combined.A"
+        ]
+    );
+    assert!(r.dropped_channels.contains(&"ViewLayer.AO.R".to_string()));
+    // Box at S = 1 is the identity: Combined.R (written 3rd in `names`) is 3.
+    let meta = exr::meta::MetaData::read_from_file(&out, false).unwrap();
+    let got: Vec<String> = meta.headers[0]
+        .channels
+        .list
+        .iter()
+        .map(|c| c.name.to_string())
+        .collect();
+    assert_eq!(
+        got,
+        [
+            "ViewLayer.Combined.A",
+            "ViewLayer.Combined.B",
+            "ViewLayer.Combined.G",
+            "ViewLayer.Combined.R"
+        ]
+    );
+    let img = exr::prelude::read_all_flat_layers_from_file(&out).unwrap();
+    let r_plane = img.layer_data[0]
+        .channel_data
+        .list
+        .iter()
+        .find(|c| c.name.to_string() == "ViewLayer.Combined.R")
+        .unwrap()
+        .sample_data
+        .values_as_f32()
+        .collect::<Vec<_>>();
+    assert!(r_plane.iter().all(|&v| v == 3.0), "{r_plane:?}");
+
+    // --layer chooses another one.
+    let mut j = job(&input, &out, Method::Box, 1);
+    j.layer = Some("ViewLayer.AO".into());
+    let r = filter_file(&j, &|_, _| {}).unwrap();
+    assert_eq!(
+        r.channels,
+        ["ViewLayer.AO.R", "ViewLayer.AO.G", "ViewLayer.AO.B"]
+    );
+}
+
+#[test]
+fn several_aov_layers_and_no_beauty_is_a_clear_error_naming_them() {
+    let dir = tmpdir();
+    let names = [
+        "albedo.R",
+        "albedo.G",
+        "albedo.B",
+        "diffuse.R",
+        "diffuse.G",
+        "diffuse.B",
+        "depth.Z",
+    ];
+    let input = dir.path().join("aovs.exr");
+    write_named(&input, 5, 3, &names, |_, _, c| c as f32);
+    let out = dir.path().join("out.exr");
+    let e = filter_file(&job(&input, &out, Method::Box, 1), &|_, _| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("aovs.exr") && e.contains("albedo, diffuse") && e.contains("--layer"),
+        "{e}"
+    );
+    assert!(!e.contains('\n'), "one line: {e}");
+    assert!(!out.exists());
+
+    let mut j = job(&input, &out, Method::Box, 1);
+    j.layer = Some("depth".into());
+    let e = filter_file(&j, &|_, _| {}).unwrap_err().to_string();
+    assert!(
+        e.contains("\"depth\"") && e.contains("albedo, diffuse"),
+        "{e}"
+    );
+
+    // A trailing dot is accepted too.
+    j.layer = Some("diffuse.".into());
+    let r = filter_file(&j, &|_, _| {}).unwrap();
+    assert_eq!(r.channels, ["diffuse.R", "diffuse.G", "diffuse.B"]);
+
+    // One layer with colour is taken without asking.
+    let single = dir.path().join("single.exr");
+    write_named(
+        &single,
+        5,
+        3,
+        &["render.R", "render.G", "render.B", "depth.Z"],
+        |_, _, c| c as f32,
+    );
+    let r = filter_file(&job(&single, &out, Method::Box, 1), &|_, _| {}).unwrap();
+    assert_eq!(r.channels, ["render.R", "render.G", "render.B"]);
 }
