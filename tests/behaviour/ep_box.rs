@@ -461,47 +461,15 @@ proptest! {
 }
 
 mod files {
-    use std::path::Path;
     use std::process::Command;
 
-    use epfilt::io::ExrOutput;
-    use epfilt::pipeline::Sink;
-    use epfilt::Precision;
-    use exr::prelude::Compression;
-
-    use crate::exr_io::tmpdir;
+    use crate::exr_io::{tmpdir, write_named as write};
 
     fn epfilt(args: &[&str]) -> std::process::Output {
         Command::new(env!("CARGO_BIN_EXE_epfilt"))
             .args(args)
             .output()
             .expect("run epfilt")
-    }
-
-    /// A `w x h` file of `channels`, each pixel's values from `f(x, y, c)`.
-    fn write(
-        path: &Path,
-        w: usize,
-        h: usize,
-        channels: &[&str],
-        ints: &[(&str, i32)],
-        f: impl Fn(usize, usize, usize) -> f32,
-    ) {
-        let names: Vec<String> = channels.iter().map(|s| s.to_string()).collect();
-        let mut out =
-            ExrOutput::create_new(path, w, h, &names, Compression::ZIP16, Precision::F32, ints)
-                .unwrap();
-        let mut data = Vec::new();
-        for y in 0..h {
-            for c in 0..channels.len() {
-                for x in 0..w {
-                    data.push(f(x, y, c));
-                }
-            }
-        }
-        out.write_rows(0, h, &data).unwrap();
-        out.finish().unwrap();
-        out.commit().unwrap();
     }
 
     const RGBV: [&str; 6] = ["R", "G", "B", "variance.R", "variance.G", "variance.B"];

@@ -333,13 +333,15 @@ fn an_interrupted_run_leaves_nothing_behind() {
     assert_eq!(names, vec![std::ffi::OsString::from("in.exr")]);
 }
 
-/// A file with the named channels (f32, any order: the writer sorts them);
-/// channel `c` of pixel (x, y) holds `f(x, y, c)`.
-fn write_named(
+/// A `w x h` f32 file of the named channels (any order: the writer sorts
+/// them) with integer header attributes `ints`; channel `c` of pixel (x, y)
+/// holds `f(x, y, c)`.
+pub fn write_named(
     path: &Path,
     w: usize,
     h: usize,
     names: &[&str],
+    ints: &[(&str, i32)],
     f: impl Fn(usize, usize, usize) -> f32,
 ) {
     let names: Vec<String> = names.iter().map(|s| s.to_string()).collect();
@@ -350,7 +352,7 @@ fn write_named(
         &names,
         Compression::ZIP16,
         Precision::F32,
-        &[],
+        ints,
     )
     .unwrap();
     let mut data = Vec::new();
@@ -382,7 +384,7 @@ fn the_beauty_layer_is_filtered_not_an_aov_that_sorts_before_it() {
     ];
     let input = dir.path().join("blender.exr");
     // Each channel holds its index: the output tells which were read.
-    write_named(&input, 6, 4, &names, |_, _, c| c as f32);
+    write_named(&input, 6, 4, &names, &[], |_, _, c| c as f32);
     let out = dir.path().join("out.exr");
     let r = filter_file(&job(&input, &out, Method::Box, 1), &|_, _| {}).unwrap();
     assert_eq!(
@@ -447,7 +449,7 @@ fn several_aov_layers_and_no_beauty_is_a_clear_error_naming_them() {
         "depth.Z",
     ];
     let input = dir.path().join("aovs.exr");
-    write_named(&input, 5, 3, &names, |_, _, c| c as f32);
+    write_named(&input, 5, 3, &names, &[], |_, _, c| c as f32);
     let out = dir.path().join("out.exr");
     let e = filter_file(&job(&input, &out, Method::Box, 1), &|_, _| {})
         .unwrap_err()
@@ -479,6 +481,7 @@ fn several_aov_layers_and_no_beauty_is_a_clear_error_naming_them() {
         5,
         3,
         &["render.R", "render.G", "render.B", "depth.Z"],
+        &[],
         |_, _, c| c as f32,
     );
     let r = filter_file(&job(&single, &out, Method::Box, 1), &|_, _| {}).unwrap();
