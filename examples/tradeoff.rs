@@ -33,7 +33,7 @@ const METHODS: [&str; 7] = [
     "median",
     "alpha-trim",
 ];
-const SETTINGS: [&str; 9] = [
+const SETTINGS: [&str; 10] = [
     "tolerance",
     "width_step",
     "max_radius",
@@ -41,6 +41,7 @@ const SETTINGS: [&str; 9] = [
     "d",
     "confidence",
     "guard",
+    "guard_confidence",
     "clamp",
     "alpha",
 ];
@@ -86,7 +87,8 @@ fn defaults(method: &str) -> BTreeMap<&'static str, String> {
             set("d", "5");
             set("confidence", "0.8");
             set("max_radius", "8");
-            set("guard", "range");
+            set("guard", "both");
+            set("guard_confidence", "0.99");
         }
         "gauss" => set("cutoff", "3"),
         "clamp" => set("clamp", "10"),
@@ -116,7 +118,7 @@ fn grid(quick: bool) -> Vec<(&'static str, Vec<Axis>)> {
                 vec![
                     ("d", vec!["2", "5", "20"]),
                     ("max_radius", vec!["4", "16"]),
-                    ("guard", vec!["none", "range"]),
+                    ("guard", vec!["none", "range", "both"]),
                 ],
             ),
             ("gauss", vec![]),
@@ -146,6 +148,7 @@ fn grid(quick: bool) -> Vec<(&'static str, Vec<Axis>)> {
                     ("confidence", vec!["0.5", "0.8", "0.95", "0.99"]),
                     ("max_radius", vec!["2", "4", "8", "16", "32", "64"]),
                     ("guard", vec!["none", "range", "stderr", "both"]),
+                    ("guard_confidence", vec!["0.8", "0.95", "0.99", "0.999"]),
                 ],
             ),
             ("gauss", vec![("cutoff", vec!["2", "3", "4"])]),
@@ -362,10 +365,123 @@ fn main() -> Result<()> {
     }
     write_csv(&out_dir.join("tradeoff.csv"), &rows)?;
     plot(&out_dir.join("tradeoff.png"), &rows, &scenes)?;
-    let md = markdown(&rows, &scenes, &size, quick);
+    let mut md = markdown(&rows, &scenes, &size, quick);
+    md.push_str(&guard_study(&bin, work.path(), &out_dir, &size, quick)?);
     std::fs::write(out_dir.join("tradeoff.md"), &md)?;
     print!("{md}");
     Ok(())
+}
+
+/// The ep-box guards from few to many samples per pixel: RMSE against truth
+/// of the input and of each guard, as a Markdown section (and
+/// `tradeoff-guards.csv`). The 9-sample trade above cannot show it: a guard
+/// that is best at 9 samples can leave a 256-sample render worse than it was.
+fn guard_study(bin: &Path, work: &Path, out_dir: &Path, size: &str, quick: bool) -> Result<String> {
+    let (scenes, spps): (&[&str], &[&str]) = if quick {
+        (&["mixed"], &["4", "64"])
+    } else {
+        (
+            &["mixed", "penumbra", "glossy", "light-edge", "caustic"],
+            &["4", "16", "64", "256"],
+        )
+    };
+    let guards: [(&str, &str, &str); 5] = [
+        ("none", "none", "0.99"),
+        ("range", "range", "0.99"),
+        ("stderr", "stderr", "0.99"),
+        ("both, 80% bound", "both", "0.8"),
+        ("both (default)", "both", "0.99"),
+    ];
+    let s = |p: &Path| p.to_string_lossy().into_owned();
+    let input = work.join("g.exr");
+    let truth = work.join("g-truth.exr");
+    let output = work.join("g-out.exr");
+    let rmse = |a: &Path| -> Result<f64> {
+        let c: Value = serde_json::from_str(&run_cmd(
+            bin,
+            &["compare", &s(a), &s(&truth), "--json"].map(String::from),
+        )?)?;
+        Ok(c["rmse"].as_f64().unwrap_or(f64::NAN))
+    };
+    let mut md = format!(
+        "## ep-box guards from 4 to 256 samples per pixel ({size})\n\n\
+         RMSE against truth of the input and of ep-box with each guard (other settings at their \
+         defaults); bold: the lowest of the row. `stderr` and `both` spread at most `t * S_p` of a \
+         pixel's excess, `t` at the bound's confidence.\n\n| scene | spp | input |"
+    );
+    let mut csv = String::from("scene,spp,guard,guard_confidence,rmse,input_rmse\n");
+    for (name, _, _) in &guards {
+        let _ = write!(md, " {name} |");
+    }
+    md.push_str("\n|---|---|---|");
+    md.push_str(&"---|".repeat(guards.len()));
+    md.push('\n');
+    let mut worst_ratio = 0.0f64;
+    for scene in scenes {
+        for spp in spps {
+            eprintln!("guard study: {scene} at {spp} spp");
+            run_cmd(
+                bin,
+                &[
+                    "synth",
+                    "-q",
+                    "--scene",
+                    scene,
+                    "--size",
+                    size,
+                    "--spp",
+                    spp,
+                    "--variance",
+                    "-o",
+                    &s(&input),
+                    "--truth",
+                    &s(&truth),
+                ]
+                .map(String::from),
+            )?;
+            let base = rmse(&input)?;
+            let mut errs = Vec::new();
+            for (_, g, gc) in &guards {
+                run_cmd(
+                    bin,
+                    &[
+                        "filter",
+                        &s(&input),
+                        &s(&output),
+                        "-q",
+                        "--method",
+                        "ep-box",
+                        "--guard",
+                        g,
+                        "--guard-confidence",
+                        gc,
+                    ]
+                    .map(String::from),
+                )?;
+                let e = rmse(&output)?;
+                let _ = writeln!(csv, "{scene},{spp},{g},{gc},{e:.6e},{base:.6e}");
+                errs.push(e);
+            }
+            worst_ratio = worst_ratio.max(errs[errs.len() - 1] / base);
+            let best = errs.iter().copied().fold(f64::INFINITY, f64::min);
+            let _ = write!(md, "| {scene} | {spp} | {base:.4} |");
+            for e in errs {
+                if e == best {
+                    let _ = write!(md, " **{e:.4}** |");
+                } else {
+                    let _ = write!(md, " {e:.4} |");
+                }
+            }
+            md.push('\n');
+        }
+    }
+    let _ = writeln!(
+        md,
+        "\nThe default's RMSE is at most {:.3} x the input's in every row.",
+        worst_ratio
+    );
+    std::fs::write(out_dir.join("tradeoff-guards.csv"), csv)?;
+    Ok(md)
 }
 
 fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {

@@ -241,9 +241,13 @@ struct FilterArgs {
     #[arg(long, default_value_t = 8)]
     passes: usize,
     /// ep-box: guard against spreading real features: none (§5.1 as written),
-    /// range, stderr or both.
-    #[arg(long, default_value = "range")]
+    /// range (not above a converged neighbour), stderr (no more than noise
+    /// can explain) or both.
+    #[arg(long, default_value = "both")]
     guard: String,
+    /// ep-box: confidence of the stderr guard's bound on the excess noise can explain.
+    #[arg(long, default_value_t = 0.99)]
+    guard_confidence: f64,
     /// Kernel cut-off in radii.
     #[arg(long, default_value_t = 3.0)]
     cutoff: f64,
@@ -504,6 +508,7 @@ fn filter(a: FilterArgs) -> Result<()> {
         ltvis: a.ltvis,
         passes: a.passes,
         guard: epfilt::filter::ep_box::Guard::parse(&a.guard)?,
+        guard_confidence: a.guard_confidence,
         ..a.stats.params()?
     };
     params.radius = a.radius;

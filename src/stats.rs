@@ -109,8 +109,12 @@ pub struct EpBoxReport {
     pub variance_kind: String,
     /// Where the sample count came from.
     pub spp_from: String,
-    /// Noisy pixels a guard left alone.
+    /// Confidence of the `stderr` guard's bound.
+    pub guard_confidence: f64,
+    /// Noisy pixels the `range` guard left alone.
     pub guarded: u64,
+    /// Pixels whose excess the `stderr` guard cut to what noise can explain.
+    pub trimmed: u64,
     /// Noisy pixels with no converged pixel within the passes' reach (left alone).
     pub unresolved: u64,
     /// Most passes allowed.
@@ -160,7 +164,7 @@ impl Report {
         }
         if let Some(e) = &self.ep_box {
             s.push_str(&format!(
-                "  ep-box: L_tvis {:.4e}{}, D {}, {}% confidence, guard {}; noisy pixels {}, spread {}, guarded {}, unresolved {}, passes {}\n",
+                "  ep-box: L_tvis {:.4e}{}, D {}, {}% confidence, guard {}; noisy pixels {}, spread {}, guarded {}, trimmed {}, unresolved {}, passes {}\n",
                 e.l_tvis,
                 e.l_ave.map(|l| format!(" (L_ave {l:.4e})")).unwrap_or_default(),
                 e.d,
@@ -169,6 +173,7 @@ impl Report {
                 self.samples_noisy,
                 self.samples_spread,
                 e.guarded,
+                e.trimmed,
                 e.unresolved,
                 e.passes_used
             ));

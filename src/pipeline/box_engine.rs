@@ -58,6 +58,8 @@ pub struct BoxEngine {
     ltvis: f64,
     dl: f64,
     t: TFactor,
+    /// Factors of the `stderr` guard's bound.
+    tg: TFactor,
     ring: Ring,
     passes: usize,
     reach: usize,
@@ -65,7 +67,8 @@ pub struct BoxEngine {
     precision: Precision,
     input: RowWindow<f32>,
     ylum: RowWindow<f64>,
-    tse: RowWindow<f64>,
+    /// `t_g * S_p`: the most of a pixel's excess that noise can explain.
+    cap: RowWindow<f64>,
     noisy: RowWindow<u8>,
     kept: RowWindow<f64>,
     acc: RowWindow<f64>,
@@ -150,6 +153,7 @@ impl BoxEngine {
             ltvis,
             dl: params.d * ltvis,
             t: TFactor::new(params.confidence),
+            tg: TFactor::new(params.guard_confidence),
             passes: params.passes,
             reach: ring.radius(),
             ring,
@@ -157,7 +161,7 @@ impl BoxEngine {
             precision,
             input: RowWindow::new(nall * w),
             ylum: RowWindow::new(w),
-            tse: RowWindow::new(w),
+            cap: RowWindow::new(w),
             noisy: RowWindow::new(w),
             kept: RowWindow::new(nch * w),
             acc: RowWindow::new(nch * w),
@@ -223,7 +227,7 @@ impl BoxEngine {
         for row in strip.data.chunks(row_len) {
             self.input.push_copy(row);
             self.ylum.push_stale(0.0);
-            self.tse.push_stale(0.0);
+            self.cap.push_stale(0.0);
             self.noisy.push_stale(0);
         }
         self.rows_in += strip.rows;
@@ -231,18 +235,20 @@ impl BoxEngine {
         self.advance()
     }
 
-    /// Luminance, `t * S_p` and the noise flag of rows `a..b`.
+    /// Luminance, the noise flag (`t * S_p > D * L_tvis`) and the guard's bound of rows
+    /// `a..b`.
     fn statistics(&mut self, a: usize, b: usize) {
         let (w, nch) = (self.w, self.nch);
-        let (input, lum, stats, t, dl) = (&self.input, &self.lum, &self.stats, &self.t, self.dl);
+        let (input, lum, stats, dl) = (&self.input, &self.lum, &self.stats, self.dl);
+        let (t, tg) = (&self.t, &self.tg);
         let ys = self.ylum.range_mut(a, b);
-        let ts = self.tse.range_mut(a, b);
+        let cs = self.cap.range_mut(a, b);
         let fs = self.noisy.range_mut(a, b);
         ys.into_par_iter()
-            .zip(ts)
+            .zip(cs)
             .zip(fs)
             .enumerate()
-            .for_each(|(k, ((yrow, trow), frow))| {
+            .for_each(|(k, ((yrow, crow), frow))| {
                 let row = input.get(a + k);
                 let ch = |c: usize, x: usize| row[c * w + x] as f64;
                 let mut var = [0.0f64; 3];
@@ -265,10 +271,10 @@ impl BoxEngine {
                         _ => y,
                     };
                     let weights = if nv == 3 { &lum[..3] } else { &lum[..1] };
-                    let tse = t.get(n) * se2(stats.kind, &var[..nv], weights, mean_y, n).sqrt();
+                    let se = se2(stats.kind, &var[..nv], weights, mean_y, n).sqrt();
                     // NaN (fewer than 2 samples) is not noisy: it cannot be tested.
-                    trow[x] = tse;
-                    frow[x] = u8::from(tse > dl);
+                    frow[x] = u8::from(t.get(n) * se > dl);
+                    crow[x] = tg.get(n) * se;
                 }
             });
     }
@@ -286,7 +292,7 @@ impl BoxEngine {
             let keep = self.treat_done.saturating_sub(self.passes + GUARD_REACH);
             self.input.evict_below(keep);
             self.ylum.evict_below(keep);
-            self.tse.evict_below(keep);
+            self.cap.evict_below(keep);
             self.noisy.evict_below(keep);
         }
         let out_target = if self.treat_done == h {
@@ -328,7 +334,7 @@ impl BoxEngine {
             nch,
             input: &self.input,
             ylum: &self.ylum,
-            tse: &self.tse,
+            cap: &self.cap,
             noisy: &self.noisy,
             lum: &self.lum,
             passes: self.passes,
@@ -357,6 +363,7 @@ impl BoxEngine {
             k.spread += c.spread;
             k.capped += c.capped;
             k.guarded += c.guarded;
+            k.trimmed += c.trimmed;
             k.unresolved += c.unresolved;
             k.passes = k.passes.max(c.passes);
         }
@@ -371,7 +378,7 @@ struct Band<'a> {
     nch: usize,
     input: &'a RowWindow<f32>,
     ylum: &'a RowWindow<f64>,
-    tse: &'a RowWindow<f64>,
+    cap: &'a RowWindow<f64>,
     noisy: &'a RowWindow<u8>,
     lum: &'a [f64],
     passes: usize,
@@ -480,7 +487,13 @@ impl Band<'_> {
                     excess = 0.0;
                 }
                 if matches!(self.guard, Guard::StdError | Guard::Both) {
-                    excess = excess.min(self.tse.get(ba + r)[x]);
+                    let cap = self.cap.get(ba + r)[x];
+                    if excess > cap {
+                        excess = cap;
+                        if target {
+                            counters.trimmed += 1;
+                        }
+                    }
                 }
                 // Below one visibility step it would come back to the pixel
                 // itself: nothing to spread.

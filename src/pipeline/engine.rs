@@ -123,6 +123,9 @@ pub struct Counters {
     pub capped: u64,
     /// ep-box: noisy pixels a guard left alone.
     pub guarded: u64,
+    /// ep-box: pixels whose excess the `stderr` guard cut to what noise can
+    /// explain.
+    pub trimmed: u64,
     /// ep-box: noisy pixels with no converged pixel within the passes' reach.
     pub unresolved: u64,
     /// ep-box: the most passes any pixel needed.

@@ -235,7 +235,7 @@ fn estimate_box_bytes(job: &Job, cfg: &PipelineConfig, block_bytes: u64, halo: H
     } else {
         cfg.threads
     } as u64;
-    // Input rows with their luminance, t*S_p and flag; kept and accumulator
+    // Input rows with their luminance, guard bound and flag; kept and accumulator
     // rows; each task's band arrays; strips in flight; the codec's blocks.
     let per_in = w.saturating_mul(nall * 4 + 8 + 8 + 1);
     let windows = per_in.saturating_mul(2 * p + strip + 2)
