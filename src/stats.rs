@@ -177,6 +177,16 @@ impl Report {
                 e.unresolved,
                 e.passes_used
             ));
+            if e.unresolved > 0 {
+                let pixels = (self.out_width * self.out_height).max(1) as f64;
+                s.push_str(&format!(
+                    "  note: {} noisy pixels ({:.1}% of the image) have no converged pixel within {} passes and are left as they are; \
+                     more samples (see `epfilt plan`), more --passes or a larger --ltvis would reach them\n",
+                    e.unresolved,
+                    100.0 * e.unresolved as f64 / pixels,
+                    e.passes_allowed
+                ));
+            }
         }
         if let Some(r) = self.peak_rss_bytes {
             s.push_str(&format!(
