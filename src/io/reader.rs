@@ -619,6 +619,15 @@ pub(crate) fn choose_channels(
         .iter()
         .filter_map(|l| layer_colour(&names, l).map(|c| (l, c)))
         .collect();
+    if coloured.is_empty() {
+        return Err(unsupported(
+            path,
+            format!(
+                "no colour channels to filter (need R,G,B or Y; the file has: {})",
+                names.join(", ")
+            ),
+        ));
+    }
     let shown = |l: &str| {
         if l.is_empty() {
             "(unlayered)".to_string()
@@ -642,15 +651,6 @@ pub(crate) fn choose_channels(
         };
         match coloured.iter().find(|(l, _)| **l == key) {
             Some(c) => c,
-            None if coloured.is_empty() => {
-                return Err(unsupported(
-                    path,
-                    format!(
-                        "no colour channels to filter (need R,G,B or Y; the file has: {})",
-                        names.join(", ")
-                    ),
-                ))
-            }
             None => {
                 return Err(Error::Config(format!(
                     "{}: --layer {want:?} has no R,G,B or Y channels (layers with colour: {})",
@@ -672,15 +672,6 @@ pub(crate) fn choose_channels(
             Some(c) => c,
             None => match coloured.as_slice() {
                 [only] => only,
-                [] => {
-                    return Err(unsupported(
-                        path,
-                        format!(
-                            "no colour channels to filter (need R,G,B or Y; the file has: {})",
-                            names.join(", ")
-                        ),
-                    ))
-                }
                 _ => {
                     return Err(Error::Config(format!(
                         "{}: several layers have colour and none is named as the beauty ({}): choose one with --layer NAME",
