@@ -282,3 +282,60 @@ fn read_only_destination_is_one_line_and_leaves_nothing() {
     assert!(leftovers.is_empty(), "{leftovers:?}");
     assert_eq!(std::fs::read(&inp).unwrap(), before);
 }
+
+#[test]
+fn sigterm_and_sigint_mid_run_leave_no_output_and_the_input_untouched() {
+    let dir = tmpdir();
+    let inp = dir.path().join("big.exr");
+    // 4608x4608 samples: long enough (about a second) to be signalled mid-run.
+    let o = epfilt(&[
+        "synth",
+        "-q",
+        "--size",
+        "1536x1536",
+        "-o",
+        inp.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let before = std::fs::read(&inp).unwrap();
+    let outdir = dir.path().join("out");
+    std::fs::create_dir(&outdir).unwrap();
+    let out = outdir.join("filtered.exr");
+    let mut interrupted = 0;
+    for sig in [libc::SIGTERM, libc::SIGINT] {
+        let child = Command::new(env!("CARGO_BIN_EXE_epfilt"))
+            .args(["filter", inp.to_str().unwrap(), out.to_str().unwrap(), "-q"])
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .expect("spawn epfilt");
+        // Wait until the temporary output exists: the run is under way.
+        let t0 = std::time::Instant::now();
+        while std::fs::read_dir(&outdir).unwrap().next().is_none() {
+            assert!(t0.elapsed().as_secs() < 30, "no temporary file appeared");
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        // SAFETY: kill(2) on our own child's pid; no memory is involved.
+        let rc = unsafe { libc::kill(child.id() as libc::pid_t, sig) };
+        assert_eq!(rc, 0);
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        if o.status.success() {
+            // The run finished before the signal was handled: then the
+            // output is complete; remove it and try nothing more.
+            eprintln!("signal {sig} arrived after the run finished");
+            std::fs::remove_file(&out).unwrap();
+            continue;
+        }
+        assert_eq!(o.status.code(), Some(2), "signal {sig}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "not one line: {err}");
+        assert!(err.contains("interrupted"), "{err}");
+        let left: Vec<_> = std::fs::read_dir(&outdir).unwrap().flatten().collect();
+        assert!(left.is_empty(), "signal {sig} left {left:?}");
+        interrupted += 1;
+    }
+    assert!(
+        interrupted > 0,
+        "no run was interrupted: the input is too small"
+    );
+    assert!(std::fs::read(&inp).unwrap() == before, "input changed");
+}
