@@ -1,7 +1,7 @@
 //! Files in, files out: every layout and codec the reader handles gives the
 //! same result as filtering the decoded pixels in memory.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use crate::common::*;
 use epfilt::pipeline::Sink;
@@ -300,10 +300,6 @@ fn size_not_a_multiple_of_s_is_refused() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("multiple of --supersample 3"), "{err}");
-}
-
-pub fn corpus_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/exr-corpus")
 }
 
 #[test]
