@@ -9,7 +9,7 @@
 
 use std::path::{Path, PathBuf};
 
-use exr::block::chunk::{Chunk, TileCoordinates};
+use exr::block::chunk::{Chunk, CompressedBlock, TileCoordinates};
 use exr::block::UncompressedBlock;
 use exr::io::{PeekRead, Tracking};
 use exr::meta::attribute::SampleType;
@@ -271,7 +271,7 @@ impl ExrInput {
                 "the block layout does not cover the data window",
             ));
         }
-        Ok(ExrInput {
+        let input = ExrInput {
             path: path.into(),
             map,
             meta,
@@ -280,7 +280,22 @@ impl ExrInput {
             rows,
             dropped,
             aux: 0,
-        })
+        };
+        // What a decoder allocates per block comes from the header: bound it
+        // before any command reads pixels (filter checks its whole job
+        // against --max-memory as well).
+        let limit = crate::job::default_max_memory();
+        if input.block_bytes() > limit {
+            return Err(invalid(
+                path,
+                format!(
+                    "one block of this file claims {} MiB decoded, more than the {} MiB a block may take",
+                    input.block_bytes() >> 20,
+                    limit >> 20
+                ),
+            ));
+        }
+        Ok(input)
     }
 
     /// The file.
@@ -448,6 +463,25 @@ impl ExrInput {
                 ),
             ));
         }
+        // Sizes the chunk claims, before a decoder allocates them (an
+        // allocation failure aborts; see `chunk_sizes`).
+        let block_size = header
+            .get_absolute_block_pixel_coordinates(found)
+            .map_err(|e| Error::from_exr(path, e, &format!("chunk at byte {offset}")))?
+            .size;
+        let data: &[u8] = match &chunk.compressed_block {
+            CompressedBlock::ScanLine(b) => &b.compressed_pixels_le,
+            CompressedBlock::Tile(t) => &t.compressed_pixels_le,
+            _ => &[],
+        };
+        super::chunk_sizes::check(
+            header.compression,
+            &header.channels,
+            block_size.0,
+            block_size.1,
+            data,
+        )
+        .map_err(|reason| invalid(path, format!("block at byte {offset}: {reason}")))?;
         // A damaged block must give an error, never take the process down: a
         // panic inside a codec becomes an error naming the block.
         let meta = &self.meta;

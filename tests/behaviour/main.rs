@@ -3,6 +3,7 @@
 mod cli;
 mod common;
 mod corpus;
+mod damaged;
 mod energy;
 mod ep_box;
 mod exr_io;

@@ -40,7 +40,9 @@ fn a_header_claiming_a_huge_image_is_refused_before_allocating() {
 fn truncated_and_bit_flipped_files_never_panic() {
     let dir = tmpdir();
     let img = fireflies(36, 27, 3, 0.02, 11);
-    let mut tried = 0;
+    // (name, bytes, S): files written here by the exr crate, and real ones
+    // written by OpenEXR (DWAA, DWAB with a float channel, tiled PXR24).
+    let mut files: Vec<(String, Vec<u8>, usize)> = Vec::new();
     for (name, comp, blocks) in [
         ("zip", Compression::ZIP16, Blocks::ScanLines),
         ("piz", Compression::PIZ, Blocks::ScanLines),
@@ -58,7 +60,17 @@ fn truncated_and_bit_flipped_files_never_panic() {
             name == "b44" || name == "piz",
             LineOrder::Increasing,
         );
-        let bytes = std::fs::read(&good).unwrap();
+        files.push((name.into(), std::fs::read(&good).unwrap(), 3));
+    }
+    for real in [
+        "small/dwaa_half_rgba.exr",
+        "small/dwab_half_rgb_float_z.exr",
+        "MultiResolution/ColorCodedLevels.exr",
+    ] {
+        let bytes = std::fs::read(crate::corpus::data_dir().join(real)).unwrap();
+        files.push((real.into(), bytes, 1));
+    }
+    for (name, bytes, s) in files {
         let bad = dir.path().join("bad.exr");
         let out = dir.path().join("out.exr");
         let mut variants: Vec<Vec<u8>> = (0..bytes.len())
@@ -75,7 +87,7 @@ fn truncated_and_bit_flipped_files_never_panic() {
         for v in variants {
             std::fs::write(&bad, &v).unwrap();
             let r = std::panic::catch_unwind(|| {
-                filter_file(&job(&bad, &out, Method::EpGauss, 3), &|_, _| {})
+                filter_file(&job(&bad, &out, Method::EpGauss, s), &|_, _| {})
             });
             match r {
                 Err(_) => panic!("{name}: panic on a damaged file"),
@@ -88,11 +100,8 @@ fn truncated_and_bit_flipped_files_never_panic() {
                 }
                 Ok(Ok(report)) => assert!(report.energy_rel_error.iter().all(|e| *e <= 1e-12)),
             }
-            tried += 1;
         }
     }
-    eprintln!("damaged variants tried: {tried}");
-    assert!(tried > 600);
 }
 
 #[test]
@@ -129,12 +138,18 @@ fn nonfinite_samples_are_refused_or_counted_as_zero() {
     assert!(report.energy_rel_error.iter().all(|e| *e <= 1e-12));
     let got = crate::exr_io::read_planar(&out);
     assert!(got.data.iter().all(|v| v.is_finite()));
-    // The corpus file full of NaN and Inf filters too.
-    let rings = crate::exr_io::corpus_dir().join("TestImages/BrightRingsNanInf.exr");
-    let mut j = job(&rings, &out, Method::EpGauss, 1);
+    // A file written by OpenEXR with NaN in R, +Inf in G and -Inf in B.
+    let real = crate::corpus::data_dir().join("small/nan_inf_half_rgb.exr");
+    let err = filter_file(&job(&real, &out, Method::EpGauss, 1), &|_, _| {})
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("(4, 3)") && err.contains("channel R"), "{err}");
+    let mut j = job(&real, &out, Method::EpGauss, 1);
     j.pipeline.nonfinite = NonFinite::Zero;
     let report = filter_file(&j, &|_, _| {}).unwrap();
-    assert!(report.nonfinite_zeroed.iter().sum::<u64>() > 0);
+    assert_eq!(report.channels, vec!["R", "G", "B"]);
+    assert_eq!(report.nonfinite_zeroed, vec![1, 1, 1]);
+    assert_eq!(report.first_nonfinite, Some((4, 3, "R".to_string())));
 }
 
 /// Inputs the fuzzer (`scripts/fuzz`) crashed epfilt with, kept once fixed:
@@ -143,7 +158,6 @@ fn nonfinite_samples_are_refused_or_counted_as_zero() {
 fn fuzzer_regressions_never_panic() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz");
     let out_dir = tmpdir();
-    let mut n = 0;
     for entry in std::fs::read_dir(&dir).expect("tests/data/fuzz") {
         let file = entry.unwrap().path();
         for s in 1..=3 {
@@ -160,9 +174,7 @@ fn fuzzer_regressions_never_panic() {
                 if let Err(e) = r {
                     assert!(!e.to_string().contains("panicked"), "{m:?} S={s}: {e}");
                 }
-                n += 1;
             }
         }
     }
-    assert!(n >= 9);
 }
