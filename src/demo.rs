@@ -142,6 +142,6 @@ pub fn run(dir: &Path, w: usize, h: usize, log: &dyn Fn(&str)) -> Result<String>
          eps = (0.01 * mean |truth|)^2; PSNR after the display mapping of `epfilt preview`.\n",
         dir = dir.display()
     ));
-    std::fs::write(dir.join("demo.md"), &table).map_err(|e| Error::io(dir.join("demo.md"), e))?;
+    crate::io::write_file(&dir.join("demo.md"), table.as_bytes())?;
     Ok(table)
 }

@@ -59,6 +59,16 @@ pub enum Error {
         source: std::io::Error,
     },
 
+    /// An output path epfilt will not write to (a directory, a device, a
+    /// FIFO, ...).
+    #[error("{path}: {reason}")]
+    Output {
+        /// The path as given.
+        path: PathBuf,
+        /// Why.
+        reason: String,
+    },
+
     /// The energy ledger did not balance: the output was not written.
     #[error("energy ledger does not balance (channel {channel}: relative error {rel_error:e}); output not written")]
     Ledger {
@@ -67,6 +77,10 @@ pub enum Error {
         /// Relative difference found.
         rel_error: f64,
     },
+
+    /// A broken invariant of epfilt itself (a bug: please report it).
+    #[error("internal error: {0}")]
+    Internal(String),
 
     /// The run was interrupted.
     #[error("interrupted; no output written")]

@@ -1,5 +1,7 @@
 //! The `epfilt` command: parse, call the library, report, exit.
-//! Errors print as one line (`epfilt: <file>: <cause>`) and exit with status 2.
+//! Errors print as one line (`epfilt: <file>: <cause>`). Exit status: 0 done,
+//! 1 the work failed, 2 a usage error, 128 + the signal when interrupted
+//! (130 SIGINT, 143 SIGTERM).
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -14,11 +16,20 @@ use epfilt::synth::{Sampling, Scene, SceneKind, SynthJob};
 use epfilt::{FilterJob, FilterParams, Method, PipelineConfig, Precision};
 use indicatif::{ProgressBar, ProgressStyle};
 
+/// The exit statuses, in every `--help`.
+const EXIT_HELP: &str =
+    "Outputs: a file is written whole or not at all (a temporary file renamed into \
+place); a symbolic link is written through; - is standard output; directories, devices and FIFOs \
+are refused.\n\nExit status: 0 done; 1 the work failed (a damaged or unsupported input, an I/O \
+error, an unbalanced ledger); 2 a usage error (bad arguments); 130 / 143 interrupted by SIGINT / \
+SIGTERM (unfinished outputs removed).";
+
 #[derive(Parser)]
 #[command(
     name = "epfilt",
     version,
-    about = "Energy-preserving non-linear filters for HDR renders (Rushmeier & Ward 1994)"
+    about = "Energy-preserving non-linear filters for HDR renders (Rushmeier & Ward 1994)",
+    after_help = EXIT_HELP
 )]
 struct Cli {
     #[command(subcommand)]
@@ -326,39 +337,115 @@ fn ignore_file_size_signal() {
 #[cfg(not(unix))]
 fn ignore_file_size_signal() {}
 
+/// How a command ends when it does not succeed.
+enum Exit {
+    /// The command line asks for something that cannot be done: status 2.
+    Usage(anyhow::Error),
+    /// The work failed: status 1 (or the signal's status when interrupted).
+    Failure(anyhow::Error),
+}
+
+fn usage(e: impl Into<anyhow::Error>) -> Exit {
+    Exit::Usage(e.into())
+}
+
+fn fail(e: impl Into<anyhow::Error>) -> Exit {
+    Exit::Failure(e.into())
+}
+
+/// The error and the causes it does not already spell out, as one line.
+fn one_line(e: &anyhow::Error) -> String {
+    let mut line = e.to_string();
+    for cause in e.chain().skip(1) {
+        let c = cause.to_string();
+        if !line.contains(&c) {
+            line = format!("{line}: {c}");
+        }
+    }
+    line.replace('\n', " ")
+}
+
+/// SIGINT and SIGTERM: raise `cancel` for the library, remove the temporary
+/// files of unfinished outputs, say so in one line and exit with 128 + the
+/// signal. A thread, not a handler: it may do all of that safely.
+fn watch_signals(cancel: Arc<AtomicBool>) {
+    use signal_hook::consts::{SIGINT, SIGTERM};
+    let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM]) else {
+        return;
+    };
+    let _ = std::thread::Builder::new()
+        .name("epfilt-signals".into())
+        .spawn(move || {
+            if let Some(sig) = signals.forever().next() {
+                cancel.store(true, Ordering::Relaxed);
+                epfilt::io::destination::remove_unfinished();
+                let name = if sig == SIGINT { "SIGINT" } else { "SIGTERM" };
+                // Off the progress bar's line, where there is one.
+                let nl = if std::io::stderr().is_terminal() {
+                    "\n"
+                } else {
+                    ""
+                };
+                eprintln!("{nl}epfilt: interrupted by {name}; unfinished outputs removed");
+                std::process::exit(128 + sig);
+            }
+        });
+}
+
 fn main() {
     tune_allocator();
     ignore_file_size_signal();
     epfilt::io::reader::quiet_decoder_panics();
+    let cancel = Arc::new(AtomicBool::new(false));
+    watch_signals(cancel.clone());
+    // clap prints usage errors itself and exits with status 2.
     let cli = Cli::parse();
-    if let Err(e) = dispatch(cli) {
-        // One line: the error and the causes it does not already spell out.
-        let mut line = e.to_string();
-        for cause in e.chain().skip(1) {
-            let c = cause.to_string();
-            if !line.contains(&c) {
-                line = format!("{line}: {c}");
+    let code = match dispatch(cli, cancel) {
+        Ok(()) => 0,
+        Err(Exit::Usage(e)) => {
+            eprintln!("epfilt: {}", one_line(&e));
+            2
+        }
+        Err(Exit::Failure(e)) => {
+            eprintln!("epfilt: {}", one_line(&e));
+            // The library's configuration and output-path refusals are usage
+            // errors too: the arguments do not fit the files.
+            match e.downcast_ref::<epfilt::Error>() {
+                Some(epfilt::Error::Interrupted) => 130,
+                Some(epfilt::Error::Config(_) | epfilt::Error::Output { .. }) => 2,
+                _ => 1,
             }
         }
-        eprintln!("epfilt: {line}");
-        std::process::exit(2);
-    }
+    };
+    std::process::exit(code);
 }
 
-fn dispatch(cli: Cli) -> Result<()> {
+/// Refuse to write binary data (an EXR or a PNG) to a terminal.
+fn check_binary_stdout(path: &std::path::Path) -> Result<(), Exit> {
+    if path.as_os_str() == "-" && std::io::stdout().is_terminal() {
+        return Err(usage(anyhow::anyhow!(
+            "standard output is a terminal: redirect it (epfilt ... - > out.exr) or name an output file"
+        )));
+    }
+    Ok(())
+}
+
+fn dispatch(cli: Cli, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
     match cli.command {
-        Command::Filter(args) => filter(*args),
+        Command::Filter(args) => filter(*args, cancel),
         Command::Info { input } => {
-            print!("{}", epfilt::io::info(&input)?);
+            print!("{}", epfilt::io::info(&input).map_err(fail)?);
             Ok(())
         }
         Command::Synth(args) => synth(*args),
         Command::Compare { a, b, json } => {
-            let cmp = epfilt::compare::compare_files(&a, &b)?;
+            let cmp = epfilt::compare::compare_files(&a, &b).map_err(fail)?;
             if json {
-                println!("{}", serde_json::to_string_pretty(&cmp)?);
+                println!("{}", serde_json::to_string_pretty(&cmp).map_err(fail)?);
             } else {
-                let names = epfilt::io::ExrInput::open(&b, None)?.channels();
+                let names = epfilt::io::ExrInput::open(&b, None)
+                    .map_err(fail)?
+                    .channels();
                 print!("{}", cmp.table(&names));
             }
             Ok(())
@@ -369,10 +456,14 @@ fn dispatch(cli: Cli) -> Result<()> {
             montage,
             labels,
         } => {
-            let out = paths.pop().context("preview needs an output PNG")?;
+            let out = paths
+                .pop()
+                .context("preview needs an output PNG")
+                .map_err(usage)?;
             if paths.len() > 1 && !montage {
-                anyhow::bail!("several inputs need --montage");
+                return Err(usage(anyhow::anyhow!("several inputs need --montage")));
             }
+            check_binary_stdout(&out)?;
             let labels: Vec<String> = match &labels {
                 Some(l) => l.split(',').map(|s| s.trim().to_string()).collect(),
                 None if montage => paths
@@ -386,31 +477,38 @@ fn dispatch(cli: Cli) -> Result<()> {
                 None => vec![String::new()],
             };
             if labels.len() != paths.len() {
-                anyhow::bail!("{} labels for {} inputs", labels.len(), paths.len());
+                return Err(usage(anyhow::anyhow!(
+                    "{} labels for {} inputs",
+                    labels.len(),
+                    paths.len()
+                )));
             }
             let inputs: Vec<_> = paths.into_iter().zip(labels).collect();
-            epfilt::preview::write_png(&inputs, &out, exposure)?;
+            epfilt::preview::write_png(&inputs, &out, exposure).map_err(fail)?;
             Ok(())
         }
         Command::Plan(a) => {
+            let request = a.stats.request().map_err(usage)?;
+            let params = a.stats.params().map_err(usage)?;
             let plan = epfilt::plan::plan_file(
                 &a.input,
                 a.part.as_deref().map(PartSelect::parse).as_ref(),
                 a.layer.as_deref(),
-                &a.stats.request()?,
-                &a.stats.params()?,
+                &request,
+                &params,
                 a.lmax,
-            )?;
+            )
+            .map_err(fail)?;
             if a.json {
-                println!("{}", serde_json::to_string_pretty(&plan)?);
+                println!("{}", serde_json::to_string_pretty(&plan).map_err(fail)?);
             } else {
                 print!("{}", plan.table());
             }
             Ok(())
         }
         Command::Demo { dir, size } => {
-            let (w, h) = parse_size(&size)?;
-            let text = epfilt::demo::run(&dir, w, h, &|line| eprintln!("{line}"))?;
+            let (w, h) = parse_size(&size).map_err(usage)?;
+            let text = epfilt::demo::run(&dir, w, h, &|line| eprintln!("{line}")).map_err(fail)?;
             print!("{text}");
             Ok(())
         }
@@ -424,16 +522,22 @@ fn parse_size(s: &str) -> Result<(usize, usize)> {
     Ok((w.parse().context("width")?, h.parse().context("height")?))
 }
 
-fn synth(a: SynthArgs) -> Result<()> {
-    let (w, h) = parse_size(&a.size)?;
+fn synth(a: SynthArgs) -> Result<(), Exit> {
+    let (w, h) = parse_size(&a.size).map_err(usage)?;
     let sampling = match a.spp {
         Some(n) => Sampling::Spp(n),
-        None if a.variance => anyhow::bail!("--variance goes with --spp N"),
+        None if a.variance => return Err(usage(anyhow::anyhow!("--variance goes with --spp N"))),
         None => Sampling::Supersample(a.supersample),
     };
+    check_binary_stdout(&a.output)?;
+    if a.truth.as_deref() == Some(std::path::Path::new("-")) && a.output.as_os_str() == "-" {
+        return Err(usage(anyhow::anyhow!(
+            "the output and --truth cannot both be standard output"
+        )));
+    }
     let job = SynthJob {
         scene: Scene {
-            kind: SceneKind::parse(&a.scene)?,
+            kind: SceneKind::parse(&a.scene).map_err(usage)?,
             w,
             h,
             seed: a.seed,
@@ -444,7 +548,8 @@ fn synth(a: SynthArgs) -> Result<()> {
         truth: a.truth,
         variance: a.variance,
         compression: parse_compression(&a.compression)
-            .with_context(|| format!("unknown --compression {:?}", a.compression))?,
+            .with_context(|| format!("unknown --compression {:?}", a.compression))
+            .map_err(usage)?,
         threads: a.threads,
     };
     let bar = progress_bar(a.quiet);
@@ -457,7 +562,7 @@ fn synth(a: SynthArgs) -> Result<()> {
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
-    let r = report?;
+    let r = report.map_err(fail)?;
     if !a.quiet {
         eprintln!(
             "{}: {}x{}{} in {:.2} s{}",
@@ -491,14 +596,8 @@ fn progress_bar(quiet: bool) -> Option<ProgressBar> {
     Some(b)
 }
 
-fn cancel_flag() -> Arc<AtomicBool> {
-    let flag = Arc::new(AtomicBool::new(false));
-    let f = flag.clone();
-    let _ = ctrlc::set_handler(move || f.store(true, Ordering::Relaxed));
-    flag
-}
-
-fn filter(a: FilterArgs) -> Result<()> {
+/// The filter job the arguments describe (every check that needs no file).
+fn filter_job(a: &FilterArgs, cancel: Arc<AtomicBool>) -> Result<FilterJob> {
     let method = Method::parse(&a.method)?;
     let s = a
         .supersample
@@ -534,7 +633,10 @@ fn filter(a: FilterArgs) -> Result<()> {
         }
         None => None,
     };
-    let job = FilterJob {
+    if a.output.as_os_str() == "-" && a.report.as_deref() == Some(std::path::Path::new("-")) {
+        anyhow::bail!("the output and --report cannot both be standard output");
+    }
+    Ok(FilterJob {
         input: a.input.clone(),
         output: a.output.clone(),
         params,
@@ -543,7 +645,7 @@ fn filter(a: FilterArgs) -> Result<()> {
             strip_rows: a.strip_rows,
             threads: a.threads,
             precision,
-            cancel: Some(cancel_flag()),
+            cancel: Some(cancel),
             nonfinite: match a.nonfinite.as_str() {
                 "error" => NonFinite::Error,
                 "zero" => NonFinite::Zero,
@@ -558,7 +660,16 @@ fn filter(a: FilterArgs) -> Result<()> {
         layer: a.layer.clone(),
         max_memory: a.max_memory.map(|m| m.saturating_mul(1 << 20)),
         stats: a.stats.request()?,
-    };
+    })
+}
+
+fn filter(a: FilterArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
+    let job = filter_job(&a, cancel).map_err(usage)?;
+    check_binary_stdout(&a.output)?;
+    // Check the report's path now, not after a long run.
+    if let Some(path) = &a.report {
+        epfilt::io::Destination::resolve(path).map_err(fail)?;
+    }
     let bar = progress_bar(a.quiet);
     let progress = |done: usize, total: usize| {
         if let Some(b) = &bar {
@@ -570,10 +681,10 @@ fn filter(a: FilterArgs) -> Result<()> {
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
-    let report = report?;
+    let report = report.map_err(fail)?;
     if let Some(path) = &a.report {
-        let json = serde_json::to_string_pretty(&report)?;
-        std::fs::write(path, json + "\n").with_context(|| format!("{}", path.display()))?;
+        let json = serde_json::to_string_pretty(&report).map_err(fail)? + "\n";
+        epfilt::io::write_file(path, json.as_bytes()).map_err(fail)?;
     }
     if !a.quiet {
         eprint!("{}", report.summary());

@@ -99,11 +99,11 @@ pub fn write_png(inputs: &[(PathBuf, String)], output: &Path, exposure: f64) -> 
             "preview of {width}x{height} pixels is too large"
         )));
     }
-    let temp = crate::io::temp_beside(output, ".png.tmp")?;
+    let temp = crate::io::Staged::new(output, ".png.tmp")?;
     let png_err = |e: png::EncodingError| Error::io(output, std::io::Error::other(e));
     {
         let file = temp
-            .as_file()
+            .file()
             .try_clone()
             .map_err(|e| Error::io(temp.path(), e))?;
         let mut enc = png::Encoder::new(BufWriter::new(file), width as u32, height as u32);
@@ -161,7 +161,7 @@ pub fn write_png(inputs: &[(PathBuf, String)], output: &Path, exposure: f64) -> 
         }
         stream.finish().map_err(png_err)?;
     }
-    crate::io::persist(temp.into_temp_path(), output)
+    temp.commit()
 }
 
 /// Draw `text` in white 8x8 glyphs into band row `gy` (glyph row) of a panel

@@ -3,10 +3,16 @@
 //! * [`reader`]: a memory-mapped file, its headers and offset tables, and a
 //!   [`crate::pipeline::Source`] that decodes blocks in increasing y, in
 //!   parallel, into planar f32 rows;
+//! * [`chunk_sizes`]: the sizes a compressed chunk claims, checked before a
+//!   decoder allocates them;
+//! * [`destination`]: output paths checked (links written through, `-` for
+//!   standard output, devices refused) and written through temporary files;
 //! * [`writer`]: a [`crate::pipeline::Sink`] that builds scan-line blocks,
 //!   compresses them in parallel and writes them with the chunk writer into a
 //!   temporary file in the destination directory.
 
+pub mod chunk_sizes;
+pub mod destination;
 pub mod info;
 pub mod mapped;
 pub mod reader;
@@ -14,47 +20,14 @@ pub mod variance;
 pub mod writer;
 pub mod zip;
 
+pub use destination::{write_file, Destination, Staged};
 pub use info::info;
 pub use reader::{ExrInput, PartSelect};
 pub use variance::{find_stats, SppFrom, StatsChannels, StatsRequest};
 pub use writer::{ExrOutput, OutputSettings};
 
-use std::path::{Path, PathBuf};
-
 use exr::meta::attribute::Chromaticities;
 use exr::prelude::Compression;
-
-/// A temporary file in `dest`'s directory (so the final rename is atomic),
-/// named `.epfilt-*<suffix>`; removed if dropped before [`persist`].
-pub fn temp_beside(dest: &Path, suffix: &str) -> crate::Result<tempfile::NamedTempFile> {
-    let dir = match dest.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    tempfile::Builder::new()
-        .prefix(".epfilt-")
-        .suffix(suffix)
-        .tempfile_in(&dir)
-        // tempfile appends "at path <temp name>" to the cause: the folder is
-        // what the user named, so report the bare OS error against it.
-        .map_err(|e| {
-            let text = e.to_string();
-            let cause = text.split(" at path ").next().unwrap_or(&text).to_string();
-            crate::Error::io(&dir, std::io::Error::new(e.kind(), cause))
-        })
-}
-
-/// Give a finished temporary file ordinary permissions (0644) and rename it
-/// to `dest`.
-pub fn persist(temp: tempfile::TempPath, dest: &Path) -> crate::Result<()> {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        let _ = std::fs::set_permissions(&temp, std::fs::Permissions::from_mode(0o644));
-    }
-    temp.persist(dest)
-        .map_err(|e| crate::Error::io(dest, e.error))
-}
 
 /// Luminance weights (the Y row of the RGB→XYZ matrix) of a file's
 /// chromaticities; Rec. 709 / sRGB primaries when absent or degenerate.

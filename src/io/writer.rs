@@ -4,7 +4,6 @@
 //! into place only by [`ExrOutput::commit`], after the caller has checked the
 //! energy ledger; dropped uncommitted, it is removed.
 
-use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::thread::JoinHandle;
@@ -34,7 +33,7 @@ pub struct OutputSettings {
 /// An output file being written.
 pub struct ExrOutput {
     dest: PathBuf,
-    temp: Option<tempfile::TempPath>,
+    staged: Option<super::Staged>,
     headers: SmallVec<[Header; 3]>,
     w: usize,
     nch: usize,
@@ -145,7 +144,7 @@ impl ExrOutput {
         precision: Precision,
     ) -> Result<Self> {
         let (w, _) = (header.layer_size.0, header.layer_size.1);
-        let temp = super::temp_beside(dest, ".exr.tmp")?;
+        let staged = super::Staged::new(dest, ".exr.tmp")?;
         let order: Vec<usize> = header
             .channels
             .list
@@ -160,10 +159,10 @@ impl ExrOutput {
         let lines = header.compression.scan_lines_per_block();
         let headers: SmallVec<[Header; 3]> = SmallVec::from_vec(vec![header]);
 
-        let file = temp
-            .as_file()
+        let file = staged
+            .file()
             .try_clone()
-            .map_err(|e| Error::io(temp.path(), e))?;
+            .map_err(|e| Error::io(staged.path(), e))?;
         let (tx, rx) = crossbeam_channel::bounded::<(usize, Chunk)>(4);
         let thread_headers = headers.clone();
         let tpath = dest.to_path_buf();
@@ -179,10 +178,10 @@ impl ExrOutput {
                 })
                 .map_err(|e| Error::from_exr(&tpath, e, "writing"))
             })
-            .map_err(|e| Error::io(temp.path(), e))?;
+            .map_err(|e| Error::io(staged.path(), e))?;
         Ok(ExrOutput {
             dest: dest.to_path_buf(),
-            temp: Some(temp.into_temp_path()),
+            staged: Some(staged),
             headers,
             w,
             nch: channels.len(),
@@ -202,7 +201,7 @@ impl ExrOutput {
         let height = self.headers[0].layer_size.1;
         if all && self.pending_y0 + rows != height {
             // Only the image's last block may be short.
-            return Err(Error::Config(format!(
+            return Err(Error::Internal(format!(
                 "{}: output incomplete ({} of {height} rows)",
                 self.dest.display(),
                 self.pending_y0 + rows
@@ -293,15 +292,15 @@ impl ExrOutput {
         match self.thread.take() {
             Some(t) => t
                 .join()
-                .unwrap_or_else(|_| Err(Error::Config("writer thread panicked".into()))),
+                .unwrap_or_else(|_| Err(Error::Internal("writer thread panicked".into()))),
             None => Ok(()),
         }
     }
 
-    /// Rename the finished file into place.
+    /// Put the finished file in place ([`super::Staged::commit`]).
     pub fn commit(mut self) -> Result<()> {
-        let temp = self.temp.take().ok_or(Error::Interrupted)?;
-        super::persist(temp, &self.dest)
+        let staged = self.staged.take().ok_or(Error::Interrupted)?;
+        staged.commit()
     }
 }
 
@@ -314,11 +313,8 @@ impl Sink for ExrOutput {
     fn finish(&mut self) -> Result<()> {
         self.flush_blocks(true)?;
         let r = self.join_writer();
-        if let Some(t) = &self.temp {
-            File::open(t)
-                .map_err(|e| Error::io(t.to_path_buf(), e))?
-                .sync_all()
-                .ok();
+        if let Some(t) = &self.staged {
+            t.file().sync_all().ok();
         }
         r
     }
@@ -330,6 +326,6 @@ impl Drop for ExrOutput {
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
-        // An uncommitted TempPath deletes its file when dropped.
+        // An uncommitted staged file is removed when dropped.
     }
 }

@@ -44,7 +44,7 @@ impl Books {
         let row_len = self.zeroed.len() * in_w;
         if strip.y0 != next || strip.data.len() != strip.rows * row_len || next + strip.rows > in_h
         {
-            return Err(Error::Config(format!(
+            return Err(Error::Internal(format!(
                 "source delivered rows {}..{} but row {next} was expected (source bug)",
                 strip.y0,
                 strip.y0 + strip.rows,

@@ -346,7 +346,7 @@ pub fn run<S: Source, K: Sink>(
         }
         drop(strip_rx);
         if engine_result.is_ok() && !writer_failed && engine.rows_out() != total {
-            engine_result = Err(Error::Config(format!(
+            engine_result = Err(Error::Internal(format!(
                 "the source ended after {} of {} output rows",
                 engine.rows_out(),
                 total
@@ -358,8 +358,8 @@ pub fn run<S: Source, K: Sink>(
         // behind another error.
         match writer.join() {
             Ok(write_result) => engine_result.and(write_result),
-            Err(_) => Err(Error::Config(
-                "internal error: the writer thread panicked (please report this file)".into(),
+            Err(_) => Err(Error::Internal(
+                "the writer thread panicked (please report this file)".into(),
             )),
         }
     });

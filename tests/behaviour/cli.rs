@@ -4,7 +4,7 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 use crate::common::*;
-use crate::exr_io::{corpus_dir, tmpdir, write_rgb};
+use crate::exr_io::{tmpdir, write_rgb};
 use exr::prelude::*;
 
 fn epfilt(args: &[&str]) -> Output {
@@ -27,8 +27,14 @@ fn input(dir: &Path) -> String {
     p.to_string_lossy().into()
 }
 
-fn one_line_error(out: &Output, needle: &str) {
-    assert_eq!(out.status.code(), Some(2));
+/// Exit status of a failed run (a bad or damaged input, an I/O error).
+const FAILURE: i32 = 1;
+/// Exit status of a usage error (arguments, output paths epfilt refuses).
+const USAGE: i32 = 2;
+
+fn one_line_error(out: &Output, code: i32, needle: &str) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(code), "{err}");
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(err.trim_end().lines().count(), 1, "not one line: {err}");
     assert!(err.starts_with("epfilt: ") && err.contains(needle), "{err}");
@@ -91,25 +97,30 @@ fn errors_are_one_line_naming_the_file() {
     let missing = dir.path().join("nope.exr");
     one_line_error(
         &epfilt(&["filter", missing.to_str().unwrap(), "o.exr"]),
+        FAILURE,
         "nope.exr",
     );
     let nodir = dir.path().join("no/such/dir/out.exr");
     one_line_error(
         &epfilt(&["filter", &inp, nodir.to_str().unwrap()]),
+        FAILURE,
         "no/such/dir",
     );
     one_line_error(
         &epfilt(&["filter", &inp, "x.exr", "-s", "9"]),
+        USAGE,
         "--supersample",
     );
     one_line_error(
         &epfilt(&["filter", &inp, "x.exr", "--method", "sharpen"]),
+        USAGE,
         "unknown method",
     );
     let text = dir.path().join("text.exr");
     std::fs::write(&text, "this is not an image").unwrap();
     one_line_error(
         &epfilt(&["filter", text.to_str().unwrap(), "x.exr"]),
+        FAILURE,
         "text.exr",
     );
 }
@@ -119,17 +130,19 @@ fn output_equal_to_input_is_refused_and_input_untouched() {
     let dir = tmpdir();
     let inp = input(dir.path());
     let before = std::fs::read(&inp).unwrap();
-    one_line_error(&epfilt(&["filter", &inp, &inp]), "is the input file");
+    one_line_error(&epfilt(&["filter", &inp, &inp]), USAGE, "is the input file");
     let link = dir.path().join("link.exr");
     std::os::unix::fs::symlink(&inp, &link).unwrap();
     one_line_error(
         &epfilt(&["filter", &inp, link.to_str().unwrap()]),
+        USAGE,
         "is the input file",
     );
     let hard = dir.path().join("hard.exr");
     std::fs::hard_link(&inp, &hard).unwrap();
     one_line_error(
         &epfilt(&["filter", &inp, hard.to_str().unwrap()]),
+        USAGE,
         "is the input file",
     );
     assert_eq!(std::fs::read(&inp).unwrap(), before);
@@ -143,16 +156,16 @@ fn output_equal_to_input_is_refused_and_input_untouched() {
 
 #[test]
 fn info_describes_a_file() {
-    let f = corpus_dir().join("Tiles/GoldenGate.exr");
+    let f = crate::corpus::data_dir().join("MultiResolution/ColorCodedLevels.exr");
     let o = epfilt(&["info", f.to_str().unwrap()]);
     assert!(o.status.success());
     let s = String::from_utf8_lossy(&o.stdout);
     assert!(
-        s.contains("1262x860")
-            && s.contains("piz")
-            && s.contains("tiles 128x128")
+        s.contains("512x512")
+            && s.contains("pxr24")
+            && s.contains("tiles 64x64")
             && s.contains("R half")
-            && s.contains("filtered: R, G, B"),
+            && s.contains("filtered: R, G, B, A"),
         "{s}"
     );
 }
@@ -227,7 +240,7 @@ fn a_full_disk_is_one_clear_error_and_leaves_no_file() {
         ])
         .output()
         .expect("sh");
-    one_line_error(&o, "out.exr");
+    one_line_error(&o, FAILURE, "out.exr");
     assert!(
         String::from_utf8_lossy(&o.stderr).contains("too large"),
         "{}",
@@ -272,7 +285,7 @@ fn read_only_destination_is_one_line_and_leaves_nothing() {
     };
     let out = ro.join("out.exr");
     let o = epfilt(&["filter", &inp, out.to_str().unwrap(), "-q"]);
-    one_line_error(&o, &ro.display().to_string());
+    one_line_error(&o, FAILURE, &ro.display().to_string());
     assert!(!out.exists());
     let leftovers: Vec<_> = std::fs::read_dir(&ro)
         .unwrap()
@@ -284,7 +297,7 @@ fn read_only_destination_is_one_line_and_leaves_nothing() {
 }
 
 #[test]
-fn sigterm_and_sigint_mid_run_leave_no_output_and_the_input_untouched() {
+fn sigterm_and_sigint_mid_run_exit_143_and_130_leave_no_output_and_the_input_untouched() {
     let dir = tmpdir();
     let inp = dir.path().join("big.exr");
     // 4608x4608 samples: long enough (about a second) to be signalled mid-run.
@@ -326,7 +339,7 @@ fn sigterm_and_sigint_mid_run_leave_no_output_and_the_input_untouched() {
             std::fs::remove_file(&out).unwrap();
             continue;
         }
-        assert_eq!(o.status.code(), Some(2), "signal {sig}: {err}");
+        assert_eq!(o.status.code(), Some(128 + sig), "signal {sig}: {err}");
         assert_eq!(err.trim_end().lines().count(), 1, "not one line: {err}");
         assert!(err.contains("interrupted"), "{err}");
         let left: Vec<_> = std::fs::read_dir(&outdir).unwrap().flatten().collect();
@@ -338,4 +351,150 @@ fn sigterm_and_sigint_mid_run_leave_no_output_and_the_input_untouched() {
         "no run was interrupted: the input is too small"
     );
     assert!(std::fs::read(&inp).unwrap() == before, "input changed");
+}
+
+/// Every command that writes a file, each with `out` as that file.
+fn writers(inp: &str, dir: &Path, out: &str) -> Vec<Vec<String>> {
+    let other = dir.join("other.exr").to_string_lossy().into_owned();
+    let v = |a: &[&str]| a.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+    vec![
+        v(&["filter", inp, out, "-q"]),
+        v(&["filter", inp, &other, "-q", "--report", out]),
+        v(&["preview", inp, out]),
+        v(&["synth", "-q", "--size", "8x8", "-o", out]),
+        v(&["synth", "-q", "--size", "8x8", "-o", &other, "--truth", out]),
+    ]
+}
+
+#[test]
+fn outputs_that_are_not_regular_files_are_refused_and_left_as_they_are() {
+    let dir = tmpdir();
+    let inp = input(dir.path());
+    let fifo = dir.path().join("fifo");
+    let made = Command::new("mkfifo").arg(&fifo).status();
+    let mut targets = vec![
+        (dir.path().to_path_buf(), "is a directory"),
+        ("/dev/null".into(), "is a character device"),
+    ];
+    if made.is_ok_and(|s| s.success()) {
+        targets.push((fifo.clone(), "is a FIFO"));
+    }
+    for (target, why) in &targets {
+        let t = target.to_str().unwrap();
+        for args in writers(&inp, dir.path(), t) {
+            let args: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
+            let o = epfilt(&args);
+            one_line_error(&o, USAGE, why);
+            assert!(String::from_utf8_lossy(&o.stderr).contains(t), "{args:?}");
+        }
+    }
+    use std::os::unix::fs::FileTypeExt;
+    if fifo.exists() {
+        assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo());
+    }
+    assert!(std::fs::metadata("/dev/null")
+        .unwrap()
+        .file_type()
+        .is_char_device());
+    let stray: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with(".epfilt"))
+        .collect();
+    assert!(stray.is_empty(), "{stray:?}");
+}
+
+#[test]
+fn a_link_output_is_written_through_and_stays_a_link() {
+    let dir = tmpdir();
+    let inp = input(dir.path());
+    for (k, args_of) in [0usize, 1, 2, 3].iter().enumerate() {
+        // A link to an existing file, and a dangling one (its target is made).
+        for existing in [true, false] {
+            let real = dir.path().join(format!("real{k}{existing}"));
+            if existing {
+                std::fs::write(&real, b"old").unwrap();
+            }
+            let link = dir.path().join(format!("link{k}{existing}"));
+            std::os::unix::fs::symlink(&real, &link).unwrap();
+            let args = &writers(&inp, dir.path(), link.to_str().unwrap())[*args_of];
+            let args: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
+            let o = epfilt(&args);
+            assert!(
+                o.status.success(),
+                "{args:?}: {}",
+                String::from_utf8_lossy(&o.stderr)
+            );
+            let meta = std::fs::symlink_metadata(&link).unwrap();
+            assert!(
+                meta.file_type().is_symlink(),
+                "{args:?}: the link was replaced"
+            );
+            let bytes = std::fs::read(&real).unwrap();
+            assert!(
+                bytes.len() > 3 && bytes != b"old",
+                "{args:?}: target not written"
+            );
+        }
+    }
+}
+
+#[test]
+fn dash_is_standard_output_for_images_reports_and_previews() {
+    let dir = tmpdir();
+    let inp = input(dir.path());
+    let file = dir.path().join("file.exr");
+    let o = epfilt(&["filter", &inp, file.to_str().unwrap(), "-q"]);
+    assert!(o.status.success());
+    let o = epfilt(&["filter", &inp, "-", "-q"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        o.stdout == std::fs::read(&file).unwrap(),
+        "stdout differs from the file"
+    );
+    let o = epfilt(&[
+        "filter",
+        &inp,
+        file.to_str().unwrap(),
+        "-q",
+        "--report",
+        "-",
+    ]);
+    assert!(o.status.success());
+    let json: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON on stdout");
+    assert_eq!(json["method"], "ep-gauss");
+    let o = epfilt(&["preview", &inp, "-"]);
+    assert!(o.status.success());
+    assert!(o.stdout.starts_with(b"\x89PNG"));
+    one_line_error(
+        &epfilt(&["filter", &inp, "-", "--report", "-"]),
+        USAGE,
+        "cannot both be standard output",
+    );
+    let stray: Vec<_> = std::fs::read_dir(std::env::temp_dir())
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with(".epfilt-"))
+        .filter(|e| {
+            e.metadata().is_ok_and(|m| {
+                m.modified()
+                    .is_ok_and(|t| t.elapsed().is_ok_and(|d| d.as_secs() < 60))
+            })
+        })
+        .collect();
+    assert!(stray.is_empty(), "temporary files left: {stray:?}");
+}
+
+#[test]
+fn help_states_the_exit_statuses_and_usage_errors_exit_2() {
+    let o = epfilt(&["--help"]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("Exit status") && text.contains("130"),
+        "{text}"
+    );
+    let o = epfilt(&["filter", "a.exr"]);
+    assert_eq!(o.status.code(), Some(USAGE));
+    let o = epfilt(&["filter", "a.exr", "b.exr", "--tolerance=-1"]);
+    one_line_error(&o, USAGE, "--tolerance");
 }
