@@ -262,6 +262,11 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         samples_noisy: stats.counters.noisy,
         samples_spread: stats.counters.spread,
         samples_capped: stats.counters.capped,
+        samples_kept: if params.method == Method::EpGauss {
+            stats.counters.guarded
+        } else {
+            0
+        },
         energy_in: vec![],
         energy_out: vec![],
         energy_rel_error: vec![],
@@ -295,6 +300,7 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
                 SppFrom::Channel(c) => format!("channel {c}"),
             },
             guard_confidence: params.ep_box.guard_confidence,
+            reliable: stats.counters.reliable,
             guarded: stats.counters.guarded,
             trimmed: stats.counters.trimmed,
             unresolved: stats.counters.unresolved,

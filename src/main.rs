@@ -251,11 +251,29 @@ struct FilterArgs {
     /// ep-box: most passes over clusters of noisy pixels.
     #[arg(long, default_value_t = 8)]
     passes: usize,
-    /// ep-box: guard against spreading real features: none (§5.1 as written),
-    /// range (not above a converged neighbour), stderr (no more than noise
-    /// can explain) or both.
-    #[arg(long, default_value = "both")]
+    /// Guard against taking real features for noise. ep-box: all (default:
+    /// carriers + range + stderr), carriers (noise only when few samples carry
+    /// the mean), range (not above a converged neighbour), stderr (spread no
+    /// more than noise can explain), both (range + stderr), none (§5.1 as
+    /// written). ep-gauss: none (§5.2 as written) turns off its --support
+    /// rule; any other value keeps it.
+    #[arg(long, default_value = "all")]
     guard: String,
+    /// ep-box, carriers guard: a pixel whose mean rests on at least this many
+    /// samples (n Y^2 / (var + Y^2)) is not noise...
+    #[arg(long, default_value_t = 16.0)]
+    carriers: f64,
+    /// ... nor one whose mean rests on at least this fraction of its samples.
+    #[arg(long, default_value_t = 0.2)]
+    carriers_fraction: f64,
+    /// ep-gauss: a noisy sample with at least this many noisy neighbouring
+    /// super-samples (within --support-ratio of it) is a feature and keeps the
+    /// base kernel; 0 = the paper's rule.
+    #[arg(long, default_value_t = 1)]
+    support: usize,
+    /// ep-gauss: neighbours support a sample when within this factor of its luminance.
+    #[arg(long, default_value_t = 16.0)]
+    support_ratio: f64,
     /// ep-box: confidence of the stderr guard's bound on the excess noise can explain.
     #[arg(long, default_value_t = 0.99)]
     guard_confidence: f64,
@@ -608,9 +626,13 @@ fn filter_job(a: &FilterArgs, cancel: Arc<AtomicBool>) -> Result<FilterJob> {
         passes: a.passes,
         guard: epfilt::filter::ep_box::Guard::parse(&a.guard)?,
         guard_confidence: a.guard_confidence,
+        carriers: a.carriers,
+        carriers_fraction: a.carriers_fraction,
         ..a.stats.params()?
     };
     params.radius = a.radius;
+    params.support = if a.guard == "none" { 0 } else { a.support };
+    params.support_ratio = a.support_ratio;
     params.clamp = a.clamp;
     params.alpha = a.alpha;
     if let Some(r) = a.max_radius {

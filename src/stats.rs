@@ -53,6 +53,9 @@ pub struct Report {
     pub samples_spread: u64,
     /// Samples that still failed at the radius cap.
     pub samples_capped: u64,
+    /// ep-gauss: noisy samples kept with the base kernel as parts of a
+    /// feature (the support rule).
+    pub samples_kept: u64,
     /// Per channel: sum of input values.
     pub energy_in: Vec<f64>,
     /// Per channel: sum of output values times S², before rounding.
@@ -111,6 +114,9 @@ pub struct EpBoxReport {
     pub spp_from: String,
     /// Confidence of the `stderr` guard's bound.
     pub guard_confidence: f64,
+    /// Pixels the paper's test calls noisy whose mean rests on enough samples
+    /// to be reliable (the `carriers` guard): not treated.
+    pub reliable: u64,
     /// Noisy pixels the `range` guard left alone.
     pub guarded: u64,
     /// Pixels whose excess the `stderr` guard cut to what noise can explain.
@@ -136,7 +142,7 @@ impl Report {
     /// The human summary, a few lines.
     pub fn summary(&self) -> String {
         let mut s = format!(
-            "{} -> {}: {} S={} {}x{} -> {}x{}\n  {:.2} s, {:.1} Mpx/s; noisy {} spread {} capped {}\n",
+            "{} -> {}: {} S={} {}x{} -> {}x{}\n  {:.2} s, {:.1} Mpx/s; noisy {} spread {} capped {}{}\n",
             self.input,
             self.output,
             self.method,
@@ -149,7 +155,12 @@ impl Report {
             self.megapixels_per_second,
             self.samples_noisy,
             self.samples_spread,
-            self.samples_capped
+            self.samples_capped,
+            if self.method == "ep-gauss" {
+                format!(" kept as features {}", self.samples_kept)
+            } else {
+                String::new()
+            }
         );
         s.push_str("  energy ledger   channel      in            out x S^2     rel.err     after rounding\n");
         for (k, c) in self.channels.iter().enumerate() {
@@ -164,12 +175,13 @@ impl Report {
         }
         if let Some(e) = &self.ep_box {
             s.push_str(&format!(
-                "  ep-box: L_tvis {:.4e}{}, D {}, {}% confidence, guard {}; noisy pixels {}, spread {}, guarded {}, trimmed {}, unresolved {}, passes {}\n",
+                "  ep-box: L_tvis {:.4e}{}, D {}, {}% confidence, guard {}; reliable {}, noisy pixels {}, spread {}, guarded {}, trimmed {}, unresolved {}, passes {}\n",
                 e.l_tvis,
                 e.l_ave.map(|l| format!(" (L_ave {l:.4e})")).unwrap_or_default(),
                 e.d,
                 e.confidence * 100.0,
                 e.guard,
+                e.reliable,
                 self.samples_noisy,
                 self.samples_spread,
                 e.guarded,

@@ -48,6 +48,16 @@ pub enum Guard {
     StdError,
     /// Both: `Range` first, then `StdError`.
     Both,
+    /// A pixel is noise only when few samples carry its mean
+    /// ([`carriers`] below [`EpBoxParams::carriers`]): a firefly is one or
+    /// two samples far above the rest, while a lamp, a bulb a fraction of a
+    /// pixel wide, a lamp-shade rim or a highlight is hit by many of the
+    /// pixel's samples. The paper's absolute test (`t S_p > D L_tvis`) takes
+    /// every bright pixel for noise; a pixel whose estimate rests on many
+    /// samples is reliable, however bright.
+    Carriers,
+    /// `Carriers`, `Range` and `StdError` together.
+    All,
 }
 
 impl Guard {
@@ -58,6 +68,8 @@ impl Guard {
             Guard::Range => "range",
             Guard::StdError => "stderr",
             Guard::Both => "both",
+            Guard::Carriers => "carriers",
+            Guard::All => "all",
         }
     }
 
@@ -68,10 +80,43 @@ impl Guard {
             "range" => Ok(Guard::Range),
             "stderr" => Ok(Guard::StdError),
             "both" => Ok(Guard::Both),
+            "carriers" => Ok(Guard::Carriers),
+            "all" => Ok(Guard::All),
             _ => Err(Error::Config(format!(
-                "unknown --guard {s:?} (choose none, range, stderr or both)"
+                "unknown --guard {s:?} (choose none, range, stderr, both (range + stderr), carriers or all)"
             ))),
         }
+    }
+
+    /// Whether the `range` guard is on.
+    pub fn range(self) -> bool {
+        matches!(self, Guard::Range | Guard::Both | Guard::All)
+    }
+
+    /// Whether the `stderr` guard is on.
+    pub fn stderr(self) -> bool {
+        matches!(self, Guard::StdError | Guard::Both | Guard::All)
+    }
+
+    /// Whether the `carriers` guard is on.
+    pub fn carriers(self) -> bool {
+        matches!(self, Guard::Carriers | Guard::All)
+    }
+}
+
+/// The effective number of samples that carry a pixel's mean: `n Y^2 /
+/// (var + Y^2)` with `var` the population variance of its `n` samples
+/// (`S_p^2 (n - 1)` from the variance of the mean). Exactly `k` when `k` of
+/// the `n` samples hold one value and the rest zero; `n` when every sample
+/// holds the mean; about 1 for a pixel whose mean one firefly makes.
+#[inline]
+pub fn carriers(y: f64, se2: f64, n: f64) -> f64 {
+    let var = se2.max(0.0) * (n - 1.0);
+    let y2 = y * y;
+    if y2 + var > 0.0 {
+        n * y2 / (var + y2)
+    } else {
+        n
     }
 }
 
@@ -99,6 +144,11 @@ pub struct EpBoxParams {
     pub guard: Guard,
     /// Confidence of the `stderr` guard's bound on what noise can explain.
     pub guard_confidence: f64,
+    /// The `carriers` guard: a pixel whose mean rests on at least this many
+    /// samples ([`carriers`]) is not noise...
+    pub carriers: f64,
+    /// ... nor one whose mean rests on at least this fraction of its samples.
+    pub carriers_fraction: f64,
 }
 
 impl Default for EpBoxParams {
@@ -113,8 +163,10 @@ impl Default for EpBoxParams {
             confidence: 0.8,
             ltvis: None,
             passes: 8,
-            guard: Guard::Both,
+            guard: Guard::All,
             guard_confidence: 0.99,
+            carriers: 16.0,
+            carriers_fraction: 0.2,
         }
     }
 }
@@ -145,6 +197,18 @@ impl EpBoxParams {
             if !(l.is_finite() && l > 0.0) {
                 return bad(format!("--ltvis must be a finite number > 0, got {l}"));
             }
+        }
+        if !(self.carriers.is_finite() && self.carriers >= 1.0) {
+            return bad(format!(
+                "--carriers must be a number >= 1, got {}",
+                self.carriers
+            ));
+        }
+        if !(self.carriers_fraction > 0.0 && self.carriers_fraction <= 1.0) {
+            return bad(format!(
+                "--carriers-fraction must be in (0, 1], got {}",
+                self.carriers_fraction
+            ));
         }
         if !(1..=64).contains(&self.passes) {
             return bad(format!("--passes must be 1..=64, got {}", self.passes));

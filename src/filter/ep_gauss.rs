@@ -385,6 +385,65 @@ impl EpGauss {
     }
 }
 
+/// Rule 1b, beyond the paper: a noisy sample with noisy neighbours is a
+/// feature. A firefly is one sample far above its surroundings; the samples
+/// of a directly seen lamp, a bulb a fraction of a pixel wide, the rim of a
+/// lamp shade or a glossy highlight come in groups, because the feature
+/// covers several super-samples (partly covered ones carry a share of its
+/// radiance). A sample that fails Relation 14 keeps the base kernel when at
+/// least `min` of its 8 neighbouring super-samples fail the same test (are
+/// above the same bound, on the same side) and are within a factor `ratio`
+/// of it: comparable in brightness, as parts of one feature are, where
+/// fireflies' heavy-tailed magnitudes rarely are. `min = 0` is the paper's
+/// rule as written.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Support {
+    min: usize,
+    ratio: f64,
+}
+
+impl Support {
+    /// At least `min` supporting neighbours within a factor `ratio`.
+    pub fn new(min: usize, ratio: f64) -> Self {
+        Support { min, ratio }
+    }
+
+    /// Whether a noisy sample of luminance `x0` (above `hi` or below `lo`)
+    /// is kept as a feature; `neighbour(di, dj)` gives the luminance of the
+    /// sample at that offset, `None` outside the image.
+    #[inline]
+    pub fn keeps(
+        &self,
+        x0: f64,
+        hi: f64,
+        lo: f64,
+        neighbour: impl Fn(i64, i64) -> Option<f64>,
+    ) -> bool {
+        if self.min == 0 {
+            return false;
+        }
+        let mut n = 0;
+        for dj in -1..=1 {
+            for di in -1..=1 {
+                if di == 0 && dj == 0 {
+                    continue;
+                }
+                let Some(v) = neighbour(di, dj) else { continue };
+                let same = if x0 > hi {
+                    v > hi && v * self.ratio >= x0
+                } else {
+                    v > 0.0 && v < lo && v <= x0 * self.ratio
+                };
+                n += usize::from(same);
+                if n >= self.min {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -152,6 +152,11 @@ pub struct FilterParams {
     pub clamp: f64,
     /// `alpha-trim`: the fraction trimmed from each end, in 0..0.5.
     pub alpha: f64,
+    /// ep-gauss: a noisy sample with at least this many noisy neighbours is
+    /// kept as a feature ([`ep_gauss::Support`]; 0: the paper's rule).
+    pub support: usize,
+    /// ep-gauss: neighbours support a sample when within this factor of it.
+    pub support_ratio: f64,
 }
 
 impl FilterParams {
@@ -174,6 +179,8 @@ impl FilterParams {
             ep_box: ep_box::EpBoxParams::default(),
             clamp: 10.0,
             alpha: 0.25,
+            support: 1,
+            support_ratio: 16.0,
         }
     }
 
@@ -217,6 +224,18 @@ impl FilterParams {
             return bad(format!(
                 "--clamp must be a finite number >= 0, got {}",
                 self.clamp
+            ));
+        }
+        if self.support > 8 {
+            return bad(format!(
+                "--support must be 0..=8 neighbours, got {}",
+                self.support
+            ));
+        }
+        if !(self.support_ratio.is_finite() && self.support_ratio >= 1.0) {
+            return bad(format!(
+                "--support-ratio must be a number >= 1, got {}",
+                self.support_ratio
             ));
         }
         if !(0.0..0.5).contains(&self.alpha) {

@@ -86,7 +86,9 @@ fn kind_of(label: &str) -> Option<(VarianceKind, u8)> {
     }
 }
 
-/// Channels of layer `layer` (no trailing dot; "" for unlayered) as R, G, B or Y.
+/// The variance channels of layer `layer` (no trailing dot; "" for
+/// unlayered): its `Y` when it has one (the variance of the samples'
+/// luminance itself; from R, G, B it can only be bounded), else R, G, B.
 fn colour_group(names: &[String], layer: &str) -> Option<Vec<String>> {
     let full = |c: &str| {
         if layer.is_empty() {
@@ -96,15 +98,15 @@ fn colour_group(names: &[String], layer: &str) -> Option<Vec<String>> {
         }
     };
     let has = |n: &str| names.iter().any(|x| x == n);
+    for y in ["Y", "y"] {
+        if has(&full(y)) {
+            return Some(vec![full(y)]);
+        }
+    }
     for set in [["R", "G", "B"], ["r", "g", "b"]] {
         let v: Vec<String> = set.iter().map(|c| full(c)).collect();
         if v.iter().all(|n| has(n)) {
             return Some(v);
-        }
-    }
-    for y in ["Y", "y"] {
-        if has(&full(y)) {
-            return Some(vec![full(y)]);
         }
     }
     None
@@ -194,7 +196,9 @@ fn spp_attribute(header: &Header) -> Option<(f64, String)> {
             let named = matches!(
                 l.as_str(),
                 "spp" | "samples" | "samplecount" | "samples_per_pixel" | "aa_samples"
-            ) || l.ends_with(".samples");
+            ) || l.ends_with(".samples")
+                || l.ends_with("_spp")
+                || l.ends_with(".spp");
             if !named {
                 return None;
             }

@@ -27,7 +27,7 @@ use super::window::RowWindow;
 use super::{Precision, Strip};
 use crate::error::{Error, Result};
 use crate::filter::ep_box::{
-    se2, EpBoxParams, Guard, Ring, Spp, StatsLayout, TFactor, VarianceKind,
+    carriers, se2, EpBoxParams, Guard, Ring, Spp, StatsLayout, TFactor, VarianceKind,
 };
 use crate::geometry::Halo;
 
@@ -244,11 +244,18 @@ impl BoxEngine {
         let ys = self.ylum.range_mut(a, b);
         let cs = self.cap.range_mut(a, b);
         let fs = self.noisy.range_mut(a, b);
-        ys.into_par_iter()
+        let (carriers_on, k_abs, k_frac) = (
+            self.params.guard.carriers(),
+            self.params.carriers,
+            self.params.carriers_fraction,
+        );
+        let reliable: u64 = ys
+            .into_par_iter()
             .zip(cs)
             .zip(fs)
             .enumerate()
-            .for_each(|(k, ((yrow, crow), frow))| {
+            .map(|(k, ((yrow, crow), frow))| {
+                let mut reliable = 0u64;
                 let row = input.get(a + k);
                 let ch = |c: usize, x: usize| row[c * w + x] as f64;
                 let mut var = [0.0f64; 3];
@@ -271,12 +278,21 @@ impl BoxEngine {
                         _ => y,
                     };
                     let weights = if nv == 3 { &lum[..3] } else { &lum[..1] };
-                    let se = se2(stats.kind, &var[..nv], weights, mean_y, n).sqrt();
+                    let se2 = se2(stats.kind, &var[..nv], weights, mean_y, n);
+                    let se = se2.sqrt();
                     // NaN (fewer than 2 samples) is not noisy: it cannot be tested.
-                    frow[x] = u8::from(t.get(n) * se > dl);
+                    let mut noisy = t.get(n) * se > dl;
+                    if noisy && carriers_on && carriers(y, se2, n) >= k_abs.min(k_frac * n) {
+                        noisy = false;
+                        reliable += 1;
+                    }
+                    frow[x] = u8::from(noisy);
                     crow[x] = tg.get(n) * se;
                 }
-            });
+                reliable
+            })
+            .sum();
+        self.counters.reliable += reliable;
     }
 
     fn advance(&mut self) -> Result<Option<OutRows>> {
@@ -469,7 +485,7 @@ impl Band<'_> {
                 if target {
                     counters.passes = counters.passes.max(k as u64);
                 }
-                if matches!(self.guard, Guard::Range | Guard::Both) && excess > 0.0 {
+                if self.guard.range() && excess > 0.0 {
                     // The brightest converged input within GUARD_REACH.
                     for rr in r.saturating_sub(GUARD_REACH)..(r + GUARD_REACH + 1).min(bh) {
                         let (fl, yl) = (self.noisy.get(ba + rr), self.ylum.get(ba + rr));
@@ -480,13 +496,13 @@ impl Band<'_> {
                         }
                     }
                 }
-                if matches!(self.guard, Guard::Range | Guard::Both) && excess > 0.0 && y <= max {
+                if self.guard.range() && excess > 0.0 && y <= max {
                     if target {
                         counters.guarded += 1;
                     }
                     excess = 0.0;
                 }
-                if matches!(self.guard, Guard::StdError | Guard::Both) {
+                if self.guard.stderr() {
                     let cap = self.cap.get(ba + r)[x];
                     if excess > cap {
                         excess = cap;

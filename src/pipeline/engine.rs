@@ -32,7 +32,7 @@ use super::books::Books;
 use super::window::RowWindow;
 use super::{Precision, Strip};
 use crate::error::{Error, Result};
-use crate::filter::ep_gauss::{EpGauss, LumRows};
+use crate::filter::ep_gauss::{EpGauss, LumRows, Support};
 use crate::filter::kernel::{ColumnTaps, Kernel1d};
 use crate::filter::{FilterParams, Method};
 use crate::geometry::{mirror, Grid, Halo};
@@ -121,7 +121,8 @@ pub struct Counters {
     /// Samples that still failed Relation 14 at the cap (ep-box: pixels
     /// whose excess did not fit under `L_tvis` per pixel within the radius).
     pub capped: u64,
-    /// ep-box: noisy pixels a guard left alone.
+    /// ep-gauss: noisy samples kept as features (the support rule); ep-box:
+    /// noisy pixels the range guard left alone.
     pub guarded: u64,
     /// ep-box: pixels whose excess the `stderr` guard cut to what noise can
     /// explain.
@@ -130,6 +131,9 @@ pub struct Counters {
     pub unresolved: u64,
     /// ep-box: the most passes any pixel needed.
     pub passes: u64,
+    /// ep-box: pixels noisy by the paper's test whose mean rests on enough
+    /// samples to be reliable (the `carriers` guard): not treated as noise.
+    pub reliable: u64,
 }
 
 /// A finished batch of output rows, `[row][channel][x]`.
@@ -171,6 +175,7 @@ pub struct Engine {
     counters: Counters,
     books: Books,
     clamp: Option<f32>,
+    support: Support,
 }
 
 impl Engine {
@@ -260,6 +265,7 @@ impl Engine {
             counters: Counters::default(),
             books: Books::new(names, nch),
             clamp: (params.method == Method::Clamp).then_some(params.clamp as f32),
+            support: Support::new(params.support, params.support_ratio),
         })
     }
 
@@ -334,15 +340,20 @@ impl Engine {
         let yb = self.ybox.end();
         let all_in = yb == self.h;
         // 2. classification + horizontal pass
+        // A row's classification reads the input row just below it (the
+        // support of samples on its last row): one pixel row more than
+        // `xbar_reach` when that is 0.
         let cls_target = if all_in {
             self.h
         } else {
-            yb.saturating_sub(self.halo.xbar_reach)
+            yb.saturating_sub(self.halo.xbar_reach.max(1))
         };
         if cls_target > self.cls_done {
             self.classify(self.cls_done, cls_target);
             self.cls_done = cls_target;
-            self.input.evict_below(self.cls_done * s);
+            // ... and the row just above it.
+            self.input
+                .evict_below((self.cls_done * s).saturating_sub(1));
         }
         // 3. spreading
         if self.ep.is_some() {
@@ -437,6 +448,7 @@ impl Engine {
 
     fn classify(&mut self, a: usize, b: usize) {
         let (s, w, in_w, nch, h) = (self.grid.s, self.w, self.grid.in_w, self.nch, self.h);
+        let in_h = self.grid.in_h;
         for _ in a * s..b * s {
             self.hpass.push_stale(0.0); // every value is written below
         }
@@ -444,51 +456,91 @@ impl Engine {
         let ybox = &self.ybox;
         let lum = &self.lum;
         let cols = &self.cols;
-        let mut inputs = self.input.range_mut(a * s, b * s);
-        let mut hrows = self.hpass.range_mut(a * s, b * s);
-        let noisy: Vec<Vec<Noisy>> = inputs
-            .par_chunks_mut(s)
-            .zip(hrows.par_chunks_mut(s))
-            .enumerate()
-            .map(|(k, (ins, hs))| {
-                let y = a + k;
+        let input = &self.input;
+        let support = self.support;
+        // Phase 1, reading the input as it came (neighbour rows included):
+        // which samples are noise, and which of those are kept as features.
+        let found: Vec<(Vec<Noisy>, u64)> = (a..b)
+            .into_par_iter()
+            .map(|y| {
                 let mut found = Vec::new();
-                if let Some(ep) = ep {
-                    let view = YView { win: ybox, h };
-                    let xbars = ep.xbar0_row(&view, y as i64, w);
-                    for (px, &xbar) in xbars.iter().enumerate() {
-                        let Some((hi, lo)) = ep.bounds(xbar) else {
-                            continue;
-                        };
-                        for (b, row) in ins.iter_mut().enumerate() {
-                            for i in px * s..(px + 1) * s {
-                                let mut x0 = 0.0;
-                                for c in 0..nch {
-                                    x0 += lum[c] * row[c * in_w + i] as f64;
-                                }
-                                if x0 > 0.0 && (x0 > hi || x0 < lo) {
-                                    let mut v = [0.0f32; MAX_CHANNELS];
-                                    for c in 0..nch {
-                                        v[c] = row[c * in_w + i];
-                                        row[c * in_w + i] = 0.0;
-                                    }
-                                    found.push(Noisy {
-                                        i: i as u32,
-                                        j: (y * s + b) as u32,
-                                        x0,
-                                        xbar0: xbar,
-                                        v,
-                                        level: 0,
-                                        capped: false,
-                                    });
-                                }
+                let mut kept = 0u64;
+                let Some(ep) = ep else {
+                    return (found, kept);
+                };
+                let view = YView { win: ybox, h };
+                let xbars = ep.xbar0_row(&view, y as i64, w);
+                let luma = |row: &[f32], i: usize| {
+                    let mut x = 0.0;
+                    for c in 0..nch {
+                        x += lum[c] * row[c * in_w + i] as f64;
+                    }
+                    x
+                };
+                for (px, &xbar) in xbars.iter().enumerate() {
+                    let Some((hi, lo)) = ep.bounds(xbar) else {
+                        continue;
+                    };
+                    for j in y * s..(y + 1) * s {
+                        let row = input.get(j);
+                        for i in px * s..(px + 1) * s {
+                            let x0 = luma(row, i);
+                            if !(x0 > 0.0 && (x0 > hi || x0 < lo)) {
+                                continue;
                             }
+                            if support.keeps(x0, hi, lo, |di, dj| {
+                                let (ni, nj) = (i as i64 + di, j as i64 + dj);
+                                (ni >= 0 && nj >= 0 && (ni as usize) < in_w && (nj as usize) < in_h)
+                                    .then(|| luma(input.get(nj as usize), ni as usize))
+                            }) {
+                                kept += 1;
+                                continue;
+                            }
+                            let mut v = [0.0f32; MAX_CHANNELS];
+                            for c in 0..nch {
+                                v[c] = row[c * in_w + i];
+                            }
+                            found.push(Noisy {
+                                i: i as u32,
+                                j: j as u32,
+                                x0,
+                                xbar0: xbar,
+                                v,
+                                level: 0,
+                                capped: false,
+                            });
                         }
                     }
-                    // Row-major order: by input row, then column.
-                    found.sort_by_key(|n| (n.j, n.i));
                 }
-                for (row, hrow) in ins.iter().zip(hs.iter_mut()) {
+                // Row-major order: by input row, then column.
+                found.sort_by_key(|n| (n.j, n.i));
+                (found, kept)
+            })
+            .collect();
+        // Phase 2: the horizontal pass of the base kernel, the spread
+        // samples taken out (zeroed in a copy of their row).
+        let mut hrows = self.hpass.range_mut(a * s, b * s);
+        hrows
+            .par_chunks_mut(s)
+            .zip(found.par_iter())
+            .enumerate()
+            .for_each_init(Vec::new, |scratch, (k, (hs, (list, _)))| {
+                let y = a + k;
+                for (bb, hrow) in hs.iter_mut().enumerate() {
+                    let j = y * s + bb;
+                    let mut row = input.get(j);
+                    let first = list.partition_point(|n| (n.j as usize) < j);
+                    let last = list.partition_point(|n| (n.j as usize) <= j);
+                    if first < last {
+                        scratch.clear();
+                        scratch.extend_from_slice(row);
+                        for n in &list[first..last] {
+                            for c in 0..nch {
+                                scratch[c * in_w + n.i as usize] = 0.0;
+                            }
+                        }
+                        row = scratch.as_slice();
+                    }
                     for c in 0..nch {
                         let src = &row[c * in_w..(c + 1) * in_w];
                         let dst = &mut hrow[c * w..(c + 1) * w];
@@ -504,10 +556,12 @@ impl Engine {
                         }
                     }
                 }
-                found
-            })
-            .collect();
-        for list in noisy {
+            });
+        for (list, kept) in found {
+            // Kept samples failed the test too; the spread ones are counted
+            // when they are spread.
+            self.counters.noisy += kept;
+            self.counters.guarded += kept;
             self.pending.extend(list);
         }
     }

@@ -99,6 +99,17 @@ fn reference(img: &Img, spp: f64, p: &FilterParams, seed: u64) -> (Vec<f64>, usi
             let se = se2(VarianceKind::Sample, &var, &LUM, 0.0, spp).sqrt();
             bound[idx(x, y)] = tg.get(spp) * se;
             noisy[idx(x, y)] = t.get(spp) * se > dl;
+            // The carriers guard: the samples' luminance deviation is taken
+            // as sum w_c s_c, so the population variance is that squared
+            // times (n - 1) / n; k = n Y^2 / (var + Y^2).
+            if matches!(e.guard, Guard::Carriers | Guard::All) {
+                let sd: f64 = var.iter().zip(&LUM).map(|(v, l)| l * v.sqrt()).sum();
+                let y2 = lum(img, x, y).powi(2);
+                let k = spp * y2 / (sd * sd * (spp - 1.0) / spp + y2);
+                if k >= e.carriers.min(e.carriers_fraction * spp) {
+                    noisy[idx(x, y)] = false;
+                }
+            }
         }
     }
     let mut pass = vec![0usize; w * h];
@@ -156,10 +167,10 @@ fn reference(img: &Img, spp: f64, p: &FilterParams, seed: u64) -> (Vec<f64>, usi
                 }
             }
             let mut ex = yv - mean - dl;
-            if matches!(e.guard, Guard::Range | Guard::Both) && yv <= max {
+            if matches!(e.guard, Guard::Range | Guard::Both | Guard::All) && yv <= max {
                 ex = 0.0;
             }
-            if matches!(e.guard, Guard::StdError | Guard::Both) {
+            if matches!(e.guard, Guard::StdError | Guard::Both | Guard::All) {
                 ex = ex.min(bound[i]);
             }
             if ex > 0.0 && yv > 0.0 && (ex / ltvis).ceil() >= 2.0 {
@@ -198,7 +209,24 @@ fn reference(img: &Img, spp: f64, p: &FilterParams, seed: u64) -> (Vec<f64>, usi
     (out, pending.len())
 }
 
-/// Background 1.0 with `count` random fireflies of random colours and sizes.
+/// A pixel whose `hits` samples of `n` saw `rgb` and the rest its value: a
+/// feature partly covering the pixel (or, for one hit, a firefly).
+fn partly_covered(img: &mut Img, x: usize, y: usize, rgb: [f32; 3], hits: f32, n: f32) {
+    for c in 0..3 {
+        let (base, hot) = (img.at(x, y, c), rgb[c]);
+        img.set(x, y, c, base + (hot - base) * hits / n);
+        img.set(
+            x,
+            y,
+            3 + c,
+            hits * (n - hits) / (n * (n - 1.0)) * (hot - base).powi(2),
+        );
+    }
+}
+
+/// Background 1.0 with `count` random fireflies of random colours and sizes,
+/// and `count / 4` pixels partly covered by a bright feature (2 to 15 of 16
+/// samples hit it).
 fn scene(w: usize, h: usize, count: usize, seed: u64) -> Img {
     let mut rng = Rng(seed);
     let mut img = rgbv(w, h);
@@ -217,6 +245,12 @@ fn scene(w: usize, h: usize, count: usize, seed: u64) -> Img {
         let rgb = [hot, hot * rng.unit() as f32, hot * rng.unit() as f32];
         firefly(&mut img, x, y, rgb, 16.0);
     }
+    for _ in 0..count / 4 {
+        let (x, y) = (rng.next_u64() as usize % w, rng.next_u64() as usize % h);
+        let hot = (10f64).powf(1.0 + 3.0 * rng.unit()) as f32;
+        let hits = 2 + rng.next_u64() % 14;
+        partly_covered(&mut img, x, y, [hot; 3], hits as f32, 16.0);
+    }
     img
 }
 
@@ -228,6 +262,8 @@ fn matches_the_reference_in_any_visiting_order() {
         (3, Guard::StdError, 0.8),
         (4, Guard::Both, 0.8),
         (5, Guard::Both, 0.99),
+        (6, Guard::Carriers, 0.99),
+        (7, Guard::All, 0.99),
     ] {
         let img = scene(40, 33, 60, seed);
         let mut p = params(guard, 0.01, 6.0);
@@ -251,6 +287,10 @@ fn matches_the_reference_in_any_visiting_order() {
         // cases test nothing the others do not).
         if guard_confidence == 0.8 {
             assert!(stats.counters.trimmed > 0, "{guard:?}: nothing trimmed");
+        }
+        // Likewise the carriers guard.
+        if guard.carriers() {
+            assert!(stats.counters.reliable > 0, "{guard:?}: nothing reliable");
         }
     }
 }
@@ -474,10 +514,23 @@ fn a_bright_region_of_noisy_pixels_keeps_its_edges_under_the_default_guard() {
         assert!(out.at(14, 15, 1) < 50.0, "{guard:?}: {}", out.at(14, 15, 1));
         assert!(out.at(8, 15, 1) > 5.0, "{guard:?}: {}", out.at(8, 15, 1));
     }
-    // The default (both guards, 99% bound): a pixel gives at most
-    // t_99(63) S_p = 2.66 x 1.25 = 3.3 of its 100.
+    // The default: every patch pixel's mean rests on all its samples (the
+    // variance of 100 is small beside a mean of 100: k = 63 carriers), so the
+    // patch is reliable, not noise, and nothing moves.
     let p = params(FilterParams::new(Method::EpBox, 1).ep_box.guard, 0.01, 8.0);
-    assert_eq!(p.ep_box.guard, Guard::Both);
+    assert_eq!(p.ep_box.guard, Guard::All);
+    let (out, s) = filter(&img, 64.0, &p, &cfg(256, 0, 2));
+    assert_eq!((s.counters.reliable, s.counters.noisy), (120, 0));
+    for y in 0..h {
+        for x in 0..w {
+            for c in 0..3 {
+                assert_eq!(out.at(x, y, c).to_bits(), img.at(x, y, c).to_bits());
+            }
+        }
+    }
+    // Range and stderr guards alone, 99% bound: a pixel gives at most
+    // t_99(63) S_p = 2.66 x 1.25 = 3.3 of its 100.
+    let p = params(Guard::Both, 0.01, 8.0);
     let (out, s) = filter(&img, 64.0, &p, &cfg(256, 0, 2));
     assert!(s.counters.trimmed > 0);
     for y in 0..h {
@@ -506,11 +559,18 @@ proptest! {
     #[test]
     fn energy_and_invariance_hold_for_random_renders(
         w in 1usize..30, h in 1usize..30, count in 0usize..40, seed in any::<u64>(),
-        guard in 0u8..4, radius in 1.0f64..12.0, passes in 1usize..5,
+        guard in 0u8..6, radius in 1.0f64..12.0, passes in 1usize..5,
         tile in 1usize..20, strip in 1usize..40, threads in 1usize..4,
     ) {
         let img = scene(w, h, count, seed);
-        let guard = [Guard::None, Guard::Range, Guard::StdError, Guard::Both][guard as usize];
+        let guard = [
+            Guard::None,
+            Guard::Range,
+            Guard::StdError,
+            Guard::Both,
+            Guard::Carriers,
+            Guard::All,
+        ][guard as usize];
         let mut p = params(guard, 0.01, radius);
         p.ep_box.passes = passes;
         let (a, sa) = filter(&img, 16.0, &p, &cfg(256, 0, 1));
