@@ -314,6 +314,7 @@ fn set(params: &mut FilterParams, key: &str, value: &str) -> Result<()> {
         "d" => params.ep_box.d = f()?,
         "carriers" => params.ep_box.carriers = f()?,
         "carriers_fraction" => params.ep_box.carriers_fraction = f()?,
+        "carriers_rse" => params.ep_box.carriers_rse = f()?,
         "guard_confidence" => params.ep_box.guard_confidence = f()?,
         "support" => params.support = value.parse()?,
         "support_ratio" => params.support_ratio = f()?,

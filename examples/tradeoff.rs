@@ -33,8 +33,10 @@ const METHODS: [&str; 7] = [
     "median",
     "alpha-trim",
 ];
-const SETTINGS: [&str; 10] = [
+const SETTINGS: [&str; 12] = [
     "tolerance",
+    "support",
+    "carriers_fraction",
     "width_step",
     "max_radius",
     "cutoff",
@@ -82,13 +84,15 @@ fn defaults(method: &str) -> BTreeMap<&'static str, String> {
             set("width_step", "0.1");
             set("max_radius", "16");
             set("cutoff", "3");
+            set("support", "1");
         }
         "ep-box" => {
             set("d", "5");
             set("confidence", "0.8");
             set("max_radius", "8");
-            set("guard", "both");
+            set("guard", "all");
             set("guard_confidence", "0.99");
+            set("carriers_fraction", "0.2");
         }
         "gauss" => set("cutoff", "3"),
         "clamp" => set("clamp", "10"),
@@ -111,6 +115,7 @@ fn grid(quick: bool) -> Vec<(&'static str, Vec<Axis>)> {
                     ("tolerance", vec!["0.1", "0.25", "1"]),
                     ("width_step", vec!["0.1", "0.4"]),
                     ("max_radius", vec!["4", "16"]),
+                    ("support", vec!["0", "1"]),
                 ],
             ),
             (
@@ -118,7 +123,7 @@ fn grid(quick: bool) -> Vec<(&'static str, Vec<Axis>)> {
                 vec![
                     ("d", vec!["2", "5", "20"]),
                     ("max_radius", vec!["4", "16"]),
-                    ("guard", vec!["none", "range", "both"]),
+                    ("guard", vec!["none", "range", "both", "all"]),
                 ],
             ),
             ("gauss", vec![]),
@@ -139,6 +144,7 @@ fn grid(quick: bool) -> Vec<(&'static str, Vec<Axis>)> {
                     ("width_step", vec!["0.02", "0.05", "0.1", "0.2", "0.4"]),
                     ("max_radius", vec!["2", "4", "8", "16", "32", "64"]),
                     ("cutoff", vec!["2", "2.5", "3", "4"]),
+                    ("support", vec!["0", "1", "2", "3"]),
                 ],
             ),
             (
@@ -147,8 +153,12 @@ fn grid(quick: bool) -> Vec<(&'static str, Vec<Axis>)> {
                     ("d", vec!["1", "2", "5", "10", "20"]),
                     ("confidence", vec!["0.5", "0.8", "0.95", "0.99"]),
                     ("max_radius", vec!["2", "4", "8", "16", "32", "64"]),
-                    ("guard", vec!["none", "range", "stderr", "both"]),
+                    (
+                        "guard",
+                        vec!["none", "range", "stderr", "both", "carriers", "all"],
+                    ),
                     ("guard_confidence", vec!["0.8", "0.95", "0.99", "0.999"]),
+                    ("carriers_fraction", vec!["0.1", "0.15", "0.2", "0.3"]),
                 ],
             ),
             ("gauss", vec![("cutoff", vec!["2", "3", "4"])]),
@@ -248,7 +258,7 @@ fn main() -> Result<()> {
     let work = tempfile::Builder::new()
         .prefix("tradeoff-")
         .tempdir_in(&out_dir)?;
-    let scenes = ["mixed", "caustic"];
+    let scenes = ["mixed", "caustic", "lights"];
     let s = |p: &Path| p.to_string_lossy().into_owned();
     for scene in scenes {
         let d = work.path();
@@ -378,19 +388,28 @@ fn main() -> Result<()> {
 /// that is best at 9 samples can leave a 256-sample render worse than it was.
 fn guard_study(bin: &Path, work: &Path, out_dir: &Path, size: &str, quick: bool) -> Result<String> {
     let (scenes, spps): (&[&str], &[&str]) = if quick {
-        (&["mixed"], &["4", "64"])
+        (&["mixed", "lights"], &["4", "64"])
     } else {
         (
-            &["mixed", "penumbra", "glossy", "light-edge", "caustic"],
+            &[
+                "mixed",
+                "penumbra",
+                "glossy",
+                "light-edge",
+                "caustic",
+                "lights",
+            ],
             &["4", "16", "64", "256"],
         )
     };
-    let guards: [(&str, &str, &str); 5] = [
+    // The default last.
+    let guards: [(&str, &str, &str); 6] = [
         ("none", "none", "0.99"),
         ("range", "range", "0.99"),
         ("stderr", "stderr", "0.99"),
-        ("both, 80% bound", "both", "0.8"),
-        ("both (default)", "both", "0.99"),
+        ("both (range + stderr)", "both", "0.99"),
+        ("carriers", "carriers", "0.99"),
+        ("all (default)", "all", "0.99"),
     ];
     let s = |p: &Path| p.to_string_lossy().into_owned();
     let input = work.join("g.exr");
@@ -406,8 +425,10 @@ fn guard_study(bin: &Path, work: &Path, out_dir: &Path, size: &str, quick: bool)
     let mut md = format!(
         "## ep-box guards from 4 to 256 samples per pixel ({size})\n\n\
          RMSE against truth of the input and of ep-box with each guard (other settings at their \
-         defaults); bold: the lowest of the row. `stderr` and `both` spread at most `t * S_p` of a \
-         pixel's excess, `t` at the bound's confidence.\n\n| scene | spp | input |"
+         defaults); bold: the lowest of the row. `stderr` spreads at most `t * S_p` of a \
+         pixel's excess, `t` at the bound's confidence (99%); `range` leaves a pixel no brighter \
+         than a converged one within 2 pixels; `carriers` treats a pixel as noise only when fewer \
+         than min(16, max(2, 0.2 n)) of its n samples carry its mean; `all` is the three.\n\n| scene | spp | input |"
     );
     let mut csv = String::from("scene,spp,guard,guard_confidence,rmse,input_rmse\n");
     for (name, _, _) in &guards {

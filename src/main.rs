@@ -263,9 +263,13 @@ struct FilterArgs {
     /// samples (n Y^2 / (var + Y^2)) is not noise...
     #[arg(long, default_value_t = 16.0)]
     carriers: f64,
-    /// ... nor one whose mean rests on at least this fraction of its samples.
+    /// ... nor one whose mean rests on at least this fraction of its samples
+    /// and whose relative standard error is at most --carriers-rse.
     #[arg(long, default_value_t = 0.2)]
     carriers_fraction: f64,
+    /// See --carriers-fraction.
+    #[arg(long, default_value_t = 0.5)]
+    carriers_rse: f64,
     /// ep-gauss: a noisy sample with at least this many noisy neighbouring
     /// super-samples (within --support-ratio of it) is a feature and keeps the
     /// base kernel; 0 = the paper's rule.
@@ -628,6 +632,7 @@ fn filter_job(a: &FilterArgs, cancel: Arc<AtomicBool>) -> Result<FilterJob> {
         guard_confidence: a.guard_confidence,
         carriers: a.carriers,
         carriers_fraction: a.carriers_fraction,
+        carriers_rse: a.carriers_rse,
         ..a.stats.params()?
     };
     params.radius = a.radius;

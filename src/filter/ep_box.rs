@@ -104,6 +104,22 @@ impl Guard {
     }
 }
 
+/// A mean carried by fewer samples than this is never reliable, whatever the
+/// fraction of the pixel's samples that is (one sample cannot tell a firefly
+/// from a lamp that covers part of the pixel).
+pub const CARRIERS_FLOOR: f64 = 2.0;
+
+/// The number of carrier samples from which a mean of `n` samples is
+/// reliable: `min(k_max, max(fraction n, n / (1 + (n - 1) rse^2), 2))`. The
+/// middle term is the carrier count at which the relative standard error of
+/// the mean falls to `rse` ([`carriers`]: `k = n / (1 + (n - 1) rse^2)`), so a
+/// few hits among few samples are not enough.
+#[inline]
+pub fn carriers_needed(k_max: f64, fraction: f64, rse: f64, n: f64) -> f64 {
+    let by_error = n / (1.0 + (n - 1.0) * rse * rse);
+    k_max.min((fraction * n).max(by_error).max(CARRIERS_FLOOR))
+}
+
 /// The effective number of samples that carry a pixel's mean: `n Y^2 /
 /// (var + Y^2)` with `var` the population variance of its `n` samples
 /// (`S_p^2 (n - 1)` from the variance of the mean). Exactly `k` when `k` of
@@ -127,6 +143,25 @@ pub const DEFAULT_MAX_RADIUS: f64 = 8.0;
 /// Chebyshev radius of the `range` guard's look at converged pixels.
 pub const GUARD_REACH: usize = 2;
 
+/// Chebyshev radius within which the `carriers` guard counts noisy pixels
+/// to tell a compact feature from a stretch of noise.
+pub const CLUSTER_REACH: usize = 2;
+
+/// At most this many noisy pixels within [`CLUSTER_REACH`] (the pixel
+/// itself included) make a compact feature: a bulb up to a pixel across hits
+/// at most a 2 x 2 block.
+pub const COMPACT_MAX: usize = 4;
+
+/// A compact feature's pixel needs at least this many carriers: two hits in
+/// one quiet pixel are still as likely a pair of fireflies as a lamp (at a
+/// firefly rate that leaves the neighbours quiet, three are 25 times rarer).
+pub const COMPACT_CARRIERS: f64 = 3.0;
+
+/// Noisy pixels count towards a cluster when at least this fraction of the
+/// pixel's luminance (1/16): parts of one feature, or of one stretch of
+/// noise, are comparable; faint fireflies around a bulb are not.
+pub const COMPACT_RATIO: f64 = 16.0;
+
 /// Settings of the `ep-box` filter (and of `epfilt plan`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct EpBoxParams {
@@ -147,8 +182,11 @@ pub struct EpBoxParams {
     /// The `carriers` guard: a pixel whose mean rests on at least this many
     /// samples ([`carriers`]) is not noise...
     pub carriers: f64,
-    /// ... nor one whose mean rests on at least this fraction of its samples.
+    /// ... nor one whose mean rests on at least this fraction of its samples
+    /// and whose relative standard error is at most `carriers_rse`.
     pub carriers_fraction: f64,
+    /// See `carriers_fraction`.
+    pub carriers_rse: f64,
 }
 
 impl Default for EpBoxParams {
@@ -167,6 +205,7 @@ impl Default for EpBoxParams {
             guard_confidence: 0.99,
             carriers: 16.0,
             carriers_fraction: 0.2,
+            carriers_rse: 0.5,
         }
     }
 }

@@ -122,7 +122,7 @@ pub fn halo(p: &FilterParams) -> crate::geometry::Halo {
             spread_reach: reach(max_rho),
         },
         Method::EpBox => crate::geometry::Halo {
-            search_reach: p.ep_box.passes + ep_box::GUARD_REACH,
+            search_reach: p.ep_box.passes + ep_box::GUARD_REACH + ep_box::CLUSTER_REACH,
             spread_reach: p.max_radius.max(0.0).floor() as usize,
             ..Default::default()
         },

@@ -180,6 +180,9 @@ impl Staged {
                 _ => PathBuf::from("."),
             },
         };
+        // Created and registered under the lock, so that a signal handler's
+        // `remove_unfinished` cannot run between the two.
+        let mut registry = unfinished();
         let temp = tempfile::Builder::new()
             .prefix(".epfilt-")
             .suffix(suffix)
@@ -191,7 +194,8 @@ impl Staged {
                 let cause = text.split(" at path ").next().unwrap_or(&text).to_string();
                 Error::io(&dir, std::io::Error::new(e.kind(), cause))
             })?;
-        unfinished().push(temp.path().to_path_buf());
+        registry.push(temp.path().to_path_buf());
+        drop(registry);
         Ok(Staged {
             temp: Some(temp),
             dest,

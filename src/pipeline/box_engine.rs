@@ -27,7 +27,8 @@ use super::window::RowWindow;
 use super::{Precision, Strip};
 use crate::error::{Error, Result};
 use crate::filter::ep_box::{
-    carriers, se2, EpBoxParams, Guard, Ring, Spp, StatsLayout, TFactor, VarianceKind,
+    carriers, carriers_needed, se2, EpBoxParams, Guard, Ring, Spp, StatsLayout, TFactor,
+    VarianceKind,
 };
 use crate::geometry::Halo;
 
@@ -69,6 +70,9 @@ pub struct BoxEngine {
     ylum: RowWindow<f64>,
     /// `t_g * S_p`: the most of a pixel's excess that noise can explain.
     cap: RowWindow<f64>,
+    /// What the statistics say of each pixel ([`RAW_NOISY`] ...).
+    raw: RowWindow<u8>,
+    /// The decision: 1 noisy, 0 converged (or reliable).
     noisy: RowWindow<u8>,
     kept: RowWindow<f64>,
     acc: RowWindow<f64>,
@@ -162,6 +166,7 @@ impl BoxEngine {
             input: RowWindow::new(nall * w),
             ylum: RowWindow::new(w),
             cap: RowWindow::new(w),
+            raw: RowWindow::new(w),
             noisy: RowWindow::new(w),
             kept: RowWindow::new(nch * w),
             acc: RowWindow::new(nch * w),
@@ -178,7 +183,7 @@ impl BoxEngine {
         Halo {
             xbar_reach: 0,
             base_reach: 0,
-            search_reach: self.passes + GUARD_REACH,
+            search_reach: self.passes + GUARD_REACH + CLUSTER_REACH,
             spread_reach: self.reach,
         }
     }
@@ -228,34 +233,32 @@ impl BoxEngine {
             self.input.push_copy(row);
             self.ylum.push_stale(0.0);
             self.cap.push_stale(0.0);
-            self.noisy.push_stale(0);
+            self.raw.push_stale(0);
         }
         self.rows_in += strip.rows;
         self.statistics(a, self.rows_in);
         self.advance()
     }
 
-    /// Luminance, the noise flag (`t * S_p > D * L_tvis`) and the guard's bound of rows
-    /// `a..b`.
+    /// Luminance, what the statistics say ([`RAW_NOISY`], [`RAW_CARRIED`],
+    /// [`RAW_FEW`]) and the stderr guard's bound of rows `a..b`.
     fn statistics(&mut self, a: usize, b: usize) {
         let (w, nch) = (self.w, self.nch);
         let (input, lum, stats, dl) = (&self.input, &self.lum, &self.stats, self.dl);
         let (t, tg) = (&self.t, &self.tg);
         let ys = self.ylum.range_mut(a, b);
         let cs = self.cap.range_mut(a, b);
-        let fs = self.noisy.range_mut(a, b);
-        let (carriers_on, k_abs, k_frac) = (
-            self.params.guard.carriers(),
+        let fs = self.raw.range_mut(a, b);
+        let (k_abs, k_frac, k_rse) = (
             self.params.carriers,
             self.params.carriers_fraction,
+            self.params.carriers_rse,
         );
-        let reliable: u64 = ys
-            .into_par_iter()
+        ys.into_par_iter()
             .zip(cs)
             .zip(fs)
             .enumerate()
-            .map(|(k, ((yrow, crow), frow))| {
-                let mut reliable = 0u64;
+            .for_each(|(k, ((yrow, crow), frow))| {
                 let row = input.get(a + k);
                 let ch = |c: usize, x: usize| row[c * w + x] as f64;
                 let mut var = [0.0f64; 3];
@@ -281,13 +284,52 @@ impl BoxEngine {
                     let se2 = se2(stats.kind, &var[..nv], weights, mean_y, n);
                     let se = se2.sqrt();
                     // NaN (fewer than 2 samples) is not noisy: it cannot be tested.
-                    let mut noisy = t.get(n) * se > dl;
-                    if noisy && carriers_on && carriers(y, se2, n) >= k_abs.min(k_frac * n) {
-                        noisy = false;
+                    let mut f = u8::from(t.get(n) * se > dl) * RAW_NOISY;
+                    if f != 0 {
+                        let k = carriers(y, se2, n);
+                        if k >= carriers_needed(k_abs, k_frac, k_rse, n) {
+                            f |= RAW_CARRIED;
+                        }
+                        if k >= COMPACT_CARRIERS {
+                            f |= RAW_FEW;
+                        }
+                    }
+                    frow[x] = f;
+                    crow[x] = tg.get(n) * se;
+                }
+            });
+    }
+
+    /// The decision for rows `a..b` (rows `a - 2 .. b + 2` have their
+    /// statistics): noisy by the paper's test and, with the carriers guard,
+    /// neither carried by enough samples nor a compact bright feature.
+    fn decide(&mut self, a: usize, b: usize) {
+        let (w, h) = (self.w, self.h);
+        for _ in a..b {
+            self.noisy.push_stale(0);
+        }
+        let (raw, ylum) = (&self.raw, &self.ylum);
+        let carriers_on = self.params.guard.carriers();
+        let rows = self.noisy.range_mut(a, b);
+        let reliable: u64 = rows
+            .into_par_iter()
+            .enumerate()
+            .map(|(k, frow)| {
+                let y = a + k;
+                let mut reliable = 0;
+                let r = raw.get(y);
+                for x in 0..w {
+                    let f = r[x];
+                    frow[x] = u8::from(f & RAW_NOISY != 0);
+                    if f & RAW_NOISY == 0 || !carriers_on {
+                        continue;
+                    }
+                    let keep = f & RAW_CARRIED != 0
+                        || (f & RAW_FEW != 0 && compact(raw, ylum, x, y, w, h));
+                    if keep {
+                        frow[x] = 0;
                         reliable += 1;
                     }
-                    frow[x] = u8::from(noisy);
-                    crow[x] = tg.get(n) * se;
                 }
                 reliable
             })
@@ -297,10 +339,23 @@ impl BoxEngine {
 
     fn advance(&mut self) -> Result<Option<OutRows>> {
         let h = self.h;
-        let treat_target = if self.rows_in == h {
+        // Decisions: a row's needs the statistics of the rows CLUSTER_REACH
+        // below it.
+        let decide_target = if self.rows_in == h {
             h
         } else {
-            self.rows_in.saturating_sub(self.passes + GUARD_REACH)
+            self.rows_in.saturating_sub(CLUSTER_REACH)
+        };
+        if decide_target > self.noisy.end() {
+            self.decide(self.noisy.end(), decide_target);
+            self.raw
+                .evict_below(self.noisy.end().saturating_sub(CLUSTER_REACH));
+        }
+        let decided = self.noisy.end();
+        let treat_target = if decided == h {
+            h
+        } else {
+            decided.saturating_sub(self.passes + GUARD_REACH)
         };
         if treat_target > self.treat_done {
             self.treat(self.treat_done, treat_target);
@@ -406,7 +461,41 @@ struct Band<'a> {
 
 const UNSET: u8 = u8::MAX;
 
-pub use crate::filter::ep_box::GUARD_REACH;
+/// Raw flags: noisy by the paper's test (`t S_p > D L_tvis`) ...
+const RAW_NOISY: u8 = 1;
+/// ... its mean carried by enough samples to be reliable ...
+const RAW_CARRIED: u8 = 2;
+/// ... by enough for a compact feature ([`COMPACT_CARRIERS`]).
+const RAW_FEW: u8 = 4;
+
+/// Whether the pixels the paper's test calls noisy within [`CLUSTER_REACH`]
+/// of `(x, y)` (itself included) whose luminance is within a factor
+/// [`COMPACT_RATIO`] of its own are at most [`COMPACT_MAX`]: a small bright
+/// feature (a bulb a fraction of a pixel wide hits up to four pixels), faint
+/// noise around it or not; not a stretch of noise of its own brightness (a
+/// caustic, a penumbra, a glossy floor where many pixels are hit alike).
+fn compact(
+    raw: &RowWindow<u8>,
+    ylum: &RowWindow<f64>,
+    x: usize,
+    y: usize,
+    w: usize,
+    h: usize,
+) -> bool {
+    let floor = ylum.get(y)[x] / COMPACT_RATIO;
+    let mut n = 0;
+    for yy in y.saturating_sub(CLUSTER_REACH)..(y + CLUSTER_REACH + 1).min(h) {
+        let (r, l) = (raw.get(yy), ylum.get(yy));
+        for xx in x.saturating_sub(CLUSTER_REACH)..(x + CLUSTER_REACH + 1).min(w) {
+            n += usize::from(r[xx] & RAW_NOISY != 0 && l[xx] >= floor);
+        }
+    }
+    n <= COMPACT_MAX
+}
+
+pub use crate::filter::ep_box::{
+    CLUSTER_REACH, COMPACT_CARRIERS, COMPACT_MAX, COMPACT_RATIO, GUARD_REACH,
+};
 
 impl Band<'_> {
     /// Treat rows `c0..c0 + kept.len()`: the passes over the band of rows

@@ -5,6 +5,11 @@
 use epfilt::filter::ep_gauss::{relation14, EpGauss};
 use epfilt::{filter_in_memory, FilterParams, Grid, Job, Method, PipelineConfig, RunStats};
 
+/// Relative energy error allowed before rounding. Each sample's weights sum
+/// to one within ~1e-16 and every sum is compensated: 1e-12 leaves a wide
+/// margin and still catches one lost sample in 1e12.
+pub const ENERGY_TOL: f64 = 1e-12;
+
 /// A small deterministic generator (SplitMix64).
 pub struct Rng(pub u64);
 impl Rng {

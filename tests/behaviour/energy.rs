@@ -3,9 +3,6 @@
 use crate::common::*;
 use epfilt::{Method, PipelineConfig};
 
-/// Relative energy error allowed before rounding (the bound). Each
-/// sample's weights sum to one within ~1e-16 and sums are compensated.
-const ENERGY_TOL: f64 = 1e-12;
 /// A flat field must stay flat to this relative precision at borders and
 /// corners (the bound; f32 output rounding alone is 6e-8).
 const FLAT_TOL: f64 = 1e-6;

@@ -99,14 +99,37 @@ fn reference(img: &Img, spp: f64, p: &FilterParams, seed: u64) -> (Vec<f64>, usi
             let se = se2(VarianceKind::Sample, &var, &LUM, 0.0, spp).sqrt();
             bound[idx(x, y)] = tg.get(spp) * se;
             noisy[idx(x, y)] = t.get(spp) * se > dl;
-            // The carriers guard: the samples' luminance deviation is taken
-            // as sum w_c s_c, so the population variance is that squared
-            // times (n - 1) / n; k = n Y^2 / (var + Y^2).
-            if matches!(e.guard, Guard::Carriers | Guard::All) {
+        }
+    }
+    // The carriers guard: the samples' luminance deviation is taken as
+    // sum w_c s_c, so the population variance is that squared times
+    // (n - 1) / n; k = n Y^2 / (var + Y^2). A pixel is reliable when
+    // k >= min(K, max(fraction n, n / (1 + (n - 1) rse^2), 2)), or when
+    // k >= 3 and at most 4 noisy pixels of at least 1/16 of its luminance
+    // lie within 2 pixels (itself included).
+    if matches!(e.guard, Guard::Carriers | Guard::All) {
+        let raw = noisy.clone();
+        for y in 0..h {
+            for x in 0..w {
+                if !raw[idx(x, y)] {
+                    continue;
+                }
+                let var: Vec<f64> = (3..6).map(|c| img.at(x, y, c) as f64).collect();
                 let sd: f64 = var.iter().zip(&LUM).map(|(v, l)| l * v.sqrt()).sum();
-                let y2 = lum(img, x, y).powi(2);
-                let k = spp * y2 / (sd * sd * (spp - 1.0) / spp + y2);
-                if k >= e.carriers.min(e.carriers_fraction * spp) {
+                let yv = lum(img, x, y);
+                let k = spp * yv * yv / (sd * sd * (spp - 1.0) / spp + yv * yv);
+                let rse = e.carriers_rse;
+                let by_error = spp / (1.0 + (spp - 1.0) * rse * rse);
+                let needed = e
+                    .carriers
+                    .min((e.carriers_fraction * spp).max(by_error).max(2.0));
+                let mut cluster = 0;
+                for yy in y.saturating_sub(2)..(y + 3).min(h) {
+                    for xx in x.saturating_sub(2)..(x + 3).min(w) {
+                        cluster += usize::from(raw[idx(xx, yy)] && lum(img, xx, yy) >= yv / 16.0);
+                    }
+                }
+                if k >= needed || (k >= 3.0 && cluster <= 4) {
                     noisy[idx(x, y)] = false;
                 }
             }

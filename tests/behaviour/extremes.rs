@@ -4,8 +4,6 @@
 use crate::common::*;
 use epfilt::{filter_in_memory, Grid, Job, Method, PipelineConfig, Precision};
 
-/// The engine's bound on the relative energy error before rounding.
-const ENERGY_TOL: f64 = 1e-12;
 const METHODS: [Method; 3] = [Method::EpGauss, Method::Gauss, Method::Box];
 
 fn all_methods_exact(img: &Img, s: usize, what: &str) -> Vec<Img> {

@@ -8,6 +8,7 @@ mod energy;
 mod ep_box;
 mod exr_io;
 mod extremes;
+mod features;
 mod foils;
 mod invariance;
 mod reference;
