@@ -541,6 +541,48 @@ mod tests {
     }
 
     #[test]
+    fn carriers_count_the_samples_that_hold_the_mean() {
+        // k of n samples at one value and the rest at zero: exactly k
+        // (unbiased sample variance s^2 = k (n - k) / (n (n - 1)) v^2).
+        for n in [2.0f64, 4.0, 16.0, 64.0] {
+            for k in 1..=n as usize {
+                let (k, v) = (k as f64, 7.5);
+                let y = k / n * v;
+                let s2 = k * (n - k) / (n * (n - 1.0)) * v * v;
+                let c = carriers(y, s2 / n, n);
+                assert!((c - k).abs() < 1e-9 * n, "n {n} k {k}: {c}");
+            }
+        }
+        // No variance: every sample carries it; no light: none does.
+        assert_eq!(carriers(3.0, 0.0, 16.0), 16.0);
+        assert_eq!(carriers(0.0, 0.0, 16.0), 16.0);
+        assert_eq!(carriers(0.0, 1.0, 16.0), 0.0);
+        // Extremes stay finite and in 0..=n.
+        for (y, se2) in [
+            (1e30, 1e60),
+            (1e-30, 1e-60),
+            (1e30, f64::INFINITY),
+            (1e-30, 1e30),
+        ] {
+            let c = carriers(y, se2, 16.0);
+            assert!(c.is_finite() && (0.0..=16.0).contains(&c), "{y} {se2}: {c}");
+        }
+    }
+
+    #[test]
+    fn carriers_needed_grow_with_the_samples_up_to_the_cap() {
+        let need = |n: f64| carriers_needed(16.0, 0.2, 0.5, n);
+        // Few samples: the relative-error term (never below 2).
+        assert_eq!(need(1.0), 2.0);
+        assert!((need(4.0) - 4.0 / 1.75).abs() < 1e-12);
+        assert!((need(16.0) - 16.0 / 4.75).abs() < 1e-12);
+        // Then the fraction, then the cap.
+        assert!((need(64.0) - 12.8).abs() < 1e-12);
+        assert_eq!(need(256.0), 16.0);
+        assert_eq!(need(1e6), 16.0);
+    }
+
+    #[test]
     fn standard_error_of_each_kind() {
         let w = [0.2126, 0.7152, 0.0722];
         assert_eq!(se2(VarianceKind::Sample, &[4.0], &w, 0.0, 16.0), 0.25);

@@ -573,6 +573,40 @@ mod tests {
     }
 
     #[test]
+    fn support_keeps_samples_with_comparable_noisy_neighbours() {
+        let (hi, lo) = (10.0, f64::NEG_INFINITY);
+        let rule = Support::new(1, 16.0);
+        let field = |hot: &'static [((i64, i64), f64)]| {
+            move |di: i64, dj: i64| -> Option<f64> {
+                Some(
+                    hot.iter()
+                        .find(|(o, _)| *o == (di, dj))
+                        .map_or(1.0, |(_, v)| *v),
+                )
+            }
+        };
+        // Alone: a firefly.
+        assert!(!rule.keeps(1000.0, hi, lo, field(&[])));
+        // A neighbour above the same bound and within 16x: a feature.
+        assert!(rule.keeps(1000.0, hi, lo, field(&[((1, 1), 300.0)])));
+        // Above the bound but 100x dimmer: a faint firefly beside a bright one.
+        assert!(!rule.keeps(1000.0, hi, lo, field(&[((0, 1), 11.0)])));
+        // Within 16x but below the bound: not noisy, no support.
+        assert!(!rule.keeps(100.0, 200.0, lo, field(&[((0, 1), 150.0)])));
+        // Outside the image counts for nothing.
+        assert!(!rule.keeps(1000.0, hi, lo, |_, _| None));
+        // Two needed.
+        let two = Support::new(2, 16.0);
+        assert!(!two.keeps(1000.0, hi, lo, field(&[((1, 0), 900.0)])));
+        assert!(two.keeps(1000.0, hi, lo, field(&[((1, 0), 900.0), ((-1, 0), 800.0)])));
+        // 0: the paper's rule, never kept.
+        assert!(!Support::new(0, 16.0).keeps(1000.0, hi, lo, field(&[((1, 0), 900.0)])));
+        // The dark side: a sample far below its pixel's average, with a
+        // neighbour as dark.
+        assert!(rule.keeps(0.1, f64::INFINITY, 0.5, field(&[((1, 0), 0.2)])));
+    }
+
+    #[test]
     fn zero_tolerance_goes_to_the_cap() {
         let ep = EpGauss::new(3, 0.6, 4.0, 3.0, 0.0, 0.1);
         let f = Field::new(40, 40, ep.pad(), |x, y| 1.0 + 0.01 * ((x + y) % 3) as f64);

@@ -235,9 +235,10 @@ fn estimate_box_bytes(job: &Job, cfg: &PipelineConfig, block_bytes: u64, halo: H
     } else {
         cfg.threads
     } as u64;
-    // Input rows with their luminance, guard bound and flag; kept and accumulator
-    // rows; each task's band arrays; strips in flight; the codec's blocks.
-    let per_in = w.saturating_mul(nall * 4 + 8 + 8 + 1);
+    // Input rows with their luminance, guard bound, raw flags and decision;
+    // kept and accumulator rows; each task's band arrays; strips in flight;
+    // the codec's blocks.
+    let per_in = w.saturating_mul(nall * 4 + 8 + 8 + 1 + 1);
     let windows = per_in.saturating_mul(2 * p + strip + 2)
         + w.saturating_mul(nch * 8)
             .saturating_mul(2 * (2 * r + strip + 2));

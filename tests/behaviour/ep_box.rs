@@ -778,3 +778,116 @@ mod files {
         assert!(err.contains("var.Y") && err.contains("variance.G"), "{err}");
     }
 }
+
+/// The carriers guard at its edges: no variance, every pixel noisy (carried
+/// by one sample, or by all), one and two samples per pixel, and values from
+/// 1e-30 to 1e30: finite output, exact energy, and the decision each case
+/// calls for.
+#[test]
+fn the_carriers_rule_at_its_edges() {
+    let (w, h) = (23, 17);
+    let default = FilterParams::new(Method::EpBox, 1);
+    let unchanged = |out: &Img, img: &Img| {
+        (0..h).all(|y| {
+            (0..w).all(|x| (0..3).all(|c| out.at(x, y, c).to_bits() == img.at(x, y, c).to_bits()))
+        })
+    };
+    let exact = |s: &RunStats| s.ledger.iter().all(|l| l.rel_error <= ENERGY_TOL);
+    // No variance anywhere: nothing is noisy, nothing moves.
+    let mut img = rgbv(w, h);
+    for y in 0..h {
+        for x in 0..w {
+            img.set(x, y, 1, 0.5 + (x * y) as f32);
+        }
+    }
+    let (out, s) = filter(&img, 16.0, &params(Guard::All, 0.01, 8.0), &cfg(256, 0, 2));
+    assert_eq!((s.counters.noisy, s.counters.reliable), (0, 0));
+    assert!(unchanged(&out, &img) && exact(&s));
+    // Every pixel hit by one sample of 16: all noise, nothing converged to
+    // spread onto, so all unresolved and left as they are.
+    let mut img = rgbv(w, h);
+    for y in 0..h {
+        for x in 0..w {
+            firefly(&mut img, x, y, [400.0; 3], 16.0);
+        }
+    }
+    let (out, s) = filter(&img, 16.0, &params(Guard::All, 0.01, 8.0), &cfg(256, 0, 2));
+    assert_eq!(s.counters.noisy, (w * h) as u64);
+    assert_eq!(s.counters.unresolved, (w * h) as u64);
+    assert!(unchanged(&out, &img) && exact(&s));
+    // Every pixel hit by all its samples but for one: reliable, kept.
+    let mut img = rgbv(w, h);
+    for y in 0..h {
+        for x in 0..w {
+            partly_covered(&mut img, x, y, [400.0; 3], 15.0, 16.0);
+        }
+    }
+    let (out, s) = filter(&img, 16.0, &params(Guard::All, 0.01, 8.0), &cfg(256, 0, 2));
+    assert_eq!((s.counters.noisy, s.counters.reliable), (0, (w * h) as u64));
+    assert!(unchanged(&out, &img) && exact(&s));
+    // One sample per pixel: no variance to test, nothing treated (a count
+    // channel of 1, so the job itself is valid); two samples: a firefly of
+    // two is one hit, below the floor of 2 carriers, and is spread.
+    for n in [1.0f32, 2.0] {
+        let mut img = Img::new(w, h, 7, |_, _, c| match c {
+            0..=2 => 1.0,
+            6 => n,
+            _ => 0.0,
+        });
+        if n == 2.0 {
+            for c in 0..3 {
+                img.set(11, 8, c, (1.0 + 500.0) / 2.0);
+                img.set(11, 8, 3 + c, 499.0f32.powi(2) / 2.0);
+            }
+        }
+        let mut j = job(w, h, 0.0);
+        j.aux.push("spp".into());
+        j.stats.as_mut().unwrap().spp = Spp::Channel(6);
+        let (out, s) = filter_in_memory(
+            img.data.clone(),
+            &j,
+            &params(Guard::All, 0.01, 8.0),
+            &cfg(256, 0, 2),
+        )
+        .unwrap();
+        let out = Img {
+            w,
+            h,
+            nch: 3,
+            data: out,
+        };
+        assert!(exact(&s));
+        if n == 1.0 {
+            assert_eq!(s.counters.noisy, 0);
+            assert!(unchanged(&out, &img));
+        } else {
+            assert_eq!(
+                (s.counters.noisy, s.counters.spread),
+                (1, 1),
+                "{:?}",
+                s.counters
+            );
+        }
+    }
+    // 1e-30 beside 1e30, with variances up to the largest f32 (whose
+    // square roots and squares must not overflow into NaN).
+    let mut img = rgbv(w, h);
+    let mut rng = Rng(5);
+    for y in 0..h {
+        for x in 0..w {
+            let (v, var) = match rng.next_u64() % 4 {
+                0 => (1e30, f32::MAX),
+                1 => (1e-30, 1e-30),
+                2 => (1e30, 0.0),
+                _ => (1e-30, 0.0),
+            };
+            for c in 0..3 {
+                img.set(x, y, c, v);
+                img.set(x, y, 3 + c, var);
+            }
+        }
+    }
+    let (out, s) = filter(&img, 16.0, &default, &cfg(256, 0, 2));
+    assert!(out.data.iter().all(|v| v.is_finite()), "{:?}", s.counters);
+    assert!(exact(&s));
+}
