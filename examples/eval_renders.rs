@@ -392,11 +392,31 @@ fn main() -> Result<()> {
         bail!("no renders in {}", dir.display());
     }
     let mut rows = Vec::new();
-    let mut montages: Vec<(String, Vec<(PathBuf, String)>)> = Vec::new();
+    // Per scene: the lowest-spp pixel-resolution input and ep-box, the
+    // lowest-spp super-sampled input's gauss and ep-gauss, the reference.
+    let mut montages: BTreeMap<
+        String,
+        (
+            Vec<(PathBuf, String)>,
+            Vec<(PathBuf, String)>,
+            Option<PathBuf>,
+        ),
+    > = BTreeMap::new();
     for inp in &list {
         eprintln!("{}", inp.name);
         let input_img = Image::read(&inp.path)?;
         let mut shown: Vec<(PathBuf, String)> = Vec::new();
+        let label = |what: &str| {
+            format!(
+                "{} spp{} {what}",
+                inp.spp,
+                if inp.s > 1 {
+                    format!(" {0}x{0}", inp.s)
+                } else {
+                    String::new()
+                }
+            )
+        };
         // Each linear filter of the reference and of the input (the box at
         // S = 1 is the identity: the files themselves).
         let mut refs: BTreeMap<&'static str, Image> = BTreeMap::new();
@@ -411,8 +431,11 @@ fn main() -> Result<()> {
             linear_noisy.insert(lin.name(), n);
             linear_reports.insert(lin.name(), r);
         }
-        shown.push((ctx.path(&format!("{}-box", inp.name)), "input (box)".into()));
-        shown.push((ctx.path(&format!("{}-gauss", inp.name)), "gauss".into()));
+        if inp.s == 1 {
+            shown.push((inp.path.clone(), label("input")));
+        } else {
+            shown.push((ctx.path(&format!("{}-gauss", inp.name)), label("gauss")));
+        }
         for &m in &methods {
             if m == Method::EpBox && inp.s != 1 {
                 continue; // needs per-pixel variance
@@ -460,17 +483,23 @@ fn main() -> Result<()> {
                 seconds: report_seconds,
                 spread: report.as_ref().map_or(0, |r| r.samples_spread),
             });
-            if matches!(m, Method::EpGauss | Method::EpBox) {
+            if (inp.s == 1 && m == Method::EpBox) || (inp.s > 1 && m == Method::EpGauss) {
                 shown.push((ctx.path(&tag), m.name().into()));
             }
         }
-        if inp.s == 1 {
-            shown.push((inp.reference.clone(), "reference".into()));
+        // Keep the montage's files: the context's folder lives to the end.
+        let entry = montages.entry(inp.scene.clone()).or_default();
+        let slot = if inp.s == 1 {
+            &mut entry.0
         } else {
-            let tag = format!("ref-{}-gauss", inp.name);
-            shown.push((ctx.path(&tag), "gauss(reference)".into()));
+            &mut entry.1
+        };
+        if slot.is_empty() {
+            *slot = shown;
         }
-        montages.push((inp.name.clone(), shown));
+        if inp.s == 1 && entry.2.is_none() {
+            entry.2 = Some(inp.reference.clone());
+        }
     }
     let md = markdown(&rows, &dir);
     print!("{md}");
@@ -478,9 +507,13 @@ fn main() -> Result<()> {
         std::fs::create_dir_all(out_dir.join("renders"))?;
         std::fs::write(out_dir.join("renders.md"), &md)?;
         std::fs::write(out_dir.join("renders.csv"), csv(&rows))?;
-        for (name, shown) in &montages {
-            let png = out_dir.join("renders").join(format!("{name}.png"));
-            epfilt::preview::write_png(shown, &png, 0.0)?;
+        for (scene, (px, ss, reference)) in &montages {
+            let mut shown: Vec<(PathBuf, String)> = px.iter().chain(ss).cloned().collect();
+            if let Some(r) = reference {
+                shown.push((r.clone(), "reference".into()));
+            }
+            let png = out_dir.join("renders").join(format!("{scene}.png"));
+            epfilt::preview::write_png(&shown, &png, 0.0)?;
         }
         eprintln!("wrote {}", out_dir.join("renders.md").display());
     }
@@ -520,12 +553,65 @@ fn markdown(rows: &[Row], dir: &Path) -> String {
     let _ = writeln!(
         s,
         "# Real renders: every method at its defaults\n\nMade by `scripts/eval-renders` from `{}` \
-         (`examples/eval_renders.rs` says how each figure is measured). **factor** below 1: less error \
-         than the unfiltered input (S = 1) or than the linear filter of the same family (S > 1); \
-         **untouched**: pixels bit-identical to the input (S = 1) or to the linear filter (S > 1); \
-         **peak**: the worst light's brightest output pixel over the reference's; **energy**: \
-         sum(out) S² / sum(in), the worst channel.\n",
+         (`examples/eval_renders.rs` says how each figure is measured). **factor**: relMSE against \
+         the reference over the relMSE the linear filter of the method's family leaves (ep-gauss, \
+         clamp: the Gaussian; ep-box, median, alpha-trim: the box, which at S = 1 is the unfiltered \
+         input), both against the same linear filter of the reference; below 1 the method removed \
+         noise the linear filter leaves. **untouched**: pixels bit-identical to that linear filter's \
+         output; **peak**: the worst light's brightest output pixel over the reference's (lights: \
+         connected reference pixels above 30 times the median); **energy**: sum(out) S² / sum(in) \
+         of the file as written, the worst channel; **ledger**: the run's relative energy error \
+         before rounding.\n",
         dir.display()
+    );
+    let worst = |m: &str, s1: bool| {
+        rows.iter()
+            .filter(|r| r.method == m && (r.s == 1) == s1)
+            .fold((0.0f64, String::new()), |(w, n), r| {
+                if r.factor > w {
+                    (r.factor, r.input.clone())
+                } else {
+                    (w, n)
+                }
+            })
+    };
+    let (bw, bi) = worst("ep-box", true);
+    let (gw, gi) = worst("ep-gauss", false);
+    let ledger = rows
+        .iter()
+        .filter(|r| !matches!(r.method, "clamp" | "median" | "alpha-trim"))
+        .map(|r| r.ledger)
+        .fold(0.0f64, f64::max);
+    // Each method where it is meant to run: ep-box at S = 1, ep-gauss at S > 1.
+    let peak = |m: &str| {
+        rows.iter()
+            .filter(|r| r.method == m && (r.s == 1) == (m == "ep-box"))
+            .map(|r| {
+                let lin = rows
+                    .iter()
+                    .find(|q| {
+                        q.input == r.input
+                            && q.method == linear_of(Method::parse(m).unwrap()).name()
+                    })
+                    .map_or(1.0, |q| q.peak);
+                (r.peak / lin, r.input.clone())
+            })
+            .fold((f64::INFINITY, String::new()), |a, b| {
+                if b.0 < a.0 {
+                    b
+                } else {
+                    a
+                }
+            })
+    };
+    let (pb, pbi) = peak("ep-box");
+    let (pg, pgi) = peak("ep-gauss");
+    let _ = writeln!(
+        s,
+        "Worst ep-box factor (pixel-resolution inputs): {bw:.3} ({bi}). Worst ep-gauss factor \
+         (super-sampled inputs): {gw:.3} ({gi}). Largest ledger error of an energy-preserving method: \
+         {ledger:.1e}. Lights' peaks against the linear filter's (the input's own noise aside): \
+         ep-box at worst {pb:.2} ({pbi}), ep-gauss on super-sampled inputs at worst {pg:.2} ({pgi}).\n"
     );
     // Summary: the factor of ep-box and ep-gauss per input.
     let mut inputs: Vec<&str> = rows.iter().map(|r| r.input.as_str()).collect();

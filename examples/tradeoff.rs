@@ -4,7 +4,7 @@
 //! per method, the Pareto front marked) and `tradeoff.md`.
 //!
 //! ```text
-//! cargo run --release --example tradeoff -- [--quick] [--out DIR] [--bin PATH] [--repeat N]
+//! cargo run --release --example tradeoff -- [--quick] [--out DIR] [--bin PATH] [--repeat N] [--guards-only]
 //! ```
 //!
 //! Every scene is made twice with the same budget of 9 samples per pixel: as
@@ -238,6 +238,7 @@ fn main() -> Result<()> {
     let mut bin = PathBuf::from("target/release/epfilt");
     let mut repeat = 1usize;
     let mut size: Option<String> = None;
+    let mut guards_only = false;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -246,6 +247,7 @@ fn main() -> Result<()> {
             "--bin" => bin = args.next().context("--bin PATH")?.into(),
             "--repeat" => repeat = args.next().context("--repeat N")?.parse()?,
             "--size" => size = Some(args.next().context("--size WxH")?),
+            "--guards-only" => guards_only = true,
             other => bail!("unknown argument {other:?}"),
         }
     }
@@ -258,6 +260,20 @@ fn main() -> Result<()> {
     let work = tempfile::Builder::new()
         .prefix("tradeoff-")
         .tempdir_in(&out_dir)?;
+    if guards_only {
+        // Only the guard study, spliced into an existing tradeoff.md.
+        let section = guard_study(&bin, work.path(), &out_dir, &size, quick)?;
+        let path = out_dir.join("tradeoff.md");
+        let old = std::fs::read_to_string(&path).unwrap_or_default();
+        let head = old
+            .split("## ep-box guards")
+            .next()
+            .unwrap_or("")
+            .to_string();
+        std::fs::write(&path, head + &section)?;
+        print!("{section}");
+        return Ok(());
+    }
     let scenes = ["mixed", "caustic", "lights"];
     let s = |p: &Path| p.to_string_lossy().into_owned();
     for scene in scenes {
@@ -415,29 +431,42 @@ fn guard_study(bin: &Path, work: &Path, out_dir: &Path, size: &str, quick: bool)
     let input = work.join("g.exr");
     let truth = work.join("g-truth.exr");
     let output = work.join("g-out.exr");
-    let rmse = |a: &Path| -> Result<f64> {
+    // (RMSE, rel. MSE) against the truth.
+    let rmse = |a: &Path| -> Result<(f64, f64)> {
         let c: Value = serde_json::from_str(&run_cmd(
             bin,
             &["compare", &s(a), &s(&truth), "--json"].map(String::from),
         )?)?;
-        Ok(c["rmse"].as_f64().unwrap_or(f64::NAN))
+        Ok((
+            c["rmse"].as_f64().unwrap_or(f64::NAN),
+            c["rel_mse"].as_f64().unwrap_or(f64::NAN),
+        ))
+    };
+    let header = |what: &str| {
+        let mut h = format!("\n{what}\n\n| scene | spp | input |");
+        for (name, _, _) in &guards {
+            let _ = write!(h, " {name} |");
+        }
+        h.push_str("\n|---|---|---|");
+        h.push_str(&"---|".repeat(guards.len()));
+        h.push('\n');
+        h
     };
     let mut md = format!(
         "## ep-box guards from 4 to 256 samples per pixel ({size})\n\n\
-         RMSE against truth of the input and of ep-box with each guard (other settings at their \
+         Error against truth of the input and of ep-box with each guard (other settings at their \
          defaults); bold: the lowest of the row. `stderr` spreads at most `t * S_p` of a \
          pixel's excess, `t` at the bound's confidence (99%); `range` leaves a pixel no brighter \
          than a converged one within 2 pixels; `carriers` treats a pixel as noise only when fewer \
-         than min(16, max(2, 0.2 n)) of its n samples carry its mean; `all` is the three.\n\n| scene | spp | input |"
+         than min(16, max(0.2 n, n / (1 + (n - 1) 0.25), 2)) of its n samples carry its mean and it \
+         is not a compact feature; `all` is the three. RMSE is dominated by the brightest pixels' \
+         errors, rel. MSE (`(a - b)^2 / (b^2 + eps)`) weighs every pixel by its own brightness.\n"
     );
-    let mut csv = String::from("scene,spp,guard,guard_confidence,rmse,input_rmse\n");
-    for (name, _, _) in &guards {
-        let _ = write!(md, " {name} |");
-    }
-    md.push_str("\n|---|---|---|");
-    md.push_str(&"---|".repeat(guards.len()));
-    md.push('\n');
-    let mut worst_ratio = 0.0f64;
+    let mut rmse_md = header("RMSE:");
+    let mut rel_md = header("rel. MSE:");
+    let mut csv =
+        String::from("scene,spp,guard,guard_confidence,rmse,input_rmse,rel_mse,input_rel_mse\n");
+    let (mut worst_ratio, mut worst_rel) = (0.0f64, 0.0f64);
     for scene in scenes {
         for spp in spps {
             eprintln!("guard study: {scene} at {spp} spp");
@@ -460,7 +489,7 @@ fn guard_study(bin: &Path, work: &Path, out_dir: &Path, size: &str, quick: bool)
                 ]
                 .map(String::from),
             )?;
-            let base = rmse(&input)?;
+            let (base, base_rel) = rmse(&input)?;
             let mut errs = Vec::new();
             for (_, g, gc) in &guards {
                 run_cmd(
@@ -479,27 +508,41 @@ fn guard_study(bin: &Path, work: &Path, out_dir: &Path, size: &str, quick: bool)
                     ]
                     .map(String::from),
                 )?;
-                let e = rmse(&output)?;
-                let _ = writeln!(csv, "{scene},{spp},{g},{gc},{e:.6e},{base:.6e}");
-                errs.push(e);
+                let (e, r) = rmse(&output)?;
+                let _ = writeln!(
+                    csv,
+                    "{scene},{spp},{g},{gc},{e:.6e},{base:.6e},{r:.6e},{base_rel:.6e}"
+                );
+                errs.push((e, r));
             }
-            worst_ratio = worst_ratio.max(errs[errs.len() - 1] / base);
-            let best = errs.iter().copied().fold(f64::INFINITY, f64::min);
-            let _ = write!(md, "| {scene} | {spp} | {base:.4} |");
-            for e in errs {
-                if e == best {
-                    let _ = write!(md, " **{e:.4}** |");
-                } else {
-                    let _ = write!(md, " {e:.4} |");
+            let last = errs[errs.len() - 1];
+            worst_ratio = worst_ratio.max(last.0 / base);
+            worst_rel = worst_rel.max(last.1 / base_rel);
+            for (md, pick, base) in [
+                (&mut rmse_md, 0usize, base),
+                (&mut rel_md, 1usize, base_rel),
+            ] {
+                let val = |e: &(f64, f64)| if pick == 0 { e.0 } else { e.1 };
+                let best = errs.iter().map(val).fold(f64::INFINITY, f64::min);
+                let _ = write!(md, "| {scene} | {spp} | {base:.4} |");
+                for e in &errs {
+                    let v = val(e);
+                    if v == best {
+                        let _ = write!(md, " **{v:.4}** |");
+                    } else {
+                        let _ = write!(md, " {v:.4} |");
+                    }
                 }
+                md.push('\n');
             }
-            md.push('\n');
         }
     }
+    md.push_str(&rmse_md);
+    md.push_str(&rel_md);
     let _ = writeln!(
         md,
-        "\nThe default's RMSE is at most {:.3} x the input's in every row.",
-        worst_ratio
+        "\nThe default's error is at most {worst_ratio:.3} x the input's in RMSE and {worst_rel:.3} x in \
+         rel. MSE in every row."
     );
     std::fs::write(out_dir.join("tradeoff-guards.csv"), csv)?;
     Ok(md)
