@@ -198,6 +198,14 @@ fn peak_ratio(out: &Image, r: &Image, lights: &[Vec<(usize, usize)>]) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+/// One scene's montage: the pixel-resolution panels, the super-sampled
+/// ones, the reference.
+type Montage = (
+    Vec<(PathBuf, String)>,
+    Vec<(PathBuf, String)>,
+    Option<PathBuf>,
+);
+
 #[derive(Clone, Debug)]
 struct Input {
     scene: String,
@@ -394,14 +402,7 @@ fn main() -> Result<()> {
     let mut rows = Vec::new();
     // Per scene: the lowest-spp pixel-resolution input and ep-box, the
     // lowest-spp super-sampled input's gauss and ep-gauss, the reference.
-    let mut montages: BTreeMap<
-        String,
-        (
-            Vec<(PathBuf, String)>,
-            Vec<(PathBuf, String)>,
-            Option<PathBuf>,
-        ),
-    > = BTreeMap::new();
+    let mut montages: BTreeMap<String, Montage> = BTreeMap::new();
     for inp in &list {
         eprintln!("{}", inp.name);
         let input_img = Image::read(&inp.path)?;
