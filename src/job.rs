@@ -10,7 +10,7 @@ use crate::geometry::Grid;
 use crate::io::{
     find_stats, ExrInput, ExrOutput, OutputSettings, PartSelect, SppFrom, StatsRequest,
 };
-use crate::pipeline::{run, Job, PipelineConfig, Progress};
+use crate::pipeline::{run, Job, MethodStats, PipelineConfig, Progress};
 use crate::stats::{peak_rss_bytes, EpBoxReport, Report};
 
 /// The ledger must balance to this relative error before rounding, or the
@@ -107,6 +107,7 @@ pub fn check_not_same_file(input: &Path, output: &Path) -> Result<()> {
 
 /// Run `job`, reporting progress as (output rows done, output rows).
 pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
+    let cpu_start = crate::stats::cpu_seconds().unwrap_or(0.0);
     job.params.validate()?;
     check_not_same_file(&job.input, &job.output)?;
     let mut input = ExrInput::open_layer(&job.input, job.part.as_ref(), job.layer.as_deref())?;
@@ -243,6 +244,13 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     } else {
         job.pipeline.threads
     };
+    // The method's own counts: ep-gauss in super-samples, ep-box in pixels.
+    let eb = stats.ep_box().unwrap_or_default();
+    let counts = match stats.method {
+        MethodStats::EpGauss(g) => (g.noisy, g.spread, g.capped, g.kept),
+        MethodStats::EpBox(b) => (b.noisy, b.spread, b.capped, 0),
+        MethodStats::Plain => (0, 0, 0, 0),
+    };
     let mut report = Report {
         input: job.input.display().to_string(),
         output: job.output.display().to_string(),
@@ -259,14 +267,10 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         max_radius: job.params.max_radius,
         seconds: stats.seconds,
         megapixels_per_second: (w * h) as f64 / stats.seconds.max(1e-9) / 1e6,
-        samples_noisy: stats.counters.noisy,
-        samples_spread: stats.counters.spread,
-        samples_capped: stats.counters.capped,
-        samples_kept: if params.method == Method::EpGauss {
-            stats.counters.guarded
-        } else {
-            0
-        },
+        samples_noisy: counts.0,
+        samples_spread: counts.1,
+        samples_capped: counts.2,
+        samples_kept: counts.3,
         energy_in: vec![],
         energy_out: vec![],
         energy_rel_error: vec![],
@@ -300,19 +304,17 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
                 SppFrom::Channel(c) => format!("channel {c}"),
             },
             guard_confidence: params.ep_box.guard_confidence,
-            reliable: stats.counters.reliable,
-            guarded: stats.counters.guarded,
-            trimmed: stats.counters.trimmed,
-            unresolved: stats.counters.unresolved,
+            reliable: eb.reliable,
+            guarded: eb.guarded,
+            trimmed: eb.trimmed,
+            unresolved: eb.unresolved,
             passes_allowed: params.ep_box.passes,
-            passes_used: stats.counters.passes,
+            passes_used: eb.passes,
         }),
-        window_rows: stats.window_rows,
-        window_bytes: {
-            let (nch, ow) = (pipe_job.strip_channels() as u64, (w / s) as u64);
-            let r = stats.window_rows.map(|v| v as u64);
-            r[0] * nch * w as u64 * 4 + r[1] * ow * 8 + (r[2] + r[3] + r[4]) * nch * ow * 8
-        },
+        window_bytes: stats.window_bytes(),
+        windows: stats.windows.clone(),
+        stage_seconds: stats.stages,
+        cpu_seconds: crate::stats::cpu_seconds().map(|c| c - cpu_start),
     };
     report.set_ledger(&stats.ledger);
     Ok(report)

@@ -22,7 +22,7 @@
 //! let (out, stats) = filter_in_memory(img, &job, &params, &PipelineConfig::default()).unwrap();
 //! assert_eq!(out.len(), 4);
 //! assert!(stats.ledger[0].rel_error < 1e-12);   // energy is exact
-//! assert_eq!(stats.counters.noisy, 1);          // only the firefly was spread
+//! assert_eq!(stats.ep_gauss().unwrap().noisy, 1); // only the firefly was spread
 //! ```
 //!
 //! Modules: [`geometry`] (grid, reflection, halo), [`filter`] (kernels and the

@@ -671,7 +671,6 @@ fn filter_job(a: &FilterArgs, cancel: Arc<AtomicBool>) -> Result<FilterJob> {
             tile: a.tile,
             strip_rows: a.strip_rows,
             threads: a.threads,
-            precision,
             cancel: Some(cancel),
             nonfinite: match a.nonfinite.as_str() {
                 "error" => NonFinite::Error,

@@ -3,7 +3,7 @@
 
 use serde::Serialize;
 
-use crate::pipeline::ChannelLedger;
+use crate::pipeline::{ChannelLedger, StageSeconds, WindowUse};
 
 /// Peak resident set size of this process in bytes (`VmHWM`), where the
 /// platform tells it.
@@ -12,6 +12,29 @@ pub fn peak_rss_bytes() -> Option<u64> {
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb * 1024)
+}
+
+/// CPU time (user + system) this process has used so far, in seconds, where
+/// the platform tells it.
+pub fn cpu_seconds() -> Option<f64> {
+    #[cfg(unix)]
+    {
+        let mut u = std::mem::MaybeUninit::<libc::rusage>::zeroed();
+        // SAFETY: getrusage writes a whole rusage into the pointer it is
+        // given, which points to one, and reads nothing from it.
+        #[allow(unsafe_code)]
+        let rc = unsafe { libc::getrusage(libc::RUSAGE_SELF, u.as_mut_ptr()) };
+        if rc != 0 {
+            return None;
+        }
+        // SAFETY: getrusage returned 0, so it filled the struct.
+        #[allow(unsafe_code)]
+        let u = unsafe { u.assume_init() };
+        let t = |v: libc::timeval| v.tv_sec as f64 + v.tv_usec as f64 * 1e-6;
+        Some(t(u.ru_utime) + t(u.ru_stime))
+    }
+    #[cfg(not(unix))]
+    None
 }
 
 /// Summary of one filtering run (the `--report` JSON).
@@ -47,11 +70,13 @@ pub struct Report {
     pub seconds: f64,
     /// Input samples per second, in millions.
     pub megapixels_per_second: f64,
-    /// Samples that failed the base noise test.
+    /// Samples that failed the noise test (ep-gauss: super-samples; ep-box:
+    /// pixels; 0 for the other methods).
     pub samples_noisy: u64,
-    /// Samples spread wider than the base kernel (m > 1).
+    /// Of those, spread wider than the base kernel (ep-box: whose excess was
+    /// spread).
     pub samples_spread: u64,
-    /// Samples that still failed at the radius cap.
+    /// Spread ones that still failed at the radius cap.
     pub samples_capped: u64,
     /// ep-gauss: noisy samples kept with the base kernel as parts of a
     /// feature (the support rule).
@@ -76,11 +101,15 @@ pub struct Report {
     pub threads: usize,
     /// Peak resident set size, where the platform tells it.
     pub peak_rss_bytes: Option<u64>,
-    /// Most rows each rolling window held: input, box luminance, horizontal
-    /// pass, base, accumulator (the halo in practice).
-    pub window_rows: [usize; 5],
+    /// Every rolling window: its name, the most rows it held and the bytes of
+    /// a row (the halo in practice).
+    pub windows: Vec<WindowUse>,
     /// Bytes those windows held at most.
     pub window_bytes: u64,
+    /// Seconds each stage was busy: read/decode, filter, encode/write.
+    pub stage_seconds: StageSeconds,
+    /// CPU seconds (user + system) the run used, where the platform tells it.
+    pub cpu_seconds: Option<f64>,
     /// NaN/infinite input samples treated as zero (`--nonfinite zero`), per channel.
     pub nonfinite_zeroed: Vec<u64>,
     /// Where the first of them was: `[x, y]` in the data window, and its channel.

@@ -261,6 +261,100 @@ pub fn ltvis(l_ave: f64, nmid: f64) -> f64 {
     l_ave / nmid
 }
 
+/// What a pixel's own statistics say, before its neighbours are looked at.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PixelTest {
+    /// Noisy by the paper's test, `t S_p > D L_tvis` (Eqs. 5-6).
+    pub noisy: bool,
+    /// Its mean rests on enough samples to be reliable ([`carriers_needed`]).
+    pub carried: bool,
+    /// ... on enough for a compact feature ([`COMPACT_CARRIERS`]).
+    pub few: bool,
+}
+
+impl PixelTest {
+    /// The test of a pixel of luminance `y` whose mean of `n` samples has
+    /// squared standard error `se2`: `t_n` is the noise test's Student-t
+    /// factor for `n` samples, `dl = D L_tvis`.
+    #[inline]
+    pub fn new(y: f64, se2: f64, n: f64, t_n: f64, dl: f64, p: &EpBoxParams) -> Self {
+        // NaN (fewer than 2 samples) is not noisy: it cannot be tested.
+        if !(t_n * se2.sqrt() > dl) {
+            return PixelTest::default();
+        }
+        let k = carriers(y, se2, n);
+        PixelTest {
+            noisy: true,
+            carried: k >= carriers_needed(p.carriers, p.carriers_fraction, p.carriers_rse, n),
+            few: k >= COMPACT_CARRIERS,
+        }
+    }
+
+    /// The decision: noise, unless the carriers guard finds the pixel
+    /// reliable (carried by enough samples, or a compact feature of a few:
+    /// `compact` is whether [`counts_toward_cluster`] neighbours within
+    /// [`CLUSTER_REACH`] are at most [`COMPACT_MAX`]).
+    #[inline]
+    pub fn is_noise(self, guard: Guard, compact: impl FnOnce() -> bool) -> bool {
+        self.noisy && !(guard.carriers() && (self.carried || (self.few && compact())))
+    }
+}
+
+/// Whether a pixel of luminance `y_other`, noisy by the paper's test or not,
+/// counts towards the cluster of a pixel of luminance `y` (the compact
+/// feature test): it does when noisy and at least `y / COMPACT_RATIO`.
+#[inline]
+pub fn counts_toward_cluster(noisy: bool, y_other: f64, y: f64) -> bool {
+    noisy && y_other >= y / COMPACT_RATIO
+}
+
+/// A noisy pixel's excess after the guards.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Excess {
+    /// What leaves the pixel (0: nothing).
+    pub value: f64,
+    /// The `range` guard kept it.
+    pub guarded: bool,
+    /// The `stderr` guard cut it.
+    pub trimmed: bool,
+}
+
+/// The excess of a noisy pixel of luminance `y` over the mean of its
+/// converged neighbours (§5.1: `y - mean - D L_tvis`), after the guards:
+/// `range` keeps a pixel no brighter than `brightest_converged` (the
+/// brightest converged pixel within [`GUARD_REACH`], `-inf` for none),
+/// `stderr` spreads at most `bound = t_g S_p`. An excess that would put less
+/// than one visibility step `ltvis` on a second pixel is nothing.
+#[inline]
+pub fn excess(
+    y: f64,
+    mean: f64,
+    dl: f64,
+    ltvis: f64,
+    guard: Guard,
+    brightest_converged: impl FnOnce() -> f64,
+    bound: f64,
+) -> Excess {
+    let mut e = Excess {
+        value: y - mean - dl,
+        guarded: false,
+        trimmed: false,
+    };
+    if guard.range() && e.value > 0.0 && y <= brightest_converged() {
+        e.value = 0.0;
+        e.guarded = true;
+    }
+    if guard.stderr() && e.value > bound {
+        e.value = bound;
+        e.trimmed = true;
+    }
+    // Below one visibility step it would come back to the pixel itself.
+    if !(e.value > 0.0 && y > 0.0 && (e.value / ltvis).ceil() >= 2.0) {
+        e.value = 0.0;
+    }
+    e
+}
+
 /// Student-t factors `t_{(1+α)/2, n-1}` by sample count, tabled once.
 #[derive(Clone, Debug)]
 pub struct TFactor {

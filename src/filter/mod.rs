@@ -4,7 +4,8 @@
 //!   sample's weights sum to one: energy is exact by construction).
 //! * [`ep_gauss`]: §5.2 of the paper, Relation 14 and the width search.
 //! * [`ep_box`]: §5.1, excess spreading for path-traced images with variance,
-//!   and the sample planning of Eqs. 8–10.
+//!   the guards that keep real features, and the sample planning of Eqs. 8–10.
+//! * [`foils`]: the energy-losing filters' rules (median, alpha-trim).
 //!
 //! Methods: `ep-gauss` (the paper's filter, default), `ep-box` (§5.1, pixel
 //! resolution input with variance), `gauss` (the same base Gaussian for every
@@ -12,6 +13,7 @@
 
 pub mod ep_box;
 pub mod ep_gauss;
+pub mod foils;
 pub mod kernel;
 
 use crate::error::{Error, Result};
@@ -100,7 +102,7 @@ pub fn default_tolerance(s: usize) -> f64 {
 
 /// The halo of a job from its settings alone (no kernels built): what the
 /// engine will need, for sizing memory before anything is allocated. Equal to
-/// [`crate::pipeline::Engine::halo`] (tested).
+/// the stage's own halo (tested beside each stage).
 pub fn halo(p: &FilterParams) -> crate::geometry::Halo {
     let reach = |rho: f64| (p.cutoff * rho + 0.5).floor().max(0.0) as usize;
     let shell = |rho: f64| (p.cutoff * rho).floor().max(0.0) as usize;
@@ -129,7 +131,8 @@ pub fn halo(p: &FilterParams) -> crate::geometry::Halo {
     }
 }
 
-/// Validated filter settings.
+/// Filter settings as asked for; [`FilterParams::validated`] checks them
+/// once into [`ValidParams`], which is what the pipeline takes.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FilterParams {
     /// Method.
@@ -182,6 +185,13 @@ impl FilterParams {
             support: 1,
             support_ratio: 16.0,
         }
+    }
+
+    /// Check every field once: the settings as a type that can no longer
+    /// change.
+    pub fn validated(&self) -> Result<ValidParams> {
+        self.validate()?;
+        Ok(ValidParams(self.clone()))
     }
 
     /// Check every field; a typed error names the first bad one.
@@ -263,5 +273,17 @@ impl FilterParams {
             ));
         }
         Ok(())
+    }
+}
+
+/// Filter settings that passed [`FilterParams::validate`]: read-only (through
+/// `Deref`), so nothing downstream can break what was checked.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ValidParams(FilterParams);
+
+impl std::ops::Deref for ValidParams {
+    type Target = FilterParams;
+    fn deref(&self) -> &FilterParams {
+        &self.0
     }
 }

@@ -305,6 +305,10 @@ impl ExrOutput {
 }
 
 impl Sink for ExrOutput {
+    fn precision(&self) -> Precision {
+        self.precision
+    }
+
     fn write_rows(&mut self, _y0: usize, _rows: usize, data: &[f32]) -> Result<()> {
         self.pending.extend_from_slice(data);
         self.flush_blocks(false)

@@ -6,8 +6,8 @@
 
 use rayon::prelude::*;
 
-use super::engine::OutRows;
 use super::ledger::{Ledger, Sums};
+use super::stream::OutRows;
 use super::window::RowWindow;
 use super::{NonFinite, Precision, Strip};
 use crate::error::{Error, Result};

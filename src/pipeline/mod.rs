@@ -1,20 +1,28 @@
-//! The streaming pipeline: a reader stage, the filter engine, a writer stage,
-//! joined by bounded channels and sharing one rayon pool.
+//! The streaming pipeline: a reader stage, the filter (one skeleton,
+//! [`stream::Streamer`], around each method's [`stream::Stage`]), a writer
+//! stage, joined by bounded channels and sharing one rayon pool.
 //!
 //! ```text
-//!  Source ──strips──▶ Engine (halo windows, tiles) ──rows──▶ Sink
-//!  (reader thread)    (this thread, rayon pool)           (writer thread)
+//!  Source ──strips──▶ Streamer + Stage (halo windows, tiles) ──rows──▶ Sink
+//!  (reader thread)    (this thread, rayon pool)                  (writer thread)
 //! ```
 //!
 //! The pipeline never sees EXR types: sources and sinks speak planar `f32`
 //! rows (`[row][channel][x]`). Back-pressure through the two-slot channels,
 //! not the image size, bounds memory.
+//!
+//! * [`stream`]: the skeleton (input window, cursors, books, precision);
+//! * [`spread`]: the Gaussian family's stage (ep-gauss, gauss, box, clamp);
+//! * [`excess`]: ep-box's stage (§5.1);
+//! * [`order`]: the median and alpha-trim foils' stage;
+//! * [`books`], [`ledger`], [`window`]: what every stage shares.
 
 pub mod books;
-pub mod box_engine;
-pub mod engine;
+pub mod excess;
 pub mod ledger;
-pub mod order_engine;
+pub mod order;
+pub mod spread;
+pub mod stream;
 pub mod window;
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -27,9 +35,10 @@ use crate::error::{Error, Result};
 use crate::filter::ep_box::StatsLayout;
 use crate::filter::{FilterParams, Method};
 use crate::geometry::{Grid, Halo};
-pub use box_engine::BoxEngine;
-pub use engine::{Counters, Engine, OutRows};
+pub use excess::ExcessStats;
 pub use ledger::{ChannelLedger, Ledger};
+pub use spread::SpreadStats;
+pub use stream::{MethodStats, OutRows, Stage, Streamer, WindowUse};
 
 /// Rows of input samples, `[row][channel][x]`.
 #[derive(Clone, Debug)]
@@ -50,7 +59,13 @@ pub trait Source: Send {
 
 /// Something that takes finished output rows in increasing order.
 pub trait Sink: Send {
-    /// Rows `y0..y0 + rows`, `[row][channel][x]`.
+    /// The precision it stores: the pipeline rounds to it (and refuses what
+    /// it cannot hold), so the ledger's "after rounding" is what is stored.
+    fn precision(&self) -> Precision {
+        Precision::F32
+    }
+    /// Rows `y0..y0 + rows`, `[row][channel][x]`, already rounded to
+    /// [`Sink::precision`].
     fn write_rows(&mut self, y0: usize, rows: usize, data: &[f32]) -> Result<()>;
     /// All rows have been written.
     fn finish(&mut self) -> Result<()>;
@@ -94,8 +109,6 @@ pub struct PipelineConfig {
     pub strip_rows: usize,
     /// Worker threads (0: one per core).
     pub threads: usize,
-    /// Output precision.
-    pub precision: Precision,
     /// Set to stop the run early (e.g. on SIGINT).
     pub cancel: Option<Arc<AtomicBool>>,
     /// NaN and infinite input samples.
@@ -108,7 +121,6 @@ impl Default for PipelineConfig {
             tile: 256,
             strip_rows: 0,
             threads: 0,
-            precision: Precision::F32,
             cancel: None,
             nonfinite: NonFinite::Error,
         }
@@ -149,25 +161,67 @@ impl Job {
     }
 }
 
+/// Seconds each stage of a run was busy: reading and decoding (the reader
+/// thread), filtering (the streamer), encoding and writing (the writer
+/// thread). Their sum above the wall time is the overlap; the largest is the
+/// stage that bounds the run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct StageSeconds {
+    /// In `Source::next_strip`.
+    pub read: f64,
+    /// In `Streamer::push`.
+    pub filter: f64,
+    /// In `Sink::write_rows` and `Sink::finish`.
+    pub write: f64,
+}
+
 /// The result of a run.
 #[derive(Clone, Debug)]
 pub struct RunStats {
-    /// Counters of the noise test.
-    pub counters: Counters,
+    /// What the method counted.
+    pub method: MethodStats,
     /// Per-channel ledger.
     pub ledger: Vec<ChannelLedger>,
     /// Wall time in seconds.
     pub seconds: f64,
+    /// Busy time of each stage.
+    pub stages: StageSeconds,
     /// Halo of the job.
     pub halo: Halo,
-    /// Most rows each window held (input, luminance, horizontal pass, base, accumulator).
-    pub window_rows: [usize; 5],
-    /// Digest of the unrounded output ([`Engine::digest`]).
+    /// Every window held: most rows and row size.
+    pub windows: Vec<WindowUse>,
+    /// Digest of the unrounded output ([`books::Books::digest`]).
     pub digest: u64,
     /// Non-finite input samples treated as zero, per channel (`NonFinite::Zero`).
     pub nonfinite_zeroed: Vec<u64>,
     /// The first of them: (x, y, channel index).
     pub first_nonfinite: Option<(usize, usize, usize)>,
+}
+
+impl RunStats {
+    /// ep-gauss's counts, if the run was ep-gauss.
+    pub fn ep_gauss(&self) -> Option<SpreadStats> {
+        match self.method {
+            MethodStats::EpGauss(s) => Some(s),
+            _ => None,
+        }
+    }
+
+    /// ep-box's counts, if the run was ep-box.
+    pub fn ep_box(&self) -> Option<ExcessStats> {
+        match self.method {
+            MethodStats::EpBox(s) => Some(s),
+            _ => None,
+        }
+    }
+
+    /// Bytes the windows held at most (each window's high-water mark).
+    pub fn window_bytes(&self) -> u64 {
+        self.windows
+            .iter()
+            .map(|w| (w.rows * w.row_bytes) as u64)
+            .sum()
+    }
 }
 
 /// Bytes of input one strip should hold by default: four strips are in
@@ -265,7 +319,7 @@ pub fn thread_pool(threads: usize) -> Result<rayon::ThreadPool> {
         .map_err(|e| Error::Config(format!("cannot start {threads} threads: {e}")))
 }
 
-/// Run `job` from `source` to `sink`.
+/// Run `job` from `source` to `sink`, rounding to the sink's precision.
 pub fn run<S: Source, K: Sink>(
     source: S,
     sink: K,
@@ -274,9 +328,10 @@ pub fn run<S: Source, K: Sink>(
     cfg: &PipelineConfig,
     progress: Progress<'_>,
 ) -> Result<RunStats> {
+    let params = params.validated()?;
     let pool = thread_pool(cfg.threads)?;
     let start = Instant::now();
-    let mut engine = AnyEngine::new(job, params, cfg)?;
+    let mut streamer = Streamer::new(job, &params, cfg, sink.precision())?;
     let total = job.grid.out_h();
     let cancelled = || {
         cfg.cancel
@@ -290,12 +345,16 @@ pub fn run<S: Source, K: Sink>(
         n => n,
     };
     let pool = &pool;
+    let mut stages = StageSeconds::default();
 
     let result = std::thread::scope(|scope| -> Result<()> {
-        let reader = scope.spawn(move || {
+        let reader = scope.spawn(move || -> f64 {
             let mut source = source;
+            let mut busy = 0.0;
             loop {
+                let t = Instant::now();
                 let next = pool.install(|| source.next_strip(strip_rows));
+                busy += t.elapsed().as_secs_f64();
                 let stop = !matches!(next, Ok(Some(_)));
                 let msg = match next {
                     Ok(Some(s)) => Ok(s),
@@ -306,31 +365,43 @@ pub fn run<S: Source, K: Sink>(
                     break;
                 }
             }
+            busy
         });
-        let writer = scope.spawn(move || -> Result<()> {
+        let writer = scope.spawn(move || -> (Result<()>, f64) {
             let mut sink = sink;
             let mut written = 0;
+            let mut busy = 0.0;
             for rows in row_rx.iter() {
-                pool.install(|| sink.write_rows(rows.y0, rows.rows, &rows.data))?;
+                let t = Instant::now();
+                let r = pool.install(|| sink.write_rows(rows.y0, rows.rows, &rows.data));
+                busy += t.elapsed().as_secs_f64();
+                if let Err(e) = r {
+                    return (Err(e), busy);
+                }
                 written += rows.rows;
             }
-            // Finish only a complete image: when the engine stopped early its
+            // Finish only a complete image: when the filter stopped early its
             // error is the one reported, and the sink is dropped unfinished
             // (an EXR output then removes its temporary file).
-            if written == total {
+            let t = Instant::now();
+            let r = if written == total {
                 pool.install(|| sink.finish())
             } else {
                 Ok(())
-            }
+            };
+            (r, busy + t.elapsed().as_secs_f64())
         });
-        let mut engine_result = Ok(());
+        let mut filter_result = Ok(());
         let mut writer_failed = false;
         for strip in strip_rx.iter() {
             if cancelled() {
-                engine_result = Err(Error::Interrupted);
+                filter_result = Err(Error::Interrupted);
                 break;
             }
-            match strip.and_then(|s| pool.install(|| engine.push(s))) {
+            let t = Instant::now();
+            let pushed = strip.and_then(|s| pool.install(|| streamer.push(s)));
+            stages.filter += t.elapsed().as_secs_f64();
+            match pushed {
                 Ok(Some(rows)) => {
                     progress(rows.y0 + rows.rows, total);
                     if row_tx.send(rows).is_err() {
@@ -340,25 +411,28 @@ pub fn run<S: Source, K: Sink>(
                 }
                 Ok(None) => {}
                 Err(e) => {
-                    engine_result = Err(e);
+                    filter_result = Err(e);
                     break;
                 }
             }
         }
         drop(strip_rx);
-        if engine_result.is_ok() && !writer_failed && engine.rows_out() != total {
-            engine_result = Err(Error::Internal(format!(
+        if filter_result.is_ok() && !writer_failed && streamer.rows_out() != total {
+            filter_result = Err(Error::Internal(format!(
                 "the source ended after {} of {} output rows",
-                engine.rows_out(),
+                streamer.rows_out(),
                 total
             )));
         }
         drop(row_tx);
-        let _ = reader.join();
+        stages.read = reader.join().unwrap_or(0.0);
         // A panic on the writer thread is a bug: report it first, never
         // behind another error.
         match writer.join() {
-            Ok(write_result) => engine_result.and(write_result),
+            Ok((write_result, busy)) => {
+                stages.write = busy;
+                filter_result.and(write_result)
+            }
             Err(_) => Err(Error::Internal(
                 "the writer thread panicked (please report this file)".into(),
             )),
@@ -366,127 +440,18 @@ pub fn run<S: Source, K: Sink>(
     });
     result?;
     let s2 = (job.grid.s * job.grid.s) as f64;
+    let books = streamer.books();
     Ok(RunStats {
-        counters: engine.counters(),
-        ledger: engine.ledger().balance(engine.names(), s2),
+        method: streamer.stats(),
+        ledger: books.ledger().balance(books.names(), s2),
         seconds: start.elapsed().as_secs_f64(),
-        halo: engine.halo(),
-        window_rows: engine.high_water(),
-        digest: engine.digest(),
-        nonfinite_zeroed: engine.nonfinite_zeroed().to_vec(),
-        first_nonfinite: engine.first_nonfinite(),
+        stages,
+        halo: streamer.halo(),
+        windows: streamer.windows(),
+        digest: books.digest(),
+        nonfinite_zeroed: books.nonfinite_zeroed().to_vec(),
+        first_nonfinite: books.first_nonfinite(),
     })
-}
-
-/// The engine of a job's method.
-enum AnyEngine {
-    Gauss(Box<Engine>),
-    Box(Box<BoxEngine>),
-    Order(Box<order_engine::OrderEngine>),
-}
-
-macro_rules! delegate {
-    ($self:ident, $e:ident => $body:expr) => {
-        match $self {
-            AnyEngine::Gauss($e) => $body,
-            AnyEngine::Box($e) => $body,
-            AnyEngine::Order($e) => $body,
-        }
-    };
-}
-
-impl AnyEngine {
-    fn new(job: &Job, params: &FilterParams, cfg: &PipelineConfig) -> Result<Self> {
-        let mut e = if params.method == Method::EpBox {
-            params.validate()?;
-            let stats = job
-                .stats
-                .clone()
-                .ok_or_else(|| Error::Config("ep-box needs per-pixel variance channels".into()))?;
-            let ltvis = params.ep_box.ltvis.ok_or_else(|| {
-                Error::Config("ep-box needs L_tvis: measure L_ave first (mean_luminance)".into())
-            })?;
-            AnyEngine::Box(Box::new(BoxEngine::new(
-                job.grid.in_w,
-                job.grid.in_h,
-                job.channels.clone(),
-                job.luminance.clone(),
-                job.aux.len(),
-                stats,
-                &params.ep_box,
-                ltvis,
-                params.max_radius,
-                cfg.tile,
-                cfg.precision,
-            )?))
-        } else if matches!(params.method, Method::Median | Method::AlphaTrim) {
-            params.validate()?;
-            let trim = match params.method {
-                Method::Median => order_engine::Trim::Median,
-                _ => order_engine::Trim::Alpha(params.alpha),
-            };
-            if job.grid.in_w < job.grid.s || job.grid.in_h < job.grid.s {
-                return Err(Error::Config(format!(
-                    "--supersample {} is larger than the image ({}x{} samples)",
-                    job.grid.s, job.grid.in_w, job.grid.in_h
-                )));
-            }
-            AnyEngine::Order(Box::new(order_engine::OrderEngine::new(
-                job.grid,
-                job.channels.clone(),
-                trim,
-                cfg.precision,
-            )?))
-        } else {
-            if !job.aux.is_empty() {
-                return Err(Error::Config(format!(
-                    "{} reads no statistics channels",
-                    params.method.name()
-                )));
-            }
-            AnyEngine::Gauss(Box::new(Engine::new(
-                job.grid,
-                job.channels.clone(),
-                job.luminance.clone(),
-                params,
-                cfg.tile,
-                cfg.precision,
-            )?))
-        };
-        let r = &mut e;
-        delegate!(r, x => x.books_mut().set_nonfinite(cfg.nonfinite));
-        Ok(e)
-    }
-    fn push(&mut self, strip: Strip) -> Result<Option<OutRows>> {
-        delegate!(self, e => e.push(strip))
-    }
-    fn rows_out(&self) -> usize {
-        delegate!(self, e => e.rows_out())
-    }
-    fn counters(&self) -> Counters {
-        delegate!(self, e => e.counters())
-    }
-    fn ledger(&self) -> &Ledger {
-        delegate!(self, e => e.books().ledger())
-    }
-    fn names(&self) -> &[String] {
-        delegate!(self, e => e.books().names())
-    }
-    fn halo(&self) -> Halo {
-        delegate!(self, e => e.halo())
-    }
-    fn high_water(&self) -> [usize; 5] {
-        delegate!(self, e => e.high_water())
-    }
-    fn digest(&self) -> u64 {
-        delegate!(self, e => e.books().digest())
-    }
-    fn nonfinite_zeroed(&self) -> &[u64] {
-        delegate!(self, e => e.books().nonfinite_zeroed())
-    }
-    fn first_nonfinite(&self) -> Option<(usize, usize, usize)> {
-        delegate!(self, e => e.books().first_nonfinite())
-    }
 }
 
 /// The mean luminance of a source's filtered channels (the first pass of
@@ -576,9 +541,24 @@ impl Source for MemorySource {
 pub struct MemorySink {
     /// Output rows, `[row][channel][x]`.
     pub data: Vec<f32>,
+    /// The precision the values are rounded to (f32 by default).
+    pub precision: Option<Precision>,
+}
+
+impl MemorySink {
+    /// A sink that stores `precision` (f16 refuses what it cannot hold).
+    pub fn with_precision(precision: Precision) -> Self {
+        MemorySink {
+            data: Vec::new(),
+            precision: Some(precision),
+        }
+    }
 }
 
 impl Sink for MemorySink {
+    fn precision(&self) -> Precision {
+        self.precision.unwrap_or(Precision::F32)
+    }
     fn write_rows(&mut self, _y0: usize, _rows: usize, data: &[f32]) -> Result<()> {
         self.data.extend_from_slice(data);
         Ok(())
@@ -589,6 +569,9 @@ impl Sink for MemorySink {
 }
 
 impl<K: Sink> Sink for &mut K {
+    fn precision(&self) -> Precision {
+        (**self).precision()
+    }
     fn write_rows(&mut self, y0: usize, rows: usize, data: &[f32]) -> Result<()> {
         (**self).write_rows(y0, rows, data)
     }

@@ -10,6 +10,23 @@ use epfilt::{filter_in_memory, FilterParams, Grid, Job, Method, PipelineConfig, 
 /// margin and still catches one lost sample in 1e12.
 pub const ENERGY_TOL: f64 = 1e-12;
 
+/// The method's counts of a run, by method (the run must be of it).
+pub trait Counts {
+    /// ep-gauss's.
+    fn eg(&self) -> epfilt::pipeline::SpreadStats;
+    /// ep-box's.
+    fn eb(&self) -> epfilt::pipeline::ExcessStats;
+}
+
+impl Counts for RunStats {
+    fn eg(&self) -> epfilt::pipeline::SpreadStats {
+        self.ep_gauss().expect("an ep-gauss run")
+    }
+    fn eb(&self) -> epfilt::pipeline::ExcessStats {
+        self.ep_box().expect("an ep-box run")
+    }
+}
+
 /// A small deterministic generator (SplitMix64).
 pub struct Rng(pub u64);
 impl Rng {
@@ -240,7 +257,28 @@ pub fn reference(img: &Img, s: usize, p: &FilterParams, lum: &[f64]) -> (Vec<f64
             if p.method == Method::EpGauss {
                 let x0 = lum_at(i, j);
                 let (xb, w0) = xbar_w0(px, py, ladder[0]);
-                if x0 > 0.0 && xb > 0.0 && relation14(x0 / xb, w0) > p.tolerance {
+                let noisy = |v: f64| v > 0.0 && xb > 0.0 && relation14(v / xb, w0) > p.tolerance;
+                // The support rule: noisy (brighter) neighbouring samples
+                // within the ratio keep it at the base width.
+                let mut support = 0;
+                for dj in -1i64..=1 {
+                    for di in -1i64..=1 {
+                        let (ni, nj) = (i as i64 + di, j as i64 + dj);
+                        if (di, dj) == (0, 0) || ni < 0 || nj < 0 {
+                            continue;
+                        }
+                        let (ni, nj) = (ni as usize, nj as usize);
+                        if ni >= img.w || nj >= img.h {
+                            continue;
+                        }
+                        let v = lum_at(ni, nj);
+                        if v > xb && noisy(v) && v * p.support_ratio >= x0 {
+                            support += 1;
+                        }
+                    }
+                }
+                let kept = p.support > 0 && support >= p.support;
+                if x0 > xb && noisy(x0) && !kept {
                     rho = *ladder.last().unwrap();
                     for &r in &ladder[1..] {
                         let (xb, w0) = xbar_w0(px, py, r);

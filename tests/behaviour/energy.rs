@@ -112,7 +112,7 @@ fn smooth_image_through_ep_gauss_equals_gauss_bit_for_bit() {
     let cfg = PipelineConfig::default();
     let (a, sa) = run(&img, 3, &params(Method::EpGauss, 3), &cfg);
     let (b, _) = run(&img, 3, &params(Method::Gauss, 3), &cfg);
-    assert_eq!(sa.counters.noisy, 0);
+    assert_eq!(sa.eg().noisy, 0);
     assert_eq!(bits(&a), bits(&b));
 }
 
@@ -138,10 +138,10 @@ fn a_lone_firefly_influences_no_pixel_beyond_the_tolerance() {
         let mut clean = img.clone();
         clean.set(i, j, 0, 0.0);
         let (without, _) = run(&clean, s, &p, &cfg);
-        if stats.counters.capped > 0 {
+        if stats.eg().capped > 0 {
             continue;
         }
-        assert_eq!(stats.counters.spread, 1);
+        assert_eq!(stats.eg().spread, 1);
         let s2 = (s * s) as f64;
         let mut worst: f64 = 0.0;
         for k in 0..with.data.len() {
@@ -153,7 +153,8 @@ fn a_lone_firefly_influences_no_pixel_beyond_the_tolerance() {
         }
         eprintln!(
             "mag {mag}: worst influence {worst:.4} level-spread {} capped {}",
-            stats.counters.spread, stats.counters.capped
+            stats.eg().spread,
+            stats.eg().capped
         );
         assert!(
             worst <= p.tolerance * INFLUENCE_SLACK,

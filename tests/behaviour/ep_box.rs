@@ -294,7 +294,7 @@ fn matches_the_reference_in_any_visiting_order() {
         let (out, stats) = filter(&img, 16.0, &p, &cfg(256, 0, 2));
         for order in 0..3 {
             let (want, unresolved) = reference(&img, 16.0, &p, seed * 10 + order);
-            assert_eq!(unresolved as u64, stats.counters.unresolved);
+            assert_eq!(unresolved as u64, stats.eb().unresolved);
             for (k, (&a, &b)) in out.data.iter().zip(&want).enumerate() {
                 // f32 rounding of the output (6e-8 relative) plus the
                 // reference's own summation order (a few ulps of f64).
@@ -305,15 +305,15 @@ fn matches_the_reference_in_any_visiting_order() {
                 );
             }
         }
-        assert!(stats.counters.spread > 0, "{guard:?}: nothing spread");
+        assert!(stats.eb().spread > 0, "{guard:?}: nothing spread");
         // The stderr bound at 80% is active in these scenes (else those
         // cases test nothing the others do not).
         if guard_confidence == 0.8 {
-            assert!(stats.counters.trimmed > 0, "{guard:?}: nothing trimmed");
+            assert!(stats.eb().trimmed > 0, "{guard:?}: nothing trimmed");
         }
         // Likewise the carriers guard.
         if guard.carriers() {
-            assert!(stats.counters.reliable > 0, "{guard:?}: nothing reliable");
+            assert!(stats.eb().reliable > 0, "{guard:?}: nothing reliable");
         }
     }
 }
@@ -329,7 +329,7 @@ fn energy_is_exact_and_every_cut_gives_the_same_bits() {
         // lost or doubled pixel (1e-4 here).
         assert!(l.rel_error <= 1e-12, "{}: {:e}", l.channel, l.rel_error);
     }
-    assert!(sa.counters.spread > 50);
+    assert!(sa.eb().spread > 50);
     for (tile, strip, threads) in [(1, 1, 2), (7, 5, 3), (16, 13, 1), (64, 200, 4)] {
         let (b, sb) = filter(&img, 16.0, &p, &cfg(tile, strip, threads));
         assert_eq!(
@@ -362,7 +362,7 @@ fn untouched_pixels_keep_their_bits_and_spread_is_a_box_of_the_pixels_colour() {
     let ltvis = 0.1;
     let p = params(Guard::Range, ltvis, 12.0);
     let (out, stats) = filter(&img, 16.0, &p, &cfg(8, 3, 2));
-    assert_eq!((stats.counters.noisy, stats.counters.spread), (1, 1));
+    assert_eq!((stats.eb().noisy, stats.eb().spread), (1, 1));
     // The excess over the 8 neighbours' mean and D L_tvis, spread equally
     // over ceil(excess / L_tvis) pixels in ring order.
     let y0 = lum(&img, 20, 20);
@@ -442,15 +442,12 @@ fn a_cluster_without_converged_neighbours_resolves_over_passes() {
     }
     let mut p = params(Guard::None, 0.01, 8.0);
     let (_, s) = filter(&img, 16.0, &p, &cfg(256, 0, 1));
-    assert_eq!(
-        (s.counters.noisy, s.counters.unresolved, s.counters.passes),
-        (25, 0, 3)
-    );
-    assert_eq!(s.counters.spread, 25);
+    assert_eq!((s.eb().noisy, s.eb().unresolved, s.eb().passes), (25, 0, 3));
+    assert_eq!(s.eb().spread, 25);
     // Two passes: the centre waits, and stays as it was.
     p.ep_box.passes = 2;
     let (out, s) = filter(&img, 16.0, &p, &cfg(256, 0, 1));
-    assert_eq!((s.counters.unresolved, s.counters.passes), (1, 2));
+    assert_eq!((s.eb().unresolved, s.eb().passes), (1, 2));
     for l in &s.ledger {
         assert!(l.rel_error <= 1e-12);
     }
@@ -496,11 +493,11 @@ fn light_edge_is_left_alone_by_the_range_guard_and_hazed_by_the_papers_rule() {
         &params(Guard::Range, 2.0, 16.0),
         &cfg(256, 0, 2),
     );
-    assert_eq!((s.counters.noisy, s.counters.spread), (40, 0));
-    assert_eq!(s.counters.guarded, 20, "the quarter-lit column");
+    assert_eq!((s.eb().noisy, s.eb().spread), (40, 0));
+    assert_eq!(s.eb().guarded, 20, "the quarter-lit column");
     assert_eq!(bits(&guarded), bits(&colour_only));
     let (hazed, s) = filter(&img, 64.0, &params(Guard::None, 2.0, 16.0), &cfg(256, 0, 2));
-    assert_eq!(s.counters.spread, 20);
+    assert_eq!(s.eb().spread, 20);
     // The paper's rule moves the edge's energy into the dim wall.
     assert!(hazed.at(12, 10, 1) > 2.0, "{}", hazed.at(12, 10, 1));
 }
@@ -531,7 +528,7 @@ fn a_bright_region_of_noisy_pixels_keeps_its_edges_under_the_default_guard() {
     // the edge is taken for excess, and each pass eats one more ring.
     for guard in [Guard::None, Guard::Range] {
         let (out, s) = filter(&img, 64.0, &params(guard, 0.01, 8.0), &cfg(256, 0, 2));
-        assert_eq!(s.counters.noisy, 120);
+        assert_eq!(s.eb().noisy, 120);
         // The patch becomes a pyramid whose skirt reaches 8 pixels out.
         assert!(out.at(19, 15, 1) < 70.0, "{guard:?}: {}", out.at(19, 15, 1));
         assert!(out.at(14, 15, 1) < 50.0, "{guard:?}: {}", out.at(14, 15, 1));
@@ -543,7 +540,7 @@ fn a_bright_region_of_noisy_pixels_keeps_its_edges_under_the_default_guard() {
     let p = params(FilterParams::new(Method::EpBox, 1).ep_box.guard, 0.01, 8.0);
     assert_eq!(p.ep_box.guard, Guard::All);
     let (out, s) = filter(&img, 64.0, &p, &cfg(256, 0, 2));
-    assert_eq!((s.counters.reliable, s.counters.noisy), (120, 0));
+    assert_eq!((s.eb().reliable, s.eb().noisy), (120, 0));
     for y in 0..h {
         for x in 0..w {
             for c in 0..3 {
@@ -555,7 +552,7 @@ fn a_bright_region_of_noisy_pixels_keeps_its_edges_under_the_default_guard() {
     // t_99(63) S_p = 2.66 x 1.25 = 3.3 of its 100.
     let p = params(Guard::Both, 0.01, 8.0);
     let (out, s) = filter(&img, 64.0, &p, &cfg(256, 0, 2));
-    assert!(s.counters.trimmed > 0);
+    assert!(s.eb().trimmed > 0);
     for y in 0..h {
         for x in 0..w {
             let (a, b) = (out.at(x, y, 1) as f64, img.at(x, y, 1) as f64);
@@ -801,7 +798,7 @@ fn the_carriers_rule_at_its_edges() {
         }
     }
     let (out, s) = filter(&img, 16.0, &params(Guard::All, 0.01, 8.0), &cfg(256, 0, 2));
-    assert_eq!((s.counters.noisy, s.counters.reliable), (0, 0));
+    assert_eq!((s.eb().noisy, s.eb().reliable), (0, 0));
     assert!(unchanged(&out, &img) && exact(&s));
     // Every pixel hit by one sample of 16: all noise, nothing converged to
     // spread onto, so all unresolved and left as they are.
@@ -812,8 +809,8 @@ fn the_carriers_rule_at_its_edges() {
         }
     }
     let (out, s) = filter(&img, 16.0, &params(Guard::All, 0.01, 8.0), &cfg(256, 0, 2));
-    assert_eq!(s.counters.noisy, (w * h) as u64);
-    assert_eq!(s.counters.unresolved, (w * h) as u64);
+    assert_eq!(s.eb().noisy, (w * h) as u64);
+    assert_eq!(s.eb().unresolved, (w * h) as u64);
     assert!(unchanged(&out, &img) && exact(&s));
     // Every pixel hit by all its samples but for one: reliable, kept.
     let mut img = rgbv(w, h);
@@ -823,7 +820,7 @@ fn the_carriers_rule_at_its_edges() {
         }
     }
     let (out, s) = filter(&img, 16.0, &params(Guard::All, 0.01, 8.0), &cfg(256, 0, 2));
-    assert_eq!((s.counters.noisy, s.counters.reliable), (0, (w * h) as u64));
+    assert_eq!((s.eb().noisy, s.eb().reliable), (0, (w * h) as u64));
     assert!(unchanged(&out, &img) && exact(&s));
     // One sample per pixel: no variance to test, nothing treated (a count
     // channel of 1, so the job itself is valid); two samples: a firefly of
@@ -858,15 +855,10 @@ fn the_carriers_rule_at_its_edges() {
         };
         assert!(exact(&s));
         if n == 1.0 {
-            assert_eq!(s.counters.noisy, 0);
+            assert_eq!(s.eb().noisy, 0);
             assert!(unchanged(&out, &img));
         } else {
-            assert_eq!(
-                (s.counters.noisy, s.counters.spread),
-                (1, 1),
-                "{:?}",
-                s.counters
-            );
+            assert_eq!((s.eb().noisy, s.eb().spread), (1, 1), "{:?}", s.eb());
         }
     }
     // 1e-30 beside 1e30, with variances up to the largest f32 (whose
@@ -888,6 +880,6 @@ fn the_carriers_rule_at_its_edges() {
         }
     }
     let (out, s) = filter(&img, 16.0, &default, &cfg(256, 0, 2));
-    assert!(out.data.iter().all(|v| v.is_finite()), "{:?}", s.counters);
+    assert!(out.data.iter().all(|v| v.is_finite()), "{:?}", s.eb());
     assert!(exact(&s));
 }

@@ -70,13 +70,16 @@ fn values_near_f32_max_accumulate_without_overflow_or_are_refused_on_output() {
         vec!["Y".into()],
         vec![1.0],
     );
-    let cfg = PipelineConfig {
-        precision: Precision::F16,
-        ..Default::default()
-    };
-    let err = filter_in_memory(img.data.clone(), &job, &params(Method::Box, 1), &cfg)
-        .unwrap_err()
-        .to_string();
+    let err = epfilt::pipeline::run(
+        epfilt::pipeline::MemorySource::new(img.data.clone(), 3),
+        epfilt::pipeline::MemorySink::with_precision(Precision::F16),
+        &job,
+        &params(Method::Box, 1),
+        &PipelineConfig::default(),
+        &|_, _| {},
+    )
+    .unwrap_err()
+    .to_string();
     assert!(err.contains("does not fit in f16"), "{err}");
 }
 
@@ -136,19 +139,16 @@ fn zero_tolerance_spreads_every_varying_sample_to_the_cap_and_a_huge_one_equals_
     // none can meet a zero tolerance: all capped but those kept as features
     // (noisy neighbours support them).
     assert!(
-        stats.counters.noisy > (45 * 30 / 2) as u64,
+        stats.eg().noisy > (45 * 30 / 2) as u64,
         "noisy {}",
-        stats.counters.noisy
+        stats.eg().noisy
     );
-    assert!(stats.counters.guarded > 0);
-    assert_eq!(
-        stats.counters.capped + stats.counters.guarded,
-        stats.counters.noisy
-    );
+    assert!(stats.eg().kept > 0);
+    assert_eq!(stats.eg().capped + stats.eg().kept, stats.eg().noisy);
     assert!(stats.ledger.iter().all(|l| l.rel_error <= ENERGY_TOL));
     p.tolerance = 1e30;
     let (huge, stats) = run(&img, s, &p, &PipelineConfig::default());
-    assert_eq!(stats.counters.noisy, 0);
+    assert_eq!(stats.eg().noisy, 0);
     let (gauss, _) = run(
         &img,
         s,

@@ -110,11 +110,11 @@ fn ep_gauss_keeps_tiny_lights_and_spreads_the_fireflies() {
     let p = FilterParams::new(Method::EpGauss, s);
     let (out, stats) = run(&img, s, &p, &PipelineConfig::default());
     assert!(
-        stats.counters.spread > 100,
+        stats.eg().spread > 100,
         "fireflies spread: {}",
-        stats.counters.spread
+        stats.eg().spread
     );
-    assert!(stats.counters.guarded > 0, "nothing kept as a feature");
+    assert!(stats.eg().kept > 0, "nothing kept as a feature");
     assert!(stats.ledger.iter().all(|l| l.rel_error <= ENERGY_TOL));
     assert_eq!(moved(&out, &input), vec![], "lights moved by the default");
     // The paper's rule spreads the smallest bulbs into discs.
@@ -215,8 +215,8 @@ fn ep_box_keeps_tiny_lights_and_spreads_the_fireflies() {
             nch: 3,
             data: out,
         };
-        assert!(stats.counters.spread > 20, "{n} spp: {:?}", stats.counters);
-        assert!(stats.counters.reliable > 0, "{n} spp: {:?}", stats.counters);
+        assert!(stats.eb().spread > 20, "{n} spp: {:?}", stats.eb());
+        assert!(stats.eb().reliable > 0, "{n} spp: {:?}", stats.eb());
         assert!(stats.ledger.iter().all(|l| l.rel_error <= ENERGY_TOL));
         // At 16 samples the two smallest bulbs (0.5 and 0.6 px: at most 20%
         // and 28% of a pixel) are hit by a handful of samples, as often by

@@ -1,12 +1,14 @@
-//! The streaming engine: scatter as the mirror image of gather.
+//! The stage of the Gaussian family (ep-gauss, gauss, box, and the clamp
+//! foil): scatter as the mirror image of gather.
 //!
-//! Rows flow through four stages, each a cursor over output (pixel) rows:
+//! Rows flow through four cursors over output (pixel) rows:
 //!
 //! 1. **box luminance** `Ybox` of pixel row `y` once its S input rows are in;
 //! 2. **classification** of row `y` (the base noise test, which reads `Ybox`
-//!    rows `y ± xbar_reach`): noisy samples are set aside (with their values)
-//!    and zeroed in the input, and every input row gets its horizontal gather
-//!    pass;
+//!    rows `y ± xbar_reach`, and the support of noisy samples, which reads
+//!    the input rows just above and below): noisy samples are set aside (with
+//!    their values), and every input row gets its horizontal gather pass with
+//!    them taken out;
 //! 3. **spreading** of the noisy samples of row `y` (the width search reads
 //!    `Ybox` rows `y ± search_reach`) into tile accumulators that own output
 //!    pixels, visited in input row-major order;
@@ -28,28 +30,24 @@
 
 use rayon::prelude::*;
 
-use super::books::Books;
+use super::stream::{MethodStats, Stage, WindowUse, MAX_CHANNELS};
 use super::window::RowWindow;
-use super::{Precision, Strip};
-use crate::error::{Error, Result};
 use crate::filter::ep_gauss::{EpGauss, LumRows, Support};
 use crate::filter::kernel::{ColumnTaps, Kernel1d};
-use crate::filter::{FilterParams, Method};
+use crate::filter::{Method, ValidParams};
 use crate::geometry::{mirror, Grid, Halo};
 
 /// Noisy samples spread per chunk (bounds the folded-weight arena to about
 /// 4096 x 1.5 KiB at the widest kernel).
 const SPREAD_CHUNK: usize = 4096;
 
-/// Most channels one job filters (R, G, B, A).
-pub const MAX_CHANNELS: usize = 4;
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::filter::FilterParams;
 
     #[test]
-    fn halo_from_params_equals_the_engines() {
+    fn halo_from_params_equals_the_stages() {
         for m in [Method::EpGauss, Method::Gauss, Method::Box] {
             for (s, r, mr, cut) in [
                 (3, 0.6, 16.0, 3.0),
@@ -64,8 +62,7 @@ mod tests {
                     in_h: 20 * s,
                     s,
                 };
-                let e =
-                    Engine::new(grid, vec!["Y".into()], vec![1.0], &p, 16, Precision::F32).unwrap();
+                let e = SpreadStage::new(grid, vec![1.0], &p.validated().unwrap(), 16);
                 assert_eq!(
                     e.halo(),
                     crate::filter::halo(&p),
@@ -109,45 +106,22 @@ impl LumRows for YView<'_> {
     }
 }
 
-/// Counters of a run.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Counters {
-    /// Samples that failed the base test (ep-box: pixels that failed the
-    /// noise test).
+/// What ep-gauss counted, in super-samples.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct SpreadStats {
+    /// Samples that failed Relation 14 at the base width.
     pub noisy: u64,
-    /// Samples spread wider than the base kernel (m > 1; ep-box: pixels whose
-    /// excess was spread).
+    /// Samples spread wider than the base kernel (m > 1).
     pub spread: u64,
-    /// Samples that still failed Relation 14 at the cap (ep-box: pixels
-    /// whose excess did not fit under `L_tvis` per pixel within the radius).
+    /// Samples that still failed Relation 14 at the cap.
     pub capped: u64,
-    /// ep-gauss: noisy samples kept as features (the support rule); ep-box:
-    /// noisy pixels the range guard left alone.
-    pub guarded: u64,
-    /// ep-box: pixels whose excess the `stderr` guard cut to what noise can
-    /// explain.
-    pub trimmed: u64,
-    /// ep-box: noisy pixels with no converged pixel within the passes' reach.
-    pub unresolved: u64,
-    /// ep-box: the most passes any pixel needed.
-    pub passes: u64,
-    /// ep-box: pixels noisy by the paper's test whose mean rests on enough
-    /// samples to be reliable (the `carriers` guard): not treated as noise.
-    pub reliable: u64,
+    /// Noisy samples kept with the base kernel as parts of a feature (the
+    /// support rule).
+    pub kept: u64,
 }
 
-/// A finished batch of output rows, `[row][channel][x]`.
-pub struct OutRows {
-    /// First output row.
-    pub y0: usize,
-    /// Number of rows.
-    pub rows: usize,
-    /// Values, already rounded to the output precision.
-    pub data: Vec<f32>,
-}
-
-/// The filter state between strips.
-pub struct Engine {
+/// The Gaussian family's state between strips.
+pub struct SpreadStage {
     grid: Grid,
     w: usize,
     h: usize,
@@ -160,60 +134,25 @@ pub struct Engine {
     halo: Halo,
     pad: usize,
     tile: usize,
-    precision: Precision,
-    input: RowWindow<f32>,
     ybox: RowWindow<f64>,
     hpass: RowWindow<f64>,
     based: RowWindow<f64>,
     acc: RowWindow<f64>,
     pending: Vec<Noisy>,
     arena: Vec<f64>,
-    rows_in: usize,
     cls_done: usize,
     spread_done: usize,
-    out_done: usize,
-    counters: Counters,
-    books: Books,
+    stats: SpreadStats,
     clamp: Option<f32>,
     support: Support,
 }
 
-impl Engine {
-    /// Build the engine: kernels, taps and halo are settled here, once.
-    pub fn new(
-        grid: Grid,
-        names: Vec<String>,
-        lum: Vec<f64>,
-        params: &FilterParams,
-        tile: usize,
-        precision: Precision,
-    ) -> Result<Self> {
-        params.validate()?;
-        let nch = names.len();
-        if nch == 0 || nch > MAX_CHANNELS || lum.len() != nch {
-            return Err(Error::Config(format!(
-                "1..={MAX_CHANNELS} channels with luminance weights needed, got {nch}"
-            )));
-        }
+impl SpreadStage {
+    /// Build the stage: kernels, taps and halo are settled here, once. The
+    /// skeleton has checked the grid, the channels and the tile.
+    pub fn new(grid: Grid, lum: Vec<f64>, params: &ValidParams, tile: usize) -> Self {
+        let nch = lum.len();
         let s = grid.s;
-        if grid.in_w == 0 || grid.in_h == 0 {
-            return Err(Error::Config("the image is empty".into()));
-        }
-        if grid.in_w < s || grid.in_h < s {
-            return Err(Error::Config(format!(
-                "--supersample {s} is larger than the image ({}x{} samples)",
-                grid.in_w, grid.in_h
-            )));
-        }
-        if grid.in_w % s != 0 || grid.in_h % s != 0 {
-            return Err(Error::Config(format!(
-                "image size {}x{} is not a multiple of --supersample {s}",
-                grid.in_w, grid.in_h
-            )));
-        }
-        if tile == 0 {
-            return Err(Error::Config("--tile must be at least 1".into()));
-        }
         let (w, h) = (grid.out_w(), grid.out_h());
         let base = match params.method {
             Method::Box => Kernel1d::boxed(s),
@@ -237,7 +176,7 @@ impl Engine {
         };
         let pad = ep.as_ref().map_or(0, |e| e.pad());
         let cols = ColumnTaps::new(&base, w, grid.in_w);
-        Ok(Engine {
+        SpreadStage {
             grid,
             w,
             h,
@@ -250,92 +189,101 @@ impl Engine {
             halo,
             pad,
             tile,
-            precision,
-            input: RowWindow::new(nch * grid.in_w),
             ybox: RowWindow::new(w + 2 * pad),
             hpass: RowWindow::new(nch * w),
             based: RowWindow::new(nch * w),
             acc: RowWindow::new(nch * w),
             pending: Vec::new(),
             arena: Vec::new(),
-            rows_in: 0,
             cls_done: 0,
             spread_done: 0,
-            out_done: 0,
-            counters: Counters::default(),
-            books: Books::new(names, nch),
+            stats: SpreadStats::default(),
             clamp: (params.method == Method::Clamp).then_some(params.clamp as f32),
             support: Support::new(params.support, params.support_ratio),
-        })
+        }
     }
+}
 
-    /// The halo this job needs.
-    pub fn halo(&self) -> Halo {
+impl Stage for SpreadStage {
+    fn halo(&self) -> Halo {
         self.halo
     }
 
-    /// Output rows finished so far.
-    pub fn rows_out(&self) -> usize {
-        self.out_done
-    }
-
-    /// Counters so far.
-    pub fn counters(&self) -> Counters {
-        self.counters
-    }
-
-    /// Names, ledger, digest and non-finite counts.
-    pub fn books(&self) -> &Books {
-        &self.books
-    }
-
-    /// The same, to set the non-finite policy.
-    pub fn books_mut(&mut self) -> &mut Books {
-        &mut self.books
-    }
-
-    /// Most rows each window held at once: input, box luminance, horizontal
-    /// pass, base rows, accumulator.
-    pub fn high_water(&self) -> [usize; 5] {
-        [
-            self.input.high_water(),
-            self.ybox.high_water(),
-            self.hpass.high_water(),
-            self.based.high_water(),
-            self.acc.high_water(),
-        ]
-    }
-
-    /// Feed the next strip of input rows; returns the output rows it finished.
-    pub fn push(&mut self, mut strip: Strip) -> Result<Option<OutRows>> {
-        let (nch, in_w) = (self.nch, self.grid.in_w);
-        let row_len = nch * in_w;
-        self.books
-            .take(&mut strip, self.rows_in, in_w, self.grid.in_h)?;
-        if let Some(limit) = self.clamp {
-            // The clamp foil: colour samples above the limit are cut (after
-            // the ledger took the input, so the loss shows).
-            for row in strip.data.chunks_mut(row_len) {
-                for (c, ch) in row.chunks_mut(in_w).enumerate() {
-                    if self.lum[c] != 0.0 {
-                        ch.iter_mut().for_each(|v| *v = v.min(limit));
-                    }
+    fn arrive(&mut self, input: &mut RowWindow<f32>, a: usize, b: usize) {
+        let Some(limit) = self.clamp else { return };
+        // The clamp foil: colour samples above the limit are cut (after the
+        // ledger took the input, so the loss shows).
+        let in_w = self.grid.in_w;
+        for row in input.range_mut(a, b) {
+            for (c, ch) in row.chunks_mut(in_w).enumerate() {
+                if self.lum[c] != 0.0 {
+                    ch.iter_mut().for_each(|v| *v = v.min(limit));
                 }
             }
         }
-        for row in strip.data.chunks(row_len) {
-            self.input.push_copy(row);
-        }
-        self.rows_in += strip.rows;
-        self.advance()
     }
 
-    fn advance(&mut self) -> Result<Option<OutRows>> {
+    fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, _all_in: bool) -> usize {
+        self.run(input, rows_in)
+    }
+
+    fn input_needed(&self) -> usize {
+        // Classification of the next row reads the input row just above it.
+        (self.cls_done * self.grid.s).saturating_sub(1)
+    }
+
+    fn output(&self) -> (&RowWindow<f64>, Option<&RowWindow<f64>>) {
+        (&self.based, self.ep.as_ref().map(|_| &self.acc))
+    }
+
+    fn release(&mut self, y: usize) {
+        self.based.evict_below(y);
+        self.acc.evict_below(y);
+    }
+
+    fn stats(&self) -> MethodStats {
+        match self.ep {
+            Some(_) => MethodStats::EpGauss(self.stats),
+            None => MethodStats::Plain,
+        }
+    }
+
+    fn windows(&self) -> Vec<WindowUse> {
+        let (nch, w) = (self.nch, self.w);
+        vec![
+            WindowUse {
+                name: "box luminance",
+                rows: self.ybox.high_water(),
+                row_bytes: (w + 2 * self.pad) * 8,
+            },
+            WindowUse {
+                name: "horizontal pass",
+                rows: self.hpass.high_water(),
+                row_bytes: nch * w * 8,
+            },
+            WindowUse {
+                name: "base rows",
+                rows: self.based.high_water(),
+                row_bytes: nch * w * 8,
+            },
+            WindowUse {
+                name: "accumulator",
+                rows: self.acc.high_water(),
+                row_bytes: nch * w * 8,
+            },
+        ]
+    }
+}
+
+impl SpreadStage {
+    /// Advance every cursor as far as `rows_in` input rows allow; returns
+    /// the end of the final output rows.
+    fn run(&mut self, input: &RowWindow<f32>, rows_in: usize) -> usize {
         let s = self.grid.s;
         // 1. box luminance
-        let ready = self.rows_in / s;
+        let ready = rows_in / s;
         if ready > self.ybox.end() {
-            self.make_ybox(self.ybox.end(), ready);
+            self.make_ybox(input, self.ybox.end(), ready);
         }
         let yb = self.ybox.end();
         let all_in = yb == self.h;
@@ -349,11 +297,8 @@ impl Engine {
             yb.saturating_sub(self.halo.xbar_reach.max(1))
         };
         if cls_target > self.cls_done {
-            self.classify(self.cls_done, cls_target);
+            self.classify(input, self.cls_done, cls_target);
             self.cls_done = cls_target;
-            // ... and the row just above it.
-            self.input
-                .evict_below((self.cls_done * s).saturating_sub(1));
         }
         // 3. spreading
         if self.ep.is_some() {
@@ -389,13 +334,6 @@ impl Engine {
             _ => h,
         };
         let out_target = self.based.end().min(by_spread);
-        let mut out = None;
-        if out_target > self.out_done {
-            out = Some(self.finish_rows(self.out_done, out_target)?);
-            self.out_done = out_target;
-            self.based.evict_below(out_target);
-            self.acc.evict_below(out_target);
-        }
         let keep = if self.ep.is_some() {
             self.cls_done
                 .saturating_sub(self.halo.xbar_reach)
@@ -404,16 +342,15 @@ impl Engine {
             yb
         };
         self.ybox.evict_below(keep.min(yb));
-        Ok(out)
+        out_target
     }
 
-    fn make_ybox(&mut self, a: usize, b: usize) {
+    fn make_ybox(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
         let (s, w, pad, in_w, nch) = (self.grid.s, self.w, self.pad, self.grid.in_w, self.nch);
         let inv = self.inv_s2;
         for _ in a..b {
             self.ybox.push(0.0);
         }
-        let input = &self.input;
         let lum = &self.lum;
         let mut rows = self.ybox.range_mut(a, b);
         rows.par_iter_mut().enumerate().for_each(|(k, row)| {
@@ -446,7 +383,7 @@ impl Engine {
         });
     }
 
-    fn classify(&mut self, a: usize, b: usize) {
+    fn classify(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
         let (s, w, in_w, nch, h) = (self.grid.s, self.w, self.grid.in_w, self.nch, self.h);
         let in_h = self.grid.in_h;
         for _ in a * s..b * s {
@@ -456,7 +393,6 @@ impl Engine {
         let ybox = &self.ybox;
         let lum = &self.lum;
         let cols = &self.cols;
-        let input = &self.input;
         let support = self.support;
         // Phase 1, reading the input as it came (neighbour rows included):
         // which samples are noise, and which of those are kept as features.
@@ -560,8 +496,8 @@ impl Engine {
         for (list, kept) in found {
             // Kept samples failed the test too; the spread ones are counted
             // when they are spread.
-            self.counters.noisy += kept;
-            self.counters.guarded += kept;
+            self.stats.noisy += kept;
+            self.stats.kept += kept;
             self.pending.extend(list);
         }
     }
@@ -595,9 +531,9 @@ impl Engine {
             self.arena.clear();
             spreads.clear();
             for n in &self.pending[c0..(c0 + SPREAD_CHUNK).min(split)] {
-                self.counters.noisy += 1;
-                self.counters.spread += (n.level > 0) as u64;
-                self.counters.capped += n.capped as u64;
+                self.stats.noisy += 1;
+                self.stats.spread += (n.level > 0) as u64;
+                self.stats.capped += n.capped as u64;
                 let k = &ep.levels()[n.level as usize].kernel;
                 let (i, j) = (n.i as usize, n.j as usize);
                 let off = self.arena.len();
@@ -653,13 +589,6 @@ impl Engine {
                     dst.iter_mut().for_each(|v| *v *= inv);
                 }
             });
-    }
-
-    /// Output rows `a..b`: base plus accumulator, rounded, with the ledger.
-    fn finish_rows(&mut self, a: usize, b: usize) -> Result<OutRows> {
-        let acc = self.ep.as_ref().map(|_| &self.acc);
-        self.books
-            .finish(&self.based, acc, a, b, self.w, self.precision)
     }
 }
 

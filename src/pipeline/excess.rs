@@ -1,4 +1,4 @@
-//! The streaming engine of the `ep-box` filter (§5.1; the rules are in
+//! The stage of the `ep-box` filter (§5.1; the rules are in
 //! [`crate::filter::ep_box`]).
 //!
 //! Input is at pixel resolution: colour channels, then the statistics channels
@@ -21,15 +21,14 @@
 
 use rayon::prelude::*;
 
-use super::books::Books;
-use super::engine::{Counters, OutRows, MAX_CHANNELS};
+use super::stream::{MethodStats, Stage, WindowUse, MAX_CHANNELS};
 use super::window::RowWindow;
-use super::{Precision, Strip};
 use crate::error::{Error, Result};
 use crate::filter::ep_box::{
-    carriers, carriers_needed, se2, EpBoxParams, Guard, Ring, Spp, StatsLayout, TFactor,
-    VarianceKind,
+    counts_toward_cluster, excess, se2, EpBoxParams, Guard, PixelTest, Ring, Spp, StatsLayout,
+    TFactor, VarianceKind,
 };
+use crate::filter::ValidParams;
 use crate::geometry::Halo;
 
 /// Rows treated per task: each task recomputes `2 * passes` rows of band
@@ -47,12 +46,34 @@ struct Source {
     share: [f64; MAX_CHANNELS],
 }
 
+/// What ep-box counted, in pixels.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct ExcessStats {
+    /// Pixels the noise test (and guards' carriers rule) calls noisy.
+    pub noisy: u64,
+    /// Noisy pixels whose excess was spread.
+    pub spread: u64,
+    /// Spread pixels whose excess did not fit under `L_tvis` per pixel within
+    /// the radius.
+    pub capped: u64,
+    /// Pixels noisy by the paper's test whose mean rests on enough samples to
+    /// be reliable (the `carriers` guard): not treated as noise.
+    pub reliable: u64,
+    /// Noisy pixels the `range` guard left alone.
+    pub guarded: u64,
+    /// Pixels whose excess the `stderr` guard cut to what noise can explain.
+    pub trimmed: u64,
+    /// Noisy pixels with no converged pixel within the passes' reach.
+    pub unresolved: u64,
+    /// The most passes any pixel needed.
+    pub passes: u64,
+}
+
 /// The `ep-box` filter state between strips.
-pub struct BoxEngine {
+pub struct ExcessStage {
     w: usize,
     h: usize,
     nch: usize,
-    nall: usize,
     lum: Vec<f64>,
     stats: StatsLayout,
     params: EpBoxParams,
@@ -65,8 +86,6 @@ pub struct BoxEngine {
     passes: usize,
     reach: usize,
     tile: usize,
-    precision: Precision,
-    input: RowWindow<f32>,
     ylum: RowWindow<f64>,
     /// `t_g * S_p`: the most of a pixel's excess that noise can explain.
     cap: RowWindow<f64>,
@@ -76,39 +95,30 @@ pub struct BoxEngine {
     noisy: RowWindow<u8>,
     kept: RowWindow<f64>,
     acc: RowWindow<f64>,
-    rows_in: usize,
     treat_done: usize,
-    out_done: usize,
-    counters: Counters,
-    books: Books,
+    counters: ExcessStats,
 }
 
 #[allow(clippy::too_many_arguments)]
-impl BoxEngine {
-    /// Build the engine for a `w x h` image whose strips hold `names` (the
-    /// filtered colour channels, with luminance weights `lum`) followed by
-    /// `aux` statistics channels laid out as `stats` says. `ltvis` is the
-    /// visibility threshold (Eq. 9), `max_radius` the spread radius in pixels.
+impl ExcessStage {
+    /// Build the stage for a `w x h` image whose strips hold `nch` filtered
+    /// colour channels (luminance weights `lum`) followed by `aux` statistics
+    /// channels laid out as `stats` says. `ltvis` is the visibility
+    /// threshold (Eq. 9); the spread radius is `params.max_radius`. The
+    /// skeleton has checked the grid, the channels and the tile.
     pub fn new(
         w: usize,
         h: usize,
-        names: Vec<String>,
+        nch: usize,
         lum: Vec<f64>,
         aux: usize,
         stats: StatsLayout,
-        params: &EpBoxParams,
+        params: &ValidParams,
         ltvis: f64,
-        max_radius: f64,
         tile: usize,
-        precision: Precision,
     ) -> Result<Self> {
-        params.validate()?;
-        let nch = names.len();
-        if nch == 0 || nch > MAX_CHANNELS || lum.len() != nch {
-            return Err(Error::Config(format!(
-                "1..={MAX_CHANNELS} channels with luminance weights needed, got {nch}"
-            )));
-        }
+        let max_radius = params.max_radius;
+        let params: &EpBoxParams = &params.ep_box;
         let nall = nch + aux;
         let in_range = |i: usize| i >= nch && i < nall;
         let var_ok = (stats.variance.len() == 1 || stats.variance.len() == 3)
@@ -129,12 +139,6 @@ impl BoxEngine {
                 "three variance channels need three colour channels (R, G, B)".into(),
             ));
         }
-        if w == 0 || h == 0 {
-            return Err(Error::Config("the image is empty".into()));
-        }
-        if tile == 0 {
-            return Err(Error::Config("--tile must be at least 1".into()));
-        }
         if !(ltvis.is_finite() && ltvis > 0.0) {
             return Err(Error::Config(format!(
                 "the visibility threshold L_tvis is {ltvis:e}: the image's mean luminance is not positive; give --ltvis"
@@ -146,11 +150,10 @@ impl BoxEngine {
             )));
         }
         let ring = Ring::new(max_radius);
-        Ok(BoxEngine {
+        Ok(ExcessStage {
             w,
             h,
             nch,
-            nall,
             lum,
             stats,
             params: params.clone(),
@@ -162,24 +165,27 @@ impl BoxEngine {
             reach: ring.radius(),
             ring,
             tile,
-            precision,
-            input: RowWindow::new(nall * w),
             ylum: RowWindow::new(w),
             cap: RowWindow::new(w),
             raw: RowWindow::new(w),
             noisy: RowWindow::new(w),
             kept: RowWindow::new(nch * w),
             acc: RowWindow::new(nch * w),
-            rows_in: 0,
             treat_done: 0,
-            out_done: 0,
-            counters: Counters::default(),
-            books: Books::new(names, nall),
+            counters: ExcessStats::default(),
         })
     }
 
-    /// The halo: `search_reach` is the passes' reach, `spread_reach` the ring's.
-    pub fn halo(&self) -> Halo {
+    /// The visibility threshold in use.
+    pub fn ltvis(&self) -> f64 {
+        self.ltvis
+    }
+}
+
+impl Stage for ExcessStage {
+    /// `search_reach` is the passes' reach (and the guards' and the cluster
+    /// look's), `spread_reach` the ring's.
+    fn halo(&self) -> Halo {
         Halo {
             xbar_reach: 0,
             base_reach: 0,
@@ -188,72 +194,79 @@ impl BoxEngine {
         }
     }
 
-    /// The visibility threshold in use.
-    pub fn ltvis(&self) -> f64 {
-        self.ltvis
-    }
-
-    /// Output rows finished so far.
-    pub fn rows_out(&self) -> usize {
-        self.out_done
-    }
-
-    /// Counters so far.
-    pub fn counters(&self) -> Counters {
-        self.counters
-    }
-
-    /// Names, ledger, digest and non-finite counts.
-    pub fn books(&self) -> &Books {
-        &self.books
-    }
-
-    /// The same, to set the non-finite policy.
-    pub fn books_mut(&mut self) -> &mut Books {
-        &mut self.books
-    }
-
-    /// Most rows each window held: input, luminance, kept, accumulator, flags.
-    pub fn high_water(&self) -> [usize; 5] {
-        [
-            self.input.high_water(),
-            self.ylum.high_water(),
-            self.kept.high_water(),
-            self.acc.high_water(),
-            self.noisy.high_water(),
-        ]
-    }
-
-    /// Feed the next strip of rows; returns the output rows it finished.
-    pub fn push(&mut self, mut strip: Strip) -> Result<Option<OutRows>> {
-        let row_len = self.nall * self.w;
-        self.books.take(&mut strip, self.rows_in, self.w, self.h)?;
-        let a = self.rows_in;
-        for row in strip.data.chunks(row_len) {
-            self.input.push_copy(row);
+    fn arrive(&mut self, input: &mut RowWindow<f32>, a: usize, b: usize) {
+        for _ in a..b {
             self.ylum.push_stale(0.0);
             self.cap.push_stale(0.0);
             self.raw.push_stale(0);
         }
-        self.rows_in += strip.rows;
-        self.statistics(a, self.rows_in);
-        self.advance()
+        self.statistics(input, a, b);
     }
 
+    fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, _all_in: bool) -> usize {
+        self.run(input, rows_in)
+    }
+
+    fn input_needed(&self) -> usize {
+        self.treat_done.saturating_sub(self.passes + GUARD_REACH)
+    }
+
+    fn output(&self) -> (&RowWindow<f64>, Option<&RowWindow<f64>>) {
+        (&self.kept, Some(&self.acc))
+    }
+
+    fn release(&mut self, y: usize) {
+        self.kept.evict_below(y);
+        self.acc.evict_below(y);
+    }
+
+    fn stats(&self) -> MethodStats {
+        MethodStats::EpBox(self.counters)
+    }
+
+    fn windows(&self) -> Vec<WindowUse> {
+        let (w, nch) = (self.w, self.nch);
+        vec![
+            WindowUse {
+                name: "luminance",
+                rows: self.ylum.high_water(),
+                row_bytes: w * 8,
+            },
+            WindowUse {
+                name: "guard bound",
+                rows: self.cap.high_water(),
+                row_bytes: w * 8,
+            },
+            WindowUse {
+                name: "flags",
+                rows: self.raw.high_water() + self.noisy.high_water(),
+                row_bytes: w,
+            },
+            WindowUse {
+                name: "kept",
+                rows: self.kept.high_water(),
+                row_bytes: nch * w * 8,
+            },
+            WindowUse {
+                name: "accumulator",
+                rows: self.acc.high_water(),
+                row_bytes: nch * w * 8,
+            },
+        ]
+    }
+}
+
+impl ExcessStage {
     /// Luminance, what the statistics say ([`RAW_NOISY`], [`RAW_CARRIED`],
     /// [`RAW_FEW`]) and the stderr guard's bound of rows `a..b`.
-    fn statistics(&mut self, a: usize, b: usize) {
+    fn statistics(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
         let (w, nch) = (self.w, self.nch);
-        let (input, lum, stats, dl) = (&self.input, &self.lum, &self.stats, self.dl);
+        let (lum, stats, dl) = (&self.lum, &self.stats, self.dl);
         let (t, tg) = (&self.t, &self.tg);
         let ys = self.ylum.range_mut(a, b);
         let cs = self.cap.range_mut(a, b);
         let fs = self.raw.range_mut(a, b);
-        let (k_abs, k_frac, k_rse) = (
-            self.params.carriers,
-            self.params.carriers_fraction,
-            self.params.carriers_rse,
-        );
+        let params = &self.params;
         ys.into_par_iter()
             .zip(cs)
             .zip(fs)
@@ -282,20 +295,12 @@ impl BoxEngine {
                     };
                     let weights = if nv == 3 { &lum[..3] } else { &lum[..1] };
                     let se2 = se2(stats.kind, &var[..nv], weights, mean_y, n);
-                    let se = se2.sqrt();
-                    // NaN (fewer than 2 samples) is not noisy: it cannot be tested.
-                    let mut f = u8::from(t.get(n) * se > dl) * RAW_NOISY;
-                    if f != 0 {
-                        let k = carriers(y, se2, n);
-                        if k >= carriers_needed(k_abs, k_frac, k_rse, n) {
-                            f |= RAW_CARRIED;
-                        }
-                        if k >= COMPACT_CARRIERS {
-                            f |= RAW_FEW;
-                        }
-                    }
+                    let test = PixelTest::new(y, se2, n, t.get(n), dl, params);
+                    let f = (u8::from(test.noisy) * RAW_NOISY)
+                        | (u8::from(test.carried) * RAW_CARRIED)
+                        | (u8::from(test.few) * RAW_FEW);
+                    crow[x] = tg.get(n) * se2.sqrt();
                     frow[x] = f;
-                    crow[x] = tg.get(n) * se;
                 }
             });
     }
@@ -309,7 +314,7 @@ impl BoxEngine {
             self.noisy.push_stale(0);
         }
         let (raw, ylum) = (&self.raw, &self.ylum);
-        let carriers_on = self.params.guard.carriers();
+        let guard = self.params.guard;
         let rows = self.noisy.range_mut(a, b);
         let reliable: u64 = rows
             .into_par_iter()
@@ -320,16 +325,14 @@ impl BoxEngine {
                 let r = raw.get(y);
                 for x in 0..w {
                     let f = r[x];
-                    frow[x] = u8::from(f & RAW_NOISY != 0);
-                    if f & RAW_NOISY == 0 || !carriers_on {
-                        continue;
-                    }
-                    let keep = f & RAW_CARRIED != 0
-                        || (f & RAW_FEW != 0 && compact(raw, ylum, x, y, w, h));
-                    if keep {
-                        frow[x] = 0;
-                        reliable += 1;
-                    }
+                    let test = PixelTest {
+                        noisy: f & RAW_NOISY != 0,
+                        carried: f & RAW_CARRIED != 0,
+                        few: f & RAW_FEW != 0,
+                    };
+                    let noise = test.is_noise(guard, || compact(raw, ylum, x, y, w, h));
+                    frow[x] = u8::from(noise);
+                    reliable += u64::from(test.noisy && !noise);
                 }
                 reliable
             })
@@ -337,14 +340,16 @@ impl BoxEngine {
         self.counters.reliable += reliable;
     }
 
-    fn advance(&mut self) -> Result<Option<OutRows>> {
+    /// Decide, treat and spread as far as `rows_in` rows allow; returns the
+    /// end of the final output rows.
+    fn run(&mut self, input: &RowWindow<f32>, rows_in: usize) -> usize {
         let h = self.h;
         // Decisions: a row's needs the statistics of the rows CLUSTER_REACH
         // below it.
-        let decide_target = if self.rows_in == h {
+        let decide_target = if rows_in == h {
             h
         } else {
-            self.rows_in.saturating_sub(CLUSTER_REACH)
+            rows_in.saturating_sub(CLUSTER_REACH)
         };
         if decide_target > self.noisy.end() {
             self.decide(self.noisy.end(), decide_target);
@@ -358,39 +363,23 @@ impl BoxEngine {
             decided.saturating_sub(self.passes + GUARD_REACH)
         };
         if treat_target > self.treat_done {
-            self.treat(self.treat_done, treat_target);
+            self.treat(input, self.treat_done, treat_target);
             self.treat_done = treat_target;
             let keep = self.treat_done.saturating_sub(self.passes + GUARD_REACH);
-            self.input.evict_below(keep);
             self.ylum.evict_below(keep);
             self.cap.evict_below(keep);
             self.noisy.evict_below(keep);
         }
-        let out_target = if self.treat_done == h {
+        if self.treat_done == h {
             h
         } else {
             self.treat_done.saturating_sub(self.reach)
-        };
-        if out_target > self.out_done {
-            let out = self.books.finish(
-                &self.kept,
-                Some(&self.acc),
-                self.out_done,
-                out_target,
-                self.w,
-                self.precision,
-            )?;
-            self.out_done = out_target;
-            self.kept.evict_below(out_target);
-            self.acc.evict_below(out_target);
-            return Ok(Some(out));
         }
-        Ok(None)
     }
 
     /// Decide the excess of every noisy pixel of rows `a..b`, write their kept
     /// rows, and spread the excess.
-    fn treat(&mut self, a: usize, b: usize) {
+    fn treat(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
         let (w, h, nch) = (self.w, self.h, self.nch);
         for _ in a..b {
             self.kept.push_stale(0.0);
@@ -403,7 +392,7 @@ impl BoxEngine {
             w,
             h,
             nch,
-            input: &self.input,
+            input,
             ylum: &self.ylum,
             cap: &self.cap,
             noisy: &self.noisy,
@@ -422,7 +411,7 @@ impl BoxEngine {
             chunks.push((y, rows.by_ref().take(n).collect()));
             y += n;
         }
-        let results: Vec<(Vec<Source>, Counters)> = chunks
+        let results: Vec<(Vec<Source>, ExcessStats)> = chunks
             .into_par_iter()
             .map(|(c0, rows)| ctx.treat_rows(c0, rows))
             .collect();
@@ -482,33 +471,31 @@ fn compact(
     w: usize,
     h: usize,
 ) -> bool {
-    let floor = ylum.get(y)[x] / COMPACT_RATIO;
+    let yc = ylum.get(y)[x];
     let mut n = 0;
     for yy in y.saturating_sub(CLUSTER_REACH)..(y + CLUSTER_REACH + 1).min(h) {
         let (r, l) = (raw.get(yy), ylum.get(yy));
         for xx in x.saturating_sub(CLUSTER_REACH)..(x + CLUSTER_REACH + 1).min(w) {
-            n += usize::from(r[xx] & RAW_NOISY != 0 && l[xx] >= floor);
+            n += usize::from(counts_toward_cluster(r[xx] & RAW_NOISY != 0, l[xx], yc));
         }
     }
     n <= COMPACT_MAX
 }
 
-pub use crate::filter::ep_box::{
-    CLUSTER_REACH, COMPACT_CARRIERS, COMPACT_MAX, COMPACT_RATIO, GUARD_REACH,
-};
+pub use crate::filter::ep_box::{CLUSTER_REACH, COMPACT_MAX, GUARD_REACH};
 
 impl Band<'_> {
     /// Treat rows `c0..c0 + kept.len()`: the passes over the band of rows
     /// `c0 - passes .. c1 + passes`, which holds everything those rows'
     /// decisions read (see `filter::ep_box`).
-    fn treat_rows(&self, c0: usize, mut kept: Vec<&mut [f64]>) -> (Vec<Source>, Counters) {
+    fn treat_rows(&self, c0: usize, mut kept: Vec<&mut [f64]>) -> (Vec<Source>, ExcessStats) {
         let (w, h, nch) = (self.w, self.h, self.nch);
         let c1 = c0 + kept.len();
         let margin = self.passes + GUARD_REACH;
         let ba = c0.saturating_sub(margin);
         let bb = (c1 + margin).min(h);
         let bh = bb - ba;
-        let mut counters = Counters::default();
+        let mut counters = ExcessStats::default();
         // Originals first: kept values start as the input.
         for (k, row) in kept.iter_mut().enumerate() {
             let src = self.input.get(c0 + k);
@@ -544,7 +531,7 @@ impl Band<'_> {
             for &i in &pending {
                 let i = i as usize;
                 let (r, x) = (i / w, i % w);
-                let (mut count, mut sum, mut max) = (0u32, 0.0f64, f64::NEG_INFINITY);
+                let (mut count, mut sum) = (0u32, 0.0f64);
                 for dy in -1i64..=1 {
                     let rr = r as i64 + dy;
                     if rr < 0 || rr >= bh as i64 {
@@ -569,43 +556,40 @@ impl Band<'_> {
                 dist[i] = k;
                 let y = self.ylum.get(ba + r)[x];
                 let mean = sum / count as f64;
-                let mut excess = y - mean - self.dl;
                 let target = in_target(r);
                 if target {
                     counters.passes = counters.passes.max(k as u64);
                 }
-                if self.guard.range() && excess > 0.0 {
-                    // The brightest converged input within GUARD_REACH.
-                    for rr in r.saturating_sub(GUARD_REACH)..(r + GUARD_REACH + 1).min(bh) {
-                        let (fl, yl) = (self.noisy.get(ba + rr), self.ylum.get(ba + rr));
-                        for xx in x.saturating_sub(GUARD_REACH)..(x + GUARD_REACH + 1).min(w) {
-                            if fl[xx] == 0 {
-                                max = max.max(yl[xx]);
+                let e = excess(
+                    y,
+                    mean,
+                    self.dl,
+                    self.ltvis,
+                    self.guard,
+                    || {
+                        // The brightest converged input within GUARD_REACH.
+                        let mut max = f64::NEG_INFINITY;
+                        for rr in r.saturating_sub(GUARD_REACH)..(r + GUARD_REACH + 1).min(bh) {
+                            let (fl, yl) = (self.noisy.get(ba + rr), self.ylum.get(ba + rr));
+                            for xx in x.saturating_sub(GUARD_REACH)..(x + GUARD_REACH + 1).min(w) {
+                                if fl[xx] == 0 {
+                                    max = max.max(yl[xx]);
+                                }
                             }
                         }
-                    }
+                        max
+                    },
+                    self.cap.get(ba + r)[x],
+                );
+                if target {
+                    counters.guarded += u64::from(e.guarded);
+                    counters.trimmed += u64::from(e.trimmed);
                 }
-                if self.guard.range() && excess > 0.0 && y <= max {
-                    if target {
-                        counters.guarded += 1;
-                    }
-                    excess = 0.0;
-                }
-                if self.guard.stderr() {
-                    let cap = self.cap.get(ba + r)[x];
-                    if excess > cap {
-                        excess = cap;
-                        if target {
-                            counters.trimmed += 1;
-                        }
-                    }
-                }
-                // Below one visibility step it would come back to the pixel
-                // itself: nothing to spread.
-                let wanted = (excess / self.ltvis).ceil();
-                if !(excess > 0.0 && y > 0.0 && wanted >= 2.0) {
+                let excess = e.value;
+                if excess == 0.0 {
                     continue;
                 }
+                let wanted = (excess / self.ltvis).ceil();
                 refv[i] = y - excess;
                 if !target {
                     continue;

@@ -1,0 +1,126 @@
+//! The order-statistic foils: `median` and `alpha-trim` (Lee & Redner's
+//! alpha-trimmed mean). Each output pixel gathers the S x S samples of its
+//! pixel (at S = 1: the 3 x 3 pixels around it, reflected at the borders),
+//! per channel, sorts them and averages what is left after trimming from
+//! each end. They discard energy by design; the ledger reports how much.
+
+use rayon::prelude::*;
+
+use super::stream::{MethodStats, Stage, WindowUse};
+use super::window::RowWindow;
+use crate::filter::{Method, ValidParams};
+use crate::geometry::{mirror, Grid, Halo};
+
+pub use crate::filter::foils::Trim;
+
+/// Streaming state of an order-statistic foil.
+pub struct OrderStage {
+    grid: Grid,
+    w: usize,
+    h: usize,
+    nch: usize,
+    trim: Trim,
+    out: RowWindow<f64>,
+    out_done: usize,
+}
+
+impl OrderStage {
+    /// A stage for `grid` over `nch` channels (the skeleton has checked them).
+    pub fn new(grid: Grid, nch: usize, params: &ValidParams) -> Self {
+        let trim = match params.method {
+            Method::Median => Trim::Median,
+            _ => Trim::Alpha(params.alpha),
+        };
+        OrderStage {
+            grid,
+            w: grid.out_w(),
+            h: grid.out_h(),
+            nch,
+            trim,
+            out: RowWindow::new(nch * grid.out_w()),
+            out_done: 0,
+        }
+    }
+}
+
+impl Stage for OrderStage {
+    /// One row of input either side at S = 1 (the 3 x 3 window), none above.
+    fn halo(&self) -> Halo {
+        Halo {
+            base_reach: usize::from(self.grid.s == 1),
+            ..Default::default()
+        }
+    }
+
+    fn arrive(&mut self, _input: &mut RowWindow<f32>, _a: usize, _b: usize) {}
+
+    fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> usize {
+        let (in_w, s) = (self.grid.in_w, self.grid.s);
+        // Output row y reads input rows up to (y+1)S - 1, plus one at S = 1.
+        let ready = if all_in {
+            self.h
+        } else {
+            (rows_in.saturating_sub(usize::from(s == 1))) / s
+        };
+        if ready <= self.out_done {
+            return self.out_done;
+        }
+        let (a, b) = (self.out_done, ready);
+        for _ in a..b {
+            self.out.push_stale(0.0);
+        }
+        let (w, h, nch, trim) = (self.w, self.h, self.nch, self.trim);
+        let rows = self.out.range_mut(a, b);
+        rows.into_par_iter()
+            .enumerate()
+            .for_each_init(Vec::new, |vals, (k, row)| {
+                let y = a + k;
+                for c in 0..nch {
+                    for x in 0..w {
+                        vals.clear();
+                        if s == 1 {
+                            for dy in -1i64..=1 {
+                                let r = input.get(mirror(y as i64 + dy, h));
+                                for dx in -1i64..=1 {
+                                    vals.push(r[c * in_w + mirror(x as i64 + dx, w)] as f64);
+                                }
+                            }
+                        } else {
+                            for j in y * s..(y + 1) * s {
+                                let r = &input.get(j)[c * in_w..(c + 1) * in_w];
+                                vals.extend(r[x * s..(x + 1) * s].iter().map(|&v| v as f64));
+                            }
+                        }
+                        row[c * w + x] = trim.apply(vals);
+                    }
+                }
+            });
+        self.out_done = b;
+        b
+    }
+
+    fn input_needed(&self) -> usize {
+        // Keep the last input row used (S = 1 reads row y - 1 of the next).
+        (self.out_done * self.grid.s).saturating_sub(usize::from(self.grid.s == 1))
+    }
+
+    fn output(&self) -> (&RowWindow<f64>, Option<&RowWindow<f64>>) {
+        (&self.out, None)
+    }
+
+    fn release(&mut self, y: usize) {
+        self.out.evict_below(y);
+    }
+
+    fn stats(&self) -> MethodStats {
+        MethodStats::Plain
+    }
+
+    fn windows(&self) -> Vec<WindowUse> {
+        vec![WindowUse {
+            name: "output",
+            rows: self.out.high_water(),
+            row_bytes: self.nch * self.w * 8,
+        }]
+    }
+}

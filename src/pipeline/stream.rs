@@ -1,0 +1,295 @@
+//! The one streaming skeleton every method runs in.
+//!
+//! [`Streamer`] owns what all methods share: the rolling window of input
+//! rows, the cursor of rows in and rows out, the [`Books`] (ledger, digest,
+//! non-finite policy) and the output precision. What differs is a [`Stage`]:
+//! the method's own windows and cursors, fed rows as they arrive and asked to
+//! go as far as the rows in allow.
+//!
+//! ```text
+//!  strip ──▶ books.take ──▶ input window ──▶ stage.arrive ──▶ stage.advance
+//!                                                 (rows final: 0..end)
+//!  stage.output (base + accumulator) ──▶ books.finish (round, ledger, digest) ──▶ rows out
+//! ```
+//!
+//! The contract that makes the output bit-identical for any strip height: a
+//! stage's decisions may depend only on which rows are in, never on how they
+//! came; every stage's cursors advance to the same targets whatever the
+//! batching (each checks its own "rows final" condition).
+
+use super::books::Books;
+use super::excess::{ExcessStage, ExcessStats};
+use super::order::OrderStage;
+use super::spread::{SpreadStage, SpreadStats};
+use super::window::RowWindow;
+use super::{Job, PipelineConfig, Precision, Strip};
+use crate::error::{Error, Result};
+use crate::filter::{Method, ValidParams};
+use crate::geometry::{Grid, Halo};
+
+/// Most channels one job filters (R, G, B, A).
+pub const MAX_CHANNELS: usize = 4;
+
+/// A finished batch of output rows, `[row][channel][x]`.
+#[derive(Debug)]
+pub struct OutRows {
+    /// First output row.
+    pub y0: usize,
+    /// Number of rows.
+    pub rows: usize,
+    /// Values, already rounded to the output precision.
+    pub data: Vec<f32>,
+}
+
+/// A window a stage holds: its name, the most rows it held and the bytes of
+/// one row (for the report's memory figures).
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct WindowUse {
+    /// What it holds.
+    pub name: &'static str,
+    /// Most rows held at once.
+    pub rows: usize,
+    /// Bytes per row.
+    pub row_bytes: usize,
+}
+
+/// What a method counted; each method its own type.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub enum MethodStats {
+    /// ep-gauss (§5.2): super-samples.
+    EpGauss(SpreadStats),
+    /// ep-box (§5.1): pixels.
+    EpBox(ExcessStats),
+    /// The linear filters and the foils count nothing.
+    Plain,
+}
+
+/// A method's work on the rows, behind the skeleton.
+pub trait Stage: Send {
+    /// Rows the method reaches beyond the row it works on.
+    fn halo(&self) -> Halo;
+    /// Input rows `a..b` have just entered `input` (the books have taken
+    /// them). A stage may alter them (the clamp foil cuts them) and compute
+    /// what it keeps per input row.
+    fn arrive(&mut self, input: &mut RowWindow<f32>, a: usize, b: usize);
+    /// Go as far as `rows_in` input rows allow (`all_in`: the image is
+    /// complete); returns the end of the output rows that are now final.
+    fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> usize;
+    /// The first input row the stage will still read.
+    fn input_needed(&self) -> usize;
+    /// The unrounded values of final output rows: a base window and an
+    /// accumulator added to it.
+    fn output(&self) -> (&RowWindow<f64>, Option<&RowWindow<f64>>);
+    /// Output rows below `y` are written: release them.
+    fn release(&mut self, y: usize);
+    /// What the stage counted.
+    fn stats(&self) -> MethodStats;
+    /// The windows it holds (the input window is the skeleton's).
+    fn windows(&self) -> Vec<WindowUse>;
+}
+
+/// The skeleton: input window, cursors, books, precision, and one stage.
+pub struct Streamer {
+    stage: Box<dyn Stage>,
+    input: RowWindow<f32>,
+    books: Books,
+    grid: Grid,
+    nall: usize,
+    w: usize,
+    precision: Precision,
+    rows_in: usize,
+    out_done: usize,
+}
+
+impl Streamer {
+    /// The skeleton and stage of `job` with `params` (validated), writing at
+    /// `precision`.
+    pub fn new(
+        job: &Job,
+        params: &ValidParams,
+        cfg: &PipelineConfig,
+        precision: Precision,
+    ) -> Result<Self> {
+        let grid = job.grid;
+        let nch = job.channels.len();
+        if nch == 0 || nch > MAX_CHANNELS || job.luminance.len() != nch {
+            return Err(Error::Config(format!(
+                "1..={MAX_CHANNELS} channels with luminance weights needed, got {nch}"
+            )));
+        }
+        let s = grid.s;
+        if grid.in_w == 0 || grid.in_h == 0 {
+            return Err(Error::Config("the image is empty".into()));
+        }
+        if s == 0 || grid.in_w < s || grid.in_h < s {
+            return Err(Error::Config(format!(
+                "--supersample {s} is larger than the image ({}x{} samples)",
+                grid.in_w, grid.in_h
+            )));
+        }
+        if grid.in_w % s != 0 || grid.in_h % s != 0 {
+            return Err(Error::Config(format!(
+                "image size {}x{} is not a multiple of --supersample {s}",
+                grid.in_w, grid.in_h
+            )));
+        }
+        if cfg.tile == 0 {
+            return Err(Error::Config("--tile must be at least 1".into()));
+        }
+        if params.method != Method::EpBox && !job.aux.is_empty() {
+            return Err(Error::Config(format!(
+                "{} reads no statistics channels",
+                params.method.name()
+            )));
+        }
+        let stage: Box<dyn Stage> = match params.method {
+            Method::EpBox => {
+                let stats = job.stats.clone().ok_or_else(|| {
+                    Error::Config("ep-box needs per-pixel variance channels".into())
+                })?;
+                let ltvis = params.ep_box.ltvis.ok_or_else(|| {
+                    Error::Config(
+                        "ep-box needs L_tvis: measure L_ave first (mean_luminance)".into(),
+                    )
+                })?;
+                Box::new(ExcessStage::new(
+                    grid.in_w,
+                    grid.in_h,
+                    nch,
+                    job.luminance.clone(),
+                    job.aux.len(),
+                    stats,
+                    params,
+                    ltvis,
+                    cfg.tile,
+                )?)
+            }
+            Method::Median | Method::AlphaTrim => Box::new(OrderStage::new(grid, nch, params)),
+            _ => Box::new(SpreadStage::new(
+                grid,
+                job.luminance.clone(),
+                params,
+                cfg.tile,
+            )),
+        };
+        let nall = job.strip_channels();
+        let mut books = Books::new(job.channels.clone(), nall);
+        books.set_nonfinite(cfg.nonfinite);
+        Ok(Streamer {
+            stage,
+            input: RowWindow::new(nall * grid.in_w),
+            books,
+            grid,
+            nall,
+            w: grid.out_w(),
+            precision,
+            rows_in: 0,
+            out_done: 0,
+        })
+    }
+
+    /// Feed the next strip of input rows; returns the output rows it finished.
+    pub fn push(&mut self, mut strip: Strip) -> Result<Option<OutRows>> {
+        let (in_w, in_h) = (self.grid.in_w, self.grid.in_h);
+        self.books.take(&mut strip, self.rows_in, in_w, in_h)?;
+        let a = self.rows_in;
+        for row in strip.data.chunks(self.nall * in_w) {
+            self.input.push_copy(row);
+        }
+        self.rows_in += strip.rows;
+        self.stage.arrive(&mut self.input, a, self.rows_in);
+        let end = self
+            .stage
+            .advance(&self.input, self.rows_in, self.rows_in == in_h);
+        self.input.evict_below(self.stage.input_needed());
+        if end <= self.out_done {
+            return Ok(None);
+        }
+        let (base, acc) = self.stage.output();
+        let out = self
+            .books
+            .finish(base, acc, self.out_done, end, self.w, self.precision)?;
+        self.out_done = end;
+        self.stage.release(end);
+        Ok(Some(out))
+    }
+
+    /// Output rows finished so far.
+    pub fn rows_out(&self) -> usize {
+        self.out_done
+    }
+
+    /// The method's halo.
+    pub fn halo(&self) -> Halo {
+        self.stage.halo()
+    }
+
+    /// What the method counted.
+    pub fn stats(&self) -> MethodStats {
+        self.stage.stats()
+    }
+
+    /// Names, ledger, digest and non-finite counts.
+    pub fn books(&self) -> &Books {
+        &self.books
+    }
+
+    /// Every window held (the input window first): most rows and row size.
+    pub fn windows(&self) -> Vec<WindowUse> {
+        let mut v = vec![WindowUse {
+            name: "input",
+            rows: self.input.high_water(),
+            row_bytes: self.nall * self.grid.in_w * 4,
+        }];
+        v.extend(self.stage.windows());
+        v
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::filter::ep_box::{Spp, StatsLayout, VarianceKind};
+    use crate::filter::FilterParams;
+
+    /// `filter::halo` sizes memory before any stage exists: it must be what
+    /// every stage reports.
+    #[test]
+    fn halo_from_params_equals_every_stages() {
+        for m in Method::ALL {
+            for (r, mr, passes) in [(0.6, 16.0, 8), (0.9, 5.5, 3), (2.0, 40.0, 1)] {
+                let s = if m == Method::EpBox { 1 } else { 3 };
+                let mut p = FilterParams::new(m, s);
+                (p.radius, p.max_radius, p.ep_box.passes) = (r, mr, passes);
+                p.ep_box.ltvis = Some(0.01);
+                let grid = Grid {
+                    in_w: 30 * s,
+                    in_h: 20 * s,
+                    s,
+                };
+                let mut job = Job::new(grid, vec!["Y".into()], vec![1.0]);
+                if m == Method::EpBox {
+                    job.aux = vec!["var".into()];
+                    job.stats = Some(StatsLayout {
+                        variance: vec![1],
+                        kind: VarianceKind::Sample,
+                        mean_y: None,
+                        spp: Spp::Fixed(16.0),
+                    });
+                }
+                let st = Streamer::new(
+                    &job,
+                    &p.validated().unwrap(),
+                    &PipelineConfig::default(),
+                    Precision::F32,
+                )
+                .unwrap();
+                assert_eq!(
+                    st.halo(),
+                    crate::filter::halo(&p),
+                    "{m:?} {r} {mr} {passes}"
+                );
+            }
+        }
+    }
+}
