@@ -131,6 +131,56 @@ pub fn cfg(tile: usize, strip_rows: usize, threads: usize) -> PipelineConfig {
     }
 }
 
+/// The cuts of the work every method must give the same bits for: tiles
+/// that divide the width and that do not (1 and 7 columns, a whole row),
+/// strips of 1, 5 and 1000 rows and the automatic height, 1 to 4 threads.
+pub const CUTS: [(usize, usize, usize); 9] = [
+    (256, 0, 1),
+    (1, 1, 2),
+    (7, 5, 3),
+    (16, 13, 1),
+    (70, 96, 1),
+    (256, 1, 1),
+    (256, 1000, 1),
+    (16, 7, 2),
+    (64, 200, 4),
+];
+
+/// The one invariance tester: runs `data` (planar, as `job` says) with
+/// `params` through every cut of [`CUTS`] and demands one answer: the same
+/// output bits, the same digest of the unrounded output and the same ledger
+/// bits. Returns the first run's output and statistics.
+pub fn same_for_every_cut(data: &[f32], job: &Job, params: &FilterParams) -> (Vec<f32>, RunStats) {
+    let mut first: Option<(Vec<f32>, RunStats)> = None;
+    for (tile, strip, threads) in CUTS {
+        let (out, stats) = filter_in_memory(data.to_vec(), job, params, &cfg(tile, strip, threads))
+            .expect("filter");
+        match &first {
+            None => first = Some((out, stats)),
+            Some((o, s)) => {
+                let what = format!(
+                    "{} tile {tile} strip {strip} threads {threads}",
+                    params.method.name()
+                );
+                assert!(
+                    o.iter().zip(&out).all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "{what}: output bits differ"
+                );
+                assert_eq!(s.digest, stats.digest, "{what}: digest");
+                let ledger = |s: &RunStats| -> Vec<(u64, u64)> {
+                    s.ledger
+                        .iter()
+                        .map(|l| (l.energy_out.to_bits(), l.energy_out_rounded.to_bits()))
+                        .collect()
+                };
+                assert_eq!(ledger(s), ledger(&stats), "{what}: ledger");
+                assert_eq!(s.method, stats.method, "{what}: counts");
+            }
+        }
+    }
+    first.expect("at least one cut")
+}
+
 pub fn params(method: Method, s: usize) -> FilterParams {
     FilterParams::new(method, s)
 }
