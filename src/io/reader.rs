@@ -744,6 +744,11 @@ pub(crate) fn choose_channels(
     Ok((selected, dropped))
 }
 
+/// Decoded bytes the reader asks for at once at most (beyond one strip's
+/// rows): enough chunks to keep the workers busy at ordinary widths, few
+/// enough that memory does not grow with the thread count at 32k.
+pub const READ_AHEAD_BYTES: u64 = 24 << 20;
+
 /// A [`Source`] over an [`ExrInput`].
 pub struct ExrSource<'a> {
     input: &'a ExrInput,
@@ -760,10 +765,14 @@ impl Source for ExrSource<'_> {
         let (w, h) = self.input.size();
         let nch = self.input.selected.len();
         let buffered = |s: &Self| s.buf.len() / s.row_len;
-        // Decode whole block rows until the strip is covered; at least two
-        // chunks per worker at a time so small blocks still decode in parallel.
+        // Decode whole block rows until the strip is covered; two chunks per
+        // worker at a time so small blocks still decode in parallel, but no
+        // more than READ_AHEAD_BYTES of decoded blocks: wide blocks (6 MB at
+        // 32k float RGB) times many workers would make memory grow with the
+        // thread count.
+        let by_bytes = (READ_AHEAD_BYTES / self.input.block_bytes().max(1)).max(2) as usize;
         while buffered(self) < max_rows && self.next_row < self.input.rows.len() {
-            let want_chunks = 2 * rayon::current_num_threads();
+            let want_chunks = (2 * rayon::current_num_threads()).min(by_bytes);
             let mut end = self.next_row;
             let mut chunks = 0;
             let mut rows = 0;

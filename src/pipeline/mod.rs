@@ -173,6 +173,11 @@ pub struct StageSeconds {
     pub filter: f64,
     /// In `Sink::write_rows` and `Sink::finish`.
     pub write: f64,
+    /// The filter waiting for the next strip (the reader is behind).
+    pub filter_waiting_for_input: f64,
+    /// The filter waiting for room in the writer's queue (the writer is
+    /// behind).
+    pub filter_waiting_for_output: f64,
 }
 
 /// The result of a run.
@@ -393,7 +398,10 @@ pub fn run<S: Source, K: Sink>(
         });
         let mut filter_result = Ok(());
         let mut writer_failed = false;
-        for strip in strip_rx.iter() {
+        loop {
+            let t = Instant::now();
+            let Ok(strip) = strip_rx.recv() else { break };
+            stages.filter_waiting_for_input += t.elapsed().as_secs_f64();
             if cancelled() {
                 filter_result = Err(Error::Interrupted);
                 break;
@@ -404,7 +412,10 @@ pub fn run<S: Source, K: Sink>(
             match pushed {
                 Ok(Some(rows)) => {
                     progress(rows.y0 + rows.rows, total);
-                    if row_tx.send(rows).is_err() {
+                    let t = Instant::now();
+                    let sent = row_tx.send(rows);
+                    stages.filter_waiting_for_output += t.elapsed().as_secs_f64();
+                    if sent.is_err() {
                         writer_failed = true; // its error is reported below
                         break;
                     }
