@@ -14,7 +14,7 @@ use crate::pipeline::{run, Job, MethodStats, PipelineConfig, Progress};
 use crate::stats::{peak_rss_bytes, EpBoxReport, Report};
 
 /// The ledger must balance to this relative error before rounding, or the
-/// output is not written. The engine's own bound is 1e-12 (each sample's
+/// output is not written. The pipeline's own bound is 1e-12 (each sample's
 /// weights sum to one within a few ulps, sums are compensated); 1e-9 leaves a
 /// wide margin and still catches any lost or doubled sample.
 pub const LEDGER_LIMIT: f64 = 1e-9;

@@ -103,7 +103,7 @@ pub trait LumRows {
 
 /// An in-memory field of box luminance with mirrored rows and padded,
 /// mirrored columns: the [`LumRows`] of small jobs, tests and benches (the
-/// engine streams its own).
+/// spread stage streams its own).
 #[derive(Clone, Debug)]
 pub struct LumImage {
     h: usize,

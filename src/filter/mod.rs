@@ -101,7 +101,7 @@ pub fn default_tolerance(s: usize) -> f64 {
 }
 
 /// The halo of a job from its settings alone (no kernels built): what the
-/// engine will need, for sizing memory before anything is allocated. Equal to
+/// stage will need, for sizing memory before anything is allocated. Equal to
 /// the stage's own halo (tested beside each stage).
 pub fn halo(p: &FilterParams) -> crate::geometry::Halo {
     let reach = |rho: f64| (p.cutoff * rho + 0.5).floor().max(0.0) as usize;

@@ -1,4 +1,4 @@
-//! The books every engine keeps beside its windows: the channel names, the
+//! The books the skeleton keeps beside the stages' windows: the channel names, the
 //! energy ledger, the digest of the unrounded output, and the non-finite
 //! policy with its counts. Strips come in through [`Books::take`] (checked,
 //! counted) and output rows go out through [`Books::finish`] (rounded,

@@ -240,7 +240,7 @@ pub fn auto_strip_rows(in_w: usize, channels: usize) -> usize {
 }
 
 /// Bytes a job will hold at most, from its sizes alone: the strips in flight,
-/// the engine's windows (input rows, horizontal pass, base, accumulator, box
+/// the stage's windows (input rows, horizontal pass, base, accumulator, box
 /// luminance) and the decoder's and encoder's blocks (`block_bytes`: one
 /// decompressed input block). Checked against `--max-memory` before anything
 /// is allocated, so a header claiming an absurd size gives an error instead of
