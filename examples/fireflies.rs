@@ -1,10 +1,12 @@
 //! Write a super-sampled test render with fireflies, streaming (flat memory):
 //!
-//! `cargo run --release --example fireflies -- OUT.exr WIDTH HEIGHT [FRACTION] [COMPRESSION]`
+//! `cargo run --release --example fireflies -- OUT.exr WIDTH HEIGHT [FRACTION] [COMPRESSION] [MIN..MAX]`
 //!
 //! WIDTH x HEIGHT are input samples. A smooth RGB background (0.2..1.0) with
-//! FRACTION (default 0.01) of the samples turned into fireflies 10x..1000x
-//! brighter (log-uniform), float samples, ZIP by default.
+//! FRACTION (default 0.01) of the samples turned into fireflies MIN..MAX times
+//! brighter (log-uniform; default 10..1000; the paper's "dynamic range of
+//! 10^5": 1e2..1e5), everywhere including borders and corners, float samples,
+//! ZIP by default.
 
 use epfilt::io::{parse_compression, ExrOutput};
 use epfilt::pipeline::{Precision, Sink};
@@ -19,12 +21,25 @@ fn hash(i: u64) -> u64 {
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let a: Vec<String> = std::env::args().collect();
     if a.len() < 4 {
-        return Err("usage: fireflies OUT.exr WIDTH HEIGHT [FRACTION] [COMPRESSION]".into());
+        return Err(
+            "usage: fireflies OUT.exr WIDTH HEIGHT [FRACTION] [COMPRESSION] [MIN..MAX]".into(),
+        );
     }
     let (w, h): (usize, usize) = (a[2].parse()?, a[3].parse()?);
     let frac: f64 = a.get(4).map(|s| s.parse()).transpose()?.unwrap_or(0.01);
     let comp = parse_compression(a.get(5).map(String::as_str).unwrap_or("zip"))
         .ok_or("unknown compression")?;
+    let (lo, hi): (f64, f64) = match a.get(6) {
+        Some(r) => {
+            let (l, h) = r.split_once("..").ok_or("MIN..MAX, e.g. 1e2..1e5")?;
+            (l.parse()?, h.parse()?)
+        }
+        None => (10.0, 1000.0),
+    };
+    if !(lo > 0.0 && hi >= lo) {
+        return Err("MIN..MAX must be positive and increasing".into());
+    }
+    let (l0, span) = (lo.log10(), (hi / lo).log10());
     let names: Vec<String> = ["R", "G", "B"].iter().map(|s| s.to_string()).collect();
     let mut out = ExrOutput::create_new(
         std::path::Path::new(&a[1]),
@@ -47,7 +62,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let k = hash((j * w + i) as u64);
                 let u = (k >> 11) as f64 / (1u64 << 53) as f64;
                 let mag = if u < frac {
-                    10f64.powf(1.0 + 2.0 * (hash(k) >> 11) as f64 / (1u64 << 53) as f64)
+                    10f64.powf(l0 + span * (hash(k) >> 11) as f64 / (1u64 << 53) as f64)
                 } else {
                     1.0
                 };
