@@ -271,6 +271,8 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         samples_spread: counts.1,
         samples_capped: counts.2,
         samples_kept: counts.3,
+        search_cost: stats.ep_gauss().map_or(0, |g| g.search_cost),
+        spread_taps: stats.ep_gauss().map_or(0, |g| g.spread_taps),
         energy_in: vec![],
         energy_out: vec![],
         energy_rel_error: vec![],

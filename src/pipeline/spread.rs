@@ -32,7 +32,7 @@ use rayon::prelude::*;
 
 use super::stream::{MethodStats, Stage, WindowUse, MAX_CHANNELS};
 use super::window::RowWindow;
-use crate::filter::ep_gauss::{EpGauss, LumRows, Support};
+use crate::filter::ep_gauss::{EpGauss, Folded, LumRows, Support};
 use crate::filter::kernel::{ColumnTaps, Kernel1d};
 use crate::filter::{Method, ValidParams};
 use crate::geometry::{mirror, Grid, Halo};
@@ -118,6 +118,12 @@ pub struct SpreadStats {
     /// Noisy samples kept with the base kernel as parts of a feature (the
     /// support rule).
     pub kept: u64,
+    /// The width search's work: luminance values read plus (folded) average
+    /// weights applied.
+    pub search_cost: u64,
+    /// Weights the spreading wrote, per channel (the reflected kernels'
+    /// areas).
+    pub spread_taps: u64,
 }
 
 /// The Gaussian family's state between strips.
@@ -281,11 +287,16 @@ impl SpreadStage {
     fn run(&mut self, input: &RowWindow<f32>, rows_in: usize) -> usize {
         let s = self.grid.s;
         // 1. box luminance
+        // (only ep-gauss reads it: the others go by the rows that are in)
         let ready = rows_in / s;
-        if ready > self.ybox.end() {
-            self.make_ybox(input, self.ybox.end(), ready);
-        }
-        let yb = self.ybox.end();
+        let yb = if self.ep.is_some() {
+            if ready > self.ybox.end() {
+                self.make_ybox(input, self.ybox.end(), ready);
+            }
+            self.ybox.end()
+        } else {
+            ready
+        };
         let all_in = yb == self.h;
         // 2. classification + horizontal pass
         // A row's classification reads the input row just below it (the
@@ -398,7 +409,7 @@ impl SpreadStage {
         // which samples are noise, and which of those are kept as features.
         let found: Vec<(Vec<Noisy>, u64)> = (a..b)
             .into_par_iter()
-            .map(|y| {
+            .map_init(Vec::new, |lrows, y| {
                 let mut found = Vec::new();
                 let mut kept = 0u64;
                 let Some(ep) = ep else {
@@ -413,14 +424,28 @@ impl SpreadStage {
                     }
                     x
                 };
+                // The luminance of the pixel row's samples, a row at a time
+                // (the same sum, in the same order, as `luma`).
+                lrows.clear();
+                lrows.resize(s * in_w, 0.0f64);
+                for (bb, lrow) in lrows.chunks_exact_mut(in_w).enumerate() {
+                    let row = input.get(y * s + bb);
+                    for c in 0..nch {
+                        let lw = lum[c];
+                        for (l, &v) in lrow.iter_mut().zip(&row[c * in_w..(c + 1) * in_w]) {
+                            *l += lw * v as f64;
+                        }
+                    }
+                }
                 for (px, &xbar) in xbars.iter().enumerate() {
                     let Some((hi, lo)) = ep.bounds(xbar) else {
                         continue;
                     };
-                    for j in y * s..(y + 1) * s {
-                        let row = input.get(j);
+                    for bb in 0..s {
+                        let j = y * s + bb;
+                        let lrow = &lrows[bb * in_w..(bb + 1) * in_w];
                         for i in px * s..(px + 1) * s {
-                            let x0 = luma(row, i);
+                            let x0 = lrow[i];
                             if !(x0 > 0.0 && (x0 > hi || x0 < lo)) {
                                 continue;
                             }
@@ -432,6 +457,7 @@ impl SpreadStage {
                                 kept += 1;
                                 continue;
                             }
+                            let row = input.get(j);
                             let mut v = [0.0f32; MAX_CHANNELS];
                             for c in 0..nch {
                                 v[c] = row[c * in_w + i];
@@ -511,11 +537,23 @@ impl SpreadStage {
         let batch = &mut self.pending[..split];
         // Width search, one sample per task (each is independent of the rest).
         let view = YView { win: &self.ybox, h };
-        batch.par_iter_mut().for_each(|n| {
-            let c = ep.search(&view, n.i as usize / s, n.j as usize / s, n.x0, n.xbar0);
-            n.level = c.level;
-            n.capped = c.capped;
-        });
+        let cost: u64 = batch
+            .par_iter_mut()
+            .map_init(Folded::default, |fold, n| {
+                let c = ep.search_in(
+                    &view,
+                    n.i as usize / s,
+                    n.j as usize / s,
+                    n.x0,
+                    n.xbar0,
+                    fold,
+                );
+                n.level = c.level;
+                n.capped = c.capped;
+                c.cost
+            })
+            .sum();
+        self.stats.search_cost += cost;
         // Accumulator rows down to the widest reach of this batch.
         let need = (target + self.halo.spread_reach).min(h);
         while self.acc.end() < need {
@@ -543,6 +581,7 @@ impl SpreadStage {
                 let ys = k.fold(j % s, j / s, h, &mut tmp);
                 let yl = tmp.len();
                 self.arena.extend_from_slice(&tmp);
+                self.stats.spread_taps += (xl * yl) as u64;
                 let mut v = [0.0; MAX_CHANNELS];
                 for (d, &x) in v.iter_mut().zip(&n.v).take(nch) {
                     *d = x as f64 * self.inv_s2;
