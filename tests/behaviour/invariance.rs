@@ -112,3 +112,27 @@ proptest! {
         }
     }
 }
+
+/// Dense fireflies of the paper's dynamic range (10% of the samples at
+/// 1e2..1e5, some on the borders and corners): wide kernels, a width search
+/// whose `D` is not monotone, reflections on every side. One answer for every
+/// cut, energy within the ledger's bound, and the search's work reported.
+#[test]
+fn dense_wide_fireflies_give_one_answer_and_keep_energy() {
+    let s = 3;
+    let img = fireflies(50 * s, 37 * s, 3, 0.1, 11);
+    let mut p = params(Method::EpGauss, s);
+    p.max_radius = 8.0; // wider than the image is tall in places: reflections
+    let (_, stats) = same_for_every_cut(&img.data, &job_for(&img, s), &p);
+    let c = stats.eg();
+    assert!(c.spread > 300, "{c:?}");
+    assert!(c.search_cost > 0 && c.spread_taps > c.spread, "{c:?}");
+    for l in &stats.ledger {
+        assert!(
+            l.rel_error <= ENERGY_TOL,
+            "channel {}: rel error {:e}",
+            l.channel,
+            l.rel_error
+        );
+    }
+}
