@@ -43,17 +43,6 @@ use epfilt::io::ExrInput;
 use epfilt::pipeline::Source;
 use epfilt::{filter_file, FilterJob, FilterParams, Method};
 
-/// Methods in the order of the tables.
-const METHODS: [Method; 7] = [
-    Method::EpGauss,
-    Method::EpBox,
-    Method::Gauss,
-    Method::Box,
-    Method::Clamp,
-    Method::Median,
-    Method::AlphaTrim,
-];
-
 /// A light: connected reference pixels this many times the median luminance.
 const LIGHT_OVER_MEDIAN: f64 = 30.0;
 
@@ -366,7 +355,7 @@ impl Ctx {
 fn main() -> Result<()> {
     let mut dir = PathBuf::from("../shared/renders");
     let mut out_dir = PathBuf::from("docs");
-    let mut methods: Vec<Method> = METHODS.to_vec();
+    let mut methods: Vec<Method> = Method::ALL.to_vec();
     let mut write = true;
     let mut sets = Vec::new();
     let mut args = std::env::args().skip(1);
