@@ -60,6 +60,7 @@ impl FilterJob {
             output_settings: OutputSettings {
                 compression: None,
                 precision: crate::pipeline::Precision::F32,
+                allow_lossy: false,
             },
             part: None,
             layer: None,
@@ -238,6 +239,22 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
             });
         }
     }
+    let mut ledger = stats.ledger.clone();
+    if output.is_lossy() {
+        // A lossy codec changed what was written: the energy on disk is what
+        // the file decodes to.
+        let sums = output.decoded_sums()?;
+        let s2 = (s * s) as f64;
+        for (l, sum) in ledger.iter_mut().zip(sums) {
+            l.set_on_disk(sum * s2);
+        }
+    }
+    let mut warnings = Vec::new();
+    if let Some(n) = output.note() {
+        warnings.push(format!("{}: {n}", job.output.display()));
+    }
+    let compression = crate::io::compression_name(output.compression());
+    let output_lossy = output.is_lossy();
     output.commit()?;
     let threads = if job.pipeline.threads == 0 {
         rayon::current_num_threads()
@@ -317,7 +334,10 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         windows: stats.windows.clone(),
         stage_seconds: stats.stages,
         cpu_seconds: crate::stats::cpu_seconds().map(|c| c - cpu_start),
+        compression,
+        energy_on_disk_decoded: output_lossy,
+        warnings,
     };
-    report.set_ledger(&stats.ledger);
+    report.set_ledger(&ledger);
     Ok(report)
 }

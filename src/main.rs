@@ -287,9 +287,14 @@ struct FilterArgs {
     /// Relative step of the ladder of widths the search picks from (its precision).
     #[arg(long, default_value_t = 0.1)]
     width_step: f64,
-    /// Output compression (none rle zips zip piz pxr24 b44 b44a dwaa dwab) [default: as input].
+    /// Output compression (none rle zips zip piz pxr24 b44 b44a dwaa dwab) [default: as input, but zip
+    /// where the input's is lossy].
     #[arg(long)]
     compression: Option<String>,
+    /// Accept a lossy output compression (dwaa, dwab; b44, b44a for f16; pxr24 for f32): the energy on
+    /// disk is then measured by decoding the file, and reported.
+    #[arg(long)]
+    allow_lossy: bool,
     /// Output sample type: f32 or f16 (f16 refuses values it cannot hold).
     #[arg(long, default_value = "f32")]
     pixel_type: String,
@@ -681,6 +686,7 @@ fn filter_job(a: &FilterArgs, cancel: Arc<AtomicBool>) -> Result<FilterJob> {
         output_settings: OutputSettings {
             compression,
             precision,
+            allow_lossy: a.allow_lossy,
         },
         part: a.part.as_deref().map(PartSelect::parse),
         layer: a.layer.clone(),
@@ -708,6 +714,9 @@ fn filter(a: FilterArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
         b.finish_and_clear();
     }
     let report = report.map_err(fail)?;
+    for w in &report.warnings {
+        eprintln!("epfilt: warning: {w}");
+    }
     if let Some(path) = &a.report {
         let json = serde_json::to_string_pretty(&report).map_err(fail)? + "\n";
         epfilt::io::write_file(path, json.as_bytes()).map_err(fail)?;

@@ -123,6 +123,13 @@ pub struct Report {
     pub stats_channels: Vec<String>,
     /// The ep-box run's settings and findings.
     pub ep_box: Option<EpBoxReport>,
+    /// The output's compression.
+    pub compression: String,
+    /// Whether that compression is lossy for the output's samples, so the
+    /// "after rounding" energy is the sum of the decoded file (`--allow-lossy`).
+    pub energy_on_disk_decoded: bool,
+    /// What the user should know about the run (one line each).
+    pub warnings: Vec<String>,
 }
 
 /// What an `ep-box` run used and found.

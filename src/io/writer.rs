@@ -24,10 +24,16 @@ use crate::pipeline::{Precision, Sink};
 /// What the output file looks like.
 #[derive(Clone, Debug)]
 pub struct OutputSettings {
-    /// Compression (None: same as the input).
+    /// Compression (None: the input's, unless that is lossy for the output's
+    /// samples: then ZIP, and [`ExrOutput::note`] says so).
     pub compression: Option<Compression>,
     /// Sample type.
     pub precision: Precision,
+    /// Accept a lossy compression ([`super::is_lossy`]): the energy on disk
+    /// is then no longer exact, and the run measures it by decoding the file
+    /// ([`ExrOutput::decoded_sums`]). Without it a lossy `compression` is
+    /// refused.
+    pub allow_lossy: bool,
 }
 
 /// An output file being written.
@@ -43,8 +49,41 @@ pub struct ExrOutput {
     precision: Precision,
     pending: Vec<f32>,
     pending_y0: usize,
+    compression: Compression,
+    note: Option<String>,
     tx: Option<crossbeam_channel::Sender<(usize, Chunk)>>,
     thread: Option<JoinHandle<Result<()>>>,
+}
+
+/// The output's compression and, where it is not what the input had, why.
+/// An explicit lossy choice needs `allow_lossy`; the input's lossy codec is
+/// replaced by ZIP unless `allow_lossy`.
+fn choose_compression(
+    dest: &Path,
+    input: Compression,
+    settings: &OutputSettings,
+) -> Result<(Compression, Option<String>)> {
+    let name = super::compression_name;
+    let lossy = |c| super::is_lossy(c, settings.precision);
+    let kind = settings.precision.name();
+    match settings.compression {
+        Some(c) if lossy(c) && !settings.allow_lossy => Err(Error::Output {
+            path: dest.to_path_buf(),
+            reason: format!(
+                "--compression {} is lossy for {kind} samples, so the energy on disk would not be exact; choose a lossless one (zip, zips, piz, rle, none) or pass --allow-lossy",
+                name(c)
+            ),
+        }),
+        Some(c) => Ok((c, None)),
+        None if lossy(input) && !settings.allow_lossy => Ok((
+            Compression::ZIP16,
+            Some(format!(
+                "the input's compression ({}) is lossy for {kind} samples: writing zip instead (--compression to choose, --allow-lossy to keep it)",
+                name(input)
+            )),
+        )),
+        None => Ok((input, None)),
+    }
 }
 
 fn floor_div(a: i32, s: i32) -> i32 {
@@ -62,7 +101,7 @@ impl ExrOutput {
         settings: &OutputSettings,
     ) -> Result<Self> {
         let (w, h) = (input_header.layer_size.0 / s, input_header.layer_size.1 / s);
-        let compression = settings.compression.unwrap_or(input_header.compression);
+        let (compression, note) = choose_compression(dest, input_header.compression, settings)?;
         let mut header = Self::fresh_header(w, h, channels, compression, settings.precision);
         let si = s as i32;
         // Keep what still holds: every attribute but the geometry we change and
@@ -83,7 +122,108 @@ impl ExrOutput {
             Vec2((x1 - x0).max(1) as usize, (y1 - y0).max(1) as usize),
         );
         header.shared_attributes = shared;
-        Self::start(dest, header, channels, settings.precision)
+        let mut out = Self::start(dest, header, channels, settings.precision)?;
+        out.note = note;
+        Ok(out)
+    }
+
+    /// The compression being written.
+    pub fn compression(&self) -> Compression {
+        self.compression
+    }
+
+    /// What the caller should tell the user about the output's settings
+    /// (the input's lossy codec replaced by ZIP).
+    pub fn note(&self) -> Option<&str> {
+        self.note.as_deref()
+    }
+
+    /// Whether the samples on disk differ from those written.
+    pub fn is_lossy(&self) -> bool {
+        super::is_lossy(self.compression, self.precision)
+    }
+
+    /// Decode the finished (not yet committed) file and sum each channel,
+    /// in the order of the channels given at creation: the energy on disk
+    /// when the compression is lossy.
+    pub fn decoded_sums(&self) -> Result<Vec<f64>> {
+        let staged = self
+            .staged
+            .as_ref()
+            .ok_or_else(|| Error::Internal("the output was already committed".into()))?;
+        use exr::block::reader::ChunksReader;
+        use exr::meta::attribute::SampleType;
+        let path = staged.path();
+        let bad = |e: exr::error::Error| Error::Output {
+            path: self.dest.clone(),
+            reason: format!("decoding what was written: {e}"),
+        };
+        let file = std::fs::File::open(path).map_err(|e| Error::Output {
+            path: self.dest.clone(),
+            reason: format!("reopening what was written: {e}"),
+        })?;
+        let chunks = exr::block::read(std::io::BufReader::new(file), false)
+            .and_then(|r| r.all_chunks(false))
+            .map_err(bad)?;
+        let header = &self.headers[0];
+        let lines = header.compression.scan_lines_per_block();
+        let blocks = header.layer_size.1.div_ceil(lines);
+        let (w, nch) = (header.layer_size.0, self.nch);
+        // Per block, per header channel: blocks arrive in any order, their
+        // sums are merged in block order so the figure is reproducible.
+        let mut parts = vec![vec![crate::pipeline::ledger::CompensatedSum::default(); nch]; blocks];
+        let mut malformed = false;
+        chunks
+            .decompress_parallel(false, |_, block| {
+                let rows = block.index.pixel_size.1;
+                let k = block.index.pixel_position.1 / lines;
+                let row_bytes: usize = header
+                    .channels
+                    .list
+                    .iter()
+                    .map(|c| w * c.sample_type.bytes_per_sample())
+                    .sum();
+                if block.data.len() != rows * row_bytes || k >= blocks {
+                    malformed = true;
+                    return Ok(());
+                }
+                let mut at = 0;
+                for _ in 0..rows {
+                    for (c, ch) in header.channels.list.iter().enumerate() {
+                        let sum = &mut parts[k][c];
+                        match ch.sample_type {
+                            SampleType::F16 => {
+                                for b in block.data[at..at + 2 * w].chunks_exact(2) {
+                                    sum.add(half::f16::from_ne_bytes([b[0], b[1]]).to_f64());
+                                }
+                                at += 2 * w;
+                            }
+                            SampleType::F32 => {
+                                for b in block.data[at..at + 4 * w].chunks_exact(4) {
+                                    sum.add(f32::from_ne_bytes([b[0], b[1], b[2], b[3]]) as f64);
+                                }
+                                at += 4 * w;
+                            }
+                            SampleType::U32 => at += 4 * w,
+                        }
+                    }
+                }
+                Ok(())
+            })
+            .map_err(bad)?;
+        if malformed {
+            return Err(Error::Output {
+                path: self.dest.clone(),
+                reason: "what was written decodes to blocks of the wrong size".into(),
+            });
+        }
+        let mut sums = vec![crate::pipeline::ledger::CompensatedSum::default(); nch];
+        for part in &parts {
+            for (k, p) in part.iter().enumerate() {
+                sums[self.order[k]].merge(p);
+            }
+        }
+        Ok(sums.iter().map(|s| s.value()).collect())
     }
 
     /// Start writing a new `w` x `h` image of `channels` (planar rows in that
@@ -157,6 +297,7 @@ impl ExrOutput {
             })
             .collect();
         let lines = header.compression.scan_lines_per_block();
+        let header_compression = header.compression;
         let headers: SmallVec<[Header; 3]> = SmallVec::from_vec(vec![header]);
 
         let file = staged
@@ -190,6 +331,8 @@ impl ExrOutput {
             precision,
             pending: Vec::new(),
             pending_y0: 0,
+            compression: header_compression,
+            note: None,
             tx: Some(tx),
             thread: Some(thread),
         })

@@ -132,6 +132,17 @@ pub struct ChannelLedger {
     pub rel_error: f64,
     /// The same after rounding.
     pub rel_error_rounded: f64,
+    /// Sum of absolute input values (the mass the errors are relative to).
+    pub mass_in: f64,
+}
+
+impl ChannelLedger {
+    /// Replace the "after rounding" figures by what the file holds, `sum`
+    /// (times S²), where a lossy codec changed the values written.
+    pub fn set_on_disk(&mut self, sum: f64) {
+        self.energy_out_rounded = sum;
+        self.rel_error_rounded = rel(sum, self.energy_in, self.mass_in);
+    }
 }
 
 /// The ledger of a run.
@@ -183,6 +194,7 @@ impl Ledger {
                     energy_out_rounded: e_round,
                     rel_error: rel(e_out, e_in, mass),
                     rel_error_rounded: rel(e_round, e_in, mass),
+                    mass_in: mass,
                 }
             })
             .collect()

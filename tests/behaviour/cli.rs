@@ -498,3 +498,155 @@ fn help_states_the_exit_statuses_and_usage_errors_exit_2() {
     let o = epfilt(&["filter", "a.exr", "b.exr", "--tolerance=-1"]);
     one_line_error(&o, USAGE, "--tolerance");
 }
+
+/// Per channel (by name): the sum of what an EXR file decodes to.
+fn decoded_sums(path: &Path) -> Vec<(String, f64)> {
+    let image = read_first_flat_layer_from_file(path).expect("decode");
+    image
+        .layer_data
+        .channel_data
+        .list
+        .iter()
+        .map(|c| {
+            let sum = match &c.sample_data {
+                FlatSamples::F16(v) => v.iter().map(|x| x.to_f64()).sum(),
+                FlatSamples::F32(v) => v.iter().map(|&x| x as f64).sum(),
+                FlatSamples::U32(v) => v.iter().map(|&x| x as f64).sum(),
+            };
+            (c.name.to_string(), sum)
+        })
+        .collect()
+}
+
+#[test]
+fn lossy_output_codecs_are_refused_unless_allowed_and_then_measured_on_disk() {
+    // Which codecs change which samples (OpenEXR's behaviour, checked with
+    // its Python bindings): DWA both, B44 half only, PXR24 float only.
+    let dir = tmpdir();
+    let inp = input(dir.path());
+    let out = dir.path().join("out.exr");
+    let out_s = out.to_str().unwrap();
+    for (codec, ty) in [
+        ("dwaa", "f32"),
+        ("dwab", "f16"),
+        ("pxr24", "f32"),
+        ("b44", "f16"),
+        ("b44a", "f16"),
+    ] {
+        let o = epfilt(&[
+            "filter",
+            &inp,
+            out_s,
+            "-s",
+            "3",
+            "--compression",
+            codec,
+            "--pixel-type",
+            ty,
+            "-q",
+        ]);
+        one_line_error(&o, USAGE, "lossy");
+        assert!(String::from_utf8_lossy(&o.stderr).contains(out_s));
+        assert!(!out.exists(), "{codec} {ty}: an output was left");
+    }
+    // Lossless for these samples: written, no warning.
+    for (codec, ty) in [("b44", "f32"), ("pxr24", "f16"), ("piz", "f32")] {
+        let o = epfilt(&[
+            "filter",
+            &inp,
+            out_s,
+            "-s",
+            "3",
+            "--compression",
+            codec,
+            "--pixel-type",
+            ty,
+            "-q",
+        ]);
+        assert!(
+            o.status.success(),
+            "{codec} {ty}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(
+            o.stderr.is_empty(),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+    // Allowed: the report's energy after rounding is the decoded file's.
+    // The two sums (compensated, and plain in file order) of ~600 values agree
+    // far within this bound.
+    const SUM_ORDER_TOL: f64 = 1e-12;
+    let rep = dir.path().join("r.json");
+    for (codec, ty) in [("dwaa", "f32"), ("pxr24", "f32"), ("b44", "f16")] {
+        let o = epfilt(&[
+            "filter",
+            &inp,
+            out_s,
+            "-s",
+            "3",
+            "--compression",
+            codec,
+            "--pixel-type",
+            ty,
+            "--allow-lossy",
+            "-q",
+            "--report",
+            rep.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+        assert_eq!(r["compression"], codec);
+        assert_eq!(r["energy_on_disk_decoded"], true);
+        let on_disk = decoded_sums(&out);
+        let mut moved = false;
+        for (k, name) in r["channels"].as_array().unwrap().iter().enumerate() {
+            let name = name.as_str().unwrap();
+            let (_, sum) = on_disk
+                .iter()
+                .find(|(n, _)| n == name)
+                .expect("channel on disk");
+            let reported = r["energy_out_rounded"][k].as_f64().unwrap() / 9.0;
+            assert!(
+                (reported - sum).abs() <= SUM_ORDER_TOL * sum.abs(),
+                "{codec} {name}: report {reported} vs file {sum}"
+            );
+            let before = r["energy_out"][k].as_f64().unwrap() / 9.0;
+            moved |= (before - sum).abs() > 1e-9 * sum.abs();
+        }
+        assert!(moved, "{codec} {ty}: the codec changed nothing measurable");
+    }
+}
+
+#[test]
+fn a_lossy_input_codec_is_not_inherited_silently() {
+    let dir = tmpdir();
+    let out = dir.path().join("out.exr");
+    let rep = dir.path().join("r.json");
+    // f32 output rounds each value within 2^-24 of itself, so the sum too.
+    const ROUNDING_TOL: f64 = 6e-8;
+    let inp = crate::corpus::data_dir().join("small/dwaa_half_rgba.exr");
+    let o = epfilt(&[
+        "filter",
+        inp.to_str().unwrap(),
+        out.to_str().unwrap(),
+        "-q",
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("warning") && err.contains("dwaa") && err.contains("zip"),
+        "{err}"
+    );
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+    assert_eq!(r["compression"], "zip");
+    assert_eq!(r["warnings"].as_array().unwrap().len(), 1);
+    for e in r["energy_rel_error_rounded"].as_array().unwrap() {
+        assert!(e.as_f64().unwrap() <= ROUNDING_TOL, "{e}");
+    }
+}

@@ -281,6 +281,7 @@ fn identity_job(input: &Path, output: &Path, part: Option<PartSelect>) -> Filter
         output_settings: OutputSettings {
             compression: Some(exr::prelude::Compression::ZIP16),
             precision: Precision::F32,
+            allow_lossy: false,
         },
         part,
         layer: None,
