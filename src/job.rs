@@ -61,6 +61,7 @@ impl FilterJob {
                 compression: None,
                 precision: crate::pipeline::Precision::F32,
                 allow_lossy: false,
+                provenance: None,
             },
             part: None,
             layer: None,
@@ -210,7 +211,28 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         }
         params.ep_box.ltvis = Some(l);
     }
-    let mut output = ExrOutput::create(&job.output, header, s, &channels, &job.output_settings)?;
+    // What the file and the report say about how they were made.
+    let mut settings = params.settings();
+    settings.push(("pixel_type", job.output_settings.precision.name().into()));
+    if let Some(p) = &job.part {
+        settings.push(("part", format!("{p:?}").into()));
+    }
+    if let Some(l) = &job.layer {
+        settings.push(("layer", l.as_str().into()));
+    }
+    let provenance = settings
+        .iter()
+        .map(|(k, v)| match v {
+            serde_json::Value::String(s) => format!("{k}={s}"),
+            v => format!("{k}={v}"),
+        })
+        .collect::<Vec<_>>()
+        .join(" ");
+    let out_settings = OutputSettings {
+        provenance: Some(provenance),
+        ..job.output_settings.clone()
+    };
+    let mut output = ExrOutput::create(&job.output, header, s, &channels, &out_settings)?;
     let stats = run(
         input.source(),
         &mut output,
@@ -334,6 +356,11 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         windows: stats.windows.clone(),
         stage_seconds: stats.stages,
         cpu_seconds: crate::stats::cpu_seconds().map(|c| c - cpu_start),
+        version: env!("CARGO_PKG_VERSION").into(),
+        settings: settings
+            .into_iter()
+            .map(|(k, v)| (k.to_string(), v))
+            .collect(),
         compression,
         energy_on_disk_decoded: output_lossy,
         warnings,

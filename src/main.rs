@@ -687,6 +687,7 @@ fn filter_job(a: &FilterArgs, cancel: Arc<AtomicBool>) -> Result<FilterJob> {
             compression,
             precision,
             allow_lossy: a.allow_lossy,
+            provenance: None,
         },
         part: a.part.as_deref().map(PartSelect::parse),
         layer: a.layer.clone(),

@@ -123,6 +123,11 @@ pub struct Report {
     pub stats_channels: Vec<String>,
     /// The ep-box run's settings and findings.
     pub ep_box: Option<EpBoxReport>,
+    /// epfilt's version.
+    pub version: String,
+    /// Every setting of the run's method, the output's sample type, the part
+    /// and layer (also in the output's `software` attribute).
+    pub settings: serde_json::Map<String, serde_json::Value>,
     /// The output's compression.
     pub compression: String,
     /// Whether that compression is lossy for the output's samples, so the

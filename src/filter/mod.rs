@@ -163,6 +163,54 @@ pub struct FilterParams {
 }
 
 impl FilterParams {
+    /// The settings this method uses, in a fixed order: what a file and a
+    /// report say about how they were made.
+    pub fn settings(&self) -> Vec<(&'static str, serde_json::Value)> {
+        use serde_json::json;
+        let mut v = vec![
+            ("method", json!(self.method.name())),
+            ("supersample", json!(self.supersample)),
+        ];
+        match self.method {
+            Method::EpGauss => v.extend([
+                ("tolerance", json!(self.tolerance)),
+                ("radius", json!(self.radius)),
+                ("max_radius", json!(self.max_radius)),
+                ("cutoff", json!(self.cutoff)),
+                ("width_step", json!(self.width_step)),
+                ("support", json!(self.support)),
+                ("support_ratio", json!(self.support_ratio)),
+            ]),
+            Method::Gauss => v.extend([
+                ("radius", json!(self.radius)),
+                ("cutoff", json!(self.cutoff)),
+            ]),
+            Method::Clamp => v.extend([
+                ("clamp", json!(self.clamp)),
+                ("radius", json!(self.radius)),
+                ("cutoff", json!(self.cutoff)),
+            ]),
+            Method::Median | Method::AlphaTrim => v.push(("alpha", json!(self.alpha))),
+            Method::Box => {}
+            Method::EpBox => {
+                let e = &self.ep_box;
+                v.extend([
+                    ("d", json!(e.d)),
+                    ("nmid", json!(e.nmid)),
+                    ("ltvis", json!(e.ltvis)),
+                    ("confidence", json!(e.confidence)),
+                    ("passes", json!(e.passes)),
+                    ("radius", json!(self.max_radius)),
+                    ("guard", json!(e.guard.name())),
+                    ("guard_confidence", json!(e.guard_confidence)),
+                    ("carriers", json!(e.carriers)),
+                    ("carriers_fraction", json!(e.carriers_fraction)),
+                ])
+            }
+        }
+        v
+    }
+
     /// Defaults for `method` at super-sampling `s` (radius 0.6 as Radiance's
     /// `pfilt -r`, cut-off 3 radii (the Gaussian has fallen to e^-9 = 1.2e-4),
     /// max radius 16, width step 10%).

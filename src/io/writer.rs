@@ -34,6 +34,9 @@ pub struct OutputSettings {
     /// ([`ExrOutput::decoded_sums`]). Without it a lossy `compression` is
     /// refused.
     pub allow_lossy: bool,
+    /// How the file was made: its `software` attribute reads
+    /// `epfilt VERSION (key=value ...)`.
+    pub provenance: Option<String>,
 }
 
 /// An output file being written.
@@ -86,6 +89,63 @@ fn choose_compression(
     }
 }
 
+/// Rewrite a finished single-part file's header with its attributes sorted
+/// by name. exr writes custom attributes in hash-map order, which changes
+/// from run to run: without this, two runs of the same command give files
+/// whose pixels are identical but whose bytes are not. The attributes keep
+/// their bytes and the header its length (the spec allows any order), so the
+/// offset table after it stays right.
+fn sort_header_attributes(file: &std::fs::File) -> std::io::Result<()> {
+    use std::io::{Read, Seek, SeekFrom, Write};
+    let bad = |why: &str| std::io::Error::new(std::io::ErrorKind::InvalidData, why.to_string());
+    let mut f = file;
+    f.seek(SeekFrom::Start(0))?;
+    // Headers are small; a bounded read keeps this cheap whatever the image.
+    let mut buf = Vec::new();
+    f.take(1 << 20).read_to_end(&mut buf)?;
+    if buf.len() < 9 || buf[..4] != [0x76, 0x2f, 0x31, 0x01] {
+        return Err(bad("not an OpenEXR file"));
+    }
+    let flags = u32::from_le_bytes([buf[4], buf[5], buf[6], buf[7]]);
+    if flags & 0x1000 != 0 || flags & 0x800 != 0 {
+        return Ok(()); // multi-part or deep: not what this writer makes
+    }
+    let mut at = 8;
+    let mut attrs: Vec<&[u8]> = Vec::new();
+    let cstr_end = |from: usize| buf[from..].iter().position(|&b| b == 0).map(|p| from + p);
+    loop {
+        let name_end = cstr_end(at).ok_or_else(|| bad("header runs past 1 MiB"))?;
+        if name_end == at {
+            break; // the empty name ends the header
+        }
+        let type_end = cstr_end(name_end + 1).ok_or_else(|| bad("truncated attribute type"))?;
+        let size_at = type_end + 1;
+        let size = buf
+            .get(size_at..size_at + 4)
+            .map(|b| i32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .ok_or_else(|| bad("truncated attribute size"))?;
+        let end = usize::try_from(size)
+            .ok()
+            .and_then(|n| (size_at + 4).checked_add(n))
+            .filter(|&e| e <= buf.len())
+            .ok_or_else(|| bad("attribute size out of range"))?;
+        attrs.push(&buf[at..end]);
+        at = end;
+    }
+    fn name(a: &[u8]) -> &[u8] {
+        a.iter().position(|&b| b == 0).map_or(a, |p| &a[..p])
+    }
+    let mut sorted = attrs.clone();
+    sorted.sort_by(|a, b| name(a).cmp(name(b)));
+    if sorted == attrs {
+        return Ok(());
+    }
+    let bytes: Vec<u8> = sorted.concat();
+    f.seek(SeekFrom::Start(8))?;
+    f.write_all(&bytes)?;
+    f.flush()
+}
+
 fn floor_div(a: i32, s: i32) -> i32 {
     a.div_euclid(s)
 }
@@ -111,6 +171,15 @@ impl ExrOutput {
         own.layer_position = Vec2(floor_div(pos.0, si), floor_div(pos.1, si));
         own.preview = None;
         own.original_data_window = None;
+        // The settings go into the standard `software` attribute: the
+        // input's comments stay the user's, and exr writes custom attributes
+        // in hash-map order, so one more of them would make the file's bytes
+        // differ from run to run.
+        let software = match &settings.provenance {
+            Some(p) => format!("epfilt {} ({p})", env!("CARGO_PKG_VERSION")),
+            None => format!("epfilt {}", env!("CARGO_PKG_VERSION")),
+        };
+        own.software_name = Some(Text::from(software.as_str()));
         header.own_attributes = own;
         let mut shared = input_header.shared_attributes.clone();
         let dw = shared.display_window;
@@ -459,11 +528,15 @@ impl Sink for ExrOutput {
 
     fn finish(&mut self) -> Result<()> {
         self.flush_blocks(true)?;
-        let r = self.join_writer();
+        self.join_writer()?;
         if let Some(t) = &self.staged {
+            sort_header_attributes(t.file()).map_err(|e| Error::Output {
+                path: self.dest.clone(),
+                reason: format!("putting the header in order: {e}"),
+            })?;
             t.file().sync_all().ok();
         }
-        r
+        Ok(())
     }
 }
 

@@ -650,3 +650,48 @@ fn a_lossy_input_codec_is_not_inherited_silently() {
         assert!(e.as_f64().unwrap() <= ROUNDING_TOL, "{e}");
     }
 }
+
+#[test]
+fn the_output_and_the_report_say_how_they_were_made() {
+    let dir = tmpdir();
+    let inp = input(dir.path());
+    let out = dir.path().join("out.exr");
+    let rep = dir.path().join("r.json");
+    for (method, key) in [("ep-gauss", "tolerance=0.2"), ("median", "alpha=")] {
+        let o = epfilt(&[
+            "filter",
+            &inp,
+            out.to_str().unwrap(),
+            "-s",
+            "3",
+            "--method",
+            method,
+            "--tolerance",
+            "0.2",
+            "-q",
+            "--report",
+            rep.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let meta = exr::meta::MetaData::read_from_file(&out, false).expect("header");
+        let own = &meta.headers[0].own_attributes;
+        let software = own.software_name.as_ref().expect("software").to_string();
+        let text = software
+            .strip_prefix(&format!("epfilt {} (", env!("CARGO_PKG_VERSION")))
+            .and_then(|t| t.strip_suffix(')'))
+            .unwrap_or_else(|| panic!("software: {software}"));
+        assert!(
+            text.starts_with(&format!("method={method} supersample=3 ")),
+            "{text}"
+        );
+        assert!(
+            text.contains(key) && text.contains("pixel_type=f32"),
+            "{text}"
+        );
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+        assert_eq!(r["version"], env!("CARGO_PKG_VERSION"));
+        assert_eq!(r["settings"]["method"], method);
+        assert_eq!(r["settings"]["supersample"], 3);
+    }
+}

@@ -282,6 +282,7 @@ fn identity_job(input: &Path, output: &Path, part: Option<PartSelect>) -> Filter
             compression: Some(exr::prelude::Compression::ZIP16),
             precision: Precision::F32,
             allow_lossy: false,
+            provenance: None,
         },
         part,
         layer: None,

@@ -483,3 +483,70 @@ fn several_aov_layers_and_no_beauty_is_a_clear_error_naming_them() {
     let r = filter_file(&job(&single, &out, Method::Box, 1), &|_, _| {}).unwrap();
     assert_eq!(r.channels, ["render.R", "render.G", "render.B"]);
 }
+
+/// A renderer's header carries many custom attributes; exr keeps them in a
+/// hash map whose order changes from process to process. Two runs of the
+/// same command must still write the same bytes (farms compare checksums
+/// and retry tasks), and every attribute must survive.
+#[test]
+fn files_with_many_custom_attributes_are_byte_identical_across_runs() {
+    let dir = tmpdir();
+    let input = dir.path().join("in.exr");
+    let ch = SpecificChannels::rgb(|Vec2(x, y): Vec2<usize>| {
+        (
+            1.0 + x as f32,
+            2.0 + y as f32,
+            if (x, y) == (4, 5) { 900.0 } else { 0.5f32 },
+        )
+    });
+    let mut attrs = LayerAttributes::named("");
+    for (k, name) in [
+        "renderer:spp",
+        "renderer:seed",
+        "camera:iso",
+        "shot",
+        "take",
+    ]
+    .iter()
+    .enumerate()
+    {
+        attrs
+            .other
+            .insert(Text::from(*name), AttributeValue::I32(k as i32 + 1));
+    }
+    let layer = Layer::new((12, 9), attrs, Encoding::FAST_LOSSLESS, ch);
+    Image::from_layer(layer).write().to_file(&input).unwrap();
+    let bytes: Vec<Vec<u8>> = (0..3)
+        .map(|k| {
+            let out = dir.path().join(format!("out{k}.exr"));
+            let o = std::process::Command::new(env!("CARGO_BIN_EXE_epfilt"))
+                .args([
+                    "filter",
+                    input.to_str().unwrap(),
+                    out.to_str().unwrap(),
+                    "-s",
+                    "3",
+                    "-q",
+                ])
+                .output()
+                .unwrap();
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+            std::fs::read(&out).unwrap()
+        })
+        .collect();
+    assert!(
+        bytes.windows(2).all(|p| p[0] == p[1]),
+        "the runs wrote different bytes"
+    );
+    let meta = exr::meta::MetaData::read_from_file(dir.path().join("out0.exr"), false).unwrap();
+    let other = &meta.headers[0].own_attributes.other;
+    for name in [
+        "renderer:spp",
+        "renderer:seed",
+        "camera:iso",
+        "shot",
+        "take",
+    ] {
+        assert!(other.contains_key(&Text::from(name)), "{name} lost");
+    }
+}
