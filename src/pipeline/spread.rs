@@ -497,7 +497,9 @@ impl SpreadStage {
                         scratch.clear();
                         scratch.extend_from_slice(row);
                         for n in &list[first..last] {
-                            for c in 0..nch {
+                            // Coverage (alpha, luminance weight 0) is not
+                            // spread: it keeps the base kernel.
+                            for c in (0..nch).filter(|&c| lum[c] != 0.0) {
                                 scratch[c * in_w + n.i as usize] = 0.0;
                             }
                         }
@@ -583,8 +585,10 @@ impl SpreadStage {
                 self.arena.extend_from_slice(&tmp);
                 self.stats.spread_taps += (xl * yl) as u64;
                 let mut v = [0.0; MAX_CHANNELS];
-                for (d, &x) in v.iter_mut().zip(&n.v).take(nch) {
-                    *d = x as f64 * self.inv_s2;
+                for ((d, &x), &l) in v.iter_mut().zip(&n.v).zip(&self.lum) {
+                    if l != 0.0 {
+                        *d = x as f64 * self.inv_s2;
+                    }
                 }
                 spreads.push(Spread {
                     xs,
@@ -670,7 +674,7 @@ fn scatter(
                 let wy = &arena[sp.off + sp.xl..sp.off + sp.xl + sp.yl];
                 for (dy, &wyv) in wy.iter().enumerate() {
                     let r = sp.ys + dy - first;
-                    for c in 0..nch {
+                    for c in (0..nch).filter(|&c| sp.v[c] != 0.0) {
                         let coef = sp.v[c] * wyv;
                         let dst = &mut parts[r * nch + c][cx0 - x0..cx1 - x0];
                         for (d, &wv) in dst.iter_mut().zip(wx) {

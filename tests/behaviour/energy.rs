@@ -163,3 +163,59 @@ fn a_lone_firefly_influences_no_pixel_beyond_the_tolerance() {
         assert!(worst > p.tolerance * 0.3, "spread far too wide: {worst}");
     }
 }
+
+/// Alpha is coverage, not light: whatever a method does to the colour, alpha
+/// stays within [0, 1], opaque regions stay exactly 1 and transparent ones
+/// exactly 0 (ep-gauss used to spread a firefly's alpha with its colour:
+/// 1.14 at S = 1), and the energy of colour and alpha is kept.
+#[test]
+fn alpha_stays_coverage_under_every_method() {
+    for s in [1usize, 3] {
+        let (w, h) = (40 * s, 30 * s);
+        // Transparent below x = 8 px, half covered 8..10, opaque from 10.
+        let cover = |x: usize| match x / s {
+            0..=7 => 0.0f32,
+            8..=9 => 0.5,
+            _ => 1.0,
+        };
+        let mut img = fireflies(w, h, 4, 0.03, 21);
+        for y in 0..h {
+            for x in 0..w {
+                let a = cover(x);
+                for c in 0..3 {
+                    img.set(x, y, c, img.at(x, y, c) * a);
+                }
+                img.set(x, y, 3, a);
+            }
+        }
+        for m in Method::ALL {
+            if m == Method::EpBox {
+                continue; // needs variance: its alpha is never spread (excess.rs)
+            }
+            let (out, stats) = run(&img, s, &params(m, s), &PipelineConfig::default());
+            for y in 0..out.h {
+                for x in 0..out.w {
+                    let a = out.at(x, y, 3);
+                    assert!((0.0..=1.0).contains(&a), "{m:?} S={s} ({x},{y}): alpha {a}");
+                    // Away from the coverage edges by more than any base kernel.
+                    if x >= 14 {
+                        assert_eq!(a, 1.0, "{m:?} S={s} ({x},{y}) opaque");
+                    }
+                    if x < 4 {
+                        assert_eq!(a, 0.0, "{m:?} S={s} ({x},{y}) transparent");
+                    }
+                }
+            }
+            if m.preserves_energy() {
+                for l in &stats.ledger {
+                    assert!(
+                        l.rel_error <= ENERGY_TOL,
+                        "{m:?} S={s} {}: {:e}",
+                        l.channel,
+                        l.rel_error
+                    );
+                }
+            }
+        }
+    }
+}
