@@ -526,6 +526,12 @@ fn lossy_output_codecs_are_refused_unless_allowed_and_then_measured_on_disk() {
     let inp = input(dir.path());
     let out = dir.path().join("out.exr");
     let out_s = out.to_str().unwrap();
+    let run_codec = |codec: &str, ty: &str, more: &[&str]| {
+        let mut args = vec!["filter", &inp, out_s, "-s", "3", "-q"];
+        args.extend(["--compression", codec, "--pixel-type", ty]);
+        args.extend(more);
+        epfilt(&args)
+    };
     for (codec, ty) in [
         ("dwaa", "f32"),
         ("dwab", "f16"),
@@ -533,36 +539,14 @@ fn lossy_output_codecs_are_refused_unless_allowed_and_then_measured_on_disk() {
         ("b44", "f16"),
         ("b44a", "f16"),
     ] {
-        let o = epfilt(&[
-            "filter",
-            &inp,
-            out_s,
-            "-s",
-            "3",
-            "--compression",
-            codec,
-            "--pixel-type",
-            ty,
-            "-q",
-        ]);
+        let o = run_codec(codec, ty, &[]);
         one_line_error(&o, USAGE, "lossy");
         assert!(String::from_utf8_lossy(&o.stderr).contains(out_s));
         assert!(!out.exists(), "{codec} {ty}: an output was left");
     }
     // Lossless for these samples: written, no warning.
     for (codec, ty) in [("b44", "f32"), ("pxr24", "f16"), ("piz", "f32")] {
-        let o = epfilt(&[
-            "filter",
-            &inp,
-            out_s,
-            "-s",
-            "3",
-            "--compression",
-            codec,
-            "--pixel-type",
-            ty,
-            "-q",
-        ]);
+        let o = run_codec(codec, ty, &[]);
         assert!(
             o.status.success(),
             "{codec} {ty}: {}",
@@ -580,21 +564,11 @@ fn lossy_output_codecs_are_refused_unless_allowed_and_then_measured_on_disk() {
     const SUM_ORDER_TOL: f64 = 1e-12;
     let rep = dir.path().join("r.json");
     for (codec, ty) in [("dwaa", "f32"), ("pxr24", "f32"), ("b44", "f16")] {
-        let o = epfilt(&[
-            "filter",
-            &inp,
-            out_s,
-            "-s",
-            "3",
-            "--compression",
+        let o = run_codec(
             codec,
-            "--pixel-type",
             ty,
-            "--allow-lossy",
-            "-q",
-            "--report",
-            rep.to_str().unwrap(),
-        ]);
+            &["--allow-lossy", "--report", rep.to_str().unwrap()],
+        );
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         let r: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
