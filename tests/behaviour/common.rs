@@ -83,6 +83,24 @@ pub fn rgb_job(w: usize, h: usize, s: usize) -> Job {
     )
 }
 
+/// An RGB render at pixel resolution with per-colour sample variances
+/// (`variance.R/G/B` after the colour) from `spp` samples: the job of ep-box.
+pub fn rgb_variance_job(w: usize, h: usize, spp: f64) -> Job {
+    let mut j = rgb_job(w, h, 1);
+    j.aux = vec![
+        "variance.R".into(),
+        "variance.G".into(),
+        "variance.B".into(),
+    ];
+    j.stats = Some(epfilt::filter::ep_box::StatsLayout {
+        variance: vec![3, 4, 5],
+        kind: epfilt::filter::ep_box::VarianceKind::Sample,
+        mean_y: None,
+        spp: epfilt::filter::ep_box::Spp::Fixed(spp),
+    });
+    j
+}
+
 pub fn job_for(img: &Img, s: usize) -> Job {
     match img.nch {
         3 => rgb_job(img.w, img.h, s),

@@ -2,8 +2,8 @@
 //! order independence, passes, and the plan.
 #![allow(clippy::needless_range_loop)] // pixel loops read clearer with indices
 
-use epfilt::filter::ep_box::{se2, Guard, Ring, Spp, StatsLayout, TFactor, VarianceKind};
-use epfilt::{filter_in_memory, FilterParams, Grid, Job, Method, PipelineConfig, RunStats};
+use epfilt::filter::ep_box::{se2, Guard, Ring, Spp, TFactor, VarianceKind};
+use epfilt::{filter_in_memory, FilterParams, Job, Method, PipelineConfig, RunStats};
 use proptest::prelude::*;
 
 use crate::common::*;
@@ -16,27 +16,7 @@ fn rgbv(w: usize, h: usize) -> Img {
 }
 
 fn job(w: usize, h: usize, spp: f64) -> Job {
-    let mut j = Job::new(
-        Grid {
-            in_w: w,
-            in_h: h,
-            s: 1,
-        },
-        vec!["R".into(), "G".into(), "B".into()],
-        LUM.to_vec(),
-    );
-    j.aux = vec![
-        "variance.R".into(),
-        "variance.G".into(),
-        "variance.B".into(),
-    ];
-    j.stats = Some(StatsLayout {
-        variance: vec![3, 4, 5],
-        kind: VarianceKind::Sample,
-        mean_y: None,
-        spp: Spp::Fixed(spp),
-    });
-    j
+    rgb_variance_job(w, h, spp)
 }
 
 fn params(guard: Guard, ltvis: f64, radius: f64) -> FilterParams {

@@ -3,9 +3,9 @@
 //! of the same frame are spread; the paper's rules as written (`--guard
 //! none`) spread the bulbs into discs, which is what the defaults are for.
 
-use epfilt::filter::ep_box::{Guard, Spp, StatsLayout, VarianceKind};
+use epfilt::filter::ep_box::Guard;
 use epfilt::synth::{Scene, SceneKind, BULBS, LINE};
-use epfilt::{filter_in_memory, FilterParams, Grid, Job, Method, PipelineConfig};
+use epfilt::{filter_in_memory, FilterParams, Job, Method, PipelineConfig};
 
 use crate::common::*;
 
@@ -168,27 +168,7 @@ fn ep_gauss_keeps_tiny_lights_and_spreads_the_fireflies() {
 }
 
 fn box_job(n: f64) -> Job {
-    let mut j = Job::new(
-        Grid {
-            in_w: W,
-            in_h: H,
-            s: 1,
-        },
-        vec!["R".into(), "G".into(), "B".into()],
-        vec![0.2126, 0.7152, 0.0722],
-    );
-    j.aux = vec![
-        "variance.R".into(),
-        "variance.G".into(),
-        "variance.B".into(),
-    ];
-    j.stats = Some(StatsLayout {
-        variance: vec![3, 4, 5],
-        kind: VarianceKind::Sample,
-        mean_y: None,
-        spp: Spp::Fixed(n),
-    });
-    j
+    rgb_variance_job(W, H, n)
 }
 
 #[test]
