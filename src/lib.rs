@@ -45,6 +45,7 @@ pub mod job;
 pub mod pipeline;
 pub mod plan;
 pub mod preview;
+pub mod sequence;
 pub mod stats;
 pub mod synth;
 

@@ -215,10 +215,34 @@ struct PlanArgs {
 
 #[derive(Args)]
 struct FilterArgs {
-    /// Input EXR (super-sampled render).
+    /// Input EXR (super-sampled render), or a frame sequence: render.####.exr
+    /// (one padded digit per #) or render.%04d.exr.
     input: PathBuf,
-    /// Output EXR (written to a temporary file, renamed on success).
+    /// Output EXR (written to a temporary file, renamed on success); for a
+    /// sequence, a pattern with a frame field too.
     output: PathBuf,
+    /// Sequence: the frames to filter, e.g. 1-240, 1-100x2, 3,4,10-20x5
+    /// [default: the input frames on disk].
+    #[arg(long)]
+    frames: Option<String>,
+    /// Sequence: this task's 0-based index; it filters the index-th of
+    /// --task-count contiguous chunks of the frames [default: from the
+    /// environment: SLURM_ARRAY_TASK_ID, JOB_COMPLETION_INDEX, AWS_BATCH_JOB_ARRAY_INDEX].
+    #[arg(long)]
+    task_index: Option<usize>,
+    /// Sequence: how many tasks share the frames [default: SLURM_ARRAY_TASK_COUNT,
+    /// AWS_BATCH_JOB_ARRAY_SIZE; needed for Kubernetes Indexed Jobs].
+    #[arg(long)]
+    task_count: Option<usize>,
+    /// Leave outputs that already exist (a retried farm task redoes only what is missing).
+    #[arg(long)]
+    skip_existing: bool,
+    /// Sequence: stop at the first failed frame.
+    #[arg(long, conflicts_with = "keep_going")]
+    fail_fast: bool,
+    /// Sequence: go on past a failed frame and exit 1 at the end (the default).
+    #[arg(long)]
+    keep_going: bool,
     /// Method: ep-gauss (§5.2), ep-box (§5.1, pixels with variance), gauss
     /// (linear foil), box (S x S average), or the energy-losing foils clamp,
     /// median and alpha-trim.
@@ -616,7 +640,7 @@ fn progress_bar(quiet: bool) -> Option<ProgressBar> {
     let b = ProgressBar::new(0);
     b.set_style(
         ProgressStyle::with_template(
-            "{spinner} {wide_bar} {pos}/{len} rows  {elapsed_precise} eta {eta}",
+            "{spinner} {msg} {wide_bar} {pos}/{len} rows  {elapsed_precise} eta {eta}",
         )
         .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
@@ -697,8 +721,37 @@ fn filter_job(a: &FilterArgs, cancel: Arc<AtomicBool>) -> Result<FilterJob> {
 }
 
 fn filter(a: FilterArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
+    use epfilt::sequence::FramePattern;
+    let input_pattern = FramePattern::parse(&a.input).map_err(usage)?;
+    let output_pattern = FramePattern::parse(&a.output).map_err(usage)?;
+    match (input_pattern, output_pattern) {
+        (Some(i), Some(o)) => return filter_sequence(&a, i, o, cancel),
+        (Some(i), None) => {
+            return Err(usage(anyhow::anyhow!(
+                "the input {i} is a frame sequence: give the output a frame field too (e.g. out/render.####.exr)"
+            )))
+        }
+        (None, Some(o)) => {
+            return Err(usage(anyhow::anyhow!(
+                "the output {o} has a frame field but the input {} does not",
+                a.input.display()
+            )))
+        }
+        (None, None) => {}
+    }
+    if a.frames.is_some() || a.task_index.is_some() || a.task_count.is_some() {
+        return Err(usage(anyhow::anyhow!(
+            "--frames, --task-index and --task-count need a frame sequence (render.####.exr)"
+        )));
+    }
     let job = filter_job(&a, cancel).map_err(usage)?;
     check_binary_stdout(&a.output)?;
+    if a.skip_existing && std::fs::metadata(&a.output).is_ok_and(|m| m.is_file()) {
+        if !a.quiet {
+            eprintln!("{}: exists, skipped (--skip-existing)", a.output.display());
+        }
+        return Ok(());
+    }
     // Check the report's path now, not after a long run.
     if let Some(path) = &a.report {
         epfilt::io::Destination::resolve(path).map_err(fail)?;
@@ -724,6 +777,120 @@ fn filter(a: FilterArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
     }
     if !a.quiet {
         eprint!("{}", report.summary());
+    }
+    Ok(())
+}
+
+/// A frame sequence, or this task's share of it: each frame as `filter`
+/// would do it, a line per frame, a summary, and exit 1 when any failed.
+fn filter_sequence(
+    a: &FilterArgs,
+    input: epfilt::sequence::FramePattern,
+    output: epfilt::sequence::FramePattern,
+    cancel: Arc<AtomicBool>,
+) -> Result<(), Exit> {
+    use epfilt::sequence::{parse_frames, run_sequence, task_from, FrameStatus, SequenceJob};
+    let template = filter_job(a, cancel).map_err(usage)?;
+    let frames = match &a.frames {
+        Some(spec) => parse_frames(spec).map_err(usage)?,
+        None => input.on_disk().map_err(usage)?,
+    };
+    let task = task_from(a.task_index, a.task_count, &|k| std::env::var(k).ok()).map_err(usage)?;
+    if let Some(&first) = frames.first() {
+        let folder = output.path(first);
+        if let Some(dir) = folder.parent().filter(|d| !d.as_os_str().is_empty()) {
+            if !dir.is_dir() {
+                return Err(usage(anyhow::anyhow!(
+                    "{}: the output folder does not exist",
+                    dir.display()
+                )));
+            }
+        }
+    }
+    if let Some(path) = &a.report {
+        epfilt::io::Destination::resolve(path).map_err(fail)?;
+    }
+    let job = SequenceJob {
+        template,
+        input,
+        output,
+        frames,
+        task,
+        skip_existing: a.skip_existing,
+        fail_fast: a.fail_fast,
+    };
+    let bar = progress_bar(a.quiet);
+    let progress = |done: usize, total: usize| {
+        if let Some(b) = &bar {
+            b.set_length(total as u64);
+            b.set_position(done as u64);
+        }
+    };
+    let quiet = a.quiet;
+    let on_frame = |e: epfilt::sequence::FrameEvent<'_>| {
+        let (k, n, frame) = (e.position, e.of, e.frame);
+        let Some(o) = e.outcome else {
+            if let Some(b) = &bar {
+                b.set_message(format!("frame {frame} [{}/{n}]", k + 1));
+            }
+            return;
+        };
+        let line = match o.status {
+            FrameStatus::Failed => {
+                format!(
+                    "epfilt: frame {frame}: {}",
+                    o.error.as_deref().unwrap_or("failed")
+                )
+            }
+            _ if quiet => return,
+            FrameStatus::Skipped => format!(
+                "frame {frame} [{}/{n}]: {} exists, skipped",
+                k + 1,
+                o.output
+            ),
+            FrameStatus::Done => {
+                let worst = o.report.as_ref().map_or(0.0, |r| {
+                    r.energy_rel_error
+                        .iter()
+                        .fold(0.0f64, |m, e| m.max(e.abs()))
+                });
+                format!(
+                    "frame {frame} [{}/{n}]: {} in {:.2} s, ledger {worst:.1e}",
+                    k + 1,
+                    o.output,
+                    o.seconds
+                )
+            }
+            FrameStatus::NotRun => return,
+        };
+        match &bar {
+            Some(b) => b.println(line),
+            None => eprintln!("{line}"),
+        }
+    };
+    let report = run_sequence(&job, &on_frame, &progress);
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    let report = report.map_err(fail)?;
+    if let Some(path) = &a.report {
+        let json = serde_json::to_string_pretty(&report).map_err(fail)? + "\n";
+        epfilt::io::write_file(path, json.as_bytes()).map_err(fail)?;
+    }
+    if !a.quiet {
+        eprint!("{}", report.summary());
+    }
+    if report.failed > 0 {
+        return Err(fail(anyhow::anyhow!(
+            "{} of {} frames failed{}",
+            report.failed,
+            report.frames.len(),
+            if report.not_run > 0 {
+                format!(" ({} not run: --fail-fast)", report.not_run)
+            } else {
+                String::new()
+            }
+        )));
     }
     Ok(())
 }

@@ -8,6 +8,7 @@ mod energy;
 mod ep_box;
 mod exr_io;
 mod extremes;
+mod farm;
 mod features;
 mod foils;
 mod invariance;
