@@ -10,6 +10,7 @@ use crate::geometry::Grid;
 use crate::io::{
     find_stats, ExrInput, ExrOutput, OutputSettings, PartSelect, SppFrom, StatsRequest,
 };
+use crate::pipeline::crop::Cropped;
 use crate::pipeline::{run, Job, MethodStats, PipelineConfig, Progress};
 use crate::stats::{peak_rss_bytes, EpBoxReport, Report};
 
@@ -41,6 +42,36 @@ pub struct FilterJob {
     pub max_memory: Option<u64>,
     /// Where `ep-box` finds its statistics (found by name when empty).
     pub stats: StatsRequest,
+    /// What to do with an input whose size is not a multiple of S.
+    pub edge: Edge,
+    /// `params.supersample` is a default, not the user's choice: the summary
+    /// says what was assumed, and a size that does not fit says how to fix it.
+    pub supersample_assumed: bool,
+}
+
+/// An input whose width or height is not a multiple of the super-sampling
+/// factor S.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Edge {
+    /// Refuse it, naming the options (the default).
+    #[default]
+    Exact,
+    /// Drop the last `w % S` columns and `h % S` rows of samples (the last
+    /// partial output column and row); the ledger counts what was kept.
+    Crop,
+}
+
+impl Edge {
+    /// `crop`; `pad` is named as not built yet.
+    pub fn parse(s: &str) -> Result<Edge> {
+        match s {
+            "crop" => Ok(Edge::Crop),
+            "pad" => Err(Error::Config(
+                "--edge pad (partial output pixels) is not built yet; --edge crop drops the last partial output row and column".into(),
+            )),
+            other => Err(Error::Config(format!("--edge must be crop, not {other:?}"))),
+        }
+    }
 }
 
 impl FilterJob {
@@ -67,6 +98,8 @@ impl FilterJob {
             layer: None,
             max_memory: None,
             stats: StatsRequest::default(),
+            edge: Edge::Exact,
+            supersample_assumed: false,
         }
     }
 }
@@ -137,18 +170,46 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
             job.input.display()
         )));
     }
-    if w % s != 0
-        || h % s != 0
-        || origin.0.rem_euclid(s as i32) != 0
-        || origin.1.rem_euclid(s as i32) != 0
-    {
+    if origin.0.rem_euclid(s as i32) != 0 || origin.1.rem_euclid(s as i32) != 0 {
         return Err(Error::Config(format!(
-            "{}: data window {w}x{h} at ({}, {}) is not a multiple of --supersample {s} in size and origin",
+            "{}: the data window starts at ({}, {}), not on a multiple of --supersample {s}",
             job.input.display(),
             origin.0,
             origin.1
         )));
     }
+    let mut warnings = Vec::new();
+    let (full_w, w, h) = if w % s == 0 && h % s == 0 {
+        (w, w, h)
+    } else {
+        let (cw, ch) = (w - w % s, h - h % s);
+        match job.edge {
+            Edge::Crop => {
+                warnings.push(format!(
+                    "{}: {w}x{h} samples is not a multiple of S={s}: cropped to {cw}x{ch} (--edge crop dropped the last {} sample column(s) and {} row(s))",
+                    job.input.display(),
+                    w - cw,
+                    h - ch
+                ));
+                (w, cw, ch)
+            }
+            Edge::Exact => {
+                let hint = if job.supersample_assumed {
+                    " If it is at pixel resolution, give --supersample 1."
+                } else {
+                    ""
+                };
+                return Err(Error::Config(format!(
+                    "{}: {w}x{h} samples is not a multiple of --supersample {s}{}: give --edge crop to drop the last partial output column and row ({}x{} pixels).{hint}",
+                    job.input.display(),
+                    if job.supersample_assumed { " (assumed: no --supersample given)" } else { "" },
+                    cw / s,
+                    ch / s
+                )));
+            }
+        }
+    };
+    let source = || Cropped::new(input.source(), full_w, w, h);
     let channels = input.channels();
     let mut pipe_job = Job::new(
         Grid {
@@ -197,8 +258,7 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     // ep-box: the first pass, for L_ave (Eq. 9).
     let mut l_ave = None;
     if params.method == Method::EpBox && params.ep_box.ltvis.is_none() {
-        let mean =
-            crate::pipeline::mean_luminance(input.source(), &pipe_job, job.pipeline.strip_rows)?;
+        let mean = crate::pipeline::mean_luminance(source(), &pipe_job, job.pipeline.strip_rows)?;
         l_ave = Some(mean);
         let l = crate::filter::ep_box::ltvis(mean, params.ep_box.nmid);
         if !(l.is_finite() && l > 0.0) {
@@ -232,9 +292,20 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         provenance: Some(provenance),
         ..job.output_settings.clone()
     };
-    let mut output = ExrOutput::create(&job.output, header, s, &channels, &out_settings)?;
+    // A cropped input's output describes the cropped window (and a display
+    // window that was the data window follows it).
+    let mut out_header = header.clone();
+    if w != full_w || h != input.size().1 {
+        let old = exr::meta::attribute::IntegerBounds::new(origin, out_header.layer_size);
+        out_header.layer_size = exr::math::Vec2(w, h);
+        if out_header.shared_attributes.display_window == old {
+            out_header.shared_attributes.display_window =
+                exr::meta::attribute::IntegerBounds::new(origin, out_header.layer_size);
+        }
+    }
+    let mut output = ExrOutput::create(&job.output, &out_header, s, &channels, &out_settings)?;
     let stats = run(
-        input.source(),
+        source(),
         &mut output,
         &pipe_job,
         &params,
@@ -271,7 +342,6 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
             l.set_on_disk(sum * s2);
         }
     }
-    let mut warnings = Vec::new();
     if let Some(n) = output.note() {
         warnings.push(format!("{}: {n}", job.output.display()));
     }
@@ -295,6 +365,7 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         output: job.output.display().to_string(),
         method: job.params.method.name().into(),
         supersample: s,
+        supersample_assumed: job.supersample_assumed,
         width: w,
         height: h,
         out_width: w / s,

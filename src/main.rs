@@ -251,6 +251,11 @@ struct FilterArgs {
     /// Input samples per output pixel along each axis (1..=8) [default: 3; 1 for ep-box].
     #[arg(long, short = 's')]
     supersample: Option<usize>,
+    /// A size that is not a multiple of S: crop drops the last partial output
+    /// column and row (the samples beyond the last whole output pixel)
+    /// [default: refuse, naming the options].
+    #[arg(long)]
+    edge: Option<String>,
     /// Relation 14 tolerance [default: 0.25 at S=3, 0.15 at S=4; 0.25*(3/S)^1.776 otherwise].
     #[arg(long)]
     tolerance: Option<f64>,
@@ -717,6 +722,11 @@ fn filter_job(a: &FilterArgs, cancel: Arc<AtomicBool>) -> Result<FilterJob> {
         layer: a.layer.clone(),
         max_memory: a.max_memory.map(|m| m.saturating_mul(1 << 20)),
         stats: a.stats.request()?,
+        edge: match &a.edge {
+            Some(e) => epfilt::job::Edge::parse(e)?,
+            None => epfilt::job::Edge::Exact,
+        },
+        supersample_assumed: a.supersample.is_none() && s > 1,
     })
 }
 

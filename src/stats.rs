@@ -48,6 +48,8 @@ pub struct Report {
     pub method: String,
     /// Super-sampling factor.
     pub supersample: usize,
+    /// The factor was the method's default, not given (`--supersample`).
+    pub supersample_assumed: bool,
     /// Input width (samples).
     pub width: usize,
     /// Input height (samples).
@@ -188,11 +190,16 @@ impl Report {
     /// The human summary, a few lines.
     pub fn summary(&self) -> String {
         let mut s = format!(
-            "{} -> {}: {} S={} {}x{} -> {}x{}\n  {:.2} s, {:.1} Mpx/s; noisy {} spread {} capped {}{}\n",
+            "{} -> {}: {} S={}{} {}x{} -> {}x{}\n  {:.2} s, {:.1} Mpx/s; noisy {} spread {} capped {}{}\n",
             self.input,
             self.output,
             self.method,
             self.supersample,
+            if self.supersample_assumed {
+                " (assumed: no --supersample given)"
+            } else {
+                ""
+            },
             self.width,
             self.height,
             self.out_width,

@@ -18,6 +18,7 @@
 //! * [`books`], [`ledger`], [`window`]: what every stage shares.
 
 pub mod books;
+pub mod crop;
 pub mod excess;
 pub mod ledger;
 pub mod order;

@@ -669,3 +669,83 @@ fn the_output_and_the_report_say_how_they_were_made() {
         assert_eq!(r["settings"]["supersample"], 3);
     }
 }
+
+#[test]
+fn a_size_not_a_multiple_of_s_is_refused_with_the_options_or_cropped() {
+    let dir = tmpdir();
+    let d = dir.path();
+    let full = fireflies(32, 23, 3, 0.03, 7);
+    let full_path = d.join("full.exr");
+    let opts = (
+        Compression::ZIP16,
+        Blocks::ScanLines,
+        false,
+        LineOrder::Increasing,
+    );
+    write_rgb(&full_path, &full, opts.0, opts.1, opts.2, opts.3);
+    let full_arg = full_path.to_str().unwrap();
+    let out = d.join("out.exr");
+    let out_arg = out.to_str().unwrap();
+
+    let o = epfilt(&["filter", full_arg, out_arg]);
+    one_line_error(&o, USAGE, "--edge crop");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("assumed") && err.contains("--supersample 1"),
+        "{err}"
+    );
+    let o = epfilt(&["filter", full_arg, out_arg, "-s", "4"]);
+    one_line_error(&o, USAGE, "--edge crop");
+    assert!(!out.exists());
+
+    for (s, method) in [(3, "ep-gauss"), (3, "gauss"), (3, "box"), (4, "ep-gauss")] {
+        let (cw, ch) = (32 - 32 % s, 23 - 23 % s);
+        let cut = Img::new(cw, ch, 3, |x, y, c| full.at(x, y, c));
+        let cut_path = d.join(format!("cut{s}.exr"));
+        write_rgb(&cut_path, &cut, opts.0, opts.1, opts.2, opts.3);
+        let expected = d.join("expected.exr");
+        let s_arg = s.to_string();
+        let o = epfilt(&[
+            "filter",
+            cut_path.to_str().unwrap(),
+            expected.to_str().unwrap(),
+            "-s",
+            &s_arg,
+            "--method",
+            method,
+            "-q",
+        ]);
+        assert!(o.status.success(), "{o:?}");
+        let rep = d.join("r.json");
+        let o = epfilt(&[
+            "filter",
+            full_arg,
+            out_arg,
+            "-s",
+            &s_arg,
+            "--method",
+            method,
+            "--edge",
+            "crop",
+            "--report",
+            rep.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{o:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains("epfilt: warning: ") && err.contains("cropped"),
+            "{err}"
+        );
+        assert!(
+            std::fs::read(&out).unwrap() == std::fs::read(&expected).unwrap(),
+            "{method} S={s}: cropping differs from filtering the cropped image"
+        );
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+        assert_eq!(json["out_width"], cw / s);
+        assert_eq!(json["out_height"], ch / s);
+        assert!(json["warnings"][0].as_str().unwrap().contains("cropped"));
+    }
+    let o = epfilt(&["filter", full_arg, out_arg, "--edge", "pad"]);
+    one_line_error(&o, USAGE, "not built yet");
+}

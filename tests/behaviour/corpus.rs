@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 
 use crate::exr_io::{read_planar, tmpdir};
 use epfilt::io::{OutputSettings, PartSelect};
-use epfilt::{filter_file, FilterJob, FilterParams, Method, PipelineConfig, Precision};
+use epfilt::{filter_file, FilterJob, FilterParams, Method, Precision};
 
 /// What a file must give.
 #[derive(Clone, Copy, Debug)]
@@ -270,25 +270,16 @@ fn files(dir: &Path, out: &mut Vec<PathBuf>) {
 /// S = 1 box filtering is the identity: the output must equal the input as
 /// `exr` decodes it.
 fn identity_job(input: &Path, output: &Path, part: Option<PartSelect>) -> FilterJob {
-    FilterJob {
-        input: input.into(),
-        output: output.into(),
-        params: FilterParams::new(Method::Box, 1),
-        pipeline: PipelineConfig {
-            threads: 2,
-            ..Default::default()
-        },
-        output_settings: OutputSettings {
-            compression: Some(exr::prelude::Compression::ZIP16),
-            precision: Precision::F32,
-            allow_lossy: false,
-            provenance: None,
-        },
-        part,
-        layer: None,
-        max_memory: None,
-        stats: Default::default(),
-    }
+    let mut job = FilterJob::new(input, output, FilterParams::new(Method::Box, 1));
+    job.pipeline.threads = 2;
+    job.output_settings = OutputSettings {
+        compression: Some(exr::prelude::Compression::ZIP16),
+        precision: Precision::F32,
+        allow_lossy: false,
+        provenance: None,
+    };
+    job.part = part;
+    job
 }
 
 /// Filter every file below `root` and hold each to the table. `strict`: a
