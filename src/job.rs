@@ -76,7 +76,8 @@ impl Edge {
 
 impl FilterJob {
     /// `input` to `output` with `params`, and defaults for the rest: automatic
-    /// strips and threads, f32 output compressed like the input, part 0 of a
+    /// strips and threads, output samples of the input's type compressed like
+    /// the input, part 0 of a
     /// single-part file, [`default_max_memory`].
     pub fn new(
         input: impl Into<PathBuf>,
@@ -90,7 +91,7 @@ impl FilterJob {
             pipeline: PipelineConfig::default(),
             output_settings: OutputSettings {
                 compression: None,
-                precision: crate::pipeline::Precision::F32,
+                precision: None,
                 allow_lossy: false,
                 provenance: None,
             },
@@ -273,7 +274,11 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     }
     // What the file and the report say about how they were made.
     let mut settings = params.settings();
-    settings.push(("pixel_type", job.output_settings.precision.name().into()));
+    let precision = job
+        .output_settings
+        .precision
+        .unwrap_or_else(|| crate::io::writer::same_precision(header, &channels));
+    settings.push(("pixel_type", precision.name().into()));
     if let Some(p) = &job.part {
         settings.push(("part", format!("{p:?}").into()));
     }
@@ -290,6 +295,7 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         .join(" ");
     let out_settings = OutputSettings {
         provenance: Some(provenance),
+        precision: Some(precision),
         ..job.output_settings.clone()
     };
     // A cropped input's output describes the cropped window (and a display

@@ -324,8 +324,9 @@ struct FilterArgs {
     /// disk is then measured by decoding the file, and reported.
     #[arg(long)]
     allow_lossy: bool,
-    /// Output sample type: f32 or f16 (f16 refuses values it cannot hold).
-    #[arg(long, default_value = "f32")]
+    /// Output sample type: same (f16 when every filtered channel is f16 in the
+    /// input, else f32), f32 or f16 (f16 refuses values it cannot hold).
+    #[arg(long, default_value = "same")]
     pixel_type: String,
     /// Part of a multi-part input, by name or index.
     #[arg(long)]
@@ -684,9 +685,10 @@ fn filter_job(a: &FilterArgs, cancel: Arc<AtomicBool>) -> Result<FilterJob> {
     }
     params.validate()?;
     let precision = match a.pixel_type.as_str() {
-        "f32" | "float" => Precision::F32,
-        "f16" | "half" => Precision::F16,
-        other => anyhow::bail!("--pixel-type must be f32 or f16, not {other:?}"),
+        "same" => None,
+        "f32" | "float" => Some(Precision::F32),
+        "f16" | "half" => Some(Precision::F16),
+        other => anyhow::bail!("--pixel-type must be same, f32 or f16, not {other:?}"),
     };
     let compression = match &a.compression {
         Some(c) => {

@@ -27,8 +27,8 @@ pub struct OutputSettings {
     /// Compression (None: the input's, unless that is lossy for the output's
     /// samples: then ZIP, and [`ExrOutput::note`] says so).
     pub compression: Option<Compression>,
-    /// Sample type.
-    pub precision: Precision,
+    /// Sample type; `None`: the input's ([`same_precision`]).
+    pub precision: Option<Precision>,
     /// Accept a lossy compression ([`super::is_lossy`]): the energy on disk
     /// is then no longer exact, and the run measures it by decoding the file
     /// ([`ExrOutput::decoded_sums`]). Without it a lossy `compression` is
@@ -58,6 +58,27 @@ pub struct ExrOutput {
     thread: Option<JoinHandle<Result<()>>>,
 }
 
+/// The output sample type that keeps the input's (`--pixel-type same`): f16
+/// when every channel written was f16 in the input, else f32 (which holds f16
+/// and f32 values exactly; u32 channels are written as f32 too). One type for
+/// all channels: the pipeline rounds every channel alike.
+pub fn same_precision(input_header: &Header, channels: &[String]) -> Precision {
+    let all_half = !channels.is_empty()
+        && channels.iter().all(|n| {
+            input_header
+                .channels
+                .list
+                .iter()
+                .find(|c| c.name.to_string() == *n)
+                .is_some_and(|c| c.sample_type == SampleType::F16)
+        });
+    if all_half {
+        Precision::F16
+    } else {
+        Precision::F32
+    }
+}
+
 /// The output's compression and, where it is not what the input had, why.
 /// An explicit lossy choice needs `allow_lossy`; the input's lossy codec is
 /// replaced by ZIP unless `allow_lossy`.
@@ -65,10 +86,11 @@ fn choose_compression(
     dest: &Path,
     input: Compression,
     settings: &OutputSettings,
+    precision: Precision,
 ) -> Result<(Compression, Option<String>)> {
     let name = super::compression_name;
-    let lossy = |c| super::is_lossy(c, settings.precision);
-    let kind = settings.precision.name();
+    let lossy = |c| super::is_lossy(c, precision);
+    let kind = precision.name();
     match settings.compression {
         Some(c) if lossy(c) && !settings.allow_lossy => Err(Error::Output {
             path: dest.to_path_buf(),
@@ -161,8 +183,12 @@ impl ExrOutput {
         settings: &OutputSettings,
     ) -> Result<Self> {
         let (w, h) = (input_header.layer_size.0 / s, input_header.layer_size.1 / s);
-        let (compression, note) = choose_compression(dest, input_header.compression, settings)?;
-        let mut header = Self::fresh_header(w, h, channels, compression, settings.precision);
+        let precision = settings
+            .precision
+            .unwrap_or_else(|| same_precision(input_header, channels));
+        let (compression, note) =
+            choose_compression(dest, input_header.compression, settings, precision)?;
+        let mut header = Self::fresh_header(w, h, channels, compression, precision);
         let si = s as i32;
         // Keep what still holds: every attribute but the geometry we change and
         // the preview (a picture of the input).
@@ -191,7 +217,7 @@ impl ExrOutput {
             Vec2((x1 - x0).max(1) as usize, (y1 - y0).max(1) as usize),
         );
         header.shared_attributes = shared;
-        let mut out = Self::start(dest, header, channels, settings.precision)?;
+        let mut out = Self::start(dest, header, channels, precision)?;
         out.note = note;
         Ok(out)
     }

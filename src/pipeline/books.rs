@@ -230,9 +230,14 @@ fn finish_rows(
                         let r = round(val, precision).ok_or_else(|| Error::Value {
                             path: Default::default(),
                             reason: format!(
-                                "output value {val:e} at pixel ({x}, {y}) in channel {} does not fit in {}",
+                                "output value {val:e} at pixel ({x}, {y}) in channel {} does not fit in {}{}",
                                 names[c],
-                                precision.name()
+                                precision.name(),
+                                if precision == Precision::F16 {
+                                    " (--pixel-type f32 holds it)"
+                                } else {
+                                    ""
+                                }
                             ),
                         })?;
                         *d = r;

@@ -607,6 +607,8 @@ fn a_lossy_input_codec_is_not_inherited_silently() {
         inp.to_str().unwrap(),
         out.to_str().unwrap(),
         "-q",
+        "--pixel-type",
+        "f32",
         "--report",
         rep.to_str().unwrap(),
     ]);

@@ -274,7 +274,7 @@ fn identity_job(input: &Path, output: &Path, part: Option<PartSelect>) -> Filter
     job.pipeline.threads = 2;
     job.output_settings = OutputSettings {
         compression: Some(exr::prelude::Compression::ZIP16),
-        precision: Precision::F32,
+        precision: Some(Precision::F32),
         allow_lossy: false,
         provenance: None,
     };

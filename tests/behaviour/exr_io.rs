@@ -183,6 +183,8 @@ fn every_layout_and_codec_matches_the_in_memory_filter() {
         for m in [Method::EpGauss, Method::Box] {
             let out = dir.path().join(format!("{name}-{}.exr", m.name()));
             let mut j = job(&input, &out, m, s);
+            // Compared with the in-memory filter's f32 values.
+            j.output_settings.precision = Some(Precision::F32);
             if m == Method::Box {
                 // Our own ZIP encoder (one line per block).
                 j.output_settings.compression = Some(Compression::ZIP1);
@@ -272,7 +274,7 @@ fn f16_output_refuses_values_it_cannot_hold() {
     let out = dir.path().join("out.exr");
     let mut j = job(&input, &out, Method::Box, 3);
     // The output's precision alone decides the rounding (and the refusal).
-    j.output_settings.precision = Precision::F16;
+    j.output_settings.precision = Some(Precision::F16);
     let err = filter_file(&j, &|_, _| {}).unwrap_err().to_string();
     assert!(err.contains("f16") && err.contains("out.exr"), "{err}");
     assert!(!out.exists());
@@ -548,5 +550,79 @@ fn files_with_many_custom_attributes_are_byte_identical_across_runs() {
         "take",
     ] {
         assert!(other.contains_key(&Text::from(name)), "{name} lost");
+    }
+}
+
+/// The sample type of each channel of a file, by name.
+fn sample_types(path: &Path) -> Vec<(String, SampleType)> {
+    let meta = exr::meta::MetaData::read_from_file(path, false).expect("header");
+    meta.headers[0]
+        .channels
+        .list
+        .iter()
+        .map(|c| (c.name.to_string(), c.sample_type))
+        .collect()
+}
+
+#[test]
+fn pixel_type_same_keeps_half_inputs_half_and_the_ledger_counts_what_is_stored() {
+    let dir = tmpdir();
+    let s = 3;
+    let mut img = fireflies(12 * s, 9 * s, 3, 0.02, 5);
+    // Half holds up to 65504.
+    img.data.iter_mut().for_each(|v| *v = v.min(6e4));
+    for (half, want) in [(true, SampleType::F16), (false, SampleType::F32)] {
+        let input = dir.path().join(format!("in-{half}.exr"));
+        write_rgb(
+            &input,
+            &img,
+            Compression::ZIP16,
+            Blocks::ScanLines,
+            half,
+            LineOrder::Increasing,
+        );
+        for m in [Method::EpGauss, Method::Gauss] {
+            let out = dir.path().join(format!("out-{half}-{}.exr", m.name()));
+            let j = job(&input, &out, m, s); // precision None: the input's
+            let report = filter_file(&j, &|_, _| {}).expect("filter");
+            let types = sample_types(&out);
+            assert!(types.iter().all(|(_, t)| *t == want), "{half}: {types:?}");
+            assert_eq!(report.settings["pixel_type"], want_name(want));
+            // "After rounding" is the sum of what the file holds.
+            let stored = read_planar(&out);
+            for (c, &after) in report.energy_out_rounded.iter().enumerate() {
+                let mut sum = 0.0f64;
+                for y in 0..stored.h {
+                    for x in 0..stored.w {
+                        sum += stored.at(x, y, c) as f64;
+                    }
+                }
+                let on_disk = sum * (s * s) as f64;
+                assert!(
+                    (on_disk - after).abs() <= SUM_ORDER_TOL * after.abs(),
+                    "{half} {m:?} channel {c}: ledger {after} vs file {on_disk}"
+                );
+            }
+        }
+    }
+    // An explicit type wins over the input's.
+    let input = dir.path().join("in-true.exr");
+    let out = dir.path().join("forced.exr");
+    let mut j = job(&input, &out, Method::EpGauss, s);
+    j.output_settings.precision = Some(Precision::F32);
+    filter_file(&j, &|_, _| {}).expect("filter");
+    assert!(sample_types(&out)
+        .iter()
+        .all(|(_, t)| *t == SampleType::F32));
+}
+
+/// The ledger and this test add the same stored values in different orders:
+/// f64 sums of a few hundred values agree to far better than this.
+const SUM_ORDER_TOL: f64 = 1e-12;
+
+fn want_name(t: SampleType) -> &'static str {
+    match t {
+        SampleType::F16 => "f16",
+        _ => "f32",
     }
 }
