@@ -58,6 +58,34 @@ pub struct ExrOutput {
     thread: Option<JoinHandle<Result<()>>>,
 }
 
+/// The views of a `multiView` list that still have channels among `channels`
+/// (OpenEXR's convention: a channel's view is its name's second-to-last
+/// component when that is a listed view, else the first, default view).
+/// The file must not name views whose channels were not written.
+pub fn views_with_channels(views: &[String], channels: &[String]) -> Vec<String> {
+    let view_of = |name: &str| -> usize {
+        let parts: Vec<&str> = name.split('.').collect();
+        if parts.len() >= 2 {
+            if let Some(i) = views.iter().position(|v| v == parts[parts.len() - 2]) {
+                return i;
+            }
+        }
+        0
+    };
+    let mut used = vec![false; views.len()];
+    for c in channels {
+        if !views.is_empty() {
+            used[view_of(c)] = true;
+        }
+    }
+    views
+        .iter()
+        .zip(used)
+        .filter(|(_, u)| *u)
+        .map(|(v, _)| v.clone())
+        .collect()
+}
+
 /// The output sample type that keeps the input's (`--pixel-type same`): f16
 /// when every channel written was f16 in the input, else f32 (which holds f16
 /// and f32 values exactly; u32 channels are written as f32 too). One type for
@@ -197,6 +225,11 @@ impl ExrOutput {
         own.layer_position = Vec2(floor_div(pos.0, si), floor_div(pos.1, si));
         own.preview = None;
         own.original_data_window = None;
+        own.multi_view_names = own.multi_view_names.as_ref().and_then(|views| {
+            let names: Vec<String> = views.iter().map(|v| v.to_string()).collect();
+            let kept = views_with_channels(&names, channels);
+            (!kept.is_empty()).then(|| kept.iter().map(|v| Text::from(v.as_str())).collect())
+        });
         // The settings go into the standard `software` attribute: the
         // input's comments stay the user's, and exr writes custom attributes
         // in hash-map order, so one more of them would make the file's bytes
@@ -573,5 +606,39 @@ impl Drop for ExrOutput {
             let _ = t.join();
         }
         // An uncommitted staged file is removed when dropped.
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn names(v: &[&str]) -> Vec<String> {
+        v.iter().map(|s| s.to_string()).collect()
+    }
+
+    #[test]
+    fn views_without_channels_leave_the_multiview_list() {
+        let views = names(&["left", "right"]);
+        // The default (first) view's channels carry no view name.
+        assert_eq!(
+            views_with_channels(&views, &names(&["R", "G", "B"])),
+            names(&["left"])
+        );
+        assert_eq!(
+            views_with_channels(&views, &names(&["right.R", "right.G"])),
+            names(&["right"])
+        );
+        assert_eq!(
+            views_with_channels(&views, &names(&["R", "right.R", "diffuse.right.G"])),
+            views
+        );
+        // A layer named like no view belongs to the default view.
+        assert_eq!(
+            views_with_channels(&views, &names(&["diffuse.R"])),
+            names(&["left"])
+        );
+        assert!(views_with_channels(&views, &[]).is_empty());
+        assert!(views_with_channels(&[], &names(&["R"])).is_empty());
     }
 }

@@ -626,3 +626,42 @@ fn want_name(t: SampleType) -> &'static str {
         _ => "f32",
     }
 }
+
+#[test]
+fn multiview_names_only_the_views_whose_channels_were_written() {
+    let dir = tmpdir();
+    let input = dir.path().join("stereo.exr");
+    let (w, h) = (12, 9);
+    let plane = |v: f32| FlatSamples::F32((0..w * h).map(|i| v + i as f32).collect());
+    let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> =
+        ["B", "G", "R", "right.B", "right.G", "right.R"]
+            .iter()
+            .enumerate()
+            .map(|(k, n)| AnyChannel::new(*n, plane(k as f32)))
+            .collect();
+    let mut attributes = LayerAttributes::named("");
+    attributes.multi_view_names = Some(vec![Text::from("left"), Text::from("right")]);
+    let layer = Layer::new(
+        (w, h),
+        attributes,
+        Encoding::UNCOMPRESSED,
+        AnyChannels::sort(channels),
+    );
+    Image::from_layer(layer)
+        .write()
+        .to_file(&input)
+        .expect("write stereo input");
+    let views = |p: &Path| -> Option<Vec<String>> {
+        let meta = exr::meta::MetaData::read_from_file(p, false).expect("header");
+        meta.headers[0]
+            .own_attributes
+            .multi_view_names
+            .as_ref()
+            .map(|v| v.iter().map(|t| t.to_string()).collect())
+    };
+    assert_eq!(views(&input), Some(vec!["left".into(), "right".into()]));
+    let out = dir.path().join("out.exr");
+    filter_file(&job(&input, &out, Method::Box, 3), &|_, _| {}).expect("filter");
+    // Only the default view's R, G, B were filtered and written.
+    assert_eq!(views(&out), Some(vec!["left".to_string()]));
+}
