@@ -7,9 +7,7 @@ use crate::error::{Error, Result};
 use crate::filter::ep_box::{Spp, StatsLayout};
 use crate::filter::{FilterParams, Method};
 use crate::geometry::Grid;
-use crate::io::{
-    find_stats, ExrInput, ExrOutput, OutputSettings, PartSelect, SppFrom, StatsRequest,
-};
+use crate::io::{find_stats, ExrInput, OutputSettings, PartSelect, SppFrom, StatsRequest};
 use crate::pipeline::crop::Cropped;
 use crate::pipeline::{run, Job, MethodStats, PipelineConfig, Progress};
 use crate::stats::{peak_rss_bytes, EpBoxReport, Report};
@@ -309,7 +307,15 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
                 exr::meta::attribute::IntegerBounds::new(origin, out_header.layer_size);
         }
     }
-    let mut output = ExrOutput::create(&job.output, &out_header, s, &channels, &out_settings)?;
+    let rgbe_lines = input.rgbe().map(|r| r.lines.clone()).unwrap_or_default();
+    let mut output = crate::io::output::Output::create(
+        &job.output,
+        &out_header,
+        s,
+        &channels,
+        &out_settings,
+        &rgbe_lines,
+    )?;
     let stats = run(
         source(),
         &mut output,
@@ -351,7 +357,7 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     if let Some(n) = output.note() {
         warnings.push(format!("{}: {n}", job.output.display()));
     }
-    let compression = crate::io::compression_name(output.compression());
+    let compression = output.compression_name();
     let output_lossy = output.is_lossy();
     output.commit()?;
     let threads = if job.pipeline.threads == 0 {

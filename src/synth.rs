@@ -505,15 +505,34 @@ fn write_streamed(
     rows: impl Fn(usize, usize) -> Vec<f32>,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<()> {
-    let mut out = ExrOutput::create_new(
-        spec.path,
-        spec.w,
-        spec.h,
-        spec.names,
-        spec.compression,
-        Precision::F32,
-        spec.ints,
-    )?;
+    let mut out = if crate::io::rgbe::is_rgbe_path(spec.path) {
+        // A Radiance picture: R, G, B only (variance needs an EXR).
+        if spec.names.len() != 3 {
+            return Err(Error::Config(format!(
+                "{}: a Radiance picture holds R, G, B only; write variance channels to an EXR",
+                spec.path.display()
+            )));
+        }
+        let software = format!("epfilt {} synth", env!("CARGO_PKG_VERSION"));
+        crate::io::output::Output::Rgbe(Box::new(crate::io::rgbe::RgbeOutput::create(
+            spec.path,
+            spec.w,
+            spec.h,
+            false,
+            &[],
+            &software,
+        )?))
+    } else {
+        crate::io::output::Output::Exr(Box::new(ExrOutput::create_new(
+            spec.path,
+            spec.w,
+            spec.h,
+            spec.names,
+            spec.compression,
+            Precision::F32,
+            spec.ints,
+        )?))
+    };
     let mut y = 0;
     while y < spec.h {
         let n = spec.strip.min(spec.h - y);

@@ -1,4 +1,4 @@
-//! `epfilt info`: what an EXR file holds.
+//! `epfilt info`: what an EXR file (or a Radiance picture) holds.
 
 use super::{compression_name, luminance_weights};
 
@@ -6,6 +6,9 @@ use super::{compression_name, luminance_weights};
 /// layout.
 pub fn info(path: &std::path::Path) -> crate::Result<String> {
     use std::fmt::Write;
+    if is_radiance(path)? {
+        return rgbe_info(path);
+    }
     let meta = exr::meta::MetaData::read_from_file(path, false)
         .map_err(|e| crate::Error::from_exr(path, e, "header"))?;
     let mut s = String::new();
@@ -107,6 +110,63 @@ pub fn info(path: &std::path::Path) -> crate::Result<String> {
             },
             h.shared_attributes.pixel_aspect
         );
+    }
+    Ok(s)
+}
+
+/// Whether the file begins as a Radiance picture.
+fn is_radiance(path: &std::path::Path) -> crate::Result<bool> {
+    use std::io::Read;
+    let mut head = [0u8; 2];
+    let mut f = std::fs::File::open(path).map_err(|e| crate::Error::io(path, e))?;
+    let n = f.read(&mut head).map_err(|e| crate::Error::io(path, e))?;
+    Ok(super::rgbe::is_rgbe(&head[..n]))
+}
+
+/// A Radiance picture: size, format, exposure, primaries, header lines.
+fn rgbe_info(path: &std::path::Path) -> crate::Result<String> {
+    use std::fmt::Write;
+    let input = super::ExrInput::open(path, None)?;
+    let r = input
+        .rgbe()
+        .ok_or_else(|| crate::Error::Internal("not a picture".into()))?;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "{}: Radiance picture, {}x{}, {}",
+        path.display(),
+        r.w,
+        r.h,
+        if r.xyze {
+            "XYZE (channels X, Y, Z)"
+        } else {
+            "RGBE (channels R, G, B)"
+        }
+    );
+    let _ = writeln!(
+        s,
+        "  stored values x {} (EXPOSURE and COLORCORR; divided out on read)",
+        if r.scale[0] == r.scale[1] && r.scale[1] == r.scale[2] {
+            format!("{}", r.scale[0])
+        } else {
+            format!("{:?}", r.scale)
+        }
+    );
+    let lw = luminance_weights(input.header().shared_attributes.chromaticities.as_ref());
+    let _ = writeln!(
+        s,
+        "  luminance Y = {:.4} R + {:.4} G + {:.4} B ({})",
+        lw[0],
+        lw[1],
+        lw[2],
+        if r.primaries.is_some() {
+            "from PRIMARIES"
+        } else {
+            "Rec. 709 primaries"
+        }
+    );
+    for l in &r.lines {
+        let _ = writeln!(s, "  header: {l}");
     }
     Ok(s)
 }

@@ -85,6 +85,9 @@ pub struct ExrInput {
     dropped: Vec<String>,
     /// The last `aux` selected channels are statistics (read, not filtered).
     aux: usize,
+    /// A Radiance picture's header: the file is RGBE / XYZE, and `meta` a
+    /// header made to describe it (three f32 channels, no blocks).
+    rgbe: Option<super::rgbe::RgbeHeader>,
 }
 
 fn invalid(path: &Path, reason: impl Into<String>) -> Error {
@@ -129,6 +132,9 @@ impl ExrInput {
     /// named as the beauty, else the only layer with colour).
     pub fn open_layer(path: &Path, part: Option<&PartSelect>, layer: Option<&str>) -> Result<Self> {
         let map = MappedFile::open(path)?;
+        if super::rgbe::is_rgbe(map.bytes()) {
+            return Self::open_rgbe(path, map, part, layer);
+        }
         let bytes = map.bytes();
         let exr_err = |e| Error::from_exr(path, e, "");
         let mut read = PeekRead::new(Tracking::new(bytes));
@@ -280,6 +286,7 @@ impl ExrInput {
             rows,
             dropped,
             aux: 0,
+            rgbe: None,
         };
         // What a decoder allocates per block comes from the header: bound it
         // before any command reads pixels (filter checks its whole job
@@ -296,6 +303,93 @@ impl ExrInput {
             ));
         }
         Ok(input)
+    }
+
+    /// A Radiance picture, described as a single-part file of three f32
+    /// channels (R, G, B, or X, Y, Z for XYZE) with the picture's primaries.
+    fn open_rgbe(
+        path: &Path,
+        map: MappedFile,
+        part: Option<&PartSelect>,
+        layer: Option<&str>,
+    ) -> Result<Self> {
+        use exr::math::Vec2;
+        use exr::meta::attribute::{ChannelDescription, ChannelList, Chromaticities, Text};
+        if matches!(part, Some(PartSelect::Index(i)) if *i != 0)
+            || matches!(part, Some(PartSelect::Name(_)))
+        {
+            return Err(Error::Config(format!(
+                "{}: a Radiance picture has one part (--part 0)",
+                path.display()
+            )));
+        }
+        if let Some(l) = layer {
+            return Err(Error::Config(format!(
+                "{}: a Radiance picture has no layers (--layer {l:?})",
+                path.display()
+            )));
+        }
+        let rh = super::rgbe::parse_header(path, map.bytes())?;
+        let names: [&str; 3] = if rh.xyze {
+            ["X", "Y", "Z"]
+        } else {
+            ["R", "G", "B"]
+        };
+        let mut sorted = names;
+        sorted.sort_unstable();
+        let list: exr::prelude::SmallVec<[ChannelDescription; 5]> = sorted
+            .iter()
+            .map(|n| ChannelDescription::new(Text::from(*n), SampleType::F32, false))
+            .collect();
+        let mut header = Header::new(Text::from(""), Vec2(rh.w, rh.h), list).with_encoding(
+            Compression::ZIP16,
+            exr::meta::BlockDescription::ScanLines,
+            exr::meta::attribute::LineOrder::Increasing,
+        );
+        header.channels = ChannelList::new(header.channels.list.clone());
+        header.own_attributes.layer_name = None;
+        if let Some(p) = rh.primaries {
+            let v = |i: usize| Vec2(p[i] as f32, p[i + 1] as f32);
+            header.shared_attributes.chromaticities = Some(Chromaticities {
+                red: v(0),
+                green: v(2),
+                blue: v(4),
+                white: v(6),
+            });
+        }
+        let selected = names
+            .iter()
+            .map(|n| Selected {
+                name: n.to_string(),
+                index: sorted.iter().position(|s| s == n).unwrap_or(0),
+            })
+            .collect();
+        let meta = MetaData {
+            requirements: Requirements {
+                file_format_version: 2,
+                is_single_layer_and_tiled: false,
+                has_long_names: false,
+                has_deep_data: false,
+                has_multiple_layers: false,
+            },
+            headers: exr::prelude::SmallVec::from_vec(vec![header]),
+        };
+        Ok(ExrInput {
+            path: path.into(),
+            map,
+            meta,
+            part: 0,
+            selected,
+            rows: Vec::new(),
+            dropped: Vec::new(),
+            aux: 0,
+            rgbe: Some(rh),
+        })
+    }
+
+    /// The Radiance header of an RGBE / XYZE input.
+    pub fn rgbe(&self) -> Option<&super::rgbe::RgbeHeader> {
+        self.rgbe.as_ref()
     }
 
     /// The file.
@@ -396,16 +490,23 @@ impl ExrInput {
     }
 
     /// A source of rows over this file.
-    pub fn source(&self) -> ExrSource<'_> {
+    pub fn source(&self) -> InputSource<'_> {
+        if let Some(rh) = &self.rgbe {
+            return InputSource::Rgbe(super::rgbe::RgbeSource::new(
+                &self.path,
+                self.map.bytes(),
+                rh.clone(),
+            ));
+        }
         let (w, _) = self.size();
-        ExrSource {
+        InputSource::Exr(ExrSource {
             input: self,
             next_row: 0,
             buf: Vec::new(),
             buf_y0: 0,
             row_len: self.selected.len() * w,
             released: None,
-        }
+        })
     }
 
     /// Decode the tiles of one block row, each into its own buffer.
@@ -588,7 +689,7 @@ fn convert(t: SampleType, src: &[u8], dst: &mut [f32]) {
     }
 }
 
-fn base_name(name: &str) -> &str {
+pub(crate) fn base_name(name: &str) -> &str {
     name.rsplit('.').next().unwrap_or(name)
 }
 
@@ -758,6 +859,23 @@ pub struct ExrSource<'a> {
     row_len: usize,
     /// Byte range of the file consumed (and released) so far.
     released: Option<(usize, usize)>,
+}
+
+/// Rows of an input file, whatever its format.
+pub enum InputSource<'a> {
+    /// OpenEXR blocks.
+    Exr(ExrSource<'a>),
+    /// Radiance scanlines.
+    Rgbe(super::rgbe::RgbeSource<'a>),
+}
+
+impl Source for InputSource<'_> {
+    fn next_strip(&mut self, max_rows: usize) -> Result<Option<Strip>> {
+        match self {
+            InputSource::Exr(s) => s.next_strip(max_rows),
+            InputSource::Rgbe(s) => s.next_strip(max_rows),
+        }
+    }
 }
 
 impl Source for ExrSource<'_> {

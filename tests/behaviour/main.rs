@@ -13,5 +13,6 @@ mod features;
 mod foils;
 mod invariance;
 mod reference;
+mod rgbe;
 mod robust;
 mod synth;

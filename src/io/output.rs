@@ -1,0 +1,137 @@
+//! The output of a filter run, whatever its format: an OpenEXR file, or a
+//! Radiance picture when the output's name ends in `.hdr`, `.pic` or `.rgbe`.
+
+use std::path::Path;
+
+use exr::meta::header::Header;
+
+use super::rgbe::{is_rgbe_path, RgbeOutput};
+use super::{ExrOutput, OutputSettings};
+use crate::error::{Error, Result};
+use crate::pipeline::{Precision, Sink};
+
+/// An output file being written.
+pub enum Output {
+    /// OpenEXR.
+    Exr(Box<ExrOutput>),
+    /// Radiance RGBE / XYZE.
+    Rgbe(Box<RgbeOutput>),
+}
+
+impl Output {
+    /// Start the output of a run at `dest`: S x S input samples per pixel of
+    /// an input described by `input_header` (and `rgbe_lines`, the header
+    /// lines of a Radiance input, kept in a Radiance output).
+    pub fn create(
+        dest: &Path,
+        input_header: &Header,
+        s: usize,
+        channels: &[String],
+        settings: &OutputSettings,
+        rgbe_lines: &[String],
+    ) -> Result<Self> {
+        if !is_rgbe_path(dest) {
+            return Ok(Output::Exr(Box::new(ExrOutput::create(
+                dest,
+                input_header,
+                s,
+                channels,
+                settings,
+            )?)));
+        }
+        let refuse = |why: String| Error::Config(format!("{}: {why}", dest.display()));
+        let xyze = match channels.iter().map(String::as_str).collect::<Vec<_>>()[..] {
+            [r, g, b] if [r, g, b].map(super::reader::base_name) == ["R", "G", "B"] => false,
+            ["X", "Y", "Z"] => true,
+            _ => {
+                return Err(refuse(format!(
+                    "a Radiance picture holds R, G, B (or X, Y, Z); the filtered channels are {}",
+                    channels.join(", ")
+                )))
+            }
+        };
+        if settings.compression.is_some() {
+            return Err(refuse(
+                "--compression applies to EXR outputs; a Radiance picture is run-length encoded"
+                    .into(),
+            ));
+        }
+        if settings.precision == Some(Precision::F16) {
+            return Err(refuse(
+                "--pixel-type f16 applies to EXR outputs; a Radiance picture stores RGBE".into(),
+            ));
+        }
+        let software = match &settings.provenance {
+            Some(p) => format!("epfilt {} ({p})", env!("CARGO_PKG_VERSION")),
+            None => format!("epfilt {}", env!("CARGO_PKG_VERSION")),
+        };
+        let (w, h) = (input_header.layer_size.0 / s, input_header.layer_size.1 / s);
+        Ok(Output::Rgbe(Box::new(RgbeOutput::create(
+            dest, w, h, xyze, rgbe_lines, &software,
+        )?)))
+    }
+
+    /// The compression's name (`rgbe` for a Radiance picture).
+    pub fn compression_name(&self) -> String {
+        match self {
+            Output::Exr(o) => super::compression_name(o.compression()).to_string(),
+            Output::Rgbe(_) => "rgbe".into(),
+        }
+    }
+
+    /// What the user should know about the output's settings.
+    pub fn note(&self) -> Option<&str> {
+        match self {
+            Output::Exr(o) => o.note(),
+            Output::Rgbe(_) => None,
+        }
+    }
+
+    /// Whether the values on disk differ from those written (RGBE keeps 8
+    /// bits of mantissa: always).
+    pub fn is_lossy(&self) -> bool {
+        match self {
+            Output::Exr(o) => o.is_lossy(),
+            Output::Rgbe(_) => true,
+        }
+    }
+
+    /// Per channel, the sum of what the finished file holds.
+    pub fn decoded_sums(&self) -> Result<Vec<f64>> {
+        match self {
+            Output::Exr(o) => o.decoded_sums(),
+            Output::Rgbe(o) => Ok(o.decoded_sums()),
+        }
+    }
+
+    /// Put the finished file in place.
+    pub fn commit(self) -> Result<()> {
+        match self {
+            Output::Exr(o) => o.commit(),
+            Output::Rgbe(o) => o.commit(),
+        }
+    }
+}
+
+impl Sink for Output {
+    fn precision(&self) -> Precision {
+        match self {
+            Output::Exr(o) => o.precision(),
+            Output::Rgbe(o) => o.precision(),
+        }
+    }
+
+    fn write_rows(&mut self, y0: usize, rows: usize, data: &[f32]) -> Result<()> {
+        match self {
+            Output::Exr(o) => o.write_rows(y0, rows, data),
+            Output::Rgbe(o) => o.write_rows(y0, rows, data),
+        }
+    }
+
+    fn finish(&mut self) -> Result<()> {
+        match self {
+            Output::Exr(o) => o.finish(),
+            Output::Rgbe(o) => o.finish(),
+        }
+    }
+}
