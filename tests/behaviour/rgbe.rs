@@ -271,3 +271,39 @@ fn bit_flipped_pictures_give_errors_or_pictures_never_panics() {
         }
     }
 }
+
+/// OpenCV decodes a mantissa m as m 2^(e-136), Radiance and epfilt as
+/// (m + 0.5) 2^(e-136): half a mantissa step, at most 1/256 of the pixel's
+/// largest channel (m >= 128 there), plus f32 rounding.
+const OPENCV_OFFSET_REL: f64 = 1.0 / 256.0 + 1e-6;
+
+#[test]
+fn pictures_written_by_opencv_read_as_opencv_reads_them() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/rgbe");
+    for name in ["opencv_rle", "opencv_flat"] {
+        let (names, ours) = values(&dir.join(format!("{name}.hdr")));
+        assert_eq!(names, ["R", "G", "B"]);
+        let raw = std::fs::read(dir.join(format!("{name}.f32"))).unwrap();
+        let cv: Vec<f32> = raw
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect();
+        let w = ExrInput::open(&dir.join(format!("{name}.hdr")), None)
+            .unwrap()
+            .size()
+            .0;
+        assert_eq!(ours.len(), cv.len(), "{name}");
+        for (i, px) in cv.chunks_exact(3).enumerate() {
+            let (y, x) = (i / w, i % w);
+            let largest = px.iter().fold(0.0f32, |m, v| m.max(*v)) as f64;
+            for c in 0..3 {
+                let a = ours[(y * 3 + c) * w + x] as f64;
+                let b = px[c] as f64;
+                assert!(
+                    a >= b && a - b <= OPENCV_OFFSET_REL * largest,
+                    "{name} ({x}, {y}) channel {c}: epfilt {a} OpenCV {b}"
+                );
+            }
+        }
+    }
+}
