@@ -45,6 +45,8 @@ pub struct FilterJob {
     /// `params.supersample` is a default, not the user's choice: the summary
     /// says what was assumed, and a size that does not fit says how to fix it.
     pub supersample_assumed: bool,
+    /// Only band `K` of `N` (1-based) of the output rows, for `merge`.
+    pub band: Option<(usize, usize)>,
 }
 
 /// An input whose width or height is not a multiple of the super-sampling
@@ -92,6 +94,7 @@ impl FilterJob {
                 precision: None,
                 allow_lossy: false,
                 provenance: None,
+                extra: Vec::new(),
             },
             part: None,
             layer: None,
@@ -99,6 +102,7 @@ impl FilterJob {
             stats: StatsRequest::default(),
             edge: Edge::Exact,
             supersample_assumed: false,
+            band: None,
         }
     }
 }
@@ -307,6 +311,26 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
                 exr::meta::attribute::IntegerBounds::new(origin, out_header.layer_size);
         }
     }
+    // --band K/N: output rows a..b, from the input rows of a window that
+    // reaches `margin` output rows beyond them.
+    let out_h = h / s;
+    let mut out_settings = out_settings;
+    let band = match job.band {
+        None => None,
+        Some((k, n)) => {
+            let plan = plan_band(job, header, &out_settings, precision, out_h, k, n, &params)?;
+            out_header.layer_size.1 = (plan.b - plan.a) * s;
+            out_header.own_attributes.layer_position.1 = origin.1 + (plan.a * s) as i32;
+            out_settings
+                .extra
+                .push((BAND_ATTRIBUTE.into(), plan.label(s)));
+            out_settings.extra.push((
+                BAND_LEDGER_ATTRIBUTE.into(),
+                band_ledger_text(&channels, &[], &[]),
+            ));
+            Some(plan)
+        }
+    };
     let rgbe_lines = input.rgbe().map(|r| r.lines.clone()).unwrap_or_default();
     let mut output = crate::io::output::Output::create(
         &job.output,
@@ -316,15 +340,69 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         &out_settings,
         &rgbe_lines,
     )?;
-    let stats = run(
-        source(),
-        &mut output,
-        &pipe_job,
-        &params,
-        &job.pipeline,
-        progress,
-    )
-    .map_err(|e| match e {
+    let mut band_sums = None;
+    let result = match &band {
+        None => run(
+            source(),
+            &mut output,
+            &pipe_job,
+            &params,
+            &job.pipeline,
+            progress,
+        ),
+        Some(plan) => {
+            let mut window_job = pipe_job.clone();
+            window_job.grid.in_h = (plan.wb - plan.wa) * s;
+            let src = crate::pipeline::band::BandSource::new(
+                source(),
+                plan.wa * s,
+                plan.wb * s,
+                (plan.a * s, plan.b * s),
+                w,
+                channels.len(),
+            );
+            let owned_in = src.owned_sums();
+            let hook_in = owned_in.clone();
+            let names = channels.clone();
+            let s2 = (s * s) as f64;
+            let hook: crate::pipeline::band::FinishHook<&mut crate::io::output::Output> =
+                Box::new(move |out, sums_out| {
+                    let inn = crate::pipeline::band::values(&hook_in);
+                    let out_e: Vec<f64> = sums_out.iter().map(|v| v * s2).collect();
+                    out.fill_attribute(
+                        BAND_LEDGER_ATTRIBUTE,
+                        band_ledger_text(&names, &inn, &out_e),
+                    );
+                });
+            let mut sink = crate::pipeline::band::BandSink::new(
+                &mut output,
+                plan.a - plan.wa,
+                plan.b - plan.wa,
+                w / s,
+                channels.len(),
+                hook,
+            );
+            let r = run(
+                src,
+                &mut sink,
+                &window_job,
+                &params,
+                &job.pipeline,
+                progress,
+            );
+            let out_e: Vec<f64> = sink.sums().iter().map(|v| v * s2).collect();
+            band_sums = Some(crate::stats::BandReport {
+                index: plan.k,
+                count: plan.n,
+                rows: (plan.a, plan.b),
+                window: (plan.wa, plan.wb),
+                energy_in_owned: crate::pipeline::band::values(&owned_in),
+                energy_out_owned: out_e,
+            });
+            r
+        }
+    };
+    let stats = result.map_err(|e| match e {
         Error::Value { path, reason } if path.as_os_str().is_empty() => Error::Value {
             path: if reason.starts_with("output") {
                 job.output.clone()
@@ -447,7 +525,119 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         compression,
         energy_on_disk_decoded: output_lossy,
         warnings,
+        band: band_sums,
     };
     report.set_ledger(&ledger);
     Ok(report)
+}
+
+/// The header attribute of a band file: `K/N rows A-B of H S=s`.
+pub const BAND_ATTRIBUTE: &str = "epfiltBand";
+/// The header attribute of a band file holding, per channel, the energy of
+/// the input rows it owns and of the output rows it holds (times S²), as the
+/// bits of f64 in hexadecimal: `NAME:IN:OUT;` per channel.
+pub const BAND_LEDGER_ATTRIBUTE: &str = "epfiltBandLedger";
+
+/// The text of [`BAND_LEDGER_ATTRIBUTE`] (zeros where no sums are given yet:
+/// the header is written with it and filled in, same length, at the end).
+pub fn band_ledger_text(names: &[String], inn: &[f64], out: &[f64]) -> String {
+    names
+        .iter()
+        .enumerate()
+        .map(|(c, n)| {
+            let i = inn.get(c).copied().unwrap_or(0.0);
+            let o = out.get(c).copied().unwrap_or(0.0);
+            format!("{n}:{:016x}:{:016x};", i.to_bits(), o.to_bits())
+        })
+        .collect()
+}
+
+/// Parse [`band_ledger_text`]: (name, input energy, output energy).
+pub fn parse_band_ledger(text: &str) -> Option<Vec<(String, f64, f64)>> {
+    text.split_terminator(';')
+        .map(|item| {
+            let mut parts = item.rsplitn(3, ':');
+            let o = u64::from_str_radix(parts.next()?, 16).ok()?;
+            let i = u64::from_str_radix(parts.next()?, 16).ok()?;
+            let n = parts.next()?;
+            Some((n.to_string(), f64::from_bits(i), f64::from_bits(o)))
+        })
+        .collect()
+}
+
+/// Where a band's rows are.
+#[derive(Clone, Copy, Debug)]
+struct BandPlan {
+    k: usize,
+    n: usize,
+    /// Output rows of the band.
+    a: usize,
+    b: usize,
+    /// Output rows of the window its run reads.
+    wa: usize,
+    wb: usize,
+    out_h: usize,
+}
+
+impl BandPlan {
+    fn label(&self, s: usize) -> String {
+        format!(
+            "{}/{} rows {}-{} of {} S={s}",
+            self.k, self.n, self.a, self.b, self.out_h
+        )
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn plan_band(
+    job: &FilterJob,
+    header: &exr::meta::header::Header,
+    settings: &OutputSettings,
+    precision: crate::pipeline::Precision,
+    out_h: usize,
+    k: usize,
+    n: usize,
+    params: &FilterParams,
+) -> Result<BandPlan> {
+    if n == 0 || k == 0 || k > n {
+        return Err(Error::Config(format!(
+            "--band {k}/{n}: the band must be 1 to N of N"
+        )));
+    }
+    if crate::io::rgbe::is_rgbe_path(&job.output) {
+        return Err(Error::Config(format!(
+            "{}: --band writes EXR bands; `epfilt merge` puts them together",
+            job.output.display()
+        )));
+    }
+    let (compression, _) = crate::io::writer::choose_compression(
+        &job.output,
+        header.compression,
+        settings,
+        precision,
+    )?;
+    if crate::io::is_lossy(compression, precision) {
+        return Err(Error::Config(format!(
+            "--band needs a lossless output compression, not {}",
+            crate::io::compression_name(compression)
+        )));
+    }
+    let unit = compression.scan_lines_per_block();
+    let (a, b) = crate::pipeline::band::band_rows(out_h, unit, k - 1, n).ok_or_else(|| {
+        Error::Config(format!(
+            "--band {k}/{n} is empty: the output's {out_h} rows make {} blocks of {unit} rows ({}); use at most that many bands",
+            out_h.div_ceil(unit),
+            crate::io::compression_name(compression)
+        ))
+    })?;
+    let m = crate::pipeline::band::margin(params);
+    Ok(BandPlan {
+        k,
+        n,
+        a,
+        b,
+        wa: a.saturating_sub(m),
+        wb: (b + m).min(out_h),
+        out_h,
+    })
 }

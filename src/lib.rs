@@ -42,6 +42,7 @@ pub mod filter;
 pub mod geometry;
 pub mod io;
 pub mod job;
+pub mod merge;
 pub mod pipeline;
 pub mod plan;
 pub mod preview;

@@ -73,6 +73,19 @@ enum Command {
         #[arg(long)]
         labels: Option<String>,
     },
+    /// Put the bands of `filter --band K/N` together into one EXR (copying
+    /// their compressed blocks): the file one run over the whole image gives.
+    Merge {
+        /// The band files (any order), then the output EXR.
+        #[arg(required = true, num_args = 2..)]
+        paths: Vec<PathBuf>,
+        /// Write the summary as JSON to this file.
+        #[arg(long)]
+        report: Option<PathBuf>,
+        /// No summary.
+        #[arg(long, short = 'q')]
+        quiet: bool,
+    },
     /// Plan a render from a pilot with variance (§5.1, Eqs. 8-10): L_tvis, the
     /// mean standard error, and the samples per pixel needed for ±D.
     Plan(Box<PlanArgs>),
@@ -251,6 +264,10 @@ struct FilterArgs {
     /// Input samples per output pixel along each axis (1..=8) [default: 3; 1 for ep-box].
     #[arg(long, short = 's')]
     supersample: Option<usize>,
+    /// Filter only band K of N of the output rows (e.g. 3/8), reading the input
+    /// rows they need; `epfilt merge` puts the bands together, identical to one run.
+    #[arg(long)]
+    band: Option<String>,
     /// A size that is not a multiple of S: crop drops the last partial output
     /// column and row (the samples beyond the last whole output pixel)
     /// [default: refuse, naming the options].
@@ -563,6 +580,26 @@ fn dispatch(cli: Cli, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
             }
             Ok(())
         }
+        Command::Merge {
+            mut paths,
+            report,
+            quiet,
+        } => {
+            let out = paths
+                .pop()
+                .context("merge needs an output")
+                .map_err(usage)?;
+            check_binary_stdout(&out)?;
+            let r = epfilt::merge::merge(&paths, &out).map_err(fail)?;
+            if let Some(path) = &report {
+                let json = serde_json::to_string_pretty(&r).map_err(fail)? + "\n";
+                epfilt::io::write_file(path, json.as_bytes()).map_err(fail)?;
+            }
+            if !quiet {
+                eprint!("{}", r.summary());
+            }
+            Ok(())
+        }
         Command::Demo { dir, size } => {
             let (w, h) = parse_size(&size).map_err(usage)?;
             let text = epfilt::demo::run(&dir, w, h, &|line| eprintln!("{line}")).map_err(fail)?;
@@ -719,6 +756,7 @@ fn filter_job(a: &FilterArgs, cancel: Arc<AtomicBool>) -> Result<FilterJob> {
             precision,
             allow_lossy: a.allow_lossy,
             provenance: None,
+            extra: Vec::new(),
         },
         part: a.part.as_deref().map(PartSelect::parse),
         layer: a.layer.clone(),
@@ -729,6 +767,23 @@ fn filter_job(a: &FilterArgs, cancel: Arc<AtomicBool>) -> Result<FilterJob> {
             None => epfilt::job::Edge::Exact,
         },
         supersample_assumed: a.supersample.is_none() && s > 1,
+        band: a
+            .band
+            .as_deref()
+            .map(|b| -> Result<(usize, usize)> {
+                let (k, n) = b
+                    .split_once('/')
+                    .with_context(|| format!("--band {b:?} is not K/N"))?;
+                Ok((
+                    k.trim()
+                        .parse()
+                        .with_context(|| format!("--band {b:?}: K"))?,
+                    n.trim()
+                        .parse()
+                        .with_context(|| format!("--band {b:?}: N"))?,
+                ))
+            })
+            .transpose()?,
     })
 }
 

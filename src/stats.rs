@@ -137,6 +137,25 @@ pub struct Report {
     pub energy_on_disk_decoded: bool,
     /// What the user should know about the run (one line each).
     pub warnings: Vec<String>,
+    /// `--band`: which rows this file holds, and their share of the energy.
+    pub band: Option<BandReport>,
+}
+
+/// One band of a `--band` run.
+#[derive(Clone, Debug, Serialize)]
+pub struct BandReport {
+    /// 1-based.
+    pub index: usize,
+    /// Bands in all.
+    pub count: usize,
+    /// Output rows `[first, end)` the file holds.
+    pub rows: (usize, usize),
+    /// Output rows the run read to filter them (the band and its margins).
+    pub window: (usize, usize),
+    /// Per channel, the energy of the input rows the band owns.
+    pub energy_in_owned: Vec<f64>,
+    /// Per channel, the energy (times S²) of the output rows it holds.
+    pub energy_out_owned: Vec<f64>,
 }
 
 /// What an `ep-box` run used and found.

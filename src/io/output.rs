@@ -71,6 +71,21 @@ impl Output {
         )?)))
     }
 
+    /// Fill a text attribute at finish (EXR; see [`ExrOutput::fill_attribute`]).
+    pub fn fill_attribute(&mut self, name: &str, value: String) {
+        if let Output::Exr(o) = self {
+            o.fill_attribute(name, value);
+        }
+    }
+
+    /// The compression being written (EXR).
+    pub fn exr_compression(&self) -> Option<exr::prelude::Compression> {
+        match self {
+            Output::Exr(o) => Some(o.compression()),
+            Output::Rgbe(_) => None,
+        }
+    }
+
     /// The compression's name (`rgbe` for a Radiance picture).
     pub fn compression_name(&self) -> String {
         match self {

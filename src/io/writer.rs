@@ -37,6 +37,8 @@ pub struct OutputSettings {
     /// How the file was made: its `software` attribute reads
     /// `epfilt VERSION (key=value ...)`.
     pub provenance: Option<String>,
+    /// More text attributes (name, value) for the header.
+    pub extra: Vec<(String, String)>,
 }
 
 /// An output file being written.
@@ -54,6 +56,8 @@ pub struct ExrOutput {
     pending_y0: usize,
     compression: Compression,
     note: Option<String>,
+    /// A text attribute whose value is filled in (same length) at finish.
+    fill: Option<(String, String)>,
     tx: Option<crossbeam_channel::Sender<(usize, Chunk)>>,
     thread: Option<JoinHandle<Result<()>>>,
 }
@@ -110,7 +114,7 @@ pub fn same_precision(input_header: &Header, channels: &[String]) -> Precision {
 /// The output's compression and, where it is not what the input had, why.
 /// An explicit lossy choice needs `allow_lossy`; the input's lossy codec is
 /// replaced by ZIP unless `allow_lossy`.
-fn choose_compression(
+pub(crate) fn choose_compression(
     dest: &Path,
     input: Compression,
     settings: &OutputSettings,
@@ -145,7 +149,10 @@ fn choose_compression(
 /// whose pixels are identical but whose bytes are not. The attributes keep
 /// their bytes and the header its length (the spec allows any order), so the
 /// offset table after it stays right.
-fn sort_header_attributes(file: &std::fs::File) -> std::io::Result<()> {
+pub(crate) fn sort_header_attributes(
+    file: &std::fs::File,
+    replace: Option<(&str, &str)>,
+) -> std::io::Result<()> {
     use std::io::{Read, Seek, SeekFrom, Write};
     let bad = |why: &str| std::io::Error::new(std::io::ErrorKind::InvalidData, why.to_string());
     let mut f = file;
@@ -185,9 +192,22 @@ fn sort_header_attributes(file: &std::fs::File) -> std::io::Result<()> {
     fn name(a: &[u8]) -> &[u8] {
         a.iter().position(|&b| b == 0).map_or(a, |p| &a[..p])
     }
-    let mut sorted = attrs.clone();
+    let mut sorted: Vec<Vec<u8>> = attrs.iter().map(|a| a.to_vec()).collect();
     sorted.sort_by(|a, b| name(a).cmp(name(b)));
-    if sorted == attrs {
+    // A text attribute's value replaced by one of the same length (what was
+    // not known when the header was written).
+    if let Some((key, value)) = replace {
+        let a = sorted
+            .iter_mut()
+            .find(|a| name(a) == key.as_bytes())
+            .ok_or_else(|| bad("the attribute to fill is missing"))?;
+        let start = a.len() - value.len();
+        if a.len() < value.len() + key.len() + 4 {
+            return Err(bad("the attribute to fill is too short"));
+        }
+        a[start..].copy_from_slice(value.as_bytes());
+    }
+    if sorted.iter().map(Vec::as_slice).eq(attrs.iter().copied()) {
         return Ok(());
     }
     let bytes: Vec<u8> = sorted.concat();
@@ -239,6 +259,12 @@ impl ExrOutput {
             None => format!("epfilt {}", env!("CARGO_PKG_VERSION")),
         };
         own.software_name = Some(Text::from(software.as_str()));
+        for (k, v) in &settings.extra {
+            own.other.insert(
+                Text::from(k.as_str()),
+                exr::meta::attribute::AttributeValue::Text(Text::from(v.as_str())),
+            );
+        }
         header.own_attributes = own;
         let mut shared = input_header.shared_attributes.clone();
         let dw = shared.display_window;
@@ -253,6 +279,13 @@ impl ExrOutput {
         let mut out = Self::start(dest, header, channels, precision)?;
         out.note = note;
         Ok(out)
+    }
+
+    /// At finish, replace the value of the text attribute `name` (given in
+    /// [`OutputSettings::extra`]) by `value`, which must have the same
+    /// length: what is known only when the pixels are written.
+    pub fn fill_attribute(&mut self, name: &str, value: String) {
+        self.fill = Some((name.to_string(), value));
     }
 
     /// The compression being written.
@@ -461,6 +494,7 @@ impl ExrOutput {
             pending_y0: 0,
             compression: header_compression,
             note: None,
+            fill: None,
             tx: Some(tx),
             thread: Some(thread),
         })
@@ -589,7 +623,8 @@ impl Sink for ExrOutput {
         self.flush_blocks(true)?;
         self.join_writer()?;
         if let Some(t) = &self.staged {
-            sort_header_attributes(t.file()).map_err(|e| Error::Output {
+            let fill = self.fill.as_ref().map(|(k, v)| (k.as_str(), v.as_str()));
+            sort_header_attributes(t.file(), fill).map_err(|e| Error::Output {
                 path: self.dest.clone(),
                 reason: format!("putting the header in order: {e}"),
             })?;

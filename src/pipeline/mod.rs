@@ -17,6 +17,7 @@
 //! * [`order`]: the median and alpha-trim foils' stage;
 //! * [`books`], [`ledger`], [`window`]: what every stage shares.
 
+pub mod band;
 pub mod books;
 pub mod crop;
 pub mod excess;

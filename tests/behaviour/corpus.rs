@@ -277,6 +277,7 @@ fn identity_job(input: &Path, output: &Path, part: Option<PartSelect>) -> Filter
         precision: Some(Precision::F32),
         allow_lossy: false,
         provenance: None,
+        extra: Vec::new(),
     };
     job.part = part;
     job

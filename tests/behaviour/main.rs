@@ -1,5 +1,6 @@
 //! Behaviour tests of epfilt, one binary with a module per theme.
 
+mod band;
 mod cli;
 mod common;
 mod corpus;

@@ -1,0 +1,286 @@
+//! `epfilt merge`: put the bands of `filter --band K/N` together into one
+//! file, copying their compressed blocks (band boundaries lie on block
+//! boundaries), so it runs at the speed of the disk and gives the file a run
+//! over the whole image gives. The bands' ledgers add up to the image's.
+
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use exr::block::chunk::{Chunk, CompressedBlock};
+use exr::block::writer::ChunksWriter;
+use exr::meta::attribute::{AttributeValue, Text};
+use exr::meta::header::Header;
+use exr::meta::{BlockDescription, MetaData};
+use serde::Serialize;
+
+use crate::error::{Error, Result};
+use crate::job::{parse_band_ledger, BAND_ATTRIBUTE, BAND_LEDGER_ATTRIBUTE};
+use crate::pipeline::ledger::CompensatedSum;
+
+/// What `merge` did.
+#[derive(Clone, Debug, Serialize)]
+pub struct MergeReport {
+    /// The merged file.
+    pub output: String,
+    /// Bands merged.
+    pub bands: usize,
+    /// Output size.
+    pub width: usize,
+    /// Output rows.
+    pub height: usize,
+    /// Channel names.
+    pub channels: Vec<String>,
+    /// Per channel, the input energy the bands own (their sum).
+    pub energy_in: Vec<f64>,
+    /// Per channel, the output energy times S² (their sum).
+    pub energy_out: Vec<f64>,
+    /// Per channel, |out - in| / |in|.
+    pub energy_rel_error: Vec<f64>,
+    /// Bytes of compressed blocks copied.
+    pub bytes_copied: u64,
+    /// Wall time in seconds.
+    pub seconds: f64,
+}
+
+impl MergeReport {
+    /// A short text summary.
+    pub fn summary(&self) -> String {
+        let mut s = format!(
+            "{}: {} bands, {}x{}, {:.1} MiB of blocks copied in {:.2} s\n  energy ledger   channel      in            out x S^2     rel.err\n",
+            self.output,
+            self.bands,
+            self.width,
+            self.height,
+            self.bytes_copied as f64 / (1 << 20) as f64,
+            self.seconds
+        );
+        for (k, c) in self.channels.iter().enumerate() {
+            s.push_str(&format!(
+                "                  {:<8} {:>13.6e} {:>13.6e}  {:>9.2e}\n",
+                c, self.energy_in[k], self.energy_out[k], self.energy_rel_error[k]
+            ));
+        }
+        s
+    }
+}
+
+/// One band file.
+struct Band {
+    path: PathBuf,
+    header: Header,
+    k: usize,
+    n: usize,
+    rows: (usize, usize),
+    of: usize,
+    s: usize,
+    ledger: Vec<(String, f64, f64)>,
+}
+
+fn text_attribute(h: &Header, name: &str) -> Option<String> {
+    match h.own_attributes.other.get(&Text::from(name)) {
+        Some(AttributeValue::Text(t)) => Some(t.to_string()),
+        _ => None,
+    }
+}
+
+fn not_a_band(path: &Path, why: impl Into<String>) -> Error {
+    Error::InvalidFile {
+        path: path.into(),
+        reason: format!("not a band of `epfilt filter --band`: {}", why.into()),
+    }
+}
+
+fn read_band(path: &Path) -> Result<Band> {
+    let meta =
+        MetaData::read_from_file(path, false).map_err(|e| Error::from_exr(path, e, "header"))?;
+    if meta.headers.len() != 1 {
+        return Err(not_a_band(path, "several parts"));
+    }
+    let header = meta.headers[0].clone();
+    if header.blocks != BlockDescription::ScanLines || header.deep {
+        return Err(not_a_band(path, "not scan lines"));
+    }
+    let label = text_attribute(&header, BAND_ATTRIBUTE)
+        .ok_or_else(|| not_a_band(path, format!("no {BAND_ATTRIBUTE} attribute")))?;
+    // "K/N rows A-B of H S=s"
+    let bad = || not_a_band(path, format!("{BAND_ATTRIBUTE} {label:?}"));
+    let t: Vec<&str> = label.split_whitespace().collect();
+    let [kn, "rows", ab, "of", of, s] = t.as_slice() else {
+        return Err(bad());
+    };
+    let (k, n) = kn.split_once('/').ok_or_else(bad)?;
+    let (a, b) = ab.split_once('-').ok_or_else(bad)?;
+    let num = |v: &str| v.parse::<usize>().map_err(|_| bad());
+    let s = num(s.strip_prefix("S=").ok_or_else(bad)?)?;
+    let ledger = text_attribute(&header, BAND_LEDGER_ATTRIBUTE)
+        .and_then(|t| parse_band_ledger(&t))
+        .ok_or_else(|| not_a_band(path, format!("no readable {BAND_LEDGER_ATTRIBUTE}")))?;
+    let band = Band {
+        path: path.into(),
+        k: num(k)?,
+        n: num(n)?,
+        rows: (num(a)?, num(b)?),
+        of: num(of)?,
+        s,
+        ledger,
+        header,
+    };
+    if band.rows.1 - band.rows.0 != band.header.layer_size.1 {
+        return Err(bad());
+    }
+    Ok(band)
+}
+
+/// The header every band shares: its own without the band attributes and
+/// with the whole image's data window.
+fn whole_header(b: &Band) -> Header {
+    let mut h = b.header.clone();
+    h.own_attributes.other.remove(&Text::from(BAND_ATTRIBUTE));
+    h.own_attributes
+        .other
+        .remove(&Text::from(BAND_LEDGER_ATTRIBUTE));
+    h.own_attributes.layer_position.1 -= b.rows.0 as i32;
+    h.layer_size.1 = b.of;
+    h.chunk_count = exr::meta::compute_chunk_count(h.compression, h.layer_size, h.blocks);
+    h
+}
+
+/// Merge `parts` (in any order) into `output`.
+pub fn merge(parts: &[PathBuf], output: &Path) -> Result<MergeReport> {
+    let start = Instant::now();
+    if parts.is_empty() {
+        return Err(Error::Config(
+            "merge needs the band files and an output".into(),
+        ));
+    }
+    let mut bands = parts
+        .iter()
+        .map(|p| read_band(p))
+        .collect::<Result<Vec<_>>>()?;
+    bands.sort_by_key(|b| b.k);
+    let first = &bands[0];
+    let n = first.n;
+    let reference = whole_header(first);
+    let mut next = 0;
+    for (i, b) in bands.iter().enumerate() {
+        if b.n != n || b.of != first.of || b.s != first.s {
+            return Err(Error::Config(format!(
+                "{} is band {}/{} of {} rows, {} band {}/{} of {}: not one run's bands",
+                b.path.display(),
+                b.k,
+                b.n,
+                b.of,
+                first.path.display(),
+                first.k,
+                first.n,
+                first.of
+            )));
+        }
+        if b.k != i + 1 || b.rows.0 != next {
+            let have: Vec<String> = bands.iter().map(|b| b.k.to_string()).collect();
+            return Err(Error::Config(format!(
+                "the bands do not cover the image once: have {} of {n} (bands {}), rows from {} expected",
+                bands.len(),
+                have.join(", "),
+                next
+            )));
+        }
+        if whole_header(b) != reference {
+            return Err(Error::Config(format!(
+                "{} was not made by the same command as {} (its header differs: method, settings, channels or compression)",
+                b.path.display(),
+                first.path.display()
+            )));
+        }
+        next = b.rows.1;
+    }
+    if bands.len() != n || next != first.of {
+        return Err(Error::Config(format!(
+            "{} of {n} bands given (rows 0-{next} of {}); merge needs all of them",
+            bands.len(),
+            first.of
+        )));
+    }
+    let lines = reference.compression.scan_lines_per_block();
+    let y0 = reference.own_attributes.layer_position.1;
+    let staged = crate::io::Staged::new(output, ".exr.tmp")?;
+    let file = staged
+        .file()
+        .try_clone()
+        .map_err(|e| Error::io(staged.path(), e))?;
+    let mut copied = 0u64;
+    let headers: exr::prelude::SmallVec<[Header; 3]> =
+        exr::prelude::SmallVec::from_vec(vec![reference.clone()]);
+    let written = exr::block::write(
+        BufWriter::with_capacity(1 << 20, file),
+        headers,
+        false,
+        |_meta, writer| {
+            for b in &bands {
+                let f = std::fs::File::open(&b.path)?;
+                let reader = exr::block::read(std::io::BufReader::new(f), false)?;
+                let mut chunks: Vec<Chunk> = reader
+                    .all_chunks(false)?
+                    .collect::<exr::error::Result<_>>()?;
+                chunks.sort_by_key(|c| match &c.compressed_block {
+                    CompressedBlock::ScanLine(s) => s.y_coordinate,
+                    _ => i32::MAX,
+                });
+                for chunk in chunks {
+                    let CompressedBlock::ScanLine(block) = &chunk.compressed_block else {
+                        return Err(exr::error::Error::Invalid(
+                            "a band holds scan lines only".into(),
+                        ));
+                    };
+                    let index = (block.y_coordinate - y0) as usize / lines;
+                    copied += block.compressed_pixels_le.len() as u64;
+                    writer.write_chunk(index, chunk)?;
+                }
+            }
+            Ok(())
+        },
+    );
+    written.map_err(|e| Error::from_exr(output, e, "merging"))?;
+    crate::io::writer::sort_header_attributes(staged.file(), None).map_err(|e| Error::Output {
+        path: output.into(),
+        reason: format!("putting the header in order: {e}"),
+    })?;
+    staged.file().sync_all().ok();
+    // The ledger: the bands' shares added up.
+    let names: Vec<String> = first.ledger.iter().map(|l| l.0.clone()).collect();
+    let mut inn = vec![CompensatedSum::default(); names.len()];
+    let mut out = vec![CompensatedSum::default(); names.len()];
+    for b in &bands {
+        for (c, (_, i, o)) in b.ledger.iter().enumerate().take(names.len()) {
+            inn[c].add(*i);
+            out[c].add(*o);
+        }
+    }
+    let energy_in: Vec<f64> = inn.iter().map(|s| s.value()).collect();
+    let energy_out: Vec<f64> = out.iter().map(|s| s.value()).collect();
+    let energy_rel_error = energy_in
+        .iter()
+        .zip(&energy_out)
+        .map(|(i, o)| {
+            if *i == 0.0 {
+                (o - i).abs()
+            } else {
+                ((o - i) / i).abs()
+            }
+        })
+        .collect();
+    staged.commit()?;
+    Ok(MergeReport {
+        output: output.display().to_string(),
+        bands: n,
+        width: reference.layer_size.0,
+        height: reference.layer_size.1,
+        channels: names,
+        energy_in,
+        energy_out,
+        energy_rel_error,
+        bytes_copied: copied,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
