@@ -213,6 +213,7 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         }
     };
     let source = || Cropped::new(input.source(), full_w, w, h);
+    let source_from = |y: usize| Cropped::new(input.source_from(y), full_w, w, h);
     let channels = input.channels();
     let mut pipe_job = Job::new(
         Grid {
@@ -354,7 +355,7 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
             let mut window_job = pipe_job.clone();
             window_job.grid.in_h = (plan.wb - plan.wa) * s;
             let src = crate::pipeline::band::BandSource::new(
-                source(),
+                source_from(plan.wa * s),
                 plan.wa * s,
                 plan.wb * s,
                 (plan.a * s, plan.b * s),

@@ -220,20 +220,24 @@ pub fn merge(parts: &[PathBuf], output: &Path) -> Result<MergeReport> {
             for b in &bands {
                 let f = std::fs::File::open(&b.path)?;
                 let reader = exr::block::read(std::io::BufReader::new(f), false)?;
-                let mut chunks: Vec<Chunk> = reader
-                    .all_chunks(false)?
-                    .collect::<exr::error::Result<_>>()?;
-                chunks.sort_by_key(|c| match &c.compressed_block {
-                    CompressedBlock::ScanLine(s) => s.y_coordinate,
-                    _ => i32::MAX,
-                });
-                for chunk in chunks {
+                // One chunk at a time, in the file's (increasing) order:
+                // memory stays one block whatever the image.
+                let mut last = None;
+                for chunk in reader.all_chunks(false)? {
+                    let chunk: Chunk = chunk?;
                     let CompressedBlock::ScanLine(block) = &chunk.compressed_block else {
                         return Err(exr::error::Error::Invalid(
                             "a band holds scan lines only".into(),
                         ));
                     };
-                    let index = (block.y_coordinate - y0) as usize / lines;
+                    let y = block.y_coordinate;
+                    if last.is_some_and(|l| y <= l) || y < y0 {
+                        return Err(exr::error::Error::Invalid(
+                            "band blocks out of order".into(),
+                        ));
+                    }
+                    last = Some(y);
+                    let index = (y - y0) as usize / lines;
                     copied += block.compressed_pixels_le.len() as u64;
                     writer.write_chunk(index, chunk)?;
                 }

@@ -489,6 +489,19 @@ impl ExrInput {
             .collect()
     }
 
+    /// A source of rows from the block that holds row `y` on (rows above it
+    /// are not decoded; a Radiance picture is read from the top, its
+    /// scanlines having no index).
+    pub fn source_from(&self, y: usize) -> InputSource<'_> {
+        let mut src = self.source();
+        if let InputSource::Exr(e) = &mut src {
+            let first = self.rows.iter().position(|r| r.y1 > y);
+            e.next_row = first.unwrap_or(self.rows.len());
+            e.buf_y0 = first.map_or(self.size().1, |i| self.rows[i].y0);
+        }
+        src
+    }
+
     /// A source of rows over this file.
     pub fn source(&self) -> InputSource<'_> {
         if let Some(rh) = &self.rgbe {

@@ -12,13 +12,16 @@ use super::{Precision, Sink, Source, Strip};
 use crate::error::Result;
 use crate::filter::FilterParams;
 
-/// Output rows either side of a band that its run reads: a row of the band
-/// depends on samples up to the stage's lag plus its widest kernel away, and
-/// those samples' kernels and noise tests on as much again (the window's own
-/// edge is reflected, which changes what lies within that reach of it).
+/// Output rows either side of a band that its run reads. A row is final once
+/// the input `lag` rows past it has been read (the stage's halo: its noise
+/// tests, searches and kernels, and everything those read), and what a row
+/// depends on reaches as far above it as below; the window's own edges are
+/// reflected, which changes only what is read past them. The widest kernel's
+/// reach is added as a margin of safety, and the tests hold bands thinner
+/// than this margin to one run's bytes on images taller than it.
 pub fn margin(params: &FilterParams) -> usize {
     let h = crate::filter::halo(params);
-    2 * (h.lag() + h.spread_reach) + 2
+    h.lag() + h.spread_reach + 2
 }
 
 /// Output rows `[a, b)` of band `index` (0-based) of `count` over `rows`

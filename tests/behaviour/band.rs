@@ -96,7 +96,10 @@ fn bands_merge_into_the_file_of_one_run_for_every_method() {
     let d = dir.path();
     let p = |name: &str| d.join(name).to_str().unwrap().to_string();
     // S = 3 (the spreading and gathering methods) and S = 1 with variance
-    // (ep-box); 23 output rows: 7 bands of 3-4 rows, far thinner than the halo.
+    // (ep-box). 23 output rows: 7 bands of 3-4 rows, thinner than any halo,
+    // each window the whole image. Then tall images (ep-gauss reads 146 rows
+    // past a band, ep-box 37): windows that start and end inside the image
+    // at a reflected edge, for bands thinner and thicker than the halo.
     ok(&[
         "synth",
         "-q",
@@ -130,6 +133,26 @@ fn bands_merge_into_the_file_of_one_run_for_every_method() {
             n,
             "ep-gauss S=1",
         );
+    }
+    let tall = p("tall.exr");
+    let tall_px = p("tallpx.exr");
+    ok(&[
+        "synth", "-q", "--size", "16x700", "--hot", "1e5", "-o", &tall,
+    ]);
+    let px_args = [
+        "--size",
+        "40x300",
+        "--spp",
+        "16",
+        "--variance",
+        "-o",
+        &tall_px,
+    ];
+    ok(&[&["synth", "-q"][..], &px_args[..]].concat());
+    for n in [2, 7, 40] {
+        bands_equal_one_run(d, &tall, &["--method", "ep-gauss"], n, "ep-gauss, tall");
+        bands_equal_one_run(d, &tall, &["--method", "gauss"], n, "gauss, tall");
+        bands_equal_one_run(d, &tall_px, &["--method", "ep-box"], n, "ep-box, tall");
     }
 }
 
