@@ -22,6 +22,15 @@ pub enum Error {
         reason: String,
     },
 
+    /// The file is not a valid Radiance picture, or is damaged.
+    #[error("{path}: invalid or damaged Radiance picture: {reason}")]
+    InvalidPicture {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, and where.
+        reason: String,
+    },
+
     /// The file is valid but uses something epfilt cannot filter.
     #[error("{path}: unsupported: {reason}")]
     Unsupported {

@@ -31,6 +31,8 @@ const MAX_HEADER: usize = 1 << 20;
 /// The widest and tallest picture accepted (a resolution line can claim any
 /// number; memory is one scanline, so this only bounds nonsense).
 const MAX_SIDE: usize = 1 << 24;
+/// The most bytes of f32 rows one strip holds.
+const STRIP_BYTES: usize = 64 << 20;
 
 /// Whether `bytes` begin as a Radiance picture does (`#?`).
 pub fn is_rgbe(bytes: &[u8]) -> bool {
@@ -70,7 +72,7 @@ pub struct RgbeHeader {
 }
 
 fn invalid(path: &Path, reason: impl Into<String>) -> Error {
-    Error::InvalidFile {
+    Error::InvalidPicture {
         path: path.into(),
         reason: reason.into(),
     }
@@ -312,7 +314,11 @@ impl Source for RgbeSource<'_> {
         if self.y >= h {
             return Ok(None);
         }
-        let rows = max_rows.max(1).min(h - self.y);
+        // A damaged header may claim a huge width over a few bytes: strips
+        // stay within STRIP_BYTES (one row at least, at most 192 MiB at
+        // MAX_SIDE), whatever the caller asks.
+        let by_bytes = (STRIP_BYTES / (12 * w)).max(1);
+        let rows = max_rows.max(1).min(by_bytes).min(h - self.y);
         let mut data = vec![0.0f32; rows * 3 * w];
         let inv = self.header.scale.map(|s| 1.0 / s);
         for r in 0..rows {
