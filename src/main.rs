@@ -857,6 +857,11 @@ fn filter_sequence(
     cancel: Arc<AtomicBool>,
 ) -> Result<(), Exit> {
     use epfilt::sequence::{parse_frames, run_sequence, task_from, FrameStatus, SequenceJob};
+    if input.to_string() == output.to_string() {
+        return Err(usage(anyhow::anyhow!(
+            "the output pattern {output} is the input's: each frame would overwrite its input"
+        )));
+    }
     let template = filter_job(a, cancel).map_err(usage)?;
     let frames = match &a.frames {
         Some(spec) => parse_frames(spec).map_err(usage)?,

@@ -154,6 +154,9 @@ pub fn merge(parts: &[PathBuf], output: &Path) -> Result<MergeReport> {
             "merge needs the band files and an output".into(),
         ));
     }
+    for p in parts {
+        crate::job::check_not_same_file(p, output)?;
+    }
     let mut bands = parts
         .iter()
         .map(|p| read_band(p))

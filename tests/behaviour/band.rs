@@ -189,6 +189,10 @@ fn merge_refuses_incomplete_or_foreign_bands_and_band_refuses_what_cannot_merge(
             "same command",
         ),
         (vec![p("in.exr"), p("out.exr")], "not a band"),
+        (
+            vec![p("a1.exr"), p("a2.exr"), p("a3.exr"), p("a2.exr")],
+            "is the input file",
+        ),
     ];
     for (args, needle) in cases {
         let mut a = vec!["merge"];

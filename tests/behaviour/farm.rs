@@ -407,6 +407,7 @@ fn sequence_usage_errors_are_one_line_and_exit_2() {
             vec![],
             "more than one frame field",
         ),
+        (vec![&input, &input], vec![], "is the input's"),
     ];
     for (args, env, needle) in cases {
         let mut a = vec!["filter"];
