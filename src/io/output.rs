@@ -61,10 +61,7 @@ impl Output {
                 "--pixel-type f16 applies to EXR outputs; a Radiance picture stores RGBE".into(),
             ));
         }
-        let software = match &settings.provenance {
-            Some(p) => format!("epfilt {} ({p})", env!("CARGO_PKG_VERSION")),
-            None => format!("epfilt {}", env!("CARGO_PKG_VERSION")),
-        };
+        let software = settings.software();
         let (w, h) = (input_header.layer_size.0 / s, input_header.layer_size.1 / s);
         Ok(Output::Rgbe(Box::new(RgbeOutput::create(
             dest, w, h, xyze, rgbe_lines, &software,

@@ -62,6 +62,16 @@ pub struct ExrOutput {
     thread: Option<JoinHandle<Result<()>>>,
 }
 
+impl OutputSettings {
+    /// What the file says made it: `epfilt VERSION (settings)`.
+    pub fn software(&self) -> String {
+        match &self.provenance {
+            Some(p) => format!("epfilt {} ({p})", env!("CARGO_PKG_VERSION")),
+            None => format!("epfilt {}", env!("CARGO_PKG_VERSION")),
+        }
+    }
+}
+
 /// The views of a `multiView` list that still have channels among `channels`
 /// (OpenEXR's convention: a channel's view is its name's second-to-last
 /// component when that is a listed view, else the first, default view).
@@ -254,11 +264,7 @@ impl ExrOutput {
         // input's comments stay the user's, and exr writes custom attributes
         // in hash-map order, so one more of them would make the file's bytes
         // differ from run to run.
-        let software = match &settings.provenance {
-            Some(p) => format!("epfilt {} ({p})", env!("CARGO_PKG_VERSION")),
-            None => format!("epfilt {}", env!("CARGO_PKG_VERSION")),
-        };
-        own.software_name = Some(Text::from(software.as_str()));
+        own.software_name = Some(Text::from(settings.software().as_str()));
         for (k, v) in &settings.extra {
             own.other.insert(
                 Text::from(k.as_str()),

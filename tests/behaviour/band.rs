@@ -2,25 +2,10 @@
 //! of one run, for every method, band count and S.
 
 use std::path::Path;
-use std::process::{Command, Output};
 
 use crate::exr_io::tmpdir;
 
-fn epfilt(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_epfilt"))
-        .args(args)
-        .output()
-        .expect("run epfilt")
-}
-
-fn ok(args: &[&str]) {
-    let o = epfilt(args);
-    assert!(
-        o.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-}
+use crate::common::{epfilt_ok as ok, epfilt_run as epfilt};
 
 /// The merge adds the bands' sums compensated, this test plainly: a few
 /// ulps apart.

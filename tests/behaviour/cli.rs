@@ -7,12 +7,7 @@ use crate::common::*;
 use crate::exr_io::{tmpdir, write_rgb};
 use exr::prelude::*;
 
-fn epfilt(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_epfilt"))
-        .args(args)
-        .output()
-        .expect("run epfilt")
-}
+use crate::common::epfilt_run as epfilt;
 
 fn input(dir: &Path) -> String {
     let p = dir.join("in.exr");

@@ -380,3 +380,22 @@ pub fn reference(img: &Img, s: usize, p: &FilterParams, lum: &[f64]) -> (Vec<f64
 pub fn bits(img: &Img) -> Vec<u32> {
     img.data.iter().map(|v| v.to_bits()).collect()
 }
+
+/// Run the `epfilt` binary.
+pub fn epfilt_run(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_epfilt"))
+        .args(args)
+        .output()
+        .expect("run epfilt")
+}
+
+/// Run the `epfilt` binary, which must succeed; its standard output.
+pub fn epfilt_ok(args: &[&str]) -> String {
+    let o = epfilt_run(args);
+    assert!(
+        o.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}

@@ -1,28 +1,12 @@
 //! Radiance pictures (`.hdr`) wherever an EXR is accepted.
 
 use std::path::Path;
-use std::process::{Command, Output};
 
 use crate::exr_io::tmpdir;
 use epfilt::io::ExrInput;
 use epfilt::pipeline::Source;
 
-fn epfilt(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_epfilt"))
-        .args(args)
-        .output()
-        .expect("run epfilt")
-}
-
-fn ok(args: &[&str]) -> String {
-    let o = epfilt(args);
-    assert!(
-        o.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
+use crate::common::{epfilt_ok as ok, epfilt_run as epfilt};
 
 /// Every value of a file (EXR or picture), as epfilt reads it: (channels, rows).
 fn values(path: &Path) -> (Vec<String>, Vec<f32>) {
