@@ -136,3 +136,18 @@ impl Error {
         }
     }
 }
+
+/// An error and the causes it does not already spell out, as one line (what
+/// the command prints after `epfilt: `).
+pub fn one_line(e: &(dyn std::error::Error + 'static)) -> String {
+    let mut line = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        let text = c.to_string();
+        if !line.contains(&text) {
+            line = format!("{line}: {text}");
+        }
+        cause = c.source();
+    }
+    line.replace('\n', " ")
+}

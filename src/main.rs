@@ -429,14 +429,7 @@ fn fail(e: impl Into<anyhow::Error>) -> Exit {
 
 /// The error and the causes it does not already spell out, as one line.
 fn one_line(e: &anyhow::Error) -> String {
-    let mut line = e.to_string();
-    for cause in e.chain().skip(1) {
-        let c = cause.to_string();
-        if !line.contains(&c) {
-            line = format!("{line}: {c}");
-        }
-    }
-    line.replace('\n', " ")
+    epfilt::error::one_line(e.as_ref())
 }
 
 /// SIGINT and SIGTERM: raise `cancel` for the library, remove the temporary

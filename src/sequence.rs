@@ -561,7 +561,7 @@ pub fn run_sequence(
                 Err(Error::Interrupted) => return Err(Error::Interrupted),
                 Err(e) => {
                     outcome.status = FrameStatus::Failed;
-                    outcome.error = Some(one_line(&e));
+                    outcome.error = Some(crate::error::one_line(&e));
                 }
             }
         }
@@ -596,20 +596,6 @@ pub fn run_sequence(
         seconds: start.elapsed().as_secs_f64(),
         frames: outcomes,
     })
-}
-
-/// An error and the causes it does not already spell out, as one line.
-fn one_line(e: &Error) -> String {
-    let mut line = e.to_string();
-    let mut cause = std::error::Error::source(e);
-    while let Some(c) = cause {
-        let c_text = c.to_string();
-        if !line.contains(&c_text) {
-            line = format!("{line}: {c_text}");
-        }
-        cause = c.source();
-    }
-    line.replace('\n', " ")
 }
 
 #[cfg(test)]

@@ -75,14 +75,6 @@ impl Output {
         }
     }
 
-    /// The compression being written (EXR).
-    pub fn exr_compression(&self) -> Option<exr::prelude::Compression> {
-        match self {
-            Output::Exr(o) => Some(o.compression()),
-            Output::Rgbe(_) => None,
-        }
-    }
-
     /// The compression's name (`rgbe` for a Radiance picture).
     pub fn compression_name(&self) -> String {
         match self {

@@ -163,11 +163,6 @@ impl<K: Sink> BandSink<K> {
     pub fn sums(&self) -> Vec<f64> {
         self.sums.iter().map(|s| s.value()).collect()
     }
-
-    /// The sink rows were passed to.
-    pub fn into_inner(self) -> K {
-        self.inner
-    }
 }
 
 impl<K: Sink> Sink for BandSink<K> {

@@ -14,9 +14,7 @@ const SUM_ORDER: f64 = 1e-14;
 /// of the exact one, so their sums too.
 const F32_ROUNDING: f64 = 6e-8;
 
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
+use crate::common::read_json as json;
 
 /// Filter `input` whole and in `n` bands, merge, and hold the merged file to
 /// the whole run's bytes and the merge's ledger to the bands' sums.

@@ -53,10 +53,7 @@ fn sequence(dir: &Path, frames: impl IntoIterator<Item = i64>) {
     }
 }
 
-fn report(path: &Path) -> serde_json::Value {
-    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    serde_json::from_str(&text).expect("report JSON")
-}
+use crate::common::read_json as report;
 
 /// Frame -> status of a sequence report.
 fn statuses(r: &serde_json::Value) -> BTreeMap<i64, String> {
@@ -247,8 +244,8 @@ fn a_damaged_or_missing_frame_fails_alone_unless_fail_fast() {
     let input = d.join("beauty.%04d.exr");
     let output = out_dir.join("beauty.%04d.exr");
     let rep = d.join("r.json");
-    let out = epfilt(
-        &[
+    let run = |extra: &[&str]| {
+        let mut args = vec![
             "filter",
             input.to_str().unwrap(),
             output.to_str().unwrap(),
@@ -256,9 +253,11 @@ fn a_damaged_or_missing_frame_fails_alone_unless_fail_fast() {
             "1-5",
             "--report",
             rep.to_str().unwrap(),
-        ],
-        &[],
-    );
+        ];
+        args.extend_from_slice(extra);
+        epfilt(&args, &[])
+    };
+    let out = run(&[]);
     assert_eq!(out.status.code(), Some(1), "{out:?}");
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
@@ -288,19 +287,7 @@ fn a_damaged_or_missing_frame_fails_alone_unless_fail_fast() {
     // --fail-fast: nothing after the first failure is attempted.
     std::fs::remove_dir_all(&out_dir).unwrap();
     std::fs::create_dir(&out_dir).unwrap();
-    let out = epfilt(
-        &[
-            "filter",
-            input.to_str().unwrap(),
-            output.to_str().unwrap(),
-            "--frames",
-            "1-5",
-            "--fail-fast",
-            "--report",
-            rep.to_str().unwrap(),
-        ],
-        &[],
-    );
+    let out = run(&["--fail-fast"]);
     assert_eq!(out.status.code(), Some(1), "{out:?}");
     let st = statuses(&report(&rep));
     assert_eq!(st[&1], "done");

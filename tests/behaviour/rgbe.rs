@@ -29,9 +29,7 @@ fn sums(path: &Path) -> Vec<f64> {
     s
 }
 
-fn report(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
+use crate::common::read_json as report;
 
 #[test]
 fn a_picture_filters_as_the_same_pixels_in_an_exr_do() {
