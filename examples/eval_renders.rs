@@ -567,15 +567,15 @@ fn markdown(rows: &[Row], dir: &Path) -> String {
     };
     let (bw, bi) = worst("ep-box", true);
     let (gw, gi) = worst("ep-gauss", false);
+    let (gpw, gpi) = worst("ep-gauss", true);
     let ledger = rows
         .iter()
         .filter(|r| !matches!(r.method, "clamp" | "median" | "alpha-trim"))
         .map(|r| r.ledger)
         .fold(0.0f64, f64::max);
-    // Each method where it is meant to run: ep-box at S = 1, ep-gauss at S > 1.
-    let peak = |m: &str| {
+    let peak = |m: &str, s1: bool| {
         rows.iter()
-            .filter(|r| r.method == m && (r.s == 1) == (m == "ep-box"))
+            .filter(|r| r.method == m && (r.s == 1) == s1)
             .map(|r| {
                 let lin = rows
                     .iter()
@@ -594,14 +594,17 @@ fn markdown(rows: &[Row], dir: &Path) -> String {
                 }
             })
     };
-    let (pb, pbi) = peak("ep-box");
-    let (pg, pgi) = peak("ep-gauss");
+    let (pb, pbi) = peak("ep-box", true);
+    let (pg, pgi) = peak("ep-gauss", false);
+    let (pgp, pgpi) = peak("ep-gauss", true);
     let _ = writeln!(
         s,
-        "Worst ep-box factor (pixel-resolution inputs): {bw:.3} ({bi}). Worst ep-gauss factor \
-         (super-sampled inputs): {gw:.3} ({gi}). Largest ledger error of an energy-preserving method: \
-         {ledger:.1e}. Lights' peaks against the linear filter's (the input's own noise aside): \
-         ep-box at worst {pb:.2} ({pbi}), ep-gauss on super-sampled inputs at worst {pg:.2} ({pgi}).\n"
+        "Worst ep-box factor (pixel-resolution inputs): {bw:.3} ({bi}). Worst ep-gauss factor: \
+         {gw:.3} on super-sampled inputs ({gi}), {gpw:.3} at pixel resolution with variance ({gpi}). \
+         Largest ledger error of an energy-preserving method: {ledger:.1e}. Lights' peaks against \
+         the linear filter's (the input's own noise aside): ep-box at worst {pb:.2} ({pbi}), \
+         ep-gauss at worst {pg:.2} on super-sampled inputs ({pgi}), {pgp:.2} at pixel resolution \
+         ({pgpi}).\n"
     );
     // Summary: the factor of ep-box and ep-gauss per input.
     let mut inputs: Vec<&str> = rows.iter().map(|r| r.input.as_str()).collect();

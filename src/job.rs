@@ -10,7 +10,7 @@ use crate::geometry::Grid;
 use crate::io::{find_stats, ExrInput, OutputSettings, PartSelect, SppFrom, StatsRequest};
 use crate::pipeline::crop::Cropped;
 use crate::pipeline::{run, Job, MethodStats, PipelineConfig, Progress};
-use crate::stats::{peak_rss_bytes, EpBoxReport, Report};
+use crate::stats::{peak_rss_bytes, EpBoxReport, Report, StatsReport};
 
 /// The ledger must balance to this relative error before rounding, or the
 /// output is not written. The pipeline's own bound is 1e-12 (each sample's
@@ -150,15 +150,24 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     check_not_same_file(&job.input, &job.output)?;
     let mut input = ExrInput::open_layer(&job.input, job.part.as_ref(), job.layer.as_deref())?;
     let mut params = job.params.clone();
-    let found = if params.method == Method::EpBox {
-        let found = find_stats(&job.input, input.header(), &job.stats)?;
-        let mut aux = found.variance.clone();
-        aux.extend(found.mean_y.clone());
-        if let SppFrom::Channel(c) = &found.spp {
-            aux.push(c.clone());
+    // ep-box needs the statistics; ep-gauss at S = 1 reads them when the
+    // file has them (the carriers rule), and must find them when asked to.
+    let asked = job.stats != StatsRequest::default();
+    let ep_gauss_px = params.method == Method::EpGauss && params.supersample == 1;
+    let found = if params.method == Method::EpBox || (ep_gauss_px && params.support > 0) {
+        match find_stats(&job.input, input.header(), &job.stats) {
+            Ok(found) => {
+                let mut aux = found.variance.clone();
+                aux.extend(found.mean_y.clone());
+                if let SppFrom::Channel(c) = &found.spp {
+                    aux.push(c.clone());
+                }
+                input.add_aux_channels(&aux)?;
+                Some(found)
+            }
+            Err(_) if params.method == Method::EpGauss && !asked => None,
+            Err(e) => return Err(e),
         }
-        input.add_aux_channels(&aux)?;
-        Some(found)
     } else {
         None
     };
@@ -493,27 +502,35 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
             (x, y, name.cloned().unwrap_or_default())
         }),
         stats_channels: pipe_job.aux.clone(),
-        ep_box: found.as_ref().map(|f| EpBoxReport {
-            l_ave,
-            l_tvis: params.ep_box.ltvis.unwrap_or(f64::NAN),
-            d: params.ep_box.d,
-            nmid: params.ep_box.nmid,
-            confidence: params.ep_box.confidence,
-            guard: params.ep_box.guard.name().into(),
-            variance_channels: f.variance.clone(),
-            variance_kind: f.kind.name().into(),
-            spp_from: match &f.spp {
-                SppFrom::Fixed(n, from) => format!("{n} ({from})"),
-                SppFrom::Channel(c) => format!("channel {c}"),
-            },
-            guard_confidence: params.ep_box.guard_confidence,
-            reliable: eb.reliable,
-            guarded: eb.guarded,
-            trimmed: eb.trimmed,
-            unresolved: eb.unresolved,
-            passes_allowed: params.ep_box.passes,
-            passes_used: eb.passes,
-        }),
+        carriers_rule: found
+            .as_ref()
+            .filter(|_| params.method == Method::EpGauss)
+            .map(|f| StatsReport {
+                variance_channels: f.variance.clone(),
+                variance_kind: f.kind.name().into(),
+                spp_from: spp_from(&f.spp),
+            }),
+        ep_box: found
+            .as_ref()
+            .filter(|_| params.method == Method::EpBox)
+            .map(|f| EpBoxReport {
+                l_ave,
+                l_tvis: params.ep_box.ltvis.unwrap_or(f64::NAN),
+                d: params.ep_box.d,
+                nmid: params.ep_box.nmid,
+                confidence: params.ep_box.confidence,
+                guard: params.ep_box.guard.name().into(),
+                variance_channels: f.variance.clone(),
+                variance_kind: f.kind.name().into(),
+                spp_from: spp_from(&f.spp),
+                guard_confidence: params.ep_box.guard_confidence,
+                reliable: eb.reliable,
+                guarded: eb.guarded,
+                trimmed: eb.trimmed,
+                unresolved: eb.unresolved,
+                passes_allowed: params.ep_box.passes,
+                passes_used: eb.passes,
+            }),
         window_bytes: stats.window_bytes(),
         windows: stats.windows.clone(),
         stage_seconds: stats.stages,
@@ -641,4 +658,12 @@ fn plan_band(
         wb: (b + m).min(out_h),
         out_h,
     })
+}
+
+/// Where a sample count came from, for reports.
+fn spp_from(spp: &SppFrom) -> String {
+    match spp {
+        SppFrom::Fixed(n, from) => format!("{n} ({from})"),
+        SppFrom::Channel(c) => format!("channel {c}"),
+    }
 }

@@ -145,7 +145,8 @@ struct SynthArgs {
 /// Statistics and noise test of ep-box, shared by `filter` and `plan`.
 #[derive(Args)]
 struct StatsArgs {
-    /// ep-box: variance channel (luminance) or layer with .R/.G/.B [default: found by name].
+    /// ep-box (and ep-gauss at S = 1, whose carriers rule reads it when found):
+    /// variance channel (luminance) or layer with .R/.G/.B [default: found by name].
     #[arg(long)]
     variance_channel: Option<String>,
     /// ep-box: what the variance holds: sample (of single samples), mean (of the
@@ -302,7 +303,7 @@ struct FilterArgs {
     /// the mean), range (not above a converged neighbour), stderr (spread no
     /// more than noise can explain), both (range + stderr), none (§5.1 as
     /// written). ep-gauss: none (§5.2 as written) turns off its --support
-    /// rule; any other value keeps it.
+    /// rule (and at S = 1 its carriers rule); any other value keeps them.
     #[arg(long, default_value = "all")]
     guard: String,
     /// ep-box, carriers guard: a pixel whose mean rests on at least this many
@@ -318,7 +319,9 @@ struct FilterArgs {
     carriers_rse: f64,
     /// ep-gauss: a noisy sample with at least this many noisy neighbouring
     /// super-samples (within --support-ratio of it) is a feature and keeps the
-    /// base kernel; 0 = the paper's rule.
+    /// base kernel; at S = 1 on a file with variance, so does a pixel whose
+    /// mean enough samples carry (ep-box's carriers rule and --carriers*
+    /// settings). 0 = the paper's rule, neither.
     #[arg(long, default_value_t = 1)]
     support: usize,
     /// ep-gauss: neighbours support a sample when within this factor of its luminance.

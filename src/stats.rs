@@ -125,6 +125,9 @@ pub struct Report {
     pub stats_channels: Vec<String>,
     /// The ep-box run's settings and findings.
     pub ep_box: Option<EpBoxReport>,
+    /// ep-gauss at S = 1: the per-pixel statistics its carriers rule read
+    /// (`None`: the file has none, or `--support 0`).
+    pub carriers_rule: Option<StatsReport>,
     /// epfilt's version.
     pub version: String,
     /// Every setting of the run's method, the output's sample type, the part
@@ -156,6 +159,17 @@ pub struct BandReport {
     pub energy_in_owned: Vec<f64>,
     /// Per channel, the energy (times S²) of the output rows it holds.
     pub energy_out_owned: Vec<f64>,
+}
+
+/// Which per-pixel statistics a run read.
+#[derive(Clone, Debug, Serialize)]
+pub struct StatsReport {
+    /// Variance channels.
+    pub variance_channels: Vec<String>,
+    /// What they hold.
+    pub variance_kind: String,
+    /// Where the sample count came from.
+    pub spp_from: String,
 }
 
 /// What an `ep-box` run used and found.
@@ -243,6 +257,14 @@ impl Report {
                 self.energy_out[k],
                 self.energy_rel_error[k],
                 self.energy_rel_error_rounded[k]
+            ));
+        }
+        if let Some(st) = &self.carriers_rule {
+            s.push_str(&format!(
+                "  carriers rule (S = 1): variance {} ({}), samples {}\n",
+                st.variance_channels.join(", "),
+                st.variance_kind,
+                st.spp_from
             ));
         }
         if let Some(e) = &self.ep_box {

@@ -40,6 +40,7 @@
 //! Samples with `x0 <= 0` or `xbar <= 0` (or non-finite ratios) keep the base
 //! kernel: the test is not defined there.
 
+use super::ep_box;
 use super::kernel::Kernel1d;
 
 /// `D_ar` of Relation 14 for `t = x0 / xbar` and weight `w0`; infinite where
@@ -312,9 +313,11 @@ impl EpGauss {
         self.levels.iter().map(|l| l.shell).max().unwrap_or(0)
     }
 
-    /// Rows either side the base test reads.
+    /// Rows either side the classification reads: the base test's, and at
+    /// S = 1 those of the pixels within [`COMPACT_REACH`] (the compact test
+    /// of [`Carriers`]).
     pub fn xbar_reach(&self) -> usize {
-        self.levels[0].shell
+        self.levels[0].shell + if self.s == 1 { COMPACT_REACH } else { 0 }
     }
 
     /// Rows either side the search reads.
@@ -578,6 +581,54 @@ impl Support {
     }
 }
 
+/// Rule 1c, beyond the paper, at pixel resolution (S = 1) when the file
+/// holds each pixel's variance and sample count: a pixel that fails
+/// Relation 14 keeps the base kernel when its mean is carried by enough of
+/// its samples ([`ep_box::carriers`], the rule and the settings of ep-box's
+/// `carriers` guard), or by a few and it is a compact feature (at most
+/// [`ep_box::COMPACT_MAX`] pixels within [`COMPACT_REACH`] fail Relation 14
+/// at [`ep_box::COMPACT_RATIO`] of its luminance or more). At S = 1 a bulb
+/// narrower than a pixel is one sample, which the support rule cannot tell
+/// from a firefly; its variance can: a lamp covering a fifth of a pixel is
+/// hit by a fifth of the pixel's samples, a firefly by one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Carriers {
+    k_max: f64,
+    fraction: f64,
+    rse: f64,
+}
+
+/// Chebyshev radius of the compact-feature test of [`Carriers`], in pixels.
+pub const COMPACT_REACH: usize = ep_box::CLUSTER_REACH;
+
+impl Carriers {
+    /// The carriers settings of ep-box (`--carriers`, `--carriers-fraction`,
+    /// `--carriers-rse`).
+    pub fn new(p: &ep_box::EpBoxParams) -> Self {
+        Carriers {
+            k_max: p.carriers,
+            fraction: p.carriers_fraction,
+            rse: p.carriers_rse,
+        }
+    }
+
+    /// Whether a pixel of luminance `y` that failed Relation 14, whose mean
+    /// of `n` samples has squared standard error `se2`, is kept as a
+    /// feature; `hot_neighbours()` counts the pixels within
+    /// [`COMPACT_REACH`] (itself included) that fail Relation 14 and are at
+    /// least `y / COMPACT_RATIO`. Statistics that cannot be read (fewer than
+    /// 2 samples, a non-finite variance) keep the paper's rule.
+    #[inline]
+    pub fn keeps(&self, y: f64, se2: f64, n: f64, hot_neighbours: impl FnOnce() -> usize) -> bool {
+        if !(n.is_finite() && n >= 2.0 && se2.is_finite() && y.is_finite() && y > 0.0) {
+            return false;
+        }
+        let k = ep_box::carriers(y, se2, n);
+        k >= ep_box::carriers_needed(self.k_max, self.fraction, self.rse, n)
+            || (k >= ep_box::COMPACT_CARRIERS && hot_neighbours() <= ep_box::COMPACT_MAX)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -597,6 +648,44 @@ mod tests {
             }
         }
         num / den
+    }
+
+    #[test]
+    fn the_carriers_rule_at_its_edges() {
+        let c = Carriers::new(&ep_box::EpBoxParams::default());
+        let none = || 1usize;
+        let many = || 9usize;
+        // One sample of 16 carries the mean (a firefly): spread. Its sample
+        // variance for a mean y is y^2 (n - 1) ... here from k = 1 exactly.
+        // The squared standard error of a mean y of n samples, k of which
+        // hold y n / k and the rest 0: var_pop = y^2 (n / k - 1).
+        let se2 = |y: f64, k: f64, n: f64| y * y * (n / k - 1.0) / (n - 1.0);
+        // One sample of 16 carries the mean (a firefly): spread.
+        assert!(!c.keeps(100.0, se2(100.0, 1.0, 16.0), 16.0, none));
+        // Zero variance: every sample agrees, carried.
+        assert!(c.keeps(100.0, 0.0, 16.0, many));
+        // 4 of 16 (k = 4 >= 3.37 needed): carried.
+        assert!(c.keeps(100.0, se2(100.0, 4.0, 16.0), 16.0, many));
+        // 3 of 16 is short of it: kept only when compact.
+        assert!(c.keeps(100.0, se2(100.0, 3.0, 16.0), 16.0, none));
+        assert!(!c.keeps(100.0, se2(100.0, 3.0, 16.0), 16.0, || {
+            ep_box::COMPACT_MAX + 1
+        }));
+        // Statistics that cannot be read: the paper's rule.
+        for (y, se2, n) in [
+            (100.0, 0.0, 1.0),
+            (100.0, f64::NAN, 16.0),
+            (100.0, f64::INFINITY, 16.0),
+            (100.0, 0.0, f64::NAN),
+            (f64::INFINITY, 0.0, 16.0),
+            (0.0, 0.0, 16.0),
+        ] {
+            assert!(!c.keeps(y, se2, n, none), "{y} {se2} {n}");
+        }
+        // 1e30 next to 1e-30: a finite decision either way.
+        assert!(c.keeps(1e30, 0.0, 2.0, none));
+        assert!(!c.keeps(1e30, se2(1e30, 1.0, 16.0), 16.0, none));
+        assert!(c.keeps(1e-30, 1e-90, 64.0, none));
     }
 
     #[test]

@@ -118,7 +118,12 @@ pub fn halo(p: &FilterParams) -> crate::geometry::Halo {
             ..Default::default()
         },
         Method::EpGauss => crate::geometry::Halo {
-            xbar_reach: shell(p.radius),
+            xbar_reach: shell(p.radius)
+                + if p.supersample == 1 {
+                    ep_gauss::COMPACT_REACH
+                } else {
+                    0
+                },
             base_reach: reach(p.radius),
             search_reach: shell(max_rho),
             spread_reach: reach(max_rho),

@@ -32,7 +32,8 @@ use rayon::prelude::*;
 
 use super::stream::{MethodStats, Stage, WindowUse, MAX_CHANNELS};
 use super::window::RowWindow;
-use crate::filter::ep_gauss::{EpGauss, Folded, LumRows, Support};
+use crate::filter::ep_box::{se2, Spp, StatsLayout, VarianceKind, COMPACT_RATIO};
+use crate::filter::ep_gauss::{Carriers, EpGauss, Folded, LumRows, Support, COMPACT_REACH};
 use crate::filter::kernel::{ColumnTaps, Kernel1d};
 use crate::filter::{Method, ValidParams};
 use crate::geometry::{mirror, Grid, Halo};
@@ -62,7 +63,7 @@ mod tests {
                     in_h: 20 * s,
                     s,
                 };
-                let e = SpreadStage::new(grid, vec![1.0], &p.validated().unwrap(), 16);
+                let e = SpreadStage::new(grid, vec![1.0], &p.validated().unwrap(), 16, None);
                 assert_eq!(
                     e.halo(),
                     crate::filter::halo(&p),
@@ -151,12 +152,23 @@ pub struct SpreadStage {
     stats: SpreadStats,
     clamp: Option<f32>,
     support: Support,
+    /// ep-gauss at S = 1 on a file with per-pixel statistics: where they
+    /// are in the input rows, and the carriers rule that reads them.
+    pixel_stats: Option<(StatsLayout, Carriers)>,
 }
 
 impl SpreadStage {
     /// Build the stage: kernels, taps and halo are settled here, once. The
     /// skeleton has checked the grid, the channels and the tile.
-    pub fn new(grid: Grid, lum: Vec<f64>, params: &ValidParams, tile: usize) -> Self {
+    /// `stats` (ep-gauss at S = 1 only; indices into the input rows'
+    /// channels) turns on the carriers rule.
+    pub fn new(
+        grid: Grid,
+        lum: Vec<f64>,
+        params: &ValidParams,
+        tile: usize,
+        stats: Option<StatsLayout>,
+    ) -> Self {
         let nch = lum.len();
         let s = grid.s;
         let (w, h) = (grid.out_w(), grid.out_h());
@@ -206,6 +218,9 @@ impl SpreadStage {
             stats: SpreadStats::default(),
             clamp: (params.method == Method::Clamp).then_some(params.clamp as f32),
             support: Support::new(params.support, params.support_ratio),
+            pixel_stats: stats
+                .filter(|_| params.method == Method::EpGauss && s == 1 && params.support > 0)
+                .map(|st| (st, Carriers::new(&params.ep_box))),
         }
     }
 }
@@ -405,6 +420,8 @@ impl SpreadStage {
         let lum = &self.lum;
         let cols = &self.cols;
         let support = self.support;
+        let pixel_stats = self.pixel_stats.as_ref();
+        let pad = self.pad;
         // Phase 1, reading the input as it came (neighbour rows included):
         // which samples are noise, and which of those are kept as features.
         let found: Vec<(Vec<Noisy>, u64)> = (a..b)
@@ -456,6 +473,52 @@ impl SpreadStage {
                             }) {
                                 kept += 1;
                                 continue;
+                            }
+                            if let Some((st, carriers)) = pixel_stats.filter(|_| x0 > hi) {
+                                // S = 1: the sample is pixel (i, j) = (px, y).
+                                let row = input.get(j);
+                                let ch = |c: usize| row[c * in_w + i] as f64;
+                                let n = match st.spp {
+                                    Spp::Fixed(n) => n,
+                                    Spp::Channel(c) => ch(c),
+                                };
+                                let nv = st.variance.len().min(3);
+                                let mut var = [0.0f64; 3];
+                                for (v, &c) in var.iter_mut().zip(&st.variance) {
+                                    *v = ch(c);
+                                }
+                                let mean_y = match (st.kind, st.mean_y) {
+                                    (VarianceKind::SecondMoment, Some(c)) => ch(c),
+                                    _ => x0,
+                                };
+                                let weights = if nv == 3 { &lum[..3] } else { &lum[..1] };
+                                let se2 = se2(st.kind, &var[..nv], weights, mean_y, n);
+                                let hot = || {
+                                    let r = COMPACT_REACH as i64;
+                                    let mut count = 0;
+                                    for yy in
+                                        (y as i64 - r).max(0)..=(y as i64 + r).min(h as i64 - 1)
+                                    {
+                                        let lrow = view.row(yy);
+                                        for xx in px.saturating_sub(COMPACT_REACH)
+                                            ..=(px + COMPACT_REACH).min(w - 1)
+                                        {
+                                            let v = lrow[pad + xx];
+                                            if v < x0 / COMPACT_RATIO {
+                                                continue;
+                                            }
+                                            let xb = ep.xbar0(&view, xx, yy);
+                                            count += usize::from(
+                                                ep.bounds(xb).is_some_and(|(hi, _)| v > hi),
+                                            );
+                                        }
+                                    }
+                                    count
+                                };
+                                if carriers.keeps(x0, se2, n, hot) {
+                                    kept += 1;
+                                    continue;
+                                }
                             }
                             let row = input.get(j);
                             let mut v = [0.0f32; MAX_CHANNELS];

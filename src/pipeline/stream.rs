@@ -24,6 +24,7 @@ use super::spread::{SpreadStage, SpreadStats};
 use super::window::RowWindow;
 use super::{Job, PipelineConfig, Precision, Strip};
 use crate::error::{Error, Result};
+use crate::filter::ep_box::{Spp, StatsLayout};
 use crate::filter::{Method, ValidParams};
 use crate::geometry::{Grid, Halo};
 
@@ -136,7 +137,9 @@ impl Streamer {
         if cfg.tile == 0 {
             return Err(Error::Config("--tile must be at least 1".into()));
         }
-        if params.method != Method::EpBox && !job.aux.is_empty() {
+        let reads_stats =
+            params.method == Method::EpBox || (params.method == Method::EpGauss && s == 1);
+        if !reads_stats && !job.aux.is_empty() {
             return Err(Error::Config(format!(
                 "{} reads no statistics channels",
                 params.method.name()
@@ -165,12 +168,31 @@ impl Streamer {
                 )?)
             }
             Method::Median | Method::AlphaTrim => Box::new(OrderStage::new(grid, nch, params)),
-            _ => Box::new(SpreadStage::new(
-                grid,
-                job.luminance.clone(),
-                params,
-                cfg.tile,
-            )),
+            _ => {
+                let nall = job.strip_channels();
+                let stats_ok = |st: &StatsLayout| {
+                    let ok = |i: usize| i >= nch && i < nall;
+                    (st.variance.len() == 1 || (st.variance.len() == 3 && nch >= 3))
+                        && st.variance.iter().all(|&i| ok(i))
+                        && st.mean_y.is_none_or(ok)
+                        && match st.spp {
+                            Spp::Channel(i) => ok(i),
+                            Spp::Fixed(n) => n.is_finite() && n >= 2.0,
+                        }
+                };
+                if job.stats.as_ref().is_some_and(|st| !stats_ok(st)) {
+                    return Err(Error::Config(
+                        "ep-gauss at S = 1 reads one or three variance channels and a sample count of at least 2".into(),
+                    ));
+                }
+                Box::new(SpreadStage::new(
+                    grid,
+                    job.luminance.clone(),
+                    params,
+                    cfg.tile,
+                    job.stats.clone(),
+                ))
+            }
         };
         let nall = job.strip_channels();
         let mut books = Books::new(job.channels.clone(), nall);

@@ -575,6 +575,26 @@ proptest! {
         prop_assert_eq!(bits(&a), bits(&b));
         prop_assert_eq!(sa.digest, sb.digest);
     }
+
+    /// ep-gauss at S = 1 reads the same statistics (its carriers rule, whose
+    /// compact test looks 2 rows away): the same invariants.
+    #[test]
+    fn ep_gauss_with_statistics_keeps_energy_and_invariance(
+        w in 1usize..30, h in 1usize..30, count in 0usize..40, seed in any::<u64>(),
+        max_radius in 0.6f64..8.0, tile in 1usize..20, strip in 1usize..40, threads in 1usize..4,
+    ) {
+        let img = scene(w, h, count, seed);
+        let mut p = FilterParams::new(Method::EpGauss, 1);
+        p.max_radius = max_radius;
+        let (a, sa) = filter(&img, 16.0, &p, &cfg(256, 0, 1));
+        for l in &sa.ledger {
+            prop_assert!(l.rel_error <= 1e-12, "{}: {:e}", l.channel, l.rel_error);
+        }
+        prop_assert!(a.data.iter().all(|v| v.is_finite()));
+        let (b, sb) = filter(&img, 16.0, &p, &cfg(tile, strip, threads));
+        prop_assert_eq!(bits(&a), bits(&b));
+        prop_assert_eq!(sa.digest, sb.digest);
+    }
 }
 
 mod files {

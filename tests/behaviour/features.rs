@@ -225,3 +225,55 @@ fn ep_box_keeps_tiny_lights_and_spreads_the_fireflies() {
         );
     }
 }
+
+#[test]
+fn ep_gauss_at_pixel_resolution_reads_the_variance() {
+    // At S = 1 a bulb narrower than a pixel is one sample: the support rule
+    // cannot tell it from a firefly, the pixel's variance can (the carriers
+    // rule). Without statistics the paper's rule is all there is, and the
+    // bulbs go.
+    let sc = scene();
+    for n in [16usize, 64] {
+        let data = sc.spp_rows(n, 0, H);
+        let rgb: Vec<f32> = data
+            .chunks(6 * W)
+            .flat_map(|r| r[..3 * W].iter().copied())
+            .collect();
+        let input = Img {
+            w: W,
+            h: H,
+            nch: 3,
+            data: rgb.clone(),
+        };
+        let p = FilterParams::new(Method::EpGauss, 1);
+        let cfg = PipelineConfig::default();
+        let (out, stats) = filter_in_memory(data.clone(), &box_job(n as f64), &p, &cfg).unwrap();
+        let out = Img {
+            w: W,
+            h: H,
+            nch: 3,
+            data: out,
+        };
+        assert!(stats.eg().spread > 20, "{n} spp: {:?}", stats.eg());
+        assert!(stats.eg().kept > 0, "{n} spp: {:?}", stats.eg());
+        assert!(stats.ledger.iter().all(|l| l.rel_error <= ENERGY_TOL));
+        // The two smallest bulbs at 16 samples: as for ep-box.
+        let kept: Vec<(String, f64)> = moved(&out, &input)
+            .into_iter()
+            .filter(|(name, _)| n >= 64 || !(name == "bulb 0.5 px" || name == "bulb 0.6 px"))
+            .collect();
+        assert_eq!(kept, vec![], "{n} spp: lights moved with statistics");
+        let (plain, _) = filter_in_memory(rgb, &rgb_job(W, H, 1), &p, &cfg).unwrap();
+        let plain = Img {
+            w: W,
+            h: H,
+            nch: 3,
+            data: plain,
+        };
+        let lost = moved(&plain, &input);
+        assert!(
+            lost.iter().any(|(_, rel)| *rel < -0.5),
+            "{n} spp: without statistics every light stayed: {lost:?}"
+        );
+    }
+}
