@@ -8,7 +8,7 @@ use crate::filter::ep_box::{Spp, StatsLayout};
 use crate::filter::{FilterParams, Method};
 use crate::geometry::Grid;
 use crate::io::{find_stats, ExrInput, OutputSettings, PartSelect, SppFrom, StatsRequest};
-use crate::pipeline::crop::Cropped;
+use crate::pipeline::edge::{Coverage, Cropped};
 use crate::pipeline::{run, Job, MethodStats, PipelineConfig, Progress};
 use crate::stats::{peak_rss_bytes, EpBoxReport, Report, StatsReport};
 
@@ -59,17 +59,21 @@ pub enum Edge {
     /// Drop the last `w % S` columns and `h % S` rows of samples (the last
     /// partial output column and row); the ledger counts what was kept.
     Crop,
+    /// Keep them: the last output column and row are made of fewer samples,
+    /// each pixel's kernel normalised over what exists; energy exact
+    /// ([`crate::pipeline::edge`]).
+    Pad,
 }
 
 impl Edge {
-    /// `crop`; `pad` is named as not built yet.
+    /// `crop` or `pad`.
     pub fn parse(s: &str) -> Result<Edge> {
         match s {
             "crop" => Ok(Edge::Crop),
-            "pad" => Err(Error::Config(
-                "--edge pad (partial output pixels) is not built yet; --edge crop drops the last partial output row and column".into(),
-            )),
-            other => Err(Error::Config(format!("--edge must be crop, not {other:?}"))),
+            "pad" => Ok(Edge::Pad),
+            other => Err(Error::Config(format!(
+                "--edge must be crop or pad, not {other:?}"
+            ))),
         }
     }
 }
@@ -191,6 +195,9 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         )));
     }
     let mut warnings = Vec::new();
+    // (samples per input row, samples read per row and rows: the crop,
+    // grid size, the real size when the grid is padded)
+    let mut padded_from = None;
     let (full_w, w, h) = if w % s == 0 && h % s == 0 {
         (w, w, h)
     } else {
@@ -205,6 +212,17 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
                 ));
                 (w, cw, ch)
             }
+            Edge::Pad => {
+                let (pw, ph) = (w.div_ceil(s) * s, h.div_ceil(s) * s);
+                warnings.push(format!(
+                    "{}: {w}x{h} samples is not a multiple of S={s}: padded (--edge pad): the last output column is made of {} and the last row of {} of {s} sample columns / rows, each normalised over what exists",
+                    job.input.display(),
+                    if w % s == 0 { s } else { w % s },
+                    if h % s == 0 { s } else { h % s },
+                ));
+                padded_from = Some((w, h));
+                (w, pw, ph)
+            }
             Edge::Exact => {
                 let hint = if job.supersample_assumed {
                     " If it is at pixel resolution, give --supersample 1."
@@ -212,17 +230,22 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
                     ""
                 };
                 return Err(Error::Config(format!(
-                    "{}: {w}x{h} samples is not a multiple of --supersample {s}{}: give --edge crop to drop the last partial output column and row ({}x{} pixels).{hint}",
+                    "{}: {w}x{h} samples is not a multiple of --supersample {s}{}: give --edge crop to drop the last partial output column and row ({}x{} pixels), or --edge pad to keep them as pixels of fewer samples ({}x{}).{hint}",
                     job.input.display(),
                     if job.supersample_assumed { " (assumed: no --supersample given)" } else { "" },
                     cw / s,
-                    ch / s
+                    ch / s,
+                    w.div_ceil(s),
+                    h.div_ceil(s)
                 )));
             }
         }
     };
-    let source = || Cropped::new(input.source(), full_w, w, h);
-    let source_from = |y: usize| Cropped::new(input.source_from(y), full_w, w, h);
+    // What is read: the crop, or with padding every sample (the pipeline
+    // completes them).
+    let (read_w, read_h) = padded_from.unwrap_or((w, h));
+    let source = || Cropped::new(input.source(), full_w, read_w, read_h);
+    let source_from = |y: usize| Cropped::new(input.source_from(y), full_w, read_w, read_h);
     let channels = input.channels();
     let mut pipe_job = Job::new(
         Grid {
@@ -233,6 +256,7 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         channels.clone(),
         input.luminance(),
     );
+    pipe_job.padded_from = padded_from;
     if let Some(found) = &found {
         let aux = input.aux_channels();
         let at = |name: &str| channels.len() + aux.iter().position(|a| a == name).unwrap_or(0);
@@ -291,6 +315,10 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         .precision
         .unwrap_or_else(|| crate::io::writer::same_precision(header, &channels));
     settings.push(("pixel_type", precision.name().into()));
+    // (A cropped run is the filtering of the cropped image, header and all.)
+    if padded_from.is_some() {
+        settings.push(("edge", "pad".into()));
+    }
     if let Some(p) = &job.part {
         settings.push(("part", format!("{p:?}").into()));
     }
@@ -350,6 +378,16 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         &out_settings,
         &rgbe_lines,
     )?;
+    // --edge pad: what each output pixel stands for (the file's rows: the
+    // band's with --band).
+    let coverage = padded_from.map(|real| Coverage::of(&params, pipe_job.grid, real));
+    if let Some(cov) = &coverage {
+        let (a, b) = band.as_ref().map_or((0, out_h), |p| (p.a, p.b));
+        output.set_coverage(Coverage {
+            x: cov.x.clone(),
+            y: cov.y[a..b].to_vec(),
+        });
+    }
     let mut band_sums = None;
     let result = match &band {
         None => run(
@@ -363,12 +401,15 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         Some(plan) => {
             let mut window_job = pipe_job.clone();
             window_job.grid.in_h = (plan.wb - plan.wa) * s;
+            // The window's real rows: all of them, or up to the input's end.
+            window_job.padded_from =
+                padded_from.map(|(rw, rh)| (rw, rh.min(plan.wb * s) - plan.wa * s));
             let src = crate::pipeline::band::BandSource::new(
                 source_from(plan.wa * s),
                 plan.wa * s,
                 plan.wb * s,
                 (plan.a * s, plan.b * s),
-                w,
+                read_w,
                 channels.len(),
             );
             let owned_in = src.owned_sums();
@@ -392,6 +433,12 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
                 channels.len(),
                 hook,
             );
+            if let Some(cov) = &coverage {
+                sink.set_coverage(Coverage {
+                    x: cov.x.clone(),
+                    y: cov.y[plan.a..plan.b].to_vec(),
+                });
+            }
             let r = run(
                 src,
                 &mut sink,
@@ -466,8 +513,8 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         method: job.params.method.name().into(),
         supersample: s,
         supersample_assumed: job.supersample_assumed,
-        width: w,
-        height: h,
+        width: read_w,
+        height: read_h,
         out_width: w / s,
         out_height: h / s,
         channels,

@@ -270,8 +270,9 @@ struct FilterArgs {
     #[arg(long)]
     band: Option<String>,
     /// A size that is not a multiple of S: crop drops the last partial output
-    /// column and row (the samples beyond the last whole output pixel)
-    /// [default: refuse, naming the options].
+    /// column and row (the samples beyond the last whole output pixel); pad
+    /// keeps them as pixels of fewer samples, each kernel normalised over
+    /// what exists, energy exact [default: refuse, naming the options].
     #[arg(long)]
     edge: Option<String>,
     /// Relation 14 tolerance [default: 0.25 at S=3, 0.15 at S=4; 0.25*(3/S)^1.776 otherwise].

@@ -34,8 +34,13 @@ fuzz_target!(
         spp: Some(16),
         ..Default::default()
     };
-    // Sizes that are not a multiple of S are cropped, so more files filter.
-    job.edge = epfilt::job::Edge::Crop;
+    // Sizes that are not a multiple of S are cropped or padded, so more
+    // files filter.
+    job.edge = if pick & 0x40 == 0 {
+        epfilt::job::Edge::Crop
+    } else {
+        epfilt::job::Edge::Pad
+    };
     let _ = filter_file(&job, &|_, _| {});
     }
 );

@@ -100,6 +100,15 @@ impl Output {
         }
     }
 
+    /// `--edge pad`: the energy on disk weighs each pixel by its coverage
+    /// (`coverage.y` indexed by the file's rows).
+    pub fn set_coverage(&mut self, coverage: crate::pipeline::edge::Coverage) {
+        match self {
+            Output::Exr(o) => o.set_coverage(coverage),
+            Output::Rgbe(o) => o.set_coverage(coverage),
+        }
+    }
+
     /// Per channel, the sum of what the finished file holds.
     pub fn decoded_sums(&self) -> Result<Vec<f64>> {
         match self {

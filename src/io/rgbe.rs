@@ -466,6 +466,8 @@ pub struct RgbeOutput {
     comp: Vec<u8>,
     /// Sum per channel of the decoded stored values.
     sums: [crate::pipeline::ledger::CompensatedSum; 3],
+    /// `--edge pad`: the sums weigh pixels by this.
+    coverage: Option<crate::pipeline::edge::Coverage>,
 }
 
 impl RgbeOutput {
@@ -498,7 +500,13 @@ impl RgbeOutput {
             line: Vec::with_capacity(4 * w + 64),
             comp: Vec::with_capacity(w),
             sums: Default::default(),
+            coverage: None,
         })
+    }
+
+    /// `--edge pad`: weigh each pixel of the sums by its coverage.
+    pub fn set_coverage(&mut self, coverage: crate::pipeline::edge::Coverage) {
+        self.coverage = Some(coverage);
     }
 
     /// Per channel, the sum of the values the file holds (decoded).
@@ -540,8 +548,12 @@ impl Sink for RgbeOutput {
                         self.rows_done + r
                     ),
                 })?;
+                let weight = self
+                    .coverage
+                    .as_ref()
+                    .map_or(1.0, |cov| cov.at(x, self.rows_done + r));
                 for c in 0..3 {
-                    self.sums[c].add(channel(p[c], p[3]) as f64);
+                    self.sums[c].add(channel(p[c], p[3]) as f64 * weight);
                 }
                 self.pixels[x] = p;
             }

@@ -58,6 +58,8 @@ pub struct ExrOutput {
     note: Option<String>,
     /// A text attribute whose value is filled in (same length) at finish.
     fill: Option<(String, String)>,
+    /// `--edge pad`: the decoded sums weigh pixels by this.
+    coverage: Option<crate::pipeline::edge::Coverage>,
     tx: Option<crossbeam_channel::Sender<(usize, Chunk)>>,
     thread: Option<JoinHandle<Result<()>>>,
 }
@@ -310,6 +312,11 @@ impl ExrOutput {
         super::is_lossy(self.compression, self.precision)
     }
 
+    /// `--edge pad`: weigh each pixel by its coverage in [`Self::decoded_sums`].
+    pub fn set_coverage(&mut self, coverage: crate::pipeline::edge::Coverage) {
+        self.coverage = Some(coverage);
+    }
+
     /// Decode the finished (not yet committed) file and sum each channel,
     /// in the order of the channels given at creation: the energy on disk
     /// when the compression is lossy.
@@ -355,19 +362,26 @@ impl ExrOutput {
                     return Ok(());
                 }
                 let mut at = 0;
-                for _ in 0..rows {
+                let y0 = block.index.pixel_position.1;
+                let cov = self.coverage.as_ref();
+                let weight = |x: usize, y: usize| cov.map_or(1.0, |c| c.at(x, y));
+                for r in 0..rows {
                     for (c, ch) in header.channels.list.iter().enumerate() {
                         let sum = &mut parts[k][c];
                         match ch.sample_type {
                             SampleType::F16 => {
-                                for b in block.data[at..at + 2 * w].chunks_exact(2) {
-                                    sum.add(half::f16::from_ne_bytes([b[0], b[1]]).to_f64());
+                                for (x, b) in block.data[at..at + 2 * w].chunks_exact(2).enumerate()
+                                {
+                                    let v = half::f16::from_ne_bytes([b[0], b[1]]).to_f64();
+                                    sum.add(v * weight(x, y0 + r));
                                 }
                                 at += 2 * w;
                             }
                             SampleType::F32 => {
-                                for b in block.data[at..at + 4 * w].chunks_exact(4) {
-                                    sum.add(f32::from_ne_bytes([b[0], b[1], b[2], b[3]]) as f64);
+                                for (x, b) in block.data[at..at + 4 * w].chunks_exact(4).enumerate()
+                                {
+                                    let v = f32::from_ne_bytes([b[0], b[1], b[2], b[3]]) as f64;
+                                    sum.add(v * weight(x, y0 + r));
                                 }
                                 at += 4 * w;
                             }
@@ -501,6 +515,7 @@ impl ExrOutput {
             compression: header_compression,
             note: None,
             fill: None,
+            coverage: None,
             tx: Some(tx),
             thread: Some(thread),
         })

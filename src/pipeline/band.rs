@@ -7,6 +7,7 @@
 
 use std::sync::{Arc, Mutex};
 
+use super::edge::Coverage;
 use super::ledger::CompensatedSum;
 use super::{Precision, Sink, Source, Strip};
 use crate::error::Result;
@@ -142,6 +143,7 @@ pub struct BandSink<K> {
     nch: usize,
     sums: Vec<CompensatedSum>,
     hook: Option<FinishHook<K>>,
+    coverage: Option<Coverage>,
 }
 
 impl<K: Sink> BandSink<K> {
@@ -156,10 +158,18 @@ impl<K: Sink> BandSink<K> {
             nch,
             sums: vec![CompensatedSum::default(); nch],
             hook: Some(hook),
+            coverage: None,
         }
     }
 
-    /// Per channel, the sum of the (rounded) values passed on.
+    /// `--edge pad`: weigh the values passed on by their pixels' coverage
+    /// (`coverage.y` indexed from the band's first row).
+    pub fn set_coverage(&mut self, coverage: Coverage) {
+        self.coverage = Some(coverage);
+    }
+
+    /// Per channel, the sum of the (rounded) values passed on (weighed by
+    /// coverage with `--edge pad`).
     pub fn sums(&self) -> Vec<f64> {
         self.sums.iter().map(|s| s.value()).collect()
     }
@@ -177,10 +187,17 @@ impl<K: Sink> Sink for BandSink<K> {
         }
         let kept = &data[(from - y0) * self.row_len..(to - y0) * self.row_len];
         let w = self.row_len / self.nch.max(1);
-        for row in kept.chunks_exact(self.row_len) {
+        for (r, row) in kept.chunks_exact(self.row_len).enumerate() {
             for (c, sum) in self.sums.iter_mut().enumerate() {
-                for &v in &row[c * w..(c + 1) * w] {
-                    sum.add(v as f64);
+                let vals = &row[c * w..(c + 1) * w];
+                match &self.coverage {
+                    None => vals.iter().for_each(|&v| sum.add(v as f64)),
+                    Some(cov) => {
+                        let y = from - self.a + r;
+                        for (x, &v) in vals.iter().enumerate() {
+                            sum.add(v as f64 * cov.at(x, y));
+                        }
+                    }
                 }
             }
         }

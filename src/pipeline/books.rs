@@ -6,6 +6,7 @@
 
 use rayon::prelude::*;
 
+use super::edge::Coverage;
 use super::ledger::{Ledger, Sums};
 use super::stream::OutRows;
 use super::window::RowWindow;
@@ -21,6 +22,7 @@ pub struct Books {
     nonfinite: NonFinite,
     zeroed: Vec<u64>,
     first_nonfinite: Option<(usize, usize, usize)>,
+    coverage: Option<Coverage>,
 }
 
 impl Books {
@@ -34,7 +36,14 @@ impl Books {
             nonfinite: NonFinite::Error,
             zeroed: vec![0; inputs],
             first_nonfinite: None,
+            coverage: None,
         }
+    }
+
+    /// `--edge pad`: output values are divided by their pixel's coverage,
+    /// and the ledger weighs them by it.
+    pub fn set_coverage(&mut self, coverage: Coverage) {
+        self.coverage = Some(coverage);
     }
 
     /// Take the next strip: it must start at row `next` of `in_h` rows of
@@ -73,8 +82,14 @@ impl Books {
         w: usize,
         precision: Precision,
     ) -> Result<OutRows> {
-        let (out, raw, rounded, digests) =
-            finish_rows(based, acc, a, b, w, &self.names, precision)?;
+        let (out, raw, rounded, digests) = finish_rows(
+            based,
+            acc,
+            (a, b, w),
+            &self.names,
+            precision,
+            self.coverage.as_ref(),
+        )?;
         for d in digests {
             self.digest = fnv(self.digest, d);
         }
@@ -192,14 +207,17 @@ fn channel_name(names: &[String], c: usize) -> String {
 /// Output rows `a..b`: `based + acc` (or `based`), rounded to `precision`,
 /// with their raw and rounded sums and each row's digest of its unrounded
 /// values (fold them in row order: the result does not depend on batching).
+///
+/// With a [`Coverage`] (`--edge pad`), each value is divided by its pixel's
+/// coverage before rounding, and both sums weigh values by it: the raw sum
+/// is that of `based + acc`, as without padding.
 fn finish_rows(
     based: &RowWindow<f64>,
     acc: Option<&RowWindow<f64>>,
-    a: usize,
-    b: usize,
-    w: usize,
+    (a, b, w): (usize, usize, usize),
     names: &[String],
     precision: Precision,
+    coverage: Option<&Coverage>,
 ) -> Result<(OutRows, Sums, Sums, Vec<u64>)> {
     let nch = names.len();
     let mut data = vec![0.0f32; (b - a) * nch * w];
@@ -207,8 +225,8 @@ fn finish_rows(
         .par_chunks_mut(nch * w)
         .enumerate()
         .map_init(
-            || vec![0.0f64; w],
-            |tmp, (k, out)| {
+            || (vec![0.0f64; w], vec![0.0f64; w]),
+            |(tmp, weighted), (k, out)| {
                 let y = a + k;
                 let mut raw = Sums::new(nch);
                 let mut rounded = Sums::new(nch);
@@ -225,6 +243,14 @@ fn finish_rows(
                         None => tmp.copy_from_slice(base_row),
                     }
                     raw.add_slice(c, tmp);
+                    if let Some(cov) = coverage {
+                        for (x, v) in tmp.iter_mut().enumerate() {
+                            let share = cov.at(x, y);
+                            if share != 1.0 {
+                                *v /= share;
+                            }
+                        }
+                    }
                     let dst = &mut out[c * w..(c + 1) * w];
                     for (x, (d, &val)) in dst.iter_mut().zip(tmp.iter()).enumerate() {
                         let r = round(val, precision).ok_or_else(|| Error::Value {
@@ -243,7 +269,15 @@ fn finish_rows(
                         *d = r;
                         digest = fnv(digest, val.to_bits());
                     }
-                    rounded.add_slice(c, dst);
+                    match coverage {
+                        Some(cov) => {
+                            for (x, (t, &d)) in weighted.iter_mut().zip(dst.iter()).enumerate() {
+                                *t = d as f64 * cov.at(x, y);
+                            }
+                            rounded.add_slice(c, weighted);
+                        }
+                        None => rounded.add_slice(c, dst),
+                    }
                 }
                 Ok((raw, rounded, digest))
             },

@@ -19,7 +19,7 @@
 
 pub mod band;
 pub mod books;
-pub mod crop;
+pub mod edge;
 pub mod excess;
 pub mod ledger;
 pub mod order;
@@ -143,6 +143,10 @@ pub struct Job {
     pub aux: Vec<String>,
     /// Where the statistics are (indices into `channels` then `aux`).
     pub stats: Option<StatsLayout>,
+    /// `--edge pad`: the source holds this many samples (columns, rows), and
+    /// the grid is that size completed with zero samples to a multiple of S
+    /// ([`edge::Padded`], [`edge::Coverage`]).
+    pub padded_from: Option<(usize, usize)>,
 }
 
 impl Job {
@@ -154,6 +158,7 @@ impl Job {
             luminance,
             aux: Vec::new(),
             stats: None,
+            padded_from: None,
         }
     }
 
@@ -339,6 +344,13 @@ pub fn run<S: Source, K: Sink>(
     let pool = thread_pool(cfg.threads)?;
     let start = Instant::now();
     let mut streamer = Streamer::new(job, &params, cfg, sink.precision())?;
+    let real = job.padded_from.unwrap_or((job.grid.in_w, job.grid.in_h));
+    let source = edge::Padded::new(
+        source,
+        real,
+        (job.grid.in_w, job.grid.in_h),
+        job.strip_channels(),
+    );
     let total = job.grid.out_h();
     let cancelled = || {
         cfg.cancel
@@ -601,7 +613,8 @@ pub fn filter_in_memory(
     params: &FilterParams,
     cfg: &PipelineConfig,
 ) -> Result<(Vec<f32>, RunStats)> {
-    let row_len = job.strip_channels() * job.grid.in_w;
+    // Rows as the source holds them (`--edge pad` completes them in `run`).
+    let row_len = job.strip_channels() * job.padded_from.map_or(job.grid.in_w, |r| r.0);
     let mut params = params.clone();
     if params.method == Method::EpBox && params.ep_box.ltvis.is_none() {
         let source = MemorySource::new(data.clone(), row_len);

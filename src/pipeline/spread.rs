@@ -155,6 +155,9 @@ pub struct SpreadStage {
     /// ep-gauss at S = 1 on a file with per-pixel statistics: where they
     /// are in the input rows, and the carriers rule that reads them.
     pixel_stats: Option<(StatsLayout, Carriers)>,
+    /// `--edge pad`: real samples per output column and row (S where the
+    /// pixel is whole), so that `Ybox` is the mean of what exists.
+    real_counts: Option<(Vec<usize>, Vec<usize>)>,
 }
 
 impl SpreadStage {
@@ -221,7 +224,20 @@ impl SpreadStage {
             pixel_stats: stats
                 .filter(|_| params.method == Method::EpGauss && s == 1 && params.support > 0)
                 .map(|st| (st, Carriers::new(&params.ep_box))),
+            real_counts: None,
         }
+    }
+
+    /// `--edge pad`: the grid's first `real.0` x `real.1` samples are real,
+    /// the rest zeros.
+    pub fn set_real_size(&mut self, real: (usize, usize)) {
+        let s = self.grid.s;
+        let counts = |n: usize, n_real: usize| -> Vec<usize> {
+            (0..n)
+                .map(|p| n_real.saturating_sub(p * s).min(s))
+                .collect()
+        };
+        self.real_counts = Some((counts(self.w, real.0), counts(self.h, real.1)));
     }
 }
 
@@ -378,6 +394,7 @@ impl SpreadStage {
             self.ybox.push(0.0);
         }
         let lum = &self.lum;
+        let real_counts = self.real_counts.as_ref();
         let mut rows = self.ybox.range_mut(a, b);
         rows.par_iter_mut().enumerate().for_each(|(k, row)| {
             let y = a + k;
@@ -402,6 +419,15 @@ impl SpreadStage {
                 }
             }
             core.iter_mut().for_each(|v| *v *= inv);
+            // --edge pad: a partial pixel's mean is over its real samples.
+            if let Some((nx, ny)) = real_counts {
+                for (v, &n) in core.iter_mut().zip(nx) {
+                    let real = n * ny[y];
+                    if real != s * s {
+                        *v *= (s * s) as f64 / real as f64;
+                    }
+                }
+            }
             for i in 0..pad {
                 row[i] = row[pad + mirror(i as i64 - pad as i64, w)];
                 row[pad + w + i] = row[pad + mirror((w + i) as i64, w)];

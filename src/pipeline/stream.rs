@@ -18,6 +18,7 @@
 //! batching (each checks its own "rows final" condition).
 
 use super::books::Books;
+use super::edge::Coverage;
 use super::excess::{ExcessStage, ExcessStats};
 use super::order::OrderStage;
 use super::spread::{SpreadStage, SpreadStats};
@@ -145,6 +146,35 @@ impl Streamer {
                 params.method.name()
             )));
         }
+        // --edge pad: the grid completes the source's samples with zeros to
+        // a multiple of S; outputs are normalised by their coverage.
+        let coverage = match job.padded_from {
+            None => None,
+            Some((rw, rh)) => {
+                if rw > grid.in_w
+                    || rh > grid.in_h
+                    || rw == 0
+                    || rh == 0
+                    || grid.in_w - rw >= s
+                    || grid.in_h - rh >= s
+                {
+                    return Err(Error::Config(format!(
+                        "--edge pad: {rw}x{rh} samples do not complete to the {}x{} grid of S = {s}",
+                        grid.in_w, grid.in_h
+                    )));
+                }
+                if matches!(
+                    params.method,
+                    Method::Median | Method::AlphaTrim | Method::EpBox
+                ) {
+                    return Err(Error::Config(format!(
+                        "--edge pad is for the Gaussian family and box; {} takes whole S x S blocks (give --edge crop)",
+                        params.method.name()
+                    )));
+                }
+                Some(Coverage::of(params, grid, (rw, rh)))
+            }
+        };
         let stage: Box<dyn Stage> = match params.method {
             Method::EpBox => {
                 let stats = job.stats.clone().ok_or_else(|| {
@@ -185,18 +215,25 @@ impl Streamer {
                         "ep-gauss at S = 1 reads one or three variance channels and a sample count of at least 2".into(),
                     ));
                 }
-                Box::new(SpreadStage::new(
+                let mut stage = SpreadStage::new(
                     grid,
                     job.luminance.clone(),
                     params,
                     cfg.tile,
                     job.stats.clone(),
-                ))
+                );
+                if let Some(real) = job.padded_from {
+                    stage.set_real_size(real);
+                }
+                Box::new(stage)
             }
         };
         let nall = job.strip_channels();
         let mut books = Books::new(job.channels.clone(), nall);
         books.set_nonfinite(cfg.nonfinite);
+        if let Some(cov) = coverage {
+            books.set_coverage(cov);
+        }
         Ok(Streamer {
             stage,
             input: RowWindow::new(nall * grid.in_w),

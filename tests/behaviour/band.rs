@@ -116,6 +116,24 @@ fn bands_merge_into_the_file_of_one_run_for_every_method() {
             n,
             "ep-gauss S=1",
         );
+        // The carriers rule reads the variance, 2 rows further.
+        bands_equal_one_run(
+            d,
+            &p("px.exr"),
+            &["-s", "1", "--method", "ep-gauss"],
+            n,
+            "ep-gauss S=1 with variance",
+        );
+        // 90x69 samples at S = 4: a partial last column and row.
+        for m in ["ep-gauss", "gauss", "box"] {
+            bands_equal_one_run(
+                d,
+                &p("ss.exr"),
+                &["-s", "4", "--edge", "pad", "--method", m],
+                n,
+                m,
+            );
+        }
     }
     let tall = p("tall.exr");
     let tall_px = p("tallpx.exr");
@@ -136,6 +154,14 @@ fn bands_merge_into_the_file_of_one_run_for_every_method() {
         bands_equal_one_run(d, &tall, &["--method", "ep-gauss"], n, "ep-gauss, tall");
         bands_equal_one_run(d, &tall, &["--method", "gauss"], n, "gauss, tall");
         bands_equal_one_run(d, &tall_px, &["--method", "ep-box"], n, "ep-box, tall");
+        // 48x2100 at S = 8: the last output row holds 4 of 8 sample rows.
+        bands_equal_one_run(
+            d,
+            &tall,
+            &["-s", "8", "--edge", "pad", "--method", "ep-gauss"],
+            n,
+            "ep-gauss, tall, pad",
+        );
     }
 }
 

@@ -743,6 +743,135 @@ fn a_size_not_a_multiple_of_s_is_refused_with_the_options_or_cropped() {
         assert_eq!(json["out_height"], ch / s);
         assert!(json["warnings"][0].as_str().unwrap().contains("cropped"));
     }
-    let o = epfilt(&["filter", full_arg, out_arg, "--edge", "pad"]);
-    one_line_error(&o, USAGE, "not built yet");
+    let o = epfilt(&["filter", full_arg, out_arg, "--edge", "nope"]);
+    one_line_error(&o, USAGE, "crop or pad");
+}
+
+#[test]
+fn a_padded_edge_keeps_flat_fields_flat_and_energy_exact() {
+    // Pixels of fewer samples: each kernel normalised over what exists.
+    const FLAT_TOL: f32 = 1e-6; // f32 rounding of a divided sum near 1
+    const ENERGY_TOL: f64 = 1e-12;
+    let dir = tmpdir();
+    let d = dir.path();
+    let opts = (
+        Compression::ZIP16,
+        Blocks::ScanLines,
+        false,
+        LineOrder::Increasing,
+    );
+    let (w, h) = (32, 23);
+    let flat = Img::new(w, h, 3, |_, _, c| [0.5, 1.0, 2.0][c]);
+    let flat_path = d.join("flat.exr");
+    write_rgb(&flat_path, &flat, opts.0, opts.1, opts.2, opts.3);
+    let noisy = fireflies(w, h, 3, 0.05, 11);
+    let noisy_path = d.join("noisy.exr");
+    write_rgb(&noisy_path, &noisy, opts.0, opts.1, opts.2, opts.3);
+    let out = d.join("out.exr");
+    let rep = d.join("r.json");
+    for (s, method) in [
+        (3, "ep-gauss"),
+        (3, "gauss"),
+        (3, "box"),
+        (4, "ep-gauss"),
+        (2, "clamp"),
+    ] {
+        let s_arg = s.to_string();
+        let run = |input: &Path| {
+            let o = epfilt(&[
+                "filter",
+                input.to_str().unwrap(),
+                out.to_str().unwrap(),
+                "-s",
+                &s_arg,
+                "--method",
+                method,
+                "--edge",
+                "pad",
+                "--report",
+                rep.to_str().unwrap(),
+            ]);
+            assert!(o.status.success(), "{method} S={s}: {o:?}");
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert!(
+                err.contains("epfilt: warning: ") && err.contains("padded"),
+                "{err}"
+            );
+            (crate::exr_io::read_planar(&out), read_json(&rep))
+        };
+        let (img, json) = run(&flat_path);
+        assert_eq!(
+            (img.w, img.h),
+            (w.div_ceil(s), h.div_ceil(s)),
+            "{method} S={s}"
+        );
+        assert_eq!(
+            (json["width"].as_u64(), json["height"].as_u64()),
+            (Some(32), Some(23))
+        );
+        for y in 0..img.h {
+            for x in 0..img.w {
+                for c in 0..3 {
+                    let want = [0.5, 1.0, 2.0][c];
+                    assert!(
+                        (img.at(x, y, c) - want).abs() <= FLAT_TOL * want,
+                        "{method} S={s} ({x}, {y}) {c}: {}",
+                        img.at(x, y, c)
+                    );
+                }
+            }
+        }
+        let (_, json) = run(&noisy_path);
+        let sum = |c: usize| -> f64 {
+            (0..h)
+                .flat_map(|y| (0..w).map(move |x| (x, y)))
+                .map(|(x, y)| noisy.at(x, y, c) as f64)
+                .sum()
+        };
+        for c in 0..3 {
+            if method != "clamp" {
+                let e = json["energy_rel_error"][c].as_f64().unwrap();
+                assert!(e <= ENERGY_TOL, "{method} S={s}: {e:e}");
+            }
+            // The ledger's input is every sample; padded ones added nothing.
+            let e_in = json["energy_in"][c].as_f64().unwrap();
+            assert!(
+                (e_in - sum(c)).abs() <= ENERGY_TOL * sum(c),
+                "{e_in} vs {}",
+                sum(c)
+            );
+        }
+        if method == "box" {
+            // On disk: a partial box pixel is the mean of its k of S^2
+            // samples and stands for k / S^2 of a pixel.
+            let img = crate::exr_io::read_planar(&out);
+            for c in 0..3 {
+                let mut on_disk = 0.0;
+                for y in 0..img.h {
+                    for x in 0..img.w {
+                        let k = (w - x * s).min(s) * (h - y * s).min(s);
+                        on_disk += img.at(x, y, c) as f64 * k as f64;
+                    }
+                }
+                // f32 rounding of each stored mean: well under 1e-6.
+                assert!(
+                    (on_disk - sum(c)).abs() <= 1e-6 * sum(c),
+                    "box on disk {on_disk} vs {}",
+                    sum(c)
+                );
+            }
+        }
+    }
+    let o = epfilt(&[
+        "filter",
+        noisy_path.to_str().unwrap(),
+        out.to_str().unwrap(),
+        "-s",
+        "3",
+        "--method",
+        "median",
+        "--edge",
+        "pad",
+    ]);
+    one_line_error(&o, USAGE, "--edge crop");
 }
