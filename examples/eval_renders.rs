@@ -315,6 +315,7 @@ fn set(params: &mut FilterParams, key: &str, value: &str) -> Result<()> {
         "guard_confidence" => params.ep_box.guard_confidence = f()?,
         "support" => params.support = value.parse()?,
         "support_ratio" => params.support_ratio = f()?,
+        "coarse_from" => params.coarse_from = f()?,
         "guard" => params.ep_box.guard = epfilt::filter::ep_box::Guard::parse(value)?,
         other => bail!("--set {other}: unknown setting"),
     }

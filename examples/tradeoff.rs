@@ -33,9 +33,10 @@ const METHODS: [&str; 7] = [
     "median",
     "alpha-trim",
 ];
-const SETTINGS: [&str; 12] = [
+const SETTINGS: [&str; 13] = [
     "tolerance",
     "support",
+    "coarse_from",
     "carriers_fraction",
     "width_step",
     "max_radius",
@@ -85,6 +86,7 @@ fn defaults(method: &str) -> BTreeMap<&'static str, String> {
             set("max_radius", "16");
             set("cutoff", "3");
             set("support", "1");
+            set("coarse_from", "4");
         }
         "ep-box" => {
             set("d", "5");
@@ -116,6 +118,7 @@ fn grid(quick: bool) -> Vec<(&'static str, Vec<Axis>)> {
                     ("width_step", vec!["0.1", "0.4"]),
                     ("max_radius", vec!["4", "16"]),
                     ("support", vec!["0", "1"]),
+                    ("coarse_from", vec!["0", "4"]),
                 ],
             ),
             (
@@ -145,6 +148,7 @@ fn grid(quick: bool) -> Vec<(&'static str, Vec<Axis>)> {
                     ("max_radius", vec!["2", "4", "8", "16", "32", "64"]),
                     ("cutoff", vec!["2", "2.5", "3", "4"]),
                     ("support", vec!["0", "1", "2", "3"]),
+                    ("coarse_from", vec!["0", "2", "3", "4", "8"]),
                 ],
             ),
             (

@@ -701,7 +701,9 @@ fn plan_band(
         n,
         a,
         b,
-        wa: a.saturating_sub(m),
+        // Even, so the window's 2x coarse grid (--coarse-from) is the
+        // whole image's.
+        wa: a.saturating_sub(m) & !1,
         wb: (b + m).min(out_h),
         out_h,
     })

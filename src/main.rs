@@ -337,6 +337,11 @@ struct FilterArgs {
     /// Relative step of the ladder of widths the search picks from (its precision).
     #[arg(long, default_value_t = 0.1)]
     width_step: f64,
+    /// ep-gauss: spread widths of this radius (output pixels) and more on a 2x
+    /// coarser grid brought back with a tent: a quarter of the taps, energy
+    /// exact, no pixel given more than the full-resolution kernel would; 0 = off.
+    #[arg(long, default_value_t = epfilt::filter::DEFAULT_COARSE_FROM)]
+    coarse_from: f64,
     /// Output compression (none rle zips zip piz pxr24 b44 b44a dwaa dwab) [default: as input, but zip
     /// where the input's is lossy].
     #[arg(long)]
@@ -714,6 +719,7 @@ fn filter_job(a: &FilterArgs, cancel: Arc<AtomicBool>) -> Result<FilterJob> {
     }
     params.cutoff = a.cutoff;
     params.width_step = a.width_step;
+    params.coarse_from = a.coarse_from;
     if let Some(t) = a.tolerance {
         params.tolerance = t;
     }

@@ -41,7 +41,7 @@
 //! kernel: the test is not defined there.
 
 use super::ep_box;
-use super::kernel::Kernel1d;
+use super::kernel::{Coarse, Kernel1d};
 
 /// `D_ar` of Relation 14 for `t = x0 / xbar` and weight `w0`; infinite where
 /// the sample outweighs everything else (`1/w0 - t <= 0`).
@@ -93,6 +93,8 @@ pub struct Level {
     norm: f64,
     /// Weight of one super-sample of `p` in the average.
     pub w0: f64,
+    /// Its spread on the 2x coarser grid (`--coarse-from`), when on.
+    pub coarse: Option<Coarse>,
 }
 
 /// The box luminance about one pixel folded into a quadrant: entry
@@ -232,6 +234,7 @@ pub struct EpGauss {
     t_lo: f64,
     /// Rungs that double a width's area (its cost in the search).
     jump: usize,
+    cutoff: f64,
 }
 
 /// Rungs of relative step `width_step` that (at least) double `rho^2`.
@@ -283,6 +286,7 @@ impl EpGauss {
                     g1,
                     norm,
                     w0: 1.0 / (s2 * norm),
+                    coarse: None,
                 }
             })
             .collect();
@@ -300,7 +304,23 @@ impl EpGauss {
             t_hi,
             t_lo,
             jump: rungs_to_double_area(width_step),
+            cutoff,
         }
+    }
+
+    /// Spread the widths of radius `from` pixels and more on the 2x coarser
+    /// grid ([`Coarse`]; `0` or infinity: none). Level 0, the base kernel,
+    /// never is.
+    pub fn with_coarse(mut self, from: f64) -> Self {
+        let (s, cutoff) = (self.s, self.cutoff);
+        for lv in self.levels.iter_mut().skip(1) {
+            lv.coarse = if from > 0.0 && lv.rho >= from {
+                Coarse::new(s, lv.rho, cutoff)
+            } else {
+                None
+            };
+        }
+        self
     }
 
     /// The ladder; level 0 is the base kernel.

@@ -175,6 +175,133 @@ impl ColumnTaps {
     }
 }
 
+/// The 2x upsampling of the coarse grid: coarse cell `C` gives the fine
+/// indices `2C - 1 ..= 2C + 2` these weights (a tent, variance 0.75 px^2),
+/// reflected at the borders like every kernel: they sum to one.
+pub const TENT: [f64; 4] = [0.125, 0.375, 0.375, 0.125];
+
+/// A Gaussian of the ladder spread on the 2x coarser grid and brought back
+/// with [`TENT`] (`--coarse-from`): a quarter of the taps. The coarse
+/// kernel is a [`Kernel1d`] with `2S` phases (a sample's place in its coarse
+/// cell: the parity of its pixel and its sub-offset) and radius
+/// `sqrt(rho^2 - 1.5) / 2` coarse cells, so that with the tent's variance
+/// the spread has the fine Gaussian's (`rho^2 / 2`). It is cut `R - 2` fine
+/// pixels from the sample (`R` the fine kernel's reach), so with the tent it
+/// reaches no further than the fine kernel; and it is widened until no fine
+/// pixel receives more than the fine kernel gives any (Relation 14 bounds a
+/// spread sample's influence on every output pixel by that weight).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Coarse {
+    /// The coarse kernel, `2S` phases, in coarse cells.
+    pub kernel: Kernel1d,
+}
+
+impl Coarse {
+    /// The coarse form of `Kernel1d::gaussian(s, rho, cutoff)`; `None` when
+    /// the fine kernel is too narrow for one (reach under 4 pixels).
+    pub fn new(s: usize, rho: f64, cutoff: f64) -> Option<Self> {
+        let fine = Kernel1d::gaussian(s, rho, cutoff);
+        let reach = fine.reach();
+        if reach < 4 || rho * rho <= 1.5 {
+            return None;
+        }
+        let fine_max: Vec<f64> = (0..s)
+            .map(|a| fine.row(a).iter().cloned().fold(0.0, f64::max))
+            .collect();
+        // Cut a whole number of fine pixels short of the fine reach (less
+        // where a phase's weights would still reach past it), widened where
+        // a phase's peak would exceed the fine kernel's.
+        let mut cut = (reach - 2) as f64; // fine pixels
+        let mut rho_f = (rho * rho - 1.5).sqrt();
+        for _ in 0..400 {
+            if cut < 1.0 {
+                return None;
+            }
+            let kernel = Kernel1d::gaussian(2 * s, rho_f / 2.0, cut / rho_f);
+            let c = Coarse { kernel };
+            let (mut inside, mut below) = (true, true);
+            for (a, &peak) in fine_max.iter().enumerate() {
+                for p in 0..2 {
+                    let (lo, w) = c.effective(a, p);
+                    let first = w.iter().position(|&v| v > 0.0).unwrap_or(0) as i64 + lo;
+                    let last = w.iter().rposition(|&v| v > 0.0).unwrap_or(0) as i64 + lo;
+                    inside &= first >= -(reach as i64) && last <= reach as i64;
+                    below &= w.iter().all(|&v| v <= peak);
+                }
+            }
+            if !inside {
+                cut -= 0.5;
+            } else if !below {
+                rho_f *= 1.005;
+            } else {
+                return Some(c);
+            }
+        }
+        None
+    }
+
+    /// The fine weights, unreflected, of a sample at sub-offset `a` of a
+    /// pixel of parity `p`: `(first offset from the pixel, weights)`.
+    pub fn effective(&self, a: usize, p: usize) -> (i64, Vec<f64>) {
+        let s = self.kernel.s() / 2;
+        let rc = self.kernel.reach() as i64;
+        let row = self.kernel.row(p * s + a);
+        // Coarse cell of the sample: 0 (its pixel is 2*0 + p); cell d gives
+        // fine 2d - 1 ..= 2d + 2, offsets from the pixel minus p.
+        let lo = -2 * rc - 1 - p as i64;
+        let mut w = vec![0.0; (4 * rc + 4) as usize];
+        for (k, &g) in row.iter().enumerate() {
+            let d = k as i64 - rc;
+            for (t, &tw) in TENT.iter().enumerate() {
+                let off = 2 * d - 1 + t as i64 - p as i64;
+                w[(off - lo) as usize] += g * tw;
+            }
+        }
+        (lo, w)
+    }
+
+    /// Reflected coarse weights of a sample at sub-offset `a` of fine pixel
+    /// `px`, onto `0..n_coarse` coarse cells (see [`Kernel1d::fold`]).
+    #[inline]
+    pub fn fold(&self, a: usize, px: usize, n_coarse: usize, out: &mut Vec<f64>) -> usize {
+        let s = self.kernel.s() / 2;
+        self.kernel.fold((px % 2) * s + a, px / 2, n_coarse, out)
+    }
+}
+
+/// Gather taps of the tent upsampling: for each of `n_fine` fine indices,
+/// the coarse cells (of `n_fine.div_ceil(2)`) that give it weight, in
+/// increasing order, with the reflected [`TENT`] weights.
+#[derive(Clone, Debug)]
+pub struct TentTaps {
+    taps: Vec<Vec<(usize, f64)>>,
+}
+
+impl TentTaps {
+    /// Taps of `n_fine` fine indices.
+    pub fn new(n_fine: usize) -> Self {
+        let n_coarse = n_fine.div_ceil(2);
+        let mut taps = vec![Vec::new(); n_fine];
+        for c in 0..n_coarse {
+            for (t, &tw) in TENT.iter().enumerate() {
+                let f = mirror(2 * c as i64 - 1 + t as i64, n_fine);
+                let list: &mut Vec<(usize, f64)> = &mut taps[f];
+                match list.last_mut() {
+                    Some(last) if last.0 == c => last.1 += tw,
+                    _ => list.push((c, tw)),
+                }
+            }
+        }
+        TentTaps { taps }
+    }
+
+    /// The coarse cells and weights of fine index `f`.
+    #[inline]
+    pub fn of(&self, f: usize) -> &[(usize, f64)] {
+        &self.taps[f]
+    }
+}
+
 #[cfg(test)]
 #[allow(clippy::needless_range_loop)] // index loops mirror the maths
 mod tests {
@@ -183,6 +310,65 @@ mod tests {
     /// Sum of weights is one up to a few rounding steps of f64 (2^-52 each, at
     /// most ~100 taps): 1e-13 leaves a wide margin.
     const SUM_TOL: f64 = 1e-13;
+
+    #[test]
+    fn coarse_spreads_keep_the_sum_the_reach_and_the_peak() {
+        for s in 1..=4 {
+            // The default ladder (0.6 * 1.1^k, to the cap) and a few more.
+            let ladder = (0..30).map(|k| 0.6 * 1.1f64.powi(k)).filter(|&r| r < 16.0);
+            for rho in ladder.chain([1.5, 2.0, 3.0, 4.7, 8.0, 16.0]) {
+                let fine = Kernel1d::gaussian(s, rho, 3.0);
+                let Some(c) = Coarse::new(s, rho, 3.0) else {
+                    assert!(rho < 3.0, "s={s} rho={rho}: no coarse form");
+                    continue;
+                };
+                let r = fine.reach() as i64;
+                for a in 0..s {
+                    let fine_max = fine.row(a).iter().cloned().fold(0.0, f64::max);
+                    for p in 0..2 {
+                        let (lo, w) = c.effective(a, p);
+                        let sum: f64 = w.iter().sum();
+                        assert!((sum - 1.0).abs() < SUM_TOL, "s={s} rho={rho}: {sum}");
+                        let first = lo + w.iter().position(|&v| v > 0.0).unwrap() as i64;
+                        let last = lo + w.iter().rposition(|&v| v > 0.0).unwrap() as i64;
+                        assert!(
+                            first >= -r && last <= r,
+                            "s={s} rho={rho}: {first}..{last} vs {r}"
+                        );
+                        let max = w.iter().cloned().fold(0.0, f64::max);
+                        assert!(max <= fine_max, "s={s} rho={rho} a={a} p={p}");
+                        // Close to the fine kernel where it is used (from
+                        // 3 px: the tent is small against it).
+                        if rho >= 3.0 {
+                            assert!(
+                                max >= 0.95 * fine_max,
+                                "s={s} rho={rho}: {max} vs {fine_max}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn tent_taps_give_every_coarse_cell_a_total_weight_of_one() {
+        for n in 1..12 {
+            let t = TentTaps::new(n);
+            let mut per_cell = vec![0.0; n.div_ceil(2)];
+            for f in 0..n {
+                let mut last = None;
+                for &(c, w) in t.of(f) {
+                    assert!(last.is_none_or(|l| l < c), "cells in order");
+                    last = Some(c);
+                    per_cell[c] += w;
+                }
+            }
+            for (c, &w) in per_cell.iter().enumerate() {
+                assert!((w - 1.0).abs() < SUM_TOL, "n={n} cell {c}: {w}");
+            }
+        }
+    }
 
     #[test]
     fn rows_sum_to_one() {

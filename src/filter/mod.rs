@@ -136,6 +136,10 @@ pub fn halo(p: &FilterParams) -> crate::geometry::Halo {
     }
 }
 
+/// Default `--coarse-from`: widths from 4 output pixels are spread on the
+/// coarser grid (`docs/tradeoff.md` measures the switch).
+pub const DEFAULT_COARSE_FROM: f64 = 4.0;
+
 /// Filter settings as asked for; [`FilterParams::validated`] checks them
 /// once into [`ValidParams`], which is what the pipeline takes.
 #[derive(Clone, Debug, PartialEq)]
@@ -165,6 +169,9 @@ pub struct FilterParams {
     pub support: usize,
     /// ep-gauss: neighbours support a sample when within this factor of it.
     pub support_ratio: f64,
+    /// ep-gauss: widths of this radius (output pixels) and more are spread
+    /// on the 2x coarser grid ([`kernel::Coarse`]); 0: none.
+    pub coarse_from: f64,
 }
 
 impl FilterParams {
@@ -185,6 +192,7 @@ impl FilterParams {
                 ("width_step", json!(self.width_step)),
                 ("support", json!(self.support)),
                 ("support_ratio", json!(self.support_ratio)),
+                ("coarse_from", json!(self.coarse_from)),
             ]),
             Method::Gauss => v.extend([
                 ("radius", json!(self.radius)),
@@ -237,6 +245,7 @@ impl FilterParams {
             alpha: 0.25,
             support: 1,
             support_ratio: 16.0,
+            coarse_from: DEFAULT_COARSE_FROM,
         }
     }
 
@@ -299,6 +308,12 @@ impl FilterParams {
             return bad(format!(
                 "--support-ratio must be a number >= 1, got {}",
                 self.support_ratio
+            ));
+        }
+        if !(self.coarse_from.is_finite() && self.coarse_from >= 0.0) {
+            return bad(format!(
+                "--coarse-from must be a radius >= 0 output pixels (0: off), got {}",
+                self.coarse_from
             ));
         }
         if !(0.0..0.5).contains(&self.alpha) {

@@ -280,9 +280,17 @@ pub fn estimate_bytes(
         + out_row.saturating_mul(2 * lag)
         + (ow + 2 * halo.search_reach as u64)
             .saturating_mul(8 * (2 * halo.search_reach as u64 + strip / s + 4));
+    // The coarse grid: accumulator rows of half the width over half the
+    // lag, and a few rows upsampled across.
+    let coarse = if params.method == Method::EpGauss && params.coarse_from > 0.0 {
+        out_row.saturating_mul(lag / 4 + 8)
+    } else {
+        0
+    };
     let strips = in_row.saturating_mul(strip).saturating_mul(4);
     let blocks = block_bytes.saturating_mul(3 * 4);
     windows
+        .saturating_add(coarse)
         .saturating_add(strips)
         .saturating_add(blocks)
         .saturating_add(out_row.saturating_mul(16 * 4))

@@ -34,7 +34,7 @@ use super::stream::{MethodStats, Stage, WindowUse, MAX_CHANNELS};
 use super::window::RowWindow;
 use crate::filter::ep_box::{se2, Spp, StatsLayout, VarianceKind, COMPACT_RATIO};
 use crate::filter::ep_gauss::{Carriers, EpGauss, Folded, LumRows, Support, COMPACT_REACH};
-use crate::filter::kernel::{ColumnTaps, Kernel1d};
+use crate::filter::kernel::{ColumnTaps, Kernel1d, TentTaps};
 use crate::filter::{Method, ValidParams};
 use crate::geometry::{mirror, Grid, Halo};
 
@@ -123,8 +123,10 @@ pub struct SpreadStats {
     /// weights applied.
     pub search_cost: u64,
     /// Weights the spreading wrote, per channel (the reflected kernels'
-    /// areas).
+    /// areas, on the coarse grid for the coarse ones).
     pub spread_taps: u64,
+    /// Samples spread on the 2x coarser grid (`--coarse-from`).
+    pub coarse: u64,
 }
 
 /// The Gaussian family's state between strips.
@@ -158,6 +160,17 @@ pub struct SpreadStage {
     /// `--edge pad`: real samples per output column and row (S where the
     /// pixel is whole), so that `Ybox` is the mean of what exists.
     real_counts: Option<(Vec<usize>, Vec<usize>)>,
+    /// The coarse grid (`--coarse-from`): its accumulator (`[c][X]` rows of
+    /// `ceil(w / 2)` cells), its rows upsampled across (`[c][x]`), the tent's
+    /// taps, its arena, whether anything was spread on it, and the output
+    /// rows it has been added to.
+    cacc: RowWindow<f64>,
+    hup: RowWindow<f64>,
+    tent_x: TentTaps,
+    tent_y: TentTaps,
+    carena: Vec<f64>,
+    coarse_used: bool,
+    up_done: usize,
 }
 
 impl SpreadStage {
@@ -188,7 +201,11 @@ impl SpreadStage {
                 params.tolerance,
                 params.width_step,
             )
+            .with_coarse(params.coarse_from)
         });
+        let coarse = ep
+            .as_ref()
+            .is_some_and(|e| e.levels().iter().any(|l| l.coarse.is_some()));
         let halo = Halo {
             xbar_reach: ep.as_ref().map_or(0, |e| e.xbar_reach()),
             base_reach: base.reach(),
@@ -225,6 +242,13 @@ impl SpreadStage {
                 .filter(|_| params.method == Method::EpGauss && s == 1 && params.support > 0)
                 .map(|st| (st, Carriers::new(&params.ep_box))),
             real_counts: None,
+            cacc: RowWindow::new(nch * w.div_ceil(2)),
+            hup: RowWindow::new(nch * w),
+            tent_x: TentTaps::new(if coarse { w } else { 0 }),
+            tent_y: TentTaps::new(if coarse { h } else { 0 }),
+            carena: Vec::new(),
+            coarse_used: false,
+            up_done: 0,
         }
     }
 
@@ -276,6 +300,10 @@ impl Stage for SpreadStage {
     fn release(&mut self, y: usize) {
         self.based.evict_below(y);
         self.acc.evict_below(y);
+        // Coarse row C reaches fine rows 2C - 1 ..= 2C + 2.
+        let c = y.saturating_sub(2) / 2;
+        self.cacc.evict_below(c);
+        self.hup.evict_below(c);
     }
 
     fn stats(&self) -> MethodStats {
@@ -306,6 +334,16 @@ impl Stage for SpreadStage {
             WindowUse {
                 name: "accumulator",
                 rows: self.acc.high_water(),
+                row_bytes: nch * w * 8,
+            },
+            WindowUse {
+                name: "coarse accumulator",
+                rows: self.cacc.high_water(),
+                row_bytes: nch * w.div_ceil(2) * 8,
+            },
+            WindowUse {
+                name: "coarse rows upsampled",
+                rows: self.hup.high_water(),
                 row_bytes: nch * w * 8,
             },
         ]
@@ -376,6 +414,14 @@ impl SpreadStage {
             _ => h,
         };
         let out_target = self.based.end().min(by_spread);
+        // The coarse grid's share of final rows (none before it was used:
+        // no coarse spread reaches a row that was final before it).
+        if out_target > self.up_done {
+            if self.coarse_used {
+                self.upsample(self.up_done, out_target);
+            }
+            self.up_done = out_target;
+        }
         let keep = if self.ep.is_some() {
             self.cls_done
                 .saturating_sub(self.halo.xbar_reach)
@@ -650,6 +696,12 @@ impl SpreadStage {
         while self.acc.end() < need {
             self.acc.push(-0.0);
         }
+        // Coarse rows reaching fine rows below `need` (and a spare).
+        let (ncw, nch_rows) = (w.div_ceil(2), h.div_ceil(2));
+        while self.cacc.end() < (need.div_ceil(2) + 1).min(nch_rows) {
+            self.cacc.push(0.0);
+        }
+        let mut cspreads = Vec::new();
         // Spread in chunks of the (row-major) batch: the folded weights of one
         // chunk at a time bound the arena, and the order of contributions to
         // every pixel stays the batch order.
@@ -658,39 +710,131 @@ impl SpreadStage {
         for c0 in (0..split).step_by(SPREAD_CHUNK) {
             // Reflect each sample's kernel once, in order.
             self.arena.clear();
+            self.carena.clear();
             spreads.clear();
+            cspreads.clear();
             for n in &self.pending[c0..(c0 + SPREAD_CHUNK).min(split)] {
                 self.stats.noisy += 1;
                 self.stats.spread += (n.level > 0) as u64;
                 self.stats.capped += n.capped as u64;
-                let k = &ep.levels()[n.level as usize].kernel;
+                let level = &ep.levels()[n.level as usize];
                 let (i, j) = (n.i as usize, n.j as usize);
-                let off = self.arena.len();
-                let xs = k.fold(i % s, i / s, w, &mut tmp);
-                let xl = tmp.len();
-                self.arena.extend_from_slice(&tmp);
-                let ys = k.fold(j % s, j / s, h, &mut tmp);
-                let yl = tmp.len();
-                self.arena.extend_from_slice(&tmp);
-                self.stats.spread_taps += (xl * yl) as u64;
                 let mut v = [0.0; MAX_CHANNELS];
                 for ((d, &x), &l) in v.iter_mut().zip(&n.v).zip(&self.lum) {
                     if l != 0.0 {
                         *d = x as f64 * self.inv_s2;
                     }
                 }
-                spreads.push(Spread {
-                    xs,
-                    xl,
-                    ys,
-                    yl,
-                    off,
-                    v,
-                });
+                // Wide kernels on the coarse grid, the others at full
+                // resolution; each list keeps the batch order.
+                let (arena, list) = match &level.coarse {
+                    Some(c) => {
+                        self.stats.coarse += 1;
+                        let off = self.carena.len();
+                        let xs = c.fold(i % s, i / s, ncw, &mut tmp);
+                        let xl = tmp.len();
+                        self.carena.extend_from_slice(&tmp);
+                        let ys = c.fold(j % s, j / s, nch_rows, &mut tmp);
+                        let yl = tmp.len();
+                        self.carena.extend_from_slice(&tmp);
+                        (
+                            Spread {
+                                xs,
+                                xl,
+                                ys,
+                                yl,
+                                off,
+                                v,
+                            },
+                            &mut cspreads,
+                        )
+                    }
+                    None => {
+                        let k = &level.kernel;
+                        let off = self.arena.len();
+                        let xs = k.fold(i % s, i / s, w, &mut tmp);
+                        let xl = tmp.len();
+                        self.arena.extend_from_slice(&tmp);
+                        let ys = k.fold(j % s, j / s, h, &mut tmp);
+                        let yl = tmp.len();
+                        self.arena.extend_from_slice(&tmp);
+                        (
+                            Spread {
+                                xs,
+                                xl,
+                                ys,
+                                yl,
+                                off,
+                                v,
+                            },
+                            &mut spreads,
+                        )
+                    }
+                };
+                self.stats.spread_taps += (arena.xl * arena.yl) as u64;
+                list.push(arena);
             }
-            scatter(&mut self.acc, &self.arena, &spreads, w, nch, self.tile);
+            if !spreads.is_empty() {
+                scatter(&mut self.acc, &self.arena, &spreads, w, nch, self.tile);
+            }
+            if !cspreads.is_empty() {
+                self.coarse_used = true;
+                let tile = (self.tile / 2).max(1);
+                scatter(&mut self.cacc, &self.carena, &cspreads, ncw, nch, tile);
+            }
         }
         self.pending.drain(..split);
+    }
+
+    /// Add the coarse grid's share to the accumulator's final rows `a..b`:
+    /// each coarse row upsampled across once (when first needed: final, as
+    /// every coarse row a final row reads is), then down, in tap order.
+    fn upsample(&mut self, a: usize, b: usize) {
+        let (w, nch) = (self.w, self.nch);
+        let ncw = w.div_ceil(2);
+        let last = (a..b)
+            .filter_map(|y| self.tent_y.of(y).last().map(|t| t.0))
+            .max()
+            .unwrap_or(0);
+        while self.cacc.end() <= last {
+            self.cacc.push(0.0);
+        }
+        let from = self.hup.end();
+        if last >= from {
+            for _ in from..=last {
+                self.hup.push_stale(0.0); // every value is written below
+            }
+            let (cacc, tent_x) = (&self.cacc, &self.tent_x);
+            let mut rows = self.hup.range_mut(from, last + 1);
+            rows.par_iter_mut().enumerate().for_each(|(k, row)| {
+                let src = cacc.get(from + k);
+                for c in 0..nch {
+                    let src = &src[c * ncw..(c + 1) * ncw];
+                    for (x, d) in row[c * w..(c + 1) * w].iter_mut().enumerate() {
+                        let mut u = 0.0;
+                        for &(cx, t) in tent_x.of(x) {
+                            u += t * src[cx];
+                        }
+                        *d = u;
+                    }
+                }
+            });
+        }
+        let (hup, tent_y) = (&self.hup, &self.tent_y);
+        let mut rows = self.acc.range_mut(a, b);
+        rows.par_iter_mut().enumerate().for_each(|(k, row)| {
+            let taps = tent_y.of(a + k);
+            for (x, d) in row.iter_mut().enumerate() {
+                let mut u = 0.0;
+                for &(cy, t) in taps {
+                    u += t * hup.get(cy)[x];
+                }
+                // Untouched pixels keep their bits (and an input's -0.0).
+                if u != 0.0 {
+                    *d += u;
+                }
+            }
+        });
     }
 
     /// The vertical gather of the base kernel for output rows `a..b`:

@@ -360,6 +360,40 @@ pub fn reference(img: &Img, s: usize, p: &FilterParams, lum: &[f64]) -> (Vec<f64
                     }
                 }
             }
+            // Widths from --coarse-from: spread on the 2x coarser grid
+            // (reflected there), brought back with the tent (reflected at
+            // the image's edges).
+            let coarse = (p.method == Method::EpGauss
+                && rho > p.radius
+                && p.coarse_from > 0.0
+                && rho >= p.coarse_from)
+                .then(|| epfilt::filter::kernel::Coarse::new(s, rho, p.cutoff))
+                .flatten();
+            if let Some(k) = coarse {
+                let axis = |pix: usize, a: usize, n: usize| -> Vec<f64> {
+                    let nc = n.div_ceil(2);
+                    let row = k.kernel.row((pix % 2) * s + a);
+                    let rc = k.kernel.reach() as i64;
+                    let mut fine = vec![0.0; n];
+                    for (kk, &g) in row.iter().enumerate() {
+                        let cell = mirror((pix / 2) as i64 + kk as i64 - rc, nc) as i64;
+                        for (t, &tw) in epfilt::filter::kernel::TENT.iter().enumerate() {
+                            fine[mirror(2 * cell - 1 + t as i64, n)] += g * tw;
+                        }
+                    }
+                    fine
+                };
+                let (fx, fy) = (axis(px, i % s, w), axis(py, j % s, h));
+                for (ty, &a) in fy.iter().enumerate() {
+                    for (tx, &b) in fx.iter().enumerate() {
+                        for c in 0..img.nch {
+                            out[(ty * img.nch + c) * w + tx] +=
+                                img.at(i, j, c) as f64 * a * b / (s * s) as f64;
+                        }
+                    }
+                }
+                continue;
+            }
             let (rx, wx) = weights(i % s, rho);
             let (ry, wy) = weights(j % s, rho);
             for (ky, &a) in wy.iter().enumerate() {
