@@ -727,52 +727,32 @@ impl SpreadStage {
                 }
                 // Wide kernels on the coarse grid, the others at full
                 // resolution; each list keeps the batch order.
-                let (arena, list) = match &level.coarse {
+                let (sp, list) = match &level.coarse {
                     Some(c) => {
                         self.stats.coarse += 1;
-                        let off = self.carena.len();
-                        let xs = c.fold(i % s, i / s, ncw, &mut tmp);
-                        let xl = tmp.len();
-                        self.carena.extend_from_slice(&tmp);
-                        let ys = c.fold(j % s, j / s, nch_rows, &mut tmp);
-                        let yl = tmp.len();
-                        self.carena.extend_from_slice(&tmp);
-                        (
-                            Spread {
-                                xs,
-                                xl,
-                                ys,
-                                yl,
-                                off,
-                                v,
-                            },
-                            &mut cspreads,
-                        )
+                        let sp = fold_both(&mut self.carena, &mut tmp, v, |across, t| {
+                            if across {
+                                c.fold(i % s, i / s, ncw, t)
+                            } else {
+                                c.fold(j % s, j / s, nch_rows, t)
+                            }
+                        });
+                        (sp, &mut cspreads)
                     }
                     None => {
                         let k = &level.kernel;
-                        let off = self.arena.len();
-                        let xs = k.fold(i % s, i / s, w, &mut tmp);
-                        let xl = tmp.len();
-                        self.arena.extend_from_slice(&tmp);
-                        let ys = k.fold(j % s, j / s, h, &mut tmp);
-                        let yl = tmp.len();
-                        self.arena.extend_from_slice(&tmp);
-                        (
-                            Spread {
-                                xs,
-                                xl,
-                                ys,
-                                yl,
-                                off,
-                                v,
-                            },
-                            &mut spreads,
-                        )
+                        let sp = fold_both(&mut self.arena, &mut tmp, v, |across, t| {
+                            if across {
+                                k.fold(i % s, i / s, w, t)
+                            } else {
+                                k.fold(j % s, j / s, h, t)
+                            }
+                        });
+                        (sp, &mut spreads)
                     }
                 };
-                self.stats.spread_taps += (arena.xl * arena.yl) as u64;
-                list.push(arena);
+                self.stats.spread_taps += (sp.xl * sp.yl) as u64;
+                list.push(sp);
             }
             if !spreads.is_empty() {
                 scatter(&mut self.acc, &self.arena, &spreads, w, nch, self.tile);
@@ -865,6 +845,31 @@ impl SpreadStage {
                     dst.iter_mut().for_each(|v| *v *= inv);
                 }
             });
+    }
+}
+
+/// A sample's kernel reflected across (`fold(true, ..)`) and down
+/// (`fold(false, ..)`), appended to `arena`: the [`Spread`] that points at it.
+fn fold_both(
+    arena: &mut Vec<f64>,
+    tmp: &mut Vec<f64>,
+    v: [f64; MAX_CHANNELS],
+    fold: impl Fn(bool, &mut Vec<f64>) -> usize,
+) -> Spread {
+    let off = arena.len();
+    let xs = fold(true, tmp);
+    let xl = tmp.len();
+    arena.extend_from_slice(tmp);
+    let ys = fold(false, tmp);
+    let yl = tmp.len();
+    arena.extend_from_slice(tmp);
+    Spread {
+        xs,
+        xl,
+        ys,
+        yl,
+        off,
+        v,
     }
 }
 
