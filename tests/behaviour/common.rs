@@ -439,3 +439,16 @@ pub fn read_json(path: &std::path::Path) -> serde_json::Value {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     serde_json::from_str(&text).expect("JSON report")
 }
+
+/// The f32 output hides differences in the last bits of the f64 sums behind
+/// rounding (and the compensated ledger is too exact to notice them): compare
+/// the digest of the unrounded values too, and the ledger's bits.
+pub fn ledger_bits(stats: &epfilt::RunStats) -> Vec<u64> {
+    let mut v: Vec<u64> = stats
+        .ledger
+        .iter()
+        .map(|l| l.energy_out.to_bits())
+        .collect();
+    v.push(stats.digest);
+    v
+}

@@ -219,3 +219,82 @@ fn alpha_stays_coverage_under_every_method() {
         }
     }
 }
+
+#[test]
+fn wide_fireflies_on_the_coarse_grid_keep_energy_influence_and_bits() {
+    // Fireflies of 1e3..1e5 in every corner, on every edge and inside, on
+    // odd and even sizes: their widths go to the coarse grid (--coarse-from),
+    // which reflects at the borders like the full-resolution kernels.
+    const INFLUENCE_SLACK: f64 = 1.10; // as for the lone firefly above
+    for (s, w, h) in [(3, 41, 30), (2, 36, 47), (4, 25, 25)] {
+        let (iw, ih) = (w * s, h * s);
+        let mut img = Img::new(iw, ih, 3, |x, y, c| {
+            0.5 + 0.01 * ((x + 3 * y + c) % 7) as f32
+        });
+        let spots = [
+            (0, 0),
+            (iw - 1, 0),
+            (0, ih - 1),
+            (iw - 1, ih - 1),
+            (iw / 2, 0),
+            (0, ih / 2),
+            (iw - 1, ih / 3),
+            (iw / 3, ih - 1),
+            (iw / 2 + 1, ih / 2),
+        ];
+        for (k, &(x, y)) in spots.iter().enumerate() {
+            for c in 0..3 {
+                img.set(x, y, c, [1e3, 1e4, 1e5][k % 3] * (1.0 + c as f32 * 0.1));
+            }
+        }
+        let p = params(Method::EpGauss, s);
+        let (a, stats) = run(&img, s, &p, &PipelineConfig::default());
+        assert!(stats.eg().coarse >= 3, "S={s}: {:?}", stats.eg());
+        for l in &stats.ledger {
+            assert!(
+                l.rel_error <= ENERGY_TOL,
+                "S={s} {}: {:e}",
+                l.channel,
+                l.rel_error
+            );
+        }
+        for (tile, strip, threads) in [(1, 1, 1), (5, 7, 2), (13, 3, 3)] {
+            let (b, sb) = run(&img, s, &p, &cfg(tile, strip, threads));
+            assert_eq!(bits(&a), bits(&b), "S={s} cut {tile}/{strip}/{threads}");
+            assert_eq!(ledger_bits(&stats), ledger_bits(&sb));
+        }
+        // Off, the same samples are spread at full resolution: the same
+        // energy, and no output pixel differs by more than the kernels do.
+        let mut off = p.clone();
+        off.coarse_from = 0.0;
+        let (c, so) = run(&img, s, &off, &PipelineConfig::default());
+        assert_eq!(so.eg().coarse, 0);
+        assert_eq!(so.eg().spread, stats.eg().spread);
+        let total = |i: &Img| i.data.iter().map(|&v| v as f64).sum::<f64>();
+        assert!((total(&a) - total(&c)).abs() <= 1e-6 * total(&c));
+    }
+    // Relation 14 with the coarse grid: one firefly whose width is on it
+    // (radius about 7 px at S = 3) influences no output pixel beyond the
+    // tolerance, as at full resolution.
+    let s = 3;
+    let mut img = Img::new(60 * s, 60 * s, 1, |_, _, _| 1.0);
+    let (i, j) = (30 * s + 1, 30 * s);
+    img.set(i, j, 0, 300.0);
+    let p = params(Method::EpGauss, s);
+    let (with, stats) = run(&img, s, &p, &PipelineConfig::default());
+    assert_eq!(stats.eg().coarse, 1, "{:?}", stats.eg());
+    let mut clean = img.clone();
+    clean.set(i, j, 0, 0.0);
+    let (without, _) = run(&clean, s, &p, &PipelineConfig::default());
+    let s2 = (s * s) as f64;
+    let mut worst: f64 = 0.0;
+    for k in 0..with.data.len() {
+        let xbar = with.data[k] as f64;
+        let c = xbar - without.data[k] as f64;
+        let wgt = c * s2 / 300.0;
+        let xk = (xbar - c) * s2 / (s2 - wgt);
+        worst = worst.max((xbar - xk).abs() / xk);
+    }
+    assert!(worst <= p.tolerance * INFLUENCE_SLACK, "influence {worst}");
+    assert!(worst > p.tolerance * 0.5, "spread far too wide: {worst}");
+}

@@ -4,19 +4,6 @@ use crate::common::*;
 use epfilt::{filter_in_memory, Method, PipelineConfig};
 use proptest::prelude::*;
 
-/// The f32 output hides differences in the last bits of the f64 sums behind
-/// rounding (and the compensated ledger is too exact to notice them): compare
-/// the digest of the unrounded values too, and the ledger's bits.
-fn ledger_bits(stats: &epfilt::RunStats) -> Vec<u64> {
-    let mut v: Vec<u64> = stats
-        .ledger
-        .iter()
-        .map(|l| l.energy_out.to_bits())
-        .collect();
-    v.push(stats.digest);
-    v
-}
-
 /// Every method, through every cut of `common::CUTS`: one answer.
 #[test]
 fn every_method_gives_the_same_bits_for_every_cut() {
