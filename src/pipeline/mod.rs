@@ -269,10 +269,13 @@ pub fn estimate_bytes(
         (job.grid.in_w / job.grid.s.max(1)) as u64,
     );
     let strip = match cfg.strip_rows {
-        0 => auto_strip_rows(job.grid.in_w.max(1), job.channels.len().max(1)),
+        0 => auto_strip_rows(job.grid.in_w.max(1), job.strip_channels().max(1)),
         n => n,
     } as u64;
-    let in_row = w.saturating_mul(nch).saturating_mul(4);
+    // Input rows carry the statistics too (ep-gauss at S = 1 reads them).
+    let in_row = w
+        .saturating_mul(job.strip_channels() as u64)
+        .saturating_mul(4);
     let out_row = ow.saturating_mul(nch).saturating_mul(8);
     let lag = (halo.lag() + halo.spread_reach) as u64 + strip / s + 4;
     let windows = in_row.saturating_mul(s * (halo.xbar_reach as u64 + 1) + strip)
