@@ -714,37 +714,50 @@ fn a_size_not_a_multiple_of_s_is_refused_with_the_options_or_cropped() {
         ]);
         assert!(o.status.success(), "{o:?}");
         let rep = d.join("r.json");
-        let o = epfilt(&[
-            "filter",
-            full_arg,
-            out_arg,
-            "-s",
-            &s_arg,
-            "--method",
-            method,
-            "--edge",
-            "crop",
-            "--report",
-            rep.to_str().unwrap(),
-        ]);
-        assert!(o.status.success(), "{o:?}");
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert!(
-            err.contains("epfilt: warning: ") && err.contains("cropped"),
-            "{err}"
-        );
+        filter_at_edge(&full_path, &out, &rep, s, method, "crop", "cropped");
         assert!(
             std::fs::read(&out).unwrap() == std::fs::read(&expected).unwrap(),
             "{method} S={s}: cropping differs from filtering the cropped image"
         );
-        let json: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+        let json = read_json(&rep);
         assert_eq!(json["out_width"], cw / s);
         assert_eq!(json["out_height"], ch / s);
         assert!(json["warnings"][0].as_str().unwrap().contains("cropped"));
     }
     let o = epfilt(&["filter", full_arg, out_arg, "--edge", "nope"]);
     one_line_error(&o, USAGE, "crop or pad");
+}
+
+/// `filter` with `--edge`, a report, and the warning that names `word`.
+fn filter_at_edge(
+    input: &Path,
+    out: &Path,
+    rep: &Path,
+    s: usize,
+    method: &str,
+    edge: &str,
+    word: &str,
+) {
+    let s_arg = s.to_string();
+    let o = epfilt(&[
+        "filter",
+        input.to_str().unwrap(),
+        out.to_str().unwrap(),
+        "-s",
+        &s_arg,
+        "--method",
+        method,
+        "--edge",
+        edge,
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{method} S={s}: {o:?}");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("epfilt: warning: ") && err.contains(word),
+        "{err}"
+    );
 }
 
 #[test]
@@ -776,27 +789,8 @@ fn a_padded_edge_keeps_flat_fields_flat_and_energy_exact() {
         (4, "ep-gauss"),
         (2, "clamp"),
     ] {
-        let s_arg = s.to_string();
         let run = |input: &Path| {
-            let o = epfilt(&[
-                "filter",
-                input.to_str().unwrap(),
-                out.to_str().unwrap(),
-                "-s",
-                &s_arg,
-                "--method",
-                method,
-                "--edge",
-                "pad",
-                "--report",
-                rep.to_str().unwrap(),
-            ]);
-            assert!(o.status.success(), "{method} S={s}: {o:?}");
-            let err = String::from_utf8_lossy(&o.stderr);
-            assert!(
-                err.contains("epfilt: warning: ") && err.contains("padded"),
-                "{err}"
-            );
+            filter_at_edge(input, &out, &rep, s, method, "pad", "padded");
             (crate::exr_io::read_planar(&out), read_json(&rep))
         };
         let (img, json) = run(&flat_path);

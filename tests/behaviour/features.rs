@@ -167,6 +167,35 @@ fn ep_gauss_keeps_tiny_lights_and_spreads_the_fireflies() {
     );
 }
 
+/// An output-sized RGB frame.
+fn frame(data: Vec<f32>) -> Img {
+    Img {
+        w: W,
+        h: H,
+        nch: 3,
+        data,
+    }
+}
+
+/// The R, G, B of rows that also hold their variances (`synth --spp`).
+fn rgb_of(data: &[f32]) -> Vec<f32> {
+    data.chunks(6 * W)
+        .flat_map(|r| r[..3 * W].iter().copied())
+        .collect()
+}
+
+/// [`moved`], but at 16 samples without the two smallest bulbs (0.5 and 0.6
+/// px: at most 20% and 28% of a pixel), hit by a handful of samples, as often
+/// by fewer than 3.2 (the carriers needed) as not: no rule of a pixel's own
+/// statistics can tell them from a firefly there. From 0.8 px on, and at 64
+/// samples all of them, they stay.
+fn moved_at(out: &Img, input: &Img, spp: usize) -> Vec<(String, f64)> {
+    moved(out, input)
+        .into_iter()
+        .filter(|(name, _)| spp >= 64 || !(name == "bulb 0.5 px" || name == "bulb 0.6 px"))
+        .collect()
+}
+
 fn box_job(n: f64) -> Job {
     rgb_variance_job(W, H, n)
 }
@@ -176,49 +205,21 @@ fn ep_box_keeps_tiny_lights_and_spreads_the_fireflies() {
     let sc = scene();
     for n in [16usize, 64] {
         let data = sc.spp_rows(n, 0, H);
-        let input = Img {
-            w: W,
-            h: H,
-            nch: 3,
-            data: data
-                .chunks(6 * W)
-                .flat_map(|r| r[..3 * W].iter().copied())
-                .collect(),
-        };
+        let input = frame(rgb_of(&data));
         let job = box_job(n as f64);
         let p = FilterParams::new(Method::EpBox, 1);
         let cfg = PipelineConfig::default();
         let (out, stats) = filter_in_memory(data.clone(), &job, &p, &cfg).unwrap();
-        let out = Img {
-            w: W,
-            h: H,
-            nch: 3,
-            data: out,
-        };
         assert!(stats.eb().spread > 20, "{n} spp: {:?}", stats.eb());
         assert!(stats.eb().reliable > 0, "{n} spp: {:?}", stats.eb());
         assert!(stats.ledger.iter().all(|l| l.rel_error <= ENERGY_TOL));
-        // At 16 samples the two smallest bulbs (0.5 and 0.6 px: at most 20%
-        // and 28% of a pixel) are hit by a handful of samples, as often by
-        // fewer than 3.2 (the carriers needed) as not: no rule of a pixel's
-        // own statistics can tell them from a firefly there. From 0.8 px on,
-        // and at 64 samples all of them, they stay.
-        let moved: Vec<(String, f64)> = moved(&out, &input)
-            .into_iter()
-            .filter(|(name, _)| n >= 64 || !(name == "bulb 0.5 px" || name == "bulb 0.6 px"))
-            .collect();
+        let moved = moved_at(&frame(out), &input, n);
         assert_eq!(moved, vec![], "{n} spp: lights moved by the default");
         // The paper's rule as written spreads them.
         let mut paper = p.clone();
         paper.ep_box.guard = Guard::None;
         let (bad, _) = filter_in_memory(data, &job, &paper, &cfg).unwrap();
-        let bad = Img {
-            w: W,
-            h: H,
-            nch: 3,
-            data: bad,
-        };
-        let lost = self::moved(&bad, &input);
+        let lost = self::moved(&frame(bad), &input);
         assert!(
             lost.iter().any(|(_, rel)| *rel < -0.5),
             "{n} spp: the paper's rule kept every light: {lost:?}"
@@ -235,42 +236,18 @@ fn ep_gauss_at_pixel_resolution_reads_the_variance() {
     let sc = scene();
     for n in [16usize, 64] {
         let data = sc.spp_rows(n, 0, H);
-        let rgb: Vec<f32> = data
-            .chunks(6 * W)
-            .flat_map(|r| r[..3 * W].iter().copied())
-            .collect();
-        let input = Img {
-            w: W,
-            h: H,
-            nch: 3,
-            data: rgb.clone(),
-        };
+        let rgb = rgb_of(&data);
+        let input = frame(rgb.clone());
         let p = FilterParams::new(Method::EpGauss, 1);
         let cfg = PipelineConfig::default();
-        let (out, stats) = filter_in_memory(data.clone(), &box_job(n as f64), &p, &cfg).unwrap();
-        let out = Img {
-            w: W,
-            h: H,
-            nch: 3,
-            data: out,
-        };
+        let (out, stats) = filter_in_memory(data, &box_job(n as f64), &p, &cfg).unwrap();
         assert!(stats.eg().spread > 20, "{n} spp: {:?}", stats.eg());
         assert!(stats.eg().kept > 0, "{n} spp: {:?}", stats.eg());
         assert!(stats.ledger.iter().all(|l| l.rel_error <= ENERGY_TOL));
-        // The two smallest bulbs at 16 samples: as for ep-box.
-        let kept: Vec<(String, f64)> = moved(&out, &input)
-            .into_iter()
-            .filter(|(name, _)| n >= 64 || !(name == "bulb 0.5 px" || name == "bulb 0.6 px"))
-            .collect();
+        let kept = moved_at(&frame(out), &input, n);
         assert_eq!(kept, vec![], "{n} spp: lights moved with statistics");
         let (plain, _) = filter_in_memory(rgb, &rgb_job(W, H, 1), &p, &cfg).unwrap();
-        let plain = Img {
-            w: W,
-            h: H,
-            nch: 3,
-            data: plain,
-        };
-        let lost = moved(&plain, &input);
+        let lost = moved(&frame(plain), &input);
         assert!(
             lost.iter().any(|(_, rel)| *rel < -0.5),
             "{n} spp: without statistics every light stayed: {lost:?}"
