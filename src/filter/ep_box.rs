@@ -567,6 +567,31 @@ pub fn se2(kind: VarianceKind, var: &[f64], w: &[f64], mean_y: f64, n: f64) -> f
     }
 }
 
+impl StatsLayout {
+    /// The sample count `n` and the squared standard error of the mean
+    /// luminance of a pixel of luminance `y`, whose channel `c` holds
+    /// `ch(c)`; `lum` weighs the colour channels (the first three, for three
+    /// variance channels).
+    #[inline]
+    pub fn pixel(&self, lum: &[f64], y: f64, ch: impl Fn(usize) -> f64) -> (f64, f64) {
+        let n = match self.spp {
+            Spp::Fixed(n) => n,
+            Spp::Channel(i) => ch(i),
+        };
+        let nv = self.variance.len().min(3);
+        let mut var = [0.0f64; 3];
+        for (v, &i) in var.iter_mut().zip(&self.variance) {
+            *v = ch(i);
+        }
+        let mean_y = match (self.kind, self.mean_y) {
+            (VarianceKind::SecondMoment, Some(i)) => ch(i),
+            _ => y,
+        };
+        let weights = if nv == 3 { &lum[..3] } else { &lum[..1] };
+        (n, se2(self.kind, &var[..nv], weights, mean_y, n))
+    }
+}
+
 /// Purgathofer's worst-case trial count (Eq. 8): `log(1 - α) / log(1 - d)`,
 /// `d` the interval on samples scaled to 0..1; rounded up.
 pub fn purgathofer_trials(confidence: f64, d: f64) -> f64 {

@@ -25,8 +25,7 @@ use super::stream::{MethodStats, Stage, WindowUse, MAX_CHANNELS};
 use super::window::RowWindow;
 use crate::error::{Error, Result};
 use crate::filter::ep_box::{
-    counts_toward_cluster, excess, se2, EpBoxParams, Guard, PixelTest, Ring, Spp, StatsLayout,
-    TFactor, VarianceKind,
+    counts_toward_cluster, excess, EpBoxParams, Guard, PixelTest, Ring, Spp, StatsLayout, TFactor,
 };
 use crate::filter::ValidParams;
 use crate::geometry::Halo;
@@ -274,27 +273,13 @@ impl ExcessStage {
             .for_each(|(k, ((yrow, crow), frow))| {
                 let row = input.get(a + k);
                 let ch = |c: usize, x: usize| row[c * w + x] as f64;
-                let mut var = [0.0f64; 3];
-                let nv = stats.variance.len();
                 for x in 0..w {
                     let mut y = 0.0;
                     for (c, &l) in lum.iter().enumerate().take(nch) {
                         y += l * ch(c, x);
                     }
                     yrow[x] = y;
-                    let n = match stats.spp {
-                        Spp::Fixed(n) => n,
-                        Spp::Channel(i) => ch(i, x),
-                    };
-                    for (v, &i) in var.iter_mut().zip(&stats.variance) {
-                        *v = ch(i, x);
-                    }
-                    let mean_y = match (stats.kind, stats.mean_y) {
-                        (VarianceKind::SecondMoment, Some(i)) => ch(i, x),
-                        _ => y,
-                    };
-                    let weights = if nv == 3 { &lum[..3] } else { &lum[..1] };
-                    let se2 = se2(stats.kind, &var[..nv], weights, mean_y, n);
+                    let (n, se2) = stats.pixel(lum, y, |c| ch(c, x));
                     let test = PixelTest::new(y, se2, n, t.get(n), dl, params);
                     let f = (u8::from(test.noisy) * RAW_NOISY)
                         | (u8::from(test.carried) * RAW_CARRIED)

@@ -32,7 +32,7 @@ use rayon::prelude::*;
 
 use super::stream::{MethodStats, Stage, WindowUse, MAX_CHANNELS};
 use super::window::RowWindow;
-use crate::filter::ep_box::{se2, Spp, StatsLayout, VarianceKind, COMPACT_RATIO};
+use crate::filter::ep_box::{StatsLayout, COMPACT_RATIO};
 use crate::filter::ep_gauss::{Carriers, EpGauss, Folded, LumRows, Support, COMPACT_REACH};
 use crate::filter::kernel::{ColumnTaps, Kernel1d, TentTaps};
 use crate::filter::{Method, ValidParams};
@@ -549,22 +549,7 @@ impl SpreadStage {
                             if let Some((st, carriers)) = pixel_stats.filter(|_| x0 > hi) {
                                 // S = 1: the sample is pixel (i, j) = (px, y).
                                 let row = input.get(j);
-                                let ch = |c: usize| row[c * in_w + i] as f64;
-                                let n = match st.spp {
-                                    Spp::Fixed(n) => n,
-                                    Spp::Channel(c) => ch(c),
-                                };
-                                let nv = st.variance.len().min(3);
-                                let mut var = [0.0f64; 3];
-                                for (v, &c) in var.iter_mut().zip(&st.variance) {
-                                    *v = ch(c);
-                                }
-                                let mean_y = match (st.kind, st.mean_y) {
-                                    (VarianceKind::SecondMoment, Some(c)) => ch(c),
-                                    _ => x0,
-                                };
-                                let weights = if nv == 3 { &lum[..3] } else { &lum[..1] };
-                                let se2 = se2(st.kind, &var[..nv], weights, mean_y, n);
+                                let (n, se2) = st.pixel(lum, x0, |c| row[c * in_w + i] as f64);
                                 let hot = || {
                                     let r = COMPACT_REACH as i64;
                                     let mut count = 0;
