@@ -310,11 +310,9 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     }
     // What the file and the report say about how they were made.
     let mut settings = params.settings();
-    let precision = job
-        .output_settings
-        .precision
-        .unwrap_or_else(|| crate::io::writer::same_precision(header, &channels));
-    settings.push(("pixel_type", precision.name().into()));
+    // Each channel's sample type: the one asked for, or its own.
+    let types = crate::io::writer::output_types(&job.output_settings, header, &channels);
+    settings.push(("pixel_type", crate::io::writer::types_name(&types).into()));
     // (A cropped run is the filtering of the cropped image, header and all.)
     if padded_from.is_some() {
         settings.push(("edge", "pad".into()));
@@ -335,7 +333,6 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         .join(" ");
     let out_settings = OutputSettings {
         provenance: Some(provenance),
-        precision: Some(precision),
         ..job.output_settings.clone()
     };
     // A cropped input's output describes the cropped window (and a display
@@ -356,7 +353,7 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     let band = match job.band {
         None => None,
         Some((k, n)) => {
-            let plan = plan_band(job, header, &out_settings, precision, out_h, k, n, &params)?;
+            let plan = plan_band(job, header, &out_settings, &types, out_h, k, n, &params)?;
             out_header.layer_size.1 = (plan.b - plan.a) * s;
             out_header.own_attributes.layer_position.1 = origin.1 + (plan.a * s) as i32;
             out_settings
@@ -658,7 +655,7 @@ fn plan_band(
     job: &FilterJob,
     header: &exr::meta::header::Header,
     settings: &OutputSettings,
-    precision: crate::pipeline::Precision,
+    types: &[crate::pipeline::Precision],
     out_h: usize,
     k: usize,
     n: usize,
@@ -675,13 +672,9 @@ fn plan_band(
             job.output.display()
         )));
     }
-    let (compression, _) = crate::io::writer::choose_compression(
-        &job.output,
-        header.compression,
-        settings,
-        precision,
-    )?;
-    if crate::io::is_lossy(compression, precision) {
+    let (compression, _) =
+        crate::io::writer::choose_compression(&job.output, header.compression, settings, types)?;
+    if types.iter().any(|&t| crate::io::is_lossy(compression, t)) {
         return Err(Error::Config(format!(
             "--band needs a lossless output compression, not {}",
             crate::io::compression_name(compression)

@@ -134,6 +134,13 @@ impl Sink for Output {
         }
     }
 
+    fn precisions(&self, nch: usize) -> Vec<Precision> {
+        match self {
+            Output::Exr(o) => o.precisions(nch),
+            Output::Rgbe(o) => o.precisions(nch),
+        }
+    }
+
     fn write_rows(&mut self, y0: usize, rows: usize, data: &[f32]) -> Result<()> {
         match self {
             Output::Exr(o) => o.write_rows(y0, rows, data),

@@ -51,7 +51,8 @@ pub struct ExrOutput {
     /// For each header channel (sorted by name), its index in our rows.
     order: Vec<usize>,
     lines: usize,
-    precision: Precision,
+    /// Sample type of each channel, in our rows' order.
+    types: Vec<Precision>,
     pending: Vec<f32>,
     pending_y0: usize,
     compression: Compression,
@@ -106,20 +107,43 @@ pub fn views_with_channels(views: &[String], channels: &[String]) -> Vec<String>
 /// when every channel written was f16 in the input, else f32 (which holds f16
 /// and f32 values exactly; u32 channels are written as f32 too). One type for
 /// all channels: the pipeline rounds every channel alike.
-pub fn same_precision(input_header: &Header, channels: &[String]) -> Precision {
-    let all_half = !channels.is_empty()
-        && channels.iter().all(|n| {
-            input_header
+pub fn same_precision(input_header: &Header, channels: &[String]) -> Vec<Precision> {
+    channels
+        .iter()
+        .map(|n| {
+            let half = input_header
                 .channels
                 .list
                 .iter()
                 .find(|c| c.name.to_string() == *n)
-                .is_some_and(|c| c.sample_type == SampleType::F16)
-        });
-    if all_half {
-        Precision::F16
-    } else {
-        Precision::F32
+                .is_some_and(|c| c.sample_type == SampleType::F16);
+            if half {
+                Precision::F16
+            } else {
+                Precision::F32
+            }
+        })
+        .collect()
+}
+
+/// The sample type of each of `channels` in the output: the one asked for,
+/// or each channel's own ([`same_precision`]).
+pub fn output_types(
+    settings: &OutputSettings,
+    input_header: &Header,
+    channels: &[String],
+) -> Vec<Precision> {
+    match settings.precision {
+        Some(p) => vec![p; channels.len()],
+        None => same_precision(input_header, channels),
+    }
+}
+
+/// The types' names, one per channel, or one name when they agree.
+pub fn types_name(types: &[Precision]) -> String {
+    match types.split_first() {
+        Some((first, rest)) if rest.iter().all(|t| t == first) => first.name().to_string(),
+        _ => types.iter().map(|t| t.name()).collect::<Vec<_>>().join(","),
     }
 }
 
@@ -130,25 +154,29 @@ pub(crate) fn choose_compression(
     dest: &Path,
     input: Compression,
     settings: &OutputSettings,
-    precision: Precision,
+    types: &[Precision],
 ) -> Result<(Compression, Option<String>)> {
     let name = super::compression_name;
-    let lossy = |c| super::is_lossy(c, precision);
-    let kind = precision.name();
+    // Lossy when it is for any channel's type.
+    let lossy_for = |c| types.iter().copied().find(|&t| super::is_lossy(c, t));
+    let lossy = |c| lossy_for(c).is_some();
+    let kind = |c| lossy_for(c).map_or("", |t| t.name());
     match settings.compression {
         Some(c) if lossy(c) && !settings.allow_lossy => Err(Error::Output {
             path: dest.to_path_buf(),
             reason: format!(
-                "--compression {} is lossy for {kind} samples, so the energy on disk would not be exact; choose a lossless one (zip, zips, piz, rle, none) or pass --allow-lossy",
-                name(c)
+                "--compression {} is lossy for {} samples, so the energy on disk would not be exact; choose a lossless one (zip, zips, piz, rle, none) or pass --allow-lossy",
+                name(c),
+                kind(c)
             ),
         }),
         Some(c) => Ok((c, None)),
         None if lossy(input) && !settings.allow_lossy => Ok((
             Compression::ZIP16,
             Some(format!(
-                "the input's compression ({}) is lossy for {kind} samples: writing zip instead (--compression to choose, --allow-lossy to keep it)",
-                name(input)
+                "the input's compression ({}) is lossy for {} samples: writing zip instead (--compression to choose, --allow-lossy to keep it)",
+                name(input),
+                kind(input)
             )),
         )),
         None => Ok((input, None)),
@@ -243,12 +271,10 @@ impl ExrOutput {
         settings: &OutputSettings,
     ) -> Result<Self> {
         let (w, h) = (input_header.layer_size.0 / s, input_header.layer_size.1 / s);
-        let precision = settings
-            .precision
-            .unwrap_or_else(|| same_precision(input_header, channels));
+        let types = output_types(settings, input_header, channels);
         let (compression, note) =
-            choose_compression(dest, input_header.compression, settings, precision)?;
-        let mut header = Self::fresh_header(w, h, channels, compression, precision);
+            choose_compression(dest, input_header.compression, settings, &types)?;
+        let mut header = Self::fresh_header(w, h, channels, compression, &types);
         let si = s as i32;
         // Keep what still holds: every attribute but the geometry we change and
         // the preview (a picture of the input).
@@ -284,7 +310,7 @@ impl ExrOutput {
             Vec2((x1 - x0).max(1) as usize, (y1 - y0).max(1) as usize),
         );
         header.shared_attributes = shared;
-        let mut out = Self::start(dest, header, channels, precision)?;
+        let mut out = Self::start(dest, header, channels, types)?;
         out.note = note;
         Ok(out)
     }
@@ -309,7 +335,9 @@ impl ExrOutput {
 
     /// Whether the samples on disk differ from those written.
     pub fn is_lossy(&self) -> bool {
-        super::is_lossy(self.compression, self.precision)
+        self.types
+            .iter()
+            .any(|&t| super::is_lossy(self.compression, t))
     }
 
     /// `--edge pad`: weigh each pixel by its coverage in [`Self::decoded_sums`].
@@ -418,14 +446,15 @@ impl ExrOutput {
         precision: Precision,
         ints: &[(&str, i32)],
     ) -> Result<Self> {
-        let mut header = Self::fresh_header(w, h, channels, compression, precision);
+        let types = vec![precision; channels.len()];
+        let mut header = Self::fresh_header(w, h, channels, compression, &types);
         for (name, v) in ints {
             header.own_attributes.other.insert(
                 Text::from(*name),
                 exr::meta::attribute::AttributeValue::I32(*v),
             );
         }
-        Self::start(dest, header, channels, precision)
+        Self::start(dest, header, channels, types)
     }
 
     fn fresh_header(
@@ -433,18 +462,19 @@ impl ExrOutput {
         h: usize,
         channels: &[String],
         compression: Compression,
-        precision: Precision,
+        types: &[Precision],
     ) -> Header {
-        let sample_type = match precision {
-            Precision::F32 => SampleType::F32,
-            Precision::F16 => SampleType::F16,
-        };
-        let mut sorted: Vec<&String> = channels.iter().collect();
-        sorted.sort_by(|a, b| a.as_bytes().cmp(b.as_bytes()));
+        let mut sorted: Vec<(&String, Precision)> =
+            channels.iter().zip(types.iter().copied()).collect();
+        sorted.sort_by(|a, b| a.0.as_bytes().cmp(b.0.as_bytes()));
         let list: SmallVec<[ChannelDescription; 5]> = sorted
             .iter()
-            .map(|n| {
+            .map(|&(n, t)| {
                 let linear = n.rsplit('.').next() == Some("A");
+                let sample_type = match t {
+                    Precision::F32 => SampleType::F32,
+                    Precision::F16 => SampleType::F16,
+                };
                 ChannelDescription::new(Text::from(n.as_str()), sample_type, linear)
             })
             .collect();
@@ -462,7 +492,7 @@ impl ExrOutput {
         dest: &Path,
         header: Header,
         channels: &[String],
-        precision: Precision,
+        types: Vec<Precision>,
     ) -> Result<Self> {
         let (w, _) = (header.layer_size.0, header.layer_size.1);
         let staged = super::Staged::new(dest, ".exr.tmp")?;
@@ -509,7 +539,7 @@ impl ExrOutput {
             nch: channels.len(),
             order,
             lines,
-            precision,
+            types,
             pending: Vec::new(),
             pending_y0: 0,
             compression: header_compression,
@@ -545,18 +575,17 @@ impl ExrOutput {
         let headers = &self.headers;
         let order = &self.order;
         let pending = &self.pending;
-        let precision = self.precision;
+        let types = &self.types;
         let chunks: Vec<Result<(usize, Chunk)>> = (0..full)
             .into_par_iter()
             .map(|b| {
                 let r0 = b * lines;
                 let r1 = ((b + 1) * lines).min(rows);
-                let bytes_per = if precision == Precision::F16 { 2 } else { 4 };
-                let mut data = Vec::with_capacity((r1 - r0) * row_len * bytes_per);
+                let mut data = Vec::with_capacity((r1 - r0) * row_len * 4);
                 for r in r0..r1 {
                     for &c in order {
                         let src = &pending[(r * nch + c) * w..][..w];
-                        match precision {
+                        match types[c] {
                             Precision::F32 => src
                                 .iter()
                                 .for_each(|v| data.extend_from_slice(&v.to_ne_bytes())),
@@ -632,7 +661,20 @@ impl ExrOutput {
 
 impl Sink for ExrOutput {
     fn precision(&self) -> Precision {
-        self.precision
+        // The widest type written (a mix holds f32).
+        if self.types.iter().all(|&t| t == Precision::F16) {
+            Precision::F16
+        } else {
+            Precision::F32
+        }
+    }
+
+    fn precisions(&self, nch: usize) -> Vec<Precision> {
+        if self.types.len() == nch {
+            self.types.clone()
+        } else {
+            vec![self.precision(); nch]
+        }
     }
 
     fn write_rows(&mut self, _y0: usize, _rows: usize, data: &[f32]) -> Result<()> {

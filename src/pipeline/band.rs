@@ -180,6 +180,10 @@ impl<K: Sink> Sink for BandSink<K> {
         self.inner.precision()
     }
 
+    fn precisions(&self, nch: usize) -> Vec<Precision> {
+        self.inner.precisions(nch)
+    }
+
     fn write_rows(&mut self, y0: usize, rows: usize, data: &[f32]) -> Result<()> {
         let (from, to) = (y0.max(self.a), (y0 + rows).min(self.b));
         if from >= to {

@@ -80,7 +80,7 @@ impl Books {
         a: usize,
         b: usize,
         w: usize,
-        precision: Precision,
+        precision: &[Precision],
     ) -> Result<OutRows> {
         let (out, raw, rounded, digests) = finish_rows(
             based,
@@ -216,7 +216,7 @@ fn finish_rows(
     acc: Option<&RowWindow<f64>>,
     (a, b, w): (usize, usize, usize),
     names: &[String],
-    precision: Precision,
+    precision: &[Precision],
     coverage: Option<&Coverage>,
 ) -> Result<(OutRows, Sums, Sums, Vec<u64>)> {
     let nch = names.len();
@@ -253,13 +253,14 @@ fn finish_rows(
                     }
                     let dst = &mut out[c * w..(c + 1) * w];
                     for (x, (d, &val)) in dst.iter_mut().zip(tmp.iter()).enumerate() {
-                        let r = round(val, precision).ok_or_else(|| Error::Value {
+                        let p = precision[c];
+                        let r = round(val, p).ok_or_else(|| Error::Value {
                             path: Default::default(),
                             reason: format!(
                                 "output value {val:e} at pixel ({x}, {y}) in channel {} does not fit in {}{}",
                                 names[c],
-                                precision.name(),
-                                if precision == Precision::F16 {
+                                p.name(),
+                                if p == Precision::F16 {
                                     " (--pixel-type f32 holds it)"
                                 } else {
                                     ""

@@ -66,8 +66,13 @@ pub trait Sink: Send {
     fn precision(&self) -> Precision {
         Precision::F32
     }
+    /// The precision of each of `nch` channels (in the rows' order): the
+    /// pipeline rounds each channel to its own.
+    fn precisions(&self, nch: usize) -> Vec<Precision> {
+        vec![self.precision(); nch]
+    }
     /// Rows `y0..y0 + rows`, `[row][channel][x]`, already rounded to
-    /// [`Sink::precision`].
+    /// [`Sink::precisions`].
     fn write_rows(&mut self, y0: usize, rows: usize, data: &[f32]) -> Result<()>;
     /// All rows have been written.
     fn finish(&mut self) -> Result<()>;
@@ -354,7 +359,7 @@ pub fn run<S: Source, K: Sink>(
     let params = params.validated()?;
     let pool = thread_pool(cfg.threads)?;
     let start = Instant::now();
-    let mut streamer = Streamer::new(job, &params, cfg, sink.precision())?;
+    let mut streamer = Streamer::new(job, &params, cfg, sink.precisions(job.channels.len()))?;
     let real = job.padded_from.unwrap_or((job.grid.in_w, job.grid.in_h));
     let source = edge::Padded::new(
         source,
@@ -607,6 +612,9 @@ impl Sink for MemorySink {
 impl<K: Sink> Sink for &mut K {
     fn precision(&self) -> Precision {
         (**self).precision()
+    }
+    fn precisions(&self, nch: usize) -> Vec<Precision> {
+        (**self).precisions(nch)
     }
     fn write_rows(&mut self, y0: usize, rows: usize, data: &[f32]) -> Result<()> {
         (**self).write_rows(y0, rows, data)

@@ -98,7 +98,8 @@ pub struct Streamer {
     grid: Grid,
     nall: usize,
     w: usize,
-    precision: Precision,
+    /// Per channel.
+    precision: Vec<Precision>,
     rows_in: usize,
     out_done: usize,
 }
@@ -110,7 +111,7 @@ impl Streamer {
         job: &Job,
         params: &ValidParams,
         cfg: &PipelineConfig,
-        precision: Precision,
+        precision: Vec<Precision>,
     ) -> Result<Self> {
         let grid = job.grid;
         let nch = job.channels.len();
@@ -267,7 +268,7 @@ impl Streamer {
         let (base, acc) = self.stage.output();
         let out = self
             .books
-            .finish(base, acc, self.out_done, end, self.w, self.precision)?;
+            .finish(base, acc, self.out_done, end, self.w, &self.precision)?;
         self.out_done = end;
         self.stage.release(end);
         Ok(Some(out))
@@ -340,7 +341,7 @@ mod tests {
                     &job,
                     &p.validated().unwrap(),
                     &PipelineConfig::default(),
-                    Precision::F32,
+                    vec![Precision::F32; job.channels.len()],
                 )
                 .unwrap();
                 assert_eq!(

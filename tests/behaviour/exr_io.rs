@@ -616,6 +616,70 @@ fn pixel_type_same_keeps_half_inputs_half_and_the_ledger_counts_what_is_stored()
         .all(|(_, t)| *t == SampleType::F32));
 }
 
+#[test]
+fn pixel_type_same_keeps_each_channels_own_type() {
+    // Half colour with a float alpha (as renderers write coverage): each
+    // channel keeps its type, and the ledger counts what each one stores.
+    let dir = tmpdir();
+    let s = 3;
+    let (w, h) = (10 * s, 7 * s);
+    let img = fireflies(w, h, 3, 0.02, 9);
+    let half = |c: usize| {
+        FlatSamples::F16(
+            (0..w * h)
+                .map(|i| f16::from_f32(img.at(i % w, i / w, c).min(6e4)))
+                .collect(),
+        )
+    };
+    let alpha = FlatSamples::F32((0..w * h).map(|i| ((i % 5) as f32) * 0.25).collect());
+    let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = vec![
+        AnyChannel::new("A", alpha),
+        AnyChannel::new("B", half(2)),
+        AnyChannel::new("G", half(1)),
+        AnyChannel::new("R", half(0)),
+    ]
+    .into_iter()
+    .collect();
+    let input = dir.path().join("mixed.exr");
+    Image::from_layer(Layer::new(
+        (w, h),
+        LayerAttributes::named(""),
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(channels),
+    ))
+    .write()
+    .to_file(&input)
+    .expect("write mixed");
+    for m in [Method::EpGauss, Method::Gauss, Method::Box] {
+        let out = dir.path().join(format!("out-{}.exr", m.name()));
+        let report = filter_file(&job(&input, &out, m, s), &|_, _| {}).expect("filter");
+        let types: std::collections::BTreeMap<String, SampleType> =
+            sample_types(&out).into_iter().collect();
+        assert_eq!(types["A"], SampleType::F32, "{m:?}: {types:?}");
+        for c in ["R", "G", "B"] {
+            assert_eq!(types[c], SampleType::F16, "{m:?}: {types:?}");
+        }
+        let name = report.settings["pixel_type"].as_str().unwrap().to_string();
+        assert!(name.contains("f16") && name.contains("f32"), "{name}");
+        let stored = read_planar(&out);
+        for (c, name) in ["R", "G", "B"].iter().enumerate() {
+            let k = report.channels.iter().position(|n| n == name).unwrap();
+            let after = report.energy_out_rounded[k];
+            let mut sum = 0.0f64;
+            for y in 0..stored.h {
+                for x in 0..stored.w {
+                    sum += stored.at(x, y, c) as f64;
+                }
+            }
+            let on_disk = sum * (s * s) as f64;
+            assert!(
+                (on_disk - after).abs() <= SUM_ORDER_TOL * after.abs(),
+                "{m:?} {name}: ledger {after} vs file {on_disk}"
+            );
+        }
+    }
+}
+
 /// The ledger and this test add the same stored values in different orders:
 /// f64 sums of a few hundred values agree to far better than this.
 const SUM_ORDER_TOL: f64 = 1e-12;
