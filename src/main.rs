@@ -350,8 +350,8 @@ struct FilterArgs {
     /// disk is then measured by decoding the file, and reported.
     #[arg(long)]
     allow_lossy: bool,
-    /// Output sample type: same (f16 when every filtered channel is f16 in the
-    /// input, else f32), f32 or f16 (f16 refuses values it cannot hold).
+    /// Output sample type: same (each channel its input type: f16 stays f16,
+    /// the others f32), f32 or f16 for all (f16 refuses values it cannot hold).
     #[arg(long, default_value = "same")]
     pixel_type: String,
     /// Part of a multi-part input, by name or index.
