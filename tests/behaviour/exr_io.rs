@@ -588,21 +588,7 @@ fn pixel_type_same_keeps_half_inputs_half_and_the_ledger_counts_what_is_stored()
             let types = sample_types(&out);
             assert!(types.iter().all(|(_, t)| *t == want), "{half}: {types:?}");
             assert_eq!(report.settings["pixel_type"], want_name(want));
-            // "After rounding" is the sum of what the file holds.
-            let stored = read_planar(&out);
-            for (c, &after) in report.energy_out_rounded.iter().enumerate() {
-                let mut sum = 0.0f64;
-                for y in 0..stored.h {
-                    for x in 0..stored.w {
-                        sum += stored.at(x, y, c) as f64;
-                    }
-                }
-                let on_disk = sum * (s * s) as f64;
-                assert!(
-                    (on_disk - after).abs() <= SUM_ORDER_TOL * after.abs(),
-                    "{half} {m:?} channel {c}: ledger {after} vs file {on_disk}"
-                );
-            }
+            ledger_holds_the_file(&report, &out, s, &format!("{half} {m:?}"));
         }
     }
     // An explicit type wins over the input's.
@@ -661,22 +647,28 @@ fn pixel_type_same_keeps_each_channels_own_type() {
         }
         let name = report.settings["pixel_type"].as_str().unwrap().to_string();
         assert!(name.contains("f16") && name.contains("f32"), "{name}");
-        let stored = read_planar(&out);
-        for (c, name) in ["R", "G", "B"].iter().enumerate() {
-            let k = report.channels.iter().position(|n| n == name).unwrap();
-            let after = report.energy_out_rounded[k];
-            let mut sum = 0.0f64;
-            for y in 0..stored.h {
-                for x in 0..stored.w {
-                    sum += stored.at(x, y, c) as f64;
-                }
+        ledger_holds_the_file(&report, &out, s, &format!("{m:?}"));
+    }
+}
+
+/// "After rounding" in the ledger is the sum of what the file holds, for
+/// each of its R, G, B channels.
+fn ledger_holds_the_file(report: &epfilt::stats::Report, out: &Path, s: usize, what: &str) {
+    let stored = read_planar(out);
+    for (c, name) in ["R", "G", "B"].iter().enumerate() {
+        let k = report.channels.iter().position(|n| n == name).unwrap();
+        let after = report.energy_out_rounded[k];
+        let mut sum = 0.0f64;
+        for y in 0..stored.h {
+            for x in 0..stored.w {
+                sum += stored.at(x, y, c) as f64;
             }
-            let on_disk = sum * (s * s) as f64;
-            assert!(
-                (on_disk - after).abs() <= SUM_ORDER_TOL * after.abs(),
-                "{m:?} {name}: ledger {after} vs file {on_disk}"
-            );
         }
+        let on_disk = sum * (s * s) as f64;
+        assert!(
+            (on_disk - after).abs() <= SUM_ORDER_TOL * after.abs(),
+            "{what} {name}: ledger {after} vs file {on_disk}"
+        );
     }
 }
 
