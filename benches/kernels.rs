@@ -5,7 +5,7 @@
 
 use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use epfilt::filter::ep_box::{Ring, Spp, StatsLayout, VarianceKind};
-use epfilt::filter::ep_gauss::{EpGauss, LumImage};
+use epfilt::filter::ep_gauss::{EpGauss, Folded, LumImage};
 use epfilt::{filter_in_memory, FilterParams, Grid, Job, Method, PipelineConfig};
 
 type Field = LumImage;
@@ -26,6 +26,37 @@ fn search(c: &mut Criterion) {
             b.iter(|| black_box(ep.search(&f, 100, 100, black_box(mag), xb)))
         });
     }
+    // Real dynamic ranges: 9% of the pixels hold a firefly of 1e2..1e5
+    // (log-uniform; 1% of S = 3 super-samples) over a smooth background, so
+    // the average grows with the width as other fireflies enter it. One
+    // iteration searches every firefly away from the borders.
+    let (w, h) = (256usize, 256usize);
+    let hash = |x: usize, y: usize| {
+        let mut z = (x as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (y as u64 + 17);
+        z = (z ^ (z >> 31)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        (z ^ (z >> 29)) as f64 / u64::MAX as f64
+    };
+    let bg = |x: usize, y: usize| 0.5 + 0.3 * (x as f64 / 70.0).sin() * (y as f64 / 50.0).cos();
+    let mag = |x: usize, y: usize| {
+        let u = hash(x, y);
+        (u < 0.09).then(|| 10f64.powf(2.0 + 3.0 * u / 0.09) * bg(x, y))
+    };
+    let f = Field::new(w, h, ep.pad(), |x, y| {
+        (8.0 * bg(x, y) + mag(x, y).unwrap_or(bg(x, y))) / 9.0
+    });
+    let list: Vec<(usize, usize, f64, f64)> = (48..h - 48)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .filter_map(|(x, y)| mag(x, y).map(|m| (x, y, m, ep.xbar0(&f, x, y as i64))))
+        .collect();
+    g.throughput(Throughput::Elements(list.len() as u64));
+    g.bench_function("dense 1e2..1e5", |b| {
+        let mut fold = Folded::default();
+        b.iter(|| {
+            for &(x, y, m, xb) in &list {
+                black_box(ep.search_in(&f, x, y, m, xb, &mut fold));
+            }
+        })
+    });
     g.finish();
 }
 

@@ -26,9 +26,15 @@
 //! the search climbs at most as many rungs as double the area (a gallop),
 //! which bounds its cost by a few times the area of the width it finds
 //! (measured: 4.1x, against 27x for unbounded guesses then bisection, on 1%
-//! fireflies of 1e2..1e5). The bracket shrinks at every step, so the search
-//! is bounded by the ladder's length. A sample that still fails at the cap
-//! is spread at the cap and counted.
+//! fireflies of 1e2..1e5). There `log D` falls about linearly with the rung,
+//! so once two widths have failed the search follows the line through them
+//! (up to twice the gallop), and once bracketed it interpolates the same
+//! way: 5.8 widths evaluated per search become 4.3, and the search's cost on
+//! the 6144x6144 file of 1e2..1e5 fireflies falls from 585M to 428M
+//! values read and weighed (1715 to 1255 per sample), with the same widths
+//! found. The bracket shrinks at every step, so the search is bounded by the
+//! ladder's length. A sample that still fails at the cap is spread at the cap
+//! and counted.
 //!
 //! The paper sums rings about `p` so that each candidate width costs one 1-D
 //! dot product instead of many `exp()` calls. Here the weights of every width
@@ -474,6 +480,15 @@ impl EpGauss {
         // of the background, from either side of the bracket.
         let mut latest = (0usize, xbar0);
         let mut guesses = 0;
+        // Relation 14 at the bracket's ends and at the failing width below
+        // `lo`: log D falls about linearly with the rung.
+        let mut d_lo = if xbar0 > 0.0 {
+            relation14(x0 / xbar0, self.levels[0].w0)
+        } else {
+            f64::INFINITY
+        };
+        let mut d_hi = f64::NAN;
+        let mut below: Option<(usize, f64)> = None;
         loop {
             match hi {
                 Some(h) if h - lo <= 1 => {
@@ -502,19 +517,32 @@ impl EpGauss {
             // most `jump` rungs (twice the area) at a time: the guess is
             // taken where it falls short of that, so an overshooting guess
             // (other bright samples raise the background as the width
-            // grows) costs at most twice the width it skips. Once bracketed,
-            // the guess or the midpoint.
+            // grows) costs at most twice the width it skips. Once two widths
+            // have failed, the line through their log D says where D meets
+            // the tolerance: it may go up to `2 jump` rungs (D falls about
+            // geometrically with the rung where fireflies are dense, where
+            // the flat-background guess overshoots). Once bracketed, the
+            // same line between the bracket's ends, else the guess, else the
+            // midpoint.
             let cand = match hi {
-                None => guess.map_or(lo + self.jump, |g| g.min(lo + self.jump)),
-                Some(_) => guess.unwrap_or((lo + upper).div_ceil(2)),
+                None => match below.and_then(|b| rung_where(b, (lo, d_lo), self.tol)) {
+                    Some(r) => guess.map_or(r, |g| g.min(r)).min(lo + 2 * self.jump),
+                    None => guess.map_or(lo + self.jump, |g| g.min(lo + self.jump)),
+                },
+                Some(h) => rung_where((lo, d_lo), (h, d_hi), self.tol)
+                    .or(guess)
+                    .unwrap_or((lo + upper).div_ceil(2)),
             }
             .clamp(lo + 1, upper);
             guesses += 1;
             let (d, xbar) = eval(cand);
             if d <= self.tol {
                 hi = Some(cand);
+                d_hi = d;
             } else {
+                below = Some((lo, d_lo));
                 lo = cand;
+                d_lo = d;
             }
             latest = (cand, xbar);
         }
@@ -865,9 +893,10 @@ mod tests {
         }
         assert!(searched > 100, "only {searched} fireflies searched");
         // What the search costs, per unit of the area it finds (which the
-        // spread costs once per channel anyway). Measured 2.3 here; without
-        // the gallop (guesses free to overshoot) 13.
-        const COST_PER_AREA: f64 = 3.0;
+        // spread costs once per channel anyway). Measured 1.78 here; 2.3
+        // without following log D's line (the gallop and guesses alone);
+        // without the gallop either (guesses free to overshoot) 13.
+        const COST_PER_AREA: f64 = 2.0;
         let ratio = fold.cost as f64 / found_area as f64;
         eprintln!("search cost / found area = {ratio:.2}");
         assert!(
@@ -945,4 +974,16 @@ mod tests {
         let xb = ep.xbar0(&f, 20, 20);
         assert!(ep.search(&f, 20, 20, 1.5, xb).capped);
     }
+}
+
+/// The first rung at or past which the line through two points
+/// `(rung, log D)` reaches `log tol`, when D falls from the first to the
+/// second (`None` otherwise: no trend to follow).
+fn rung_where((l1, d1): (usize, f64), (l2, d2): (usize, f64), tol: f64) -> Option<usize> {
+    if !(d1.is_finite() && d2 > 0.0 && d2 < d1 && l2 > l1) {
+        return None;
+    }
+    let slope = (d2.ln() - d1.ln()) / (l2 - l1) as f64;
+    let x = l2 as f64 + (tol.ln() - d2.ln()) / slope;
+    (x.is_finite() && x >= 0.0).then(|| (x.ceil() as usize).min(1 << 16))
 }

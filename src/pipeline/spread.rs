@@ -895,8 +895,28 @@ fn scatter(
                 }
                 let wx = &arena[sp.off + cx0 - sp.xs..sp.off + cx1 - sp.xs];
                 let wy = &arena[sp.off + sp.xl..sp.off + sp.xl + sp.yl];
+                // Colour without alpha, the common case: the three channels in
+                // one loop (each value gets the same products in the same
+                // order as channel by channel).
+                let rgb = nch >= 3
+                    && sp.v[..3].iter().all(|&v| v != 0.0)
+                    && sp.v[3..nch].iter().all(|&v| v == 0.0);
                 for (dy, &wyv) in wy.iter().enumerate() {
                     let r = sp.ys + dy - first;
+                    if rgb {
+                        let (k0, k1, k2) = (sp.v[0] * wyv, sp.v[1] * wyv, sp.v[2] * wyv);
+                        if let [a, b, c, ..] = &mut parts[r * nch..(r + 1) * nch] {
+                            let span = cx0 - x0..cx1 - x0;
+                            let (a, b, c) =
+                                (&mut a[span.clone()], &mut b[span.clone()], &mut c[span]);
+                            for (((a, b), c), &wv) in a.iter_mut().zip(b).zip(c).zip(wx) {
+                                *a += k0 * wv;
+                                *b += k1 * wv;
+                                *c += k2 * wv;
+                            }
+                        }
+                        continue;
+                    }
                     for c in (0..nch).filter(|&c| sp.v[c] != 0.0) {
                         let coef = sp.v[c] * wyv;
                         let dst = &mut parts[r * nch + c][cx0 - x0..cx1 - x0];
