@@ -677,6 +677,18 @@ impl Carriers {
     }
 }
 
+/// The first rung at or past which the line through two points
+/// `(rung, log D)` reaches `log tol`, when D falls from the first to the
+/// second (`None` otherwise: no trend to follow).
+fn rung_where((l1, d1): (usize, f64), (l2, d2): (usize, f64), tol: f64) -> Option<usize> {
+    if !(d1.is_finite() && d2 > 0.0 && d2 < d1 && l2 > l1) {
+        return None;
+    }
+    let slope = (d2.ln() - d1.ln()) / (l2 - l1) as f64;
+    let x = l2 as f64 + (tol.ln() - d2.ln()) / slope;
+    (x.is_finite() && x >= 0.0).then(|| (x.ceil() as usize).min(1 << 16))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -974,16 +986,4 @@ mod tests {
         let xb = ep.xbar0(&f, 20, 20);
         assert!(ep.search(&f, 20, 20, 1.5, xb).capped);
     }
-}
-
-/// The first rung at or past which the line through two points
-/// `(rung, log D)` reaches `log tol`, when D falls from the first to the
-/// second (`None` otherwise: no trend to follow).
-fn rung_where((l1, d1): (usize, f64), (l2, d2): (usize, f64), tol: f64) -> Option<usize> {
-    if !(d1.is_finite() && d2 > 0.0 && d2 < d1 && l2 > l1) {
-        return None;
-    }
-    let slope = (d2.ln() - d1.ln()) / (l2 - l1) as f64;
-    let x = l2 as f64 + (tol.ln() - d2.ln()) / slope;
-    (x.is_finite() && x >= 0.0).then(|| (x.ceil() as usize).min(1 << 16))
 }
