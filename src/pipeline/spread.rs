@@ -530,6 +530,17 @@ impl SpreadStage {
                     let Some((hi, lo)) = ep.bounds(xbar) else {
                         continue;
                     };
+                    // Most pixels hold no noisy sample: one branch-free test
+                    // of all their samples first (the same test as below).
+                    let mut any = false;
+                    for bb in 0..s {
+                        for &x0 in &lrows[bb * in_w + px * s..bb * in_w + (px + 1) * s] {
+                            any |= x0 > 0.0 && (x0 > hi || x0 < lo);
+                        }
+                    }
+                    if !any {
+                        continue;
+                    }
                     for bb in 0..s {
                         let j = y * s + bb;
                         let lrow = &lrows[bb * in_w..(bb + 1) * in_w];
