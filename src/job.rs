@@ -4,12 +4,14 @@
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
+use crate::filter::channels::{self, RuleOverride};
 use crate::filter::ep_box::{Spp, StatsLayout};
 use crate::filter::{FilterParams, Method};
 use crate::geometry::Grid;
 use crate::io::{find_stats, ExrInput, OutputSettings, PartSelect, SppFrom, StatsRequest};
 use crate::pipeline::edge::{Coverage, Cropped};
-use crate::pipeline::{run, Job, MethodStats, PipelineConfig, Progress};
+use crate::pipeline::stream::MAX_CHANNELS;
+use crate::pipeline::{run, ChannelMode, Job, MethodStats, PipelineConfig, Progress};
 use crate::stats::{peak_rss_bytes, EpBoxReport, Report, StatsReport};
 
 /// The ledger must balance to this relative error before rounding, or the
@@ -47,6 +49,9 @@ pub struct FilterJob {
     pub supersample_assumed: bool,
     /// Only band `K` of `N` (1-based) of the output rows, for `merge`.
     pub band: Option<(usize, usize)>,
+    /// `--channel-rule`s for the channels beside the beauty (the last that
+    /// matches wins; the rest get [`channels::default_rule`]).
+    pub channel_rules: Vec<RuleOverride>,
 }
 
 /// An input whose width or height is not a multiple of the super-sampling
@@ -107,6 +112,7 @@ impl FilterJob {
             edge: Edge::Exact,
             supersample_assumed: false,
             band: None,
+            channel_rules: Vec::new(),
         }
     }
 }
@@ -154,6 +160,35 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     check_not_same_file(&job.input, &job.output)?;
     let mut input = ExrInput::open_layer(&job.input, job.part.as_ref(), job.layer.as_deref())?;
     let mut params = job.params.clone();
+    // Every channel beside the beauty is carried by its rule, except by the
+    // order-statistic foils (a per-channel median breaks every sum).
+    let carried = if matches!(params.method, Method::Median | Method::AlphaTrim) {
+        Vec::new()
+    } else {
+        // Views beside the default (the first `multiView` name).
+        let other_views: Vec<String> = input
+            .header()
+            .own_attributes
+            .multi_view_names
+            .iter()
+            .flatten()
+            .skip(1)
+            .map(|t| t.to_string())
+            .collect();
+        input.carry_channels(|name, uint| {
+            channels::rule_for(name, uint, &job.channel_rules, &other_views)
+        })
+    };
+    let nfiltered = input.channels().len();
+    if nfiltered > MAX_CHANNELS {
+        return Err(Error::Channels {
+            path: job.input.clone(),
+            reason: format!(
+                "{nfiltered} channels to filter and carry, at most {MAX_CHANNELS}: drop some with --channel-rule 'PATTERN=drop' (carried: {})",
+                carried.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>().join(", ")
+            ),
+        });
+    }
     // ep-box needs the statistics; ep-gauss at S = 1 reads them when the
     // file has them (the carriers rule), and must find them when asked to.
     let asked = job.stats != StatsRequest::default();
@@ -255,7 +290,21 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         },
         channels.clone(),
         input.luminance(),
-    );
+    )
+    .with_rules(&input.channel_rules());
+    if padded_from.is_some() && pipe_job.modes.contains(&ChannelMode::Nearest) {
+        let nearest: Vec<&str> = channels
+            .iter()
+            .zip(&pipe_job.modes)
+            .filter(|(_, m)| **m == ChannelMode::Nearest)
+            .map(|(n, _)| n.as_str())
+            .collect();
+        return Err(Error::Config(format!(
+            "{}: --edge pad makes pixels of fewer samples, which have no centre sample for the nearest rule of {}: give --edge crop, or --channel-rule 'PATTERN=drop' or '=average'",
+            job.input.display(),
+            nearest.join(", ")
+        )));
+    }
     pipe_job.padded_from = padded_from;
     if let Some(found) = &found {
         let aux = input.aux_channels();
@@ -467,9 +516,13 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         },
         e => e,
     })?;
-    for l in &stats.ledger {
-        // The foils lose energy by design: their ledger is reported, not enforced.
-        if params.method.preserves_energy() && !(l.rel_error <= LEDGER_LIMIT) {
+    for (l, mode) in stats.ledger.iter().zip(&pipe_job.modes) {
+        // The foils lose energy by design: their ledger is reported, not
+        // enforced; nor is it for ids and masks (the nearest sample).
+        if params.method.preserves_energy()
+            && *mode != ChannelMode::Nearest
+            && !(l.rel_error <= LEDGER_LIMIT)
+        {
             return Err(Error::Ledger {
                 channel: l.channel.clone(),
                 rel_error: l.rel_error,
@@ -514,6 +567,19 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         height: read_h,
         out_width: w / s,
         out_height: h / s,
+        channel_rules: channels
+            .iter()
+            .zip(input.channel_rules())
+            .zip(&pipe_job.luminance)
+            .map(|((c, r), &l)| {
+                let name = match r {
+                    Some(r) => r.name(),
+                    None if l != 0.0 => "colour",
+                    None => "alpha",
+                };
+                (c.clone(), name.to_string())
+            })
+            .collect(),
         channels,
         dropped_channels: input.dropped_channels().to_vec(),
         tolerance: job.params.tolerance,

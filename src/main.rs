@@ -10,6 +10,7 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
+use epfilt::filter::channels::RuleOverride;
 use epfilt::io::{parse_compression, OutputSettings, PartSelect};
 use epfilt::pipeline::NonFinite;
 use epfilt::synth::{Sampling, Scene, SceneKind, SynthJob};
@@ -361,6 +362,12 @@ struct FilterArgs {
     /// [default: the unlayered channels, else a beauty-named layer, else the only one].
     #[arg(long)]
     layer: Option<String>,
+    /// What a channel beside the beauty gets, PATTERN=RULE (glob on the full name; repeatable, the
+    /// last match wins): additive (spread with the beauty's kernels: light AOVs that sum to it),
+    /// average (the base filter; copied at S = 1: depth, normals, albedo), nearest (the centre
+    /// sample: ids, masks), drop [default: by name; `epfilt info` shows each channel's rule].
+    #[arg(long = "channel-rule", value_name = "PATTERN=RULE")]
+    channel_rule: Vec<String>,
     /// NaN and infinite input samples: error (refuse, naming the first) or zero (count them).
     #[arg(long, default_value = "error")]
     nonfinite: String,
@@ -787,6 +794,11 @@ fn filter_job(a: &FilterArgs, cancel: Arc<AtomicBool>) -> Result<FilterJob> {
                 ))
             })
             .transpose()?,
+        channel_rules: a
+            .channel_rule
+            .iter()
+            .map(|r| RuleOverride::parse(r))
+            .collect::<Result<_, _>>()?,
     })
 }
 

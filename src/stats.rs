@@ -58,8 +58,12 @@ pub struct Report {
     pub out_width: usize,
     /// Output height (pixels).
     pub out_height: usize,
-    /// Filtered channels.
+    /// Written channels: the beauty's, then those carried beside it.
     pub channels: Vec<String>,
+    /// What each written channel got: `colour` and `alpha` (the beauty's),
+    /// or its rule (`additive`, `average`, `nearest`;
+    /// [`crate::filter::channels`]).
+    pub channel_rules: std::collections::BTreeMap<String, String>,
     /// Channels of the input that were not filtered nor written.
     pub dropped_channels: Vec<String>,
     /// Relation 14 tolerance (ep-gauss).
@@ -316,6 +320,17 @@ impl Report {
                     .collect::<Vec<_>>()
                     .join(", ")
             ));
+        }
+        let carried: Vec<String> = self
+            .channels
+            .iter()
+            .filter_map(|c| {
+                let r = self.channel_rules.get(c)?;
+                (r != "colour" && r != "alpha").then(|| format!("{c} {r}"))
+            })
+            .collect();
+        if !carried.is_empty() {
+            s.push_str(&format!("  carried: {}\n", carried.join(", ")));
         }
         if !self.dropped_channels.is_empty() {
             s.push_str(&format!(

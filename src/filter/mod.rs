@@ -6,11 +6,13 @@
 //! * [`ep_box`]: §5.1, excess spreading for path-traced images with variance,
 //!   the guards that keep real features, and the sample planning of Eqs. 8–10.
 //! * [`foils`]: the energy-losing filters' rules (median, alpha-trim).
+//! * [`channels`]: what the channels beside the beauty get (`--channel-rule`).
 //!
 //! Methods: `ep-gauss` (the paper's filter, default), `ep-box` (§5.1, pixel
 //! resolution input with variance), `gauss` (the same base Gaussian for every
 //! sample: the linear foil) and `box` (S x S average: the I/O floor).
 
+pub mod channels;
 pub mod ep_box;
 pub mod ep_gauss;
 pub mod foils;

@@ -1,6 +1,7 @@
 //! `epfilt info`: what an EXR file (or a Radiance picture) holds.
 
 use super::{compression_name, luminance_weights};
+use crate::filter::channels::ChannelRule;
 
 /// A human description of an EXR file: parts, sizes, channels, compression,
 /// layout.
@@ -78,9 +79,39 @@ pub fn info(path: &std::path::Path) -> crate::Result<String> {
             .collect();
         let _ = writeln!(s, "  channels: {}", chans.join(", "));
         let _ = match super::reader::choose_channels(path, h, None) {
-            Ok((chosen, _)) => {
+            Ok((chosen, rest)) => {
                 let names: Vec<&str> = chosen.iter().map(|c| c.name.as_str()).collect();
-                writeln!(s, "  filtered: {}", names.join(", "))
+                let _ = writeln!(s, "  filtered: {}", names.join(", "));
+                // What `filter` does with the rest by default (--channel-rule
+                // changes it; median and alpha-trim carry nothing).
+                let views: Vec<String> = h
+                    .own_attributes
+                    .multi_view_names
+                    .iter()
+                    .flatten()
+                    .skip(1)
+                    .map(|t| t.to_string())
+                    .collect();
+                let (mut carried, mut dropped) = (Vec::new(), Vec::new());
+                for name in &rest {
+                    let uint = h.channels.list.iter().any(|c| {
+                        c.name.to_string() == *name
+                            && c.sample_type == exr::meta::attribute::SampleType::U32
+                    });
+                    match crate::filter::channels::rule_for(name, uint, &[], &views) {
+                        _ if uint => dropped.push(format!("{name} (uint: not carried yet)")),
+                        ChannelRule::Drop => dropped.push(name.clone()),
+                        r => carried.push(format!("{name} {}", r.name())),
+                    }
+                }
+                if !carried.is_empty() {
+                    let _ = writeln!(s, "  carried: {}", carried.join(", "));
+                }
+                if dropped.is_empty() {
+                    Ok(())
+                } else {
+                    writeln!(s, "  dropped: {}", dropped.join(", "))
+                }
             }
             Err(crate::Error::Unsupported { reason, .. }) => {
                 writeln!(s, "  filtered: nothing ({reason})")

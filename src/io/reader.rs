@@ -20,6 +20,7 @@ use rayon::prelude::*;
 
 use super::mapped::MappedFile;
 use crate::error::{Error, Result};
+use crate::filter::channels::ChannelRule;
 use crate::pipeline::{Source, Strip};
 
 thread_local! {
@@ -85,6 +86,9 @@ pub struct ExrInput {
     dropped: Vec<String>,
     /// The last `aux` selected channels are statistics (read, not filtered).
     aux: usize,
+    /// Selected channels after the beauty's, before the statistics: carried
+    /// by their [`ChannelRule`]s ([`ExrInput::carry_channels`]).
+    carried: Vec<ChannelRule>,
     /// A Radiance picture's header: the file is RGBE / XYZE, and `meta` a
     /// header made to describe it (three f32 channels, no blocks).
     rgbe: Option<super::rgbe::RgbeHeader>,
@@ -286,6 +290,7 @@ impl ExrInput {
             rows,
             dropped,
             aux: 0,
+            carried: Vec::new(),
             rgbe: None,
         };
         // What a decoder allocates per block comes from the header: bound it
@@ -383,6 +388,7 @@ impl ExrInput {
             rows: Vec::new(),
             dropped: Vec::new(),
             aux: 0,
+            carried: Vec::new(),
             rgbe: Some(rh),
         })
     }
@@ -469,6 +475,52 @@ impl ExrInput {
         Ok(())
     }
 
+    /// Carry the channels beside the beauty's: each gets `rule(name, uint)`;
+    /// those it drops, and channels of unsigned integers (not carried yet:
+    /// their ids would pass through f32), stay dropped. Returns the
+    /// carried channels and their rules. Call before
+    /// [`ExrInput::add_aux_channels`].
+    pub fn carry_channels(
+        &mut self,
+        rule: impl Fn(&str, bool) -> ChannelRule,
+    ) -> Vec<(String, ChannelRule)> {
+        assert_eq!(self.aux, 0, "carry channels before the statistics");
+        let header = self.header();
+        let mut carried = Vec::new();
+        let mut added = Vec::new();
+        for (index, ch) in header.channels.list.iter().enumerate() {
+            let name = ch.name.to_string();
+            if self.selected.iter().any(|s| s.index == index) {
+                continue;
+            }
+            let uint = ch.sample_type == SampleType::U32;
+            let r = rule(&name, uint);
+            if r == ChannelRule::Drop || uint {
+                continue;
+            }
+            added.push(Selected {
+                name: name.clone(),
+                index,
+            });
+            carried.push((name, r));
+        }
+        self.dropped
+            .retain(|d| !carried.iter().any(|(n, _)| n == d));
+        self.selected.extend(added);
+        self.carried = carried.iter().map(|(_, r)| *r).collect();
+        carried
+    }
+
+    /// The rule of each filtered channel, in strip order: `None` for the
+    /// beauty's own.
+    pub fn channel_rules(&self) -> Vec<Option<ChannelRule>> {
+        let n = self.selected.len() - self.aux - self.carried.len();
+        (0..n)
+            .map(|_| None)
+            .chain(self.carried.iter().map(|&r| Some(r)))
+            .collect()
+    }
+
     /// Channels of the file that are not filtered (and not written).
     pub fn dropped_channels(&self) -> &[String] {
         &self.dropped
@@ -477,9 +529,12 @@ impl ExrInput {
     /// Luminance weight of each filtered channel.
     pub fn luminance(&self) -> Vec<f64> {
         let rgb = super::luminance_weights(self.header().shared_attributes.chromaticities.as_ref());
+        let beauty = self.selected.len() - self.aux - self.carried.len();
         self.selected[..self.selected.len() - self.aux]
             .iter()
-            .map(|s| match base_name(&s.name) {
+            .enumerate()
+            .map(|(i, s)| if i >= beauty { "" } else { base_name(&s.name) })
+            .map(|b| match b {
                 "R" => rgb[0],
                 "G" => rgb[1],
                 "B" => rgb[2],

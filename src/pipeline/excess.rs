@@ -21,8 +21,9 @@
 
 use rayon::prelude::*;
 
-use super::stream::{MethodStats, Stage, WindowUse, MAX_CHANNELS};
+use super::stream::{MethodStats, Stage, WindowUse};
 use super::window::RowWindow;
+use super::ChannelMode;
 use crate::error::{Error, Result};
 use crate::filter::ep_box::{
     counts_toward_cluster, excess, EpBoxParams, Guard, PixelTest, Ring, Spp, StatsLayout, TFactor,
@@ -41,8 +42,9 @@ struct Source {
     y: u32,
     /// Offsets of the ring walked.
     m: u32,
-    /// What each in-image pixel of the walk receives, per channel.
-    share: [f64; MAX_CHANNELS],
+    /// Where what each in-image pixel of the walk receives is, per channel
+    /// (`nch` values in the shares).
+    off: usize,
 }
 
 /// What ep-box counted, in pixels.
@@ -74,6 +76,8 @@ pub struct ExcessStage {
     h: usize,
     nch: usize,
     lum: Vec<f64>,
+    /// Which channels give up the excess (the colour and additive layers).
+    modes: Vec<ChannelMode>,
     stats: StatsLayout,
     params: EpBoxParams,
     ltvis: f64,
@@ -110,6 +114,7 @@ impl ExcessStage {
         h: usize,
         nch: usize,
         lum: Vec<f64>,
+        modes: Vec<ChannelMode>,
         aux: usize,
         stats: StatsLayout,
         params: &ValidParams,
@@ -154,6 +159,7 @@ impl ExcessStage {
             h,
             nch,
             lum,
+            modes,
             stats,
             params: params.clone(),
             ltvis,
@@ -381,7 +387,7 @@ impl ExcessStage {
             ylum: &self.ylum,
             cap: &self.cap,
             noisy: &self.noisy,
-            lum: &self.lum,
+            modes: &self.modes,
             passes: self.passes,
             dl: self.dl,
             ltvis: self.ltvis,
@@ -396,13 +402,18 @@ impl ExcessStage {
             chunks.push((y, rows.by_ref().take(n).collect()));
             y += n;
         }
-        let results: Vec<(Vec<Source>, ExcessStats)> = chunks
+        let results: Vec<(Vec<Source>, Vec<f64>, ExcessStats)> = chunks
             .into_par_iter()
             .map(|(c0, rows)| ctx.treat_rows(c0, rows))
             .collect();
-        let mut sources = Vec::new();
-        for (s, c) in results {
-            sources.extend(s);
+        let (mut sources, mut shares) = (Vec::new(), Vec::new());
+        for (s, sh, c) in results {
+            let base = shares.len();
+            sources.extend(s.into_iter().map(|s| Source {
+                off: s.off + base,
+                ..s
+            }));
+            shares.extend(sh);
             let k = &mut self.counters;
             k.noisy += c.noisy;
             k.spread += c.spread;
@@ -412,7 +423,15 @@ impl ExcessStage {
             k.unresolved += c.unresolved;
             k.passes = k.passes.max(c.passes);
         }
-        scatter_ring(&mut self.acc, &self.ring, &sources, w, h, nch, self.tile);
+        scatter_ring(
+            &mut self.acc,
+            &self.ring,
+            &sources,
+            &shares,
+            &self.modes,
+            (w, h),
+            self.tile,
+        );
     }
 }
 
@@ -425,7 +444,7 @@ struct Band<'a> {
     ylum: &'a RowWindow<f64>,
     cap: &'a RowWindow<f64>,
     noisy: &'a RowWindow<u8>,
-    lum: &'a [f64],
+    modes: &'a [ChannelMode],
     passes: usize,
     dl: f64,
     ltvis: f64,
@@ -473,7 +492,11 @@ impl Band<'_> {
     /// Treat rows `c0..c0 + kept.len()`: the passes over the band of rows
     /// `c0 - passes .. c1 + passes`, which holds everything those rows'
     /// decisions read (see `filter::ep_box`).
-    fn treat_rows(&self, c0: usize, mut kept: Vec<&mut [f64]>) -> (Vec<Source>, ExcessStats) {
+    fn treat_rows(
+        &self,
+        c0: usize,
+        mut kept: Vec<&mut [f64]>,
+    ) -> (Vec<Source>, Vec<f64>, ExcessStats) {
         let (w, h, nch) = (self.w, self.h, self.nch);
         let c1 = c0 + kept.len();
         let margin = self.passes + GUARD_REACH;
@@ -506,7 +529,7 @@ impl Band<'_> {
             .iter()
             .filter(|&&i| in_target(i as usize / w))
             .count() as u64;
-        let mut sources = Vec::new();
+        let (mut sources, mut shares) = (Vec::new(), Vec::new());
         let mut next = Vec::with_capacity(pending.len());
         for k in 1..=self.passes.min(UNSET as usize - 1) as u8 {
             if pending.is_empty() {
@@ -586,21 +609,22 @@ impl Band<'_> {
                 counters.spread += 1;
                 counters.capped += u64::from(found < wanted);
                 let row = &mut kept[yy - c0];
-                let mut share = [0.0f64; MAX_CHANNELS];
+                let off = shares.len();
                 for c in 0..nch {
-                    if self.lum[c] == 0.0 {
-                        continue;
+                    let mut share = 0.0;
+                    if self.modes[c] == ChannelMode::Spread {
+                        let v = &mut row[c * w + x];
+                        let removed = *v * f;
+                        *v -= removed;
+                        share = removed / found as f64;
                     }
-                    let v = &mut row[c * w + x];
-                    let removed = *v * f;
-                    *v -= removed;
-                    share[c] = removed / found as f64;
+                    shares.push(share);
                 }
                 sources.push(Source {
                     x: x as u32,
                     y: yy as u32,
                     m: m as u32,
-                    share,
+                    off,
                 });
             }
             std::mem::swap(&mut pending, &mut next);
@@ -610,7 +634,7 @@ impl Band<'_> {
             .filter(|&&i| in_target(i as usize / w))
             .count() as u64;
         sources.sort_by_key(|s| (s.y, s.x));
-        (sources, counters)
+        (sources, shares, counters)
     }
 }
 
@@ -620,11 +644,12 @@ fn scatter_ring(
     acc: &mut RowWindow<f64>,
     ring: &Ring,
     sources: &[Source],
-    w: usize,
-    h: usize,
-    nch: usize,
+    shares: &[f64],
+    modes: &[ChannelMode],
+    (w, h): (usize, usize),
     tile: usize,
 ) {
+    let nch = modes.len();
     if sources.is_empty() {
         return;
     }
@@ -660,8 +685,9 @@ fn scatter_ring(
                         continue;
                     }
                     let r = ty as usize - first;
-                    for c in 0..nch {
-                        parts[r * nch + c][tx as usize - x0] += s.share[c];
+                    // Channels that are not spread keep their bits.
+                    for c in (0..nch).filter(|&c| modes[c] == ChannelMode::Spread) {
+                        parts[r * nch + c][tx as usize - x0] += shares[s.off + c];
                     }
                 }
             }

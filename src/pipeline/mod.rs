@@ -34,6 +34,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
+use crate::filter::channels::ChannelRule;
 use crate::filter::ep_box::StatsLayout;
 use crate::filter::{FilterParams, Method};
 use crate::geometry::{Grid, Halo};
@@ -134,6 +135,33 @@ impl Default for PipelineConfig {
     }
 }
 
+/// What the stage does with one channel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ChannelMode {
+    /// The base filter, and noisy samples spread (the beauty's colour, and
+    /// additive layers with the beauty's kernels).
+    Spread,
+    /// The base filter only (alpha, averaged data).
+    Base,
+    /// The centre sample of each pixel (ids; averaged data at S = 1, which
+    /// is then copied bit for bit). Not energy: out of the ledger's check.
+    Nearest,
+}
+
+impl ChannelMode {
+    /// The mode of a channel with luminance weight `lum` and carried by
+    /// `rule` (`None`: the beauty's own channel) at super-sampling `s`.
+    pub fn of(lum: f64, rule: Option<ChannelRule>, s: usize) -> Self {
+        match rule {
+            None if lum != 0.0 => ChannelMode::Spread,
+            None => ChannelMode::Base,
+            Some(ChannelRule::Additive) => ChannelMode::Spread,
+            Some(ChannelRule::Average | ChannelRule::Drop) if s > 1 => ChannelMode::Base,
+            Some(_) => ChannelMode::Nearest,
+        }
+    }
+}
+
 /// What one job filters: the grid and its channels.
 #[derive(Clone, Debug)]
 pub struct Job {
@@ -141,8 +169,11 @@ pub struct Job {
     pub grid: Grid,
     /// Channel names, in the order of the strips.
     pub channels: Vec<String>,
-    /// Luminance weight of each channel (0 for alpha).
+    /// Luminance weight of each channel (0 for alpha and carried channels).
     pub luminance: Vec<f64>,
+    /// What the stage does with each channel ([`Job::new`]: spread where
+    /// the luminance weight is not 0, else the base filter).
+    pub modes: Vec<ChannelMode>,
     /// Channels read after `channels` but not written: the statistics of
     /// `ep-box` (variance, sample count).
     pub aux: Vec<String>,
@@ -157,14 +188,27 @@ pub struct Job {
 impl Job {
     /// A job over `channels` with no statistics channels.
     pub fn new(grid: Grid, channels: Vec<String>, luminance: Vec<f64>) -> Self {
+        let modes = luminance
+            .iter()
+            .map(|&l| ChannelMode::of(l, None, grid.s))
+            .collect();
         Job {
             grid,
             channels,
             luminance,
+            modes,
             aux: Vec::new(),
             stats: None,
             padded_from: None,
         }
+    }
+
+    /// Carried channels: `rules[c]` for each channel (`None`: the beauty's).
+    pub fn with_rules(mut self, rules: &[Option<ChannelRule>]) -> Self {
+        for ((m, &l), &r) in self.modes.iter_mut().zip(&self.luminance).zip(rules) {
+            *m = ChannelMode::of(l, r, self.grid.s);
+        }
+        self
     }
 
     /// Channels per strip row: filtered ones, then statistics.

@@ -30,8 +30,9 @@
 
 use rayon::prelude::*;
 
-use super::stream::{MethodStats, Stage, WindowUse, MAX_CHANNELS};
+use super::stream::{MethodStats, Stage, WindowUse};
 use super::window::RowWindow;
+use super::ChannelMode;
 use crate::filter::ep_box::{StatsLayout, COMPACT_RATIO};
 use crate::filter::ep_gauss::{Carriers, EpGauss, Folded, LumRows, Support, COMPACT_REACH};
 use crate::filter::kernel::{ColumnTaps, Kernel1d, TentTaps};
@@ -63,7 +64,14 @@ mod tests {
                     in_h: 20 * s,
                     s,
                 };
-                let e = SpreadStage::new(grid, vec![1.0], &p.validated().unwrap(), 16, None);
+                let e = SpreadStage::new(
+                    grid,
+                    vec![1.0],
+                    vec![ChannelMode::Spread],
+                    &p.validated().unwrap(),
+                    16,
+                    None,
+                );
                 assert_eq!(
                     e.halo(),
                     crate::filter::halo(&p),
@@ -80,7 +88,6 @@ struct Noisy {
     j: u32,
     x0: f64,
     xbar0: f64,
-    v: [f32; MAX_CHANNELS],
     level: u16,
     capped: bool,
 }
@@ -92,7 +99,8 @@ struct Spread {
     ys: usize,
     yl: usize,
     off: usize,
-    v: [f64; MAX_CHANNELS],
+    /// Where its value in each channel is, in the chunk's values.
+    voff: usize,
 }
 
 struct YView<'a> {
@@ -137,6 +145,7 @@ pub struct SpreadStage {
     nch: usize,
     inv_s2: f64,
     lum: Vec<f64>,
+    modes: Vec<ChannelMode>,
     base: Kernel1d,
     cols: ColumnTaps,
     ep: Option<EpGauss>,
@@ -148,6 +157,11 @@ pub struct SpreadStage {
     based: RowWindow<f64>,
     acc: RowWindow<f64>,
     pending: Vec<Noisy>,
+    /// The pending samples' values, `nch` each, in the same order.
+    pending_v: Vec<f32>,
+    /// The values of one chunk's spreads, `nch` each (0 in channels not
+    /// spread).
+    vals: Vec<f64>,
     arena: Vec<f64>,
     cls_done: usize,
     spread_done: usize,
@@ -181,11 +195,13 @@ impl SpreadStage {
     pub fn new(
         grid: Grid,
         lum: Vec<f64>,
+        modes: Vec<ChannelMode>,
         params: &ValidParams,
         tile: usize,
         stats: Option<StatsLayout>,
     ) -> Self {
         let nch = lum.len();
+        assert_eq!(modes.len(), nch, "a mode per channel");
         let s = grid.s;
         let (w, h) = (grid.out_w(), grid.out_h());
         let base = match params.method {
@@ -221,6 +237,7 @@ impl SpreadStage {
             nch,
             inv_s2: 1.0 / (s * s) as f64,
             lum,
+            modes,
             base,
             cols,
             ep,
@@ -232,6 +249,8 @@ impl SpreadStage {
             based: RowWindow::new(nch * w),
             acc: RowWindow::new(nch * w),
             pending: Vec::new(),
+            pending_v: Vec::new(),
+            vals: Vec::new(),
             arena: Vec::new(),
             cls_done: 0,
             spread_done: 0,
@@ -490,125 +509,134 @@ impl SpreadStage {
         let ep = self.ep.as_ref();
         let ybox = &self.ybox;
         let lum = &self.lum;
+        let modes = &self.modes;
         let cols = &self.cols;
         let support = self.support;
         let pixel_stats = self.pixel_stats.as_ref();
         let pad = self.pad;
         // Phase 1, reading the input as it came (neighbour rows included):
         // which samples are noise, and which of those are kept as features.
-        let found: Vec<(Vec<Noisy>, u64)> = (a..b)
+        // Each row's noisy samples in row-major order, and their values (nch
+        // each, in the same order).
+        type Found = (Vec<Noisy>, Vec<f32>, u64);
+        let found: Vec<Found> = (a..b)
             .into_par_iter()
-            .map_init(Vec::new, |lrows, y| {
-                let mut found = Vec::new();
-                let mut kept = 0u64;
-                let Some(ep) = ep else {
-                    return (found, kept);
-                };
-                let view = YView { win: ybox, h };
-                let xbars = ep.xbar0_row(&view, y as i64, w);
-                let luma = |row: &[f32], i: usize| {
-                    let mut x = 0.0;
-                    for c in 0..nch {
-                        x += lum[c] * row[c * in_w + i] as f64;
-                    }
-                    x
-                };
-                // The luminance of the pixel row's samples, a row at a time
-                // (the same sum, in the same order, as `luma`).
-                lrows.clear();
-                lrows.resize(s * in_w, 0.0f64);
-                for (bb, lrow) in lrows.chunks_exact_mut(in_w).enumerate() {
-                    let row = input.get(y * s + bb);
-                    for c in 0..nch {
-                        let lw = lum[c];
-                        for (l, &v) in lrow.iter_mut().zip(&row[c * in_w..(c + 1) * in_w]) {
-                            *l += lw * v as f64;
-                        }
-                    }
-                }
-                for (px, &xbar) in xbars.iter().enumerate() {
-                    let Some((hi, lo)) = ep.bounds(xbar) else {
-                        continue;
+            .map_init(
+                <(Vec<f64>, Vec<(usize, f64, f64, f64)>)>::default,
+                |(lrows, flagged), y| {
+                    let mut found = Vec::new();
+                    let mut vals = Vec::new();
+                    let mut kept = 0u64;
+                    let Some(ep) = ep else {
+                        return (found, vals, kept);
                     };
-                    // Most pixels hold no noisy sample: one branch-free test
-                    // of all their samples first (the same test as below).
-                    let mut any = false;
-                    for bb in 0..s {
-                        for &x0 in &lrows[bb * in_w + px * s..bb * in_w + (px + 1) * s] {
-                            any |= x0 > 0.0 && (x0 > hi || x0 < lo);
+                    let view = YView { win: ybox, h };
+                    let xbars = ep.xbar0_row(&view, y as i64, w);
+                    let luma = |row: &[f32], i: usize| {
+                        let mut x = 0.0;
+                        for c in 0..nch {
+                            x += lum[c] * row[c * in_w + i] as f64;
+                        }
+                        x
+                    };
+                    // The luminance of the pixel row's samples, a row at a time
+                    // (the same sum, in the same order, as `luma`).
+                    lrows.clear();
+                    lrows.resize(s * in_w, 0.0f64);
+                    for (bb, lrow) in lrows.chunks_exact_mut(in_w).enumerate() {
+                        let row = input.get(y * s + bb);
+                        for c in 0..nch {
+                            let lw = lum[c];
+                            for (l, &v) in lrow.iter_mut().zip(&row[c * in_w..(c + 1) * in_w]) {
+                                *l += lw * v as f64;
+                            }
                         }
                     }
-                    if !any {
-                        continue;
+                    // Which pixels hold a noisy sample: one branch-free test of
+                    // all their samples first (most hold none).
+                    flagged.clear();
+                    for (px, &xbar) in xbars.iter().enumerate() {
+                        let Some((hi, lo)) = ep.bounds(xbar) else {
+                            continue;
+                        };
+                        let mut any = false;
+                        for bb in 0..s {
+                            for &x0 in &lrows[bb * in_w + px * s..bb * in_w + (px + 1) * s] {
+                                any |= x0 > 0.0 && (x0 > hi || x0 < lo);
+                            }
+                        }
+                        if any {
+                            flagged.push((px, xbar, hi, lo));
+                        }
                     }
+                    // Row-major order: by input row, then column.
                     for bb in 0..s {
                         let j = y * s + bb;
                         let lrow = &lrows[bb * in_w..(bb + 1) * in_w];
-                        for i in px * s..(px + 1) * s {
-                            let x0 = lrow[i];
-                            if !(x0 > 0.0 && (x0 > hi || x0 < lo)) {
-                                continue;
-                            }
-                            if support.keeps(x0, hi, lo, |di, dj| {
-                                let (ni, nj) = (i as i64 + di, j as i64 + dj);
-                                (ni >= 0 && nj >= 0 && (ni as usize) < in_w && (nj as usize) < in_h)
-                                    .then(|| luma(input.get(nj as usize), ni as usize))
-                            }) {
-                                kept += 1;
-                                continue;
-                            }
-                            if let Some((st, carriers)) = pixel_stats.filter(|_| x0 > hi) {
-                                // S = 1: the sample is pixel (i, j) = (px, y).
-                                let row = input.get(j);
-                                let (n, se2) = st.pixel(lum, x0, |c| row[c * in_w + i] as f64);
-                                let hot = || {
-                                    let r = COMPACT_REACH as i64;
-                                    let mut count = 0;
-                                    for yy in
-                                        (y as i64 - r).max(0)..=(y as i64 + r).min(h as i64 - 1)
-                                    {
-                                        let lrow = view.row(yy);
-                                        for xx in px.saturating_sub(COMPACT_REACH)
-                                            ..=(px + COMPACT_REACH).min(w - 1)
-                                        {
-                                            let v = lrow[pad + xx];
-                                            if v < x0 / COMPACT_RATIO {
-                                                continue;
-                                            }
-                                            let xb = ep.xbar0(&view, xx, yy);
-                                            count += usize::from(
-                                                ep.bounds(xb).is_some_and(|(hi, _)| v > hi),
-                                            );
-                                        }
-                                    }
-                                    count
-                                };
-                                if carriers.keeps(x0, se2, n, hot) {
+                        for &(px, xbar, hi, lo) in flagged.iter() {
+                            for i in px * s..(px + 1) * s {
+                                let x0 = lrow[i];
+                                if !(x0 > 0.0 && (x0 > hi || x0 < lo)) {
+                                    continue;
+                                }
+                                if support.keeps(x0, hi, lo, |di, dj| {
+                                    let (ni, nj) = (i as i64 + di, j as i64 + dj);
+                                    (ni >= 0
+                                        && nj >= 0
+                                        && (ni as usize) < in_w
+                                        && (nj as usize) < in_h)
+                                        .then(|| luma(input.get(nj as usize), ni as usize))
+                                }) {
                                     kept += 1;
                                     continue;
                                 }
+                                if let Some((st, carriers)) = pixel_stats.filter(|_| x0 > hi) {
+                                    // S = 1: the sample is pixel (i, j) = (px, y).
+                                    let row = input.get(j);
+                                    let (n, se2) = st.pixel(lum, x0, |c| row[c * in_w + i] as f64);
+                                    let hot = || {
+                                        let r = COMPACT_REACH as i64;
+                                        let mut count = 0;
+                                        for yy in
+                                            (y as i64 - r).max(0)..=(y as i64 + r).min(h as i64 - 1)
+                                        {
+                                            let lrow = view.row(yy);
+                                            for xx in px.saturating_sub(COMPACT_REACH)
+                                                ..=(px + COMPACT_REACH).min(w - 1)
+                                            {
+                                                let v = lrow[pad + xx];
+                                                if v < x0 / COMPACT_RATIO {
+                                                    continue;
+                                                }
+                                                let xb = ep.xbar0(&view, xx, yy);
+                                                count += usize::from(
+                                                    ep.bounds(xb).is_some_and(|(hi, _)| v > hi),
+                                                );
+                                            }
+                                        }
+                                        count
+                                    };
+                                    if carriers.keeps(x0, se2, n, hot) {
+                                        kept += 1;
+                                        continue;
+                                    }
+                                }
+                                let row = input.get(j);
+                                vals.extend((0..nch).map(|c| row[c * in_w + i]));
+                                found.push(Noisy {
+                                    i: i as u32,
+                                    j: j as u32,
+                                    x0,
+                                    xbar0: xbar,
+                                    level: 0,
+                                    capped: false,
+                                });
                             }
-                            let row = input.get(j);
-                            let mut v = [0.0f32; MAX_CHANNELS];
-                            for c in 0..nch {
-                                v[c] = row[c * in_w + i];
-                            }
-                            found.push(Noisy {
-                                i: i as u32,
-                                j: j as u32,
-                                x0,
-                                xbar0: xbar,
-                                v,
-                                level: 0,
-                                capped: false,
-                            });
                         }
                     }
-                }
-                // Row-major order: by input row, then column.
-                found.sort_by_key(|n| (n.j, n.i));
-                (found, kept)
-            })
+                    (found, vals, kept)
+                },
+            )
             .collect();
         // Phase 2: the horizontal pass of the base kernel, the spread
         // samples taken out (zeroed in a copy of their row).
@@ -617,7 +645,7 @@ impl SpreadStage {
             .par_chunks_mut(s)
             .zip(found.par_iter())
             .enumerate()
-            .for_each_init(Vec::new, |scratch, (k, (hs, (list, _)))| {
+            .for_each_init(Vec::new, |scratch, (k, (hs, (list, _, _)))| {
                 let y = a + k;
                 for (bb, hrow) in hs.iter_mut().enumerate() {
                     let j = y * s + bb;
@@ -628,9 +656,9 @@ impl SpreadStage {
                         scratch.clear();
                         scratch.extend_from_slice(row);
                         for n in &list[first..last] {
-                            // Coverage (alpha, luminance weight 0) is not
-                            // spread: it keeps the base kernel.
-                            for c in (0..nch).filter(|&c| lum[c] != 0.0) {
+                            // Coverage (alpha) and averaged data are not
+                            // spread: they keep the base kernel.
+                            for c in (0..nch).filter(|&c| modes[c] == ChannelMode::Spread) {
                                 scratch[c * in_w + n.i as usize] = 0.0;
                             }
                         }
@@ -639,6 +667,13 @@ impl SpreadStage {
                     for c in 0..nch {
                         let src = &row[c * in_w..(c + 1) * in_w];
                         let dst = &mut hrow[c * w..(c + 1) * w];
+                        if modes[c] == ChannelMode::Nearest {
+                            // The centre sample, as it is.
+                            for (x, d) in dst.iter_mut().enumerate() {
+                                *d = src[x * s + (s - 1) / 2] as f64;
+                            }
+                            continue;
+                        }
                         for (x, d) in dst.iter_mut().enumerate() {
                             let (start, taps) = cols.taps(x);
                             // -0.0 is the additive identity: a sum of -0.0
@@ -652,12 +687,13 @@ impl SpreadStage {
                     }
                 }
             });
-        for (list, kept) in found {
+        for (list, vals, kept) in found {
             // Kept samples failed the test too; the spread ones are counted
             // when they are spread.
             self.stats.noisy += kept;
             self.stats.kept += kept;
             self.pending.extend(list);
+            self.pending_v.extend(vals);
         }
     }
 
@@ -707,26 +743,33 @@ impl SpreadStage {
             // Reflect each sample's kernel once, in order.
             self.arena.clear();
             self.carena.clear();
+            self.vals.clear();
             spreads.clear();
             cspreads.clear();
-            for n in &self.pending[c0..(c0 + SPREAD_CHUNK).min(split)] {
+            let c1 = (c0 + SPREAD_CHUNK).min(split);
+            for (n, x) in self.pending[c0..c1]
+                .iter()
+                .zip(self.pending_v[c0 * nch..c1 * nch].chunks_exact(nch))
+            {
                 self.stats.noisy += 1;
                 self.stats.spread += (n.level > 0) as u64;
                 self.stats.capped += n.capped as u64;
                 let level = &ep.levels()[n.level as usize];
                 let (i, j) = (n.i as usize, n.j as usize);
-                let mut v = [0.0; MAX_CHANNELS];
-                for ((d, &x), &l) in v.iter_mut().zip(&n.v).zip(&self.lum) {
-                    if l != 0.0 {
-                        *d = x as f64 * self.inv_s2;
+                let voff = self.vals.len();
+                self.vals.extend(x.iter().zip(&self.modes).map(|(&x, &m)| {
+                    if m == ChannelMode::Spread {
+                        x as f64 * self.inv_s2
+                    } else {
+                        0.0
                     }
-                }
+                }));
                 // Wide kernels on the coarse grid, the others at full
                 // resolution; each list keeps the batch order.
                 let (sp, list) = match &level.coarse {
                     Some(c) => {
                         self.stats.coarse += 1;
-                        let sp = fold_both(&mut self.carena, &mut tmp, v, |across, t| {
+                        let sp = fold_both(&mut self.carena, &mut tmp, voff, |across, t| {
                             if across {
                                 c.fold(i % s, i / s, ncw, t)
                             } else {
@@ -737,7 +780,7 @@ impl SpreadStage {
                     }
                     None => {
                         let k = &level.kernel;
-                        let sp = fold_both(&mut self.arena, &mut tmp, v, |across, t| {
+                        let sp = fold_both(&mut self.arena, &mut tmp, voff, |across, t| {
                             if across {
                                 k.fold(i % s, i / s, w, t)
                             } else {
@@ -751,15 +794,32 @@ impl SpreadStage {
                 list.push(sp);
             }
             if !spreads.is_empty() {
-                scatter(&mut self.acc, &self.arena, &spreads, w, nch, self.tile);
+                scatter(
+                    &mut self.acc,
+                    &self.arena,
+                    &self.vals,
+                    &spreads,
+                    w,
+                    nch,
+                    self.tile,
+                );
             }
             if !cspreads.is_empty() {
                 self.coarse_used = true;
                 let tile = (self.tile / 2).max(1);
-                scatter(&mut self.cacc, &self.carena, &cspreads, ncw, nch, tile);
+                scatter(
+                    &mut self.cacc,
+                    &self.carena,
+                    &self.vals,
+                    &cspreads,
+                    ncw,
+                    nch,
+                    tile,
+                );
             }
         }
         self.pending.drain(..split);
+        self.pending_v.drain(..split * nch);
     }
 
     /// Add the coarse grid's share to the accumulator's final rows `a..b`:
@@ -823,6 +883,7 @@ impl SpreadStage {
         let base = &self.base;
         let hpass = &self.hpass;
         let inv = self.inv_s2;
+        let (modes, s) = (&self.modes, self.grid.s);
         let mut rows = self.based.range_mut(a, b);
         rows.par_iter_mut()
             .enumerate()
@@ -831,6 +892,11 @@ impl SpreadStage {
                 let j0 = base.gather(y, h, in_h, taps);
                 for c in 0..nch {
                     let dst = &mut row[c * w..(c + 1) * w];
+                    if modes[c] == ChannelMode::Nearest {
+                        // The centre row's centre sample (horizontal pass).
+                        dst.copy_from_slice(&hpass.get(y * s + (s - 1) / 2)[c * w..(c + 1) * w]);
+                        continue;
+                    }
                     dst.iter_mut().for_each(|v| *v = -0.0);
                     for (t, &wt) in taps.iter().enumerate() {
                         let src = &hpass.get(j0 + t)[c * w..(c + 1) * w];
@@ -849,7 +915,7 @@ impl SpreadStage {
 fn fold_both(
     arena: &mut Vec<f64>,
     tmp: &mut Vec<f64>,
-    v: [f64; MAX_CHANNELS],
+    voff: usize,
     fold: impl Fn(bool, &mut Vec<f64>) -> usize,
 ) -> Spread {
     let off = arena.len();
@@ -865,7 +931,7 @@ fn fold_both(
         ys,
         yl,
         off,
-        v,
+        voff,
     }
 }
 
@@ -874,6 +940,7 @@ fn fold_both(
 fn scatter(
     acc: &mut RowWindow<f64>,
     arena: &[f64],
+    vals: &[f64],
     spreads: &[Spread],
     w: usize,
     nch: usize,
@@ -906,16 +973,17 @@ fn scatter(
                 }
                 let wx = &arena[sp.off + cx0 - sp.xs..sp.off + cx1 - sp.xs];
                 let wy = &arena[sp.off + sp.xl..sp.off + sp.xl + sp.yl];
+                let v = &vals[sp.voff..sp.voff + nch];
                 // Colour without alpha, the common case: the three channels in
                 // one loop (each value gets the same products in the same
                 // order as channel by channel).
                 let rgb = nch >= 3
-                    && sp.v[..3].iter().all(|&v| v != 0.0)
-                    && sp.v[3..nch].iter().all(|&v| v == 0.0);
+                    && v[..3].iter().all(|&v| v != 0.0)
+                    && v[3..].iter().all(|&v| v == 0.0);
                 for (dy, &wyv) in wy.iter().enumerate() {
                     let r = sp.ys + dy - first;
                     if rgb {
-                        let (k0, k1, k2) = (sp.v[0] * wyv, sp.v[1] * wyv, sp.v[2] * wyv);
+                        let (k0, k1, k2) = (v[0] * wyv, v[1] * wyv, v[2] * wyv);
                         if let [a, b, c, ..] = &mut parts[r * nch..(r + 1) * nch] {
                             let span = cx0 - x0..cx1 - x0;
                             let (a, b, c) =
@@ -928,8 +996,8 @@ fn scatter(
                         }
                         continue;
                     }
-                    for c in (0..nch).filter(|&c| sp.v[c] != 0.0) {
-                        let coef = sp.v[c] * wyv;
+                    for c in (0..nch).filter(|&c| v[c] != 0.0) {
+                        let coef = v[c] * wyv;
                         let dst = &mut parts[r * nch + c][cx0 - x0..cx1 - x0];
                         for (d, &wv) in dst.iter_mut().zip(wx) {
                             *d += coef * wv;

@@ -29,8 +29,9 @@ use crate::filter::ep_box::{Spp, StatsLayout};
 use crate::filter::{Method, ValidParams};
 use crate::geometry::{Grid, Halo};
 
-/// Most channels one job filters (R, G, B, A).
-pub const MAX_CHANNELS: usize = 4;
+/// Most channels one job filters: the beauty (R, G, B, A) and what it
+/// carries beside it.
+pub const MAX_CHANNELS: usize = 64;
 
 /// A finished batch of output rows, `[row][channel][x]`.
 #[derive(Debug)]
@@ -115,9 +116,9 @@ impl Streamer {
     ) -> Result<Self> {
         let grid = job.grid;
         let nch = job.channels.len();
-        if nch == 0 || nch > MAX_CHANNELS || job.luminance.len() != nch {
+        if nch == 0 || nch > MAX_CHANNELS || job.luminance.len() != nch || job.modes.len() != nch {
             return Err(Error::Config(format!(
-                "1..={MAX_CHANNELS} channels with luminance weights needed, got {nch}"
+                "1..={MAX_CHANNELS} channels with luminance weights and modes needed, got {nch}"
             )));
         }
         let s = grid.s;
@@ -191,6 +192,7 @@ impl Streamer {
                     grid.in_h,
                     nch,
                     job.luminance.clone(),
+                    job.modes.clone(),
                     job.aux.len(),
                     stats,
                     params,
@@ -219,6 +221,7 @@ impl Streamer {
                 let mut stage = SpreadStage::new(
                     grid,
                     job.luminance.clone(),
+                    job.modes.clone(),
                     params,
                     cfg.tile,
                     job.stats.clone(),

@@ -689,7 +689,15 @@ mod files {
         assert_eq!(r["samples_spread"], 1);
         assert_eq!(r["ep_box"]["variance_channels"][0], "variance.R");
         assert!(r["ep_box"]["spp_from"].as_str().unwrap().contains("spp"));
-        assert_eq!(r["channels"].as_array().unwrap().len(), 3);
+        let written: Vec<&str> = r["channels"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c.as_str().unwrap())
+            .collect();
+        assert_eq!(written[..3], ["R", "G", "B"]);
+        // The statistics are carried too, averaged (at S = 1: copied).
+        assert_eq!(r["channel_rules"]["variance.R"], "average");
         assert!(r["energy_rel_error"]
             .as_array()
             .unwrap()

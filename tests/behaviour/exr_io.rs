@@ -386,7 +386,7 @@ fn the_beauty_layer_is_filtered_not_an_aov_that_sorts_before_it() {
     let out = dir.path().join("out.exr");
     let r = filter_file(&job(&input, &out, Method::Box, 1), &|_, _| {}).unwrap();
     assert_eq!(
-        r.channels,
+        r.channels[..4],
         [
             "ViewLayer.Combined.R",
             "ViewLayer.Combined.G",
@@ -394,7 +394,12 @@ fn the_beauty_layer_is_filtered_not_an_aov_that_sorts_before_it() {
             "ViewLayer.Combined.A"
         ]
     );
-    assert!(r.dropped_channels.contains(&"ViewLayer.AO.R".to_string()));
+    // The AOVs are carried beside it, by their rules.
+    assert_eq!(r.channel_rules["ViewLayer.Combined.R"], "colour");
+    assert_eq!(r.channel_rules["ViewLayer.Combined.A"], "alpha");
+    assert_eq!(r.channel_rules["ViewLayer.AO.R"], "average");
+    assert_eq!(r.channel_rules["ViewLayer.Depth.Z"], "average");
+    assert!(r.dropped_channels.is_empty());
     // Box at S = 1 is the identity: Combined.R (written 3rd in `names`) is 3.
     let meta = exr::meta::MetaData::read_from_file(&out, false).unwrap();
     let got: Vec<String> = meta.headers[0]
@@ -406,10 +411,14 @@ fn the_beauty_layer_is_filtered_not_an_aov_that_sorts_before_it() {
     assert_eq!(
         got,
         [
+            "ViewLayer.AO.B",
+            "ViewLayer.AO.G",
+            "ViewLayer.AO.R",
             "ViewLayer.Combined.A",
             "ViewLayer.Combined.B",
             "ViewLayer.Combined.G",
-            "ViewLayer.Combined.R"
+            "ViewLayer.Combined.R",
+            "ViewLayer.Depth.Z"
         ]
     );
     let img = exr::prelude::read_all_flat_layers_from_file(&out).unwrap();
@@ -429,9 +438,10 @@ fn the_beauty_layer_is_filtered_not_an_aov_that_sorts_before_it() {
     j.layer = Some("ViewLayer.AO".into());
     let r = filter_file(&j, &|_, _| {}).unwrap();
     assert_eq!(
-        r.channels,
+        r.channels[..3],
         ["ViewLayer.AO.R", "ViewLayer.AO.G", "ViewLayer.AO.B"]
     );
+    assert_eq!(r.channel_rules["ViewLayer.AO.R"], "colour");
 }
 
 #[test]
@@ -470,7 +480,10 @@ fn several_aov_layers_and_no_beauty_is_a_clear_error_naming_them() {
     // A trailing dot is accepted too.
     j.layer = Some("diffuse.".into());
     let r = filter_file(&j, &|_, _| {}).unwrap();
-    assert_eq!(r.channels, ["diffuse.R", "diffuse.G", "diffuse.B"]);
+    assert_eq!(r.channels[..3], ["diffuse.R", "diffuse.G", "diffuse.B"]);
+    assert_eq!(r.channel_rules["diffuse.R"], "colour");
+    assert_eq!(r.channel_rules["albedo.R"], "average");
+    assert_eq!(r.channel_rules["depth.Z"], "average");
 
     // One layer with colour is taken without asking.
     let single = dir.path().join("single.exr");
@@ -483,7 +496,9 @@ fn several_aov_layers_and_no_beauty_is_a_clear_error_naming_them() {
         |_, _, c| c as f32,
     );
     let r = filter_file(&job(&single, &out, Method::Box, 1), &|_, _| {}).unwrap();
-    assert_eq!(r.channels, ["render.R", "render.G", "render.B"]);
+    assert_eq!(r.channels, ["render.R", "render.G", "render.B", "depth.Z"]);
+    assert_eq!(r.channel_rules["render.G"], "colour");
+    assert_eq!(r.channel_rules["depth.Z"], "average");
 }
 
 /// A renderer's header carries many custom attributes; exr keeps them in a

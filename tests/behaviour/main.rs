@@ -1,6 +1,7 @@
 //! Behaviour tests of epfilt, one binary with a module per theme.
 
 mod band;
+mod channels;
 mod cli;
 mod common;
 mod corpus;

@@ -1,0 +1,264 @@
+//! What happens to the channels that are not the beauty's colour: the rules
+//! of `--channel-rule` and the defaults chosen by name.
+//!
+//! * **additive** (light AOVs: diffuse, specular, emission, per-light and
+//!   LPE layers...): spread with the beauty's own per-sample kernels, so that
+//!   layers that summed to the beauty in the input still do in the output,
+//!   and each keeps its energy exactly.
+//! * **average** (depth, normals, positions, motion, albedo, variance, and
+//!   anything not recognised): the base filter, never spread (a depth is not
+//!   energy); at S = 1 copied bit for bit.
+//! * **nearest** (ids, masks, cryptomatte): the centre sample of each pixel,
+//!   never a mix of values.
+//! * **drop**: not written.
+//!
+//! The beauty's own channels (R, G, B or Y, and A) are not ruled here.
+
+use crate::error::{Error, Result};
+
+/// How one carried channel is resampled.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ChannelRule {
+    /// Spread with the beauty's kernels (energy exact, sums kept).
+    Additive,
+    /// The base filter (S = 1: copied).
+    Average,
+    /// The centre sample of each pixel.
+    Nearest,
+    /// Not written.
+    Drop,
+}
+
+impl ChannelRule {
+    /// The name `--channel-rule` takes and reports show.
+    pub fn name(self) -> &'static str {
+        match self {
+            ChannelRule::Additive => "additive",
+            ChannelRule::Average => "average",
+            ChannelRule::Nearest => "nearest",
+            ChannelRule::Drop => "drop",
+        }
+    }
+
+    /// Parse a rule's name.
+    pub fn parse(s: &str) -> Result<Self> {
+        Ok(match s.trim().to_ascii_lowercase().as_str() {
+            "additive" => ChannelRule::Additive,
+            "average" => ChannelRule::Average,
+            "nearest" => ChannelRule::Nearest,
+            "drop" => ChannelRule::Drop,
+            other => {
+                return Err(Error::Config(format!(
+                    "--channel-rule: unknown rule {other:?} (additive, average, nearest or drop)"
+                )))
+            }
+        })
+    }
+}
+
+/// One `--channel-rule PATTERN=RULE`: channels whose full name matches the
+/// glob `PATTERN` (`*`, `?`, `[...]`; e.g. `diffuse.*`, `*.Z`) get `RULE`.
+#[derive(Clone, Debug)]
+pub struct RuleOverride {
+    pattern: glob::Pattern,
+    text: String,
+    /// The rule.
+    pub rule: ChannelRule,
+}
+
+impl RuleOverride {
+    /// Parse `PATTERN=RULE`.
+    pub fn parse(s: &str) -> Result<Self> {
+        let (pat, rule) = s.rsplit_once('=').ok_or_else(|| {
+            Error::Config(format!(
+                "--channel-rule {s:?}: expected PATTERN=RULE, e.g. 'diffuse.*=additive'"
+            ))
+        })?;
+        let pattern = glob::Pattern::new(pat)
+            .map_err(|e| Error::Config(format!("--channel-rule {s:?}: bad pattern: {e}")))?;
+        Ok(RuleOverride {
+            pattern,
+            text: pat.to_string(),
+            rule: ChannelRule::parse(rule)?,
+        })
+    }
+
+    /// The pattern as given.
+    pub fn pattern(&self) -> &str {
+        &self.text
+    }
+
+    /// Whether `name` matches.
+    pub fn matches(&self, name: &str) -> bool {
+        self.pattern.matches(name)
+    }
+}
+
+/// Layer names (any dot-component, any case) of light that adds up to the
+/// beauty: Blender's passes (DiffDir, GlossInd, Emit, Env...), Arnold's and
+/// RenderMan's AOVs and the generic words.
+const ADDITIVE_WORDS: &[&str] = &[
+    "diffuse",
+    "diff",
+    "diffdir",
+    "diffind",
+    "specular",
+    "spec",
+    "glossy",
+    "gloss",
+    "glossdir",
+    "glossind",
+    "transmission",
+    "trans",
+    "transdir",
+    "transind",
+    "emission",
+    "emit",
+    "env",
+    "environment",
+    "background",
+    "direct",
+    "indirect",
+    "sss",
+    "subsurface",
+    "volume",
+    "coat",
+    "sheen",
+    "light",
+    "lights",
+    "lpe",
+    "caustic",
+    "caustics",
+    "reflection",
+    "refraction",
+];
+
+/// Layer or channel names of ids and masks.
+const NEAREST_WORDS: &[&str] = &[
+    "id",
+    "objectid",
+    "object_id",
+    "materialid",
+    "material_id",
+    "indexob",
+    "indexma",
+    "mask",
+    "matte",
+];
+
+/// Layer or channel names of averaged data (checked before the additive
+/// words: `DiffCol` is an albedo, not light).
+const AVERAGE_WORDS: &[&str] = &[
+    "z", "depth", "n", "normal", "normals", "p", "position", "pref", "motion", "vector",
+    "velocity", "uv", "albedo", "col", "diffcol", "glosscol", "transcol", "ao", "shadow",
+    "variance", "var", "se", "mist", "alpha",
+];
+
+/// The default rule of a carried channel `name` (`uint`: its samples are
+/// unsigned integers).
+pub fn default_rule(name: &str, uint: bool) -> ChannelRule {
+    if uint {
+        return ChannelRule::Nearest;
+    }
+    let lower = name.to_ascii_lowercase();
+    let parts: Vec<&str> = lower.split('.').collect();
+    let (layers, last) = parts.split_at(parts.len() - 1);
+    let is = |words: &[&str], w: &str| words.contains(&w);
+    if lower.contains("crypto") || parts.iter().any(|p| is(NEAREST_WORDS, p)) {
+        return ChannelRule::Nearest;
+    }
+    if layers.iter().any(|p| is(AVERAGE_WORDS, p)) || layers.is_empty() {
+        // Unlayered channels that are not the beauty (Z, a mask...).
+        return ChannelRule::Average;
+    }
+    // An AOV's alpha is coverage, not light.
+    if last[0] == "a" {
+        return ChannelRule::Average;
+    }
+    if layers.iter().any(|p| is(ADDITIVE_WORDS, p)) {
+        return ChannelRule::Additive;
+    }
+    ChannelRule::Average
+}
+
+/// The rule for `name`: the last override that matches, else the default;
+/// by default the channels of a stereo file's other views (`right.R` where
+/// `multiView` names `left, right`) are dropped: a view is an image of its
+/// own, not a layer of the beauty's.
+pub fn rule_for(
+    name: &str,
+    uint: bool,
+    overrides: &[RuleOverride],
+    other_views: &[String],
+) -> ChannelRule {
+    overrides
+        .iter()
+        .rev()
+        .find(|o| o.matches(name))
+        .map_or_else(
+            || {
+                let view = name.split('.').next().unwrap_or("");
+                if name.contains('.') && other_views.iter().any(|v| v == view) {
+                    ChannelRule::Drop
+                } else {
+                    default_rule(name, uint)
+                }
+            },
+            |o| o.rule,
+        )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_by_name_and_type() {
+        use ChannelRule::*;
+        for (name, rule) in [
+            ("diffuse.R", Additive),
+            ("specular.B", Additive),
+            ("ViewLayer.DiffDir.G", Additive),
+            ("ViewLayer.DiffCol.G", Average),
+            ("emission.R", Additive),
+            ("diffuse.A", Average),
+            ("Z", Average),
+            ("depth.Z", Average),
+            ("N.X", Average),
+            ("P.Y", Average),
+            ("var.R", Average),
+            ("albedo.G", Average),
+            ("id", Nearest),
+            ("CryptoObject00.R", Nearest),
+            ("objectId.R", Nearest),
+            ("mystery.R", Average),
+        ] {
+            assert_eq!(default_rule(name, false), rule, "{name}");
+        }
+        assert_eq!(default_rule("anything", true), Nearest);
+    }
+
+    #[test]
+    fn overrides_win_and_the_last_match_counts() {
+        let o = [
+            RuleOverride::parse("*=drop").unwrap(),
+            RuleOverride::parse("mystery.*=additive").unwrap(),
+        ];
+        assert_eq!(rule_for("mystery.R", false, &o, &[]), ChannelRule::Additive);
+        assert_eq!(rule_for("Z", false, &o, &[]), ChannelRule::Drop);
+        let right = ["right".to_string()];
+        assert_eq!(rule_for("right.R", false, &[], &right), ChannelRule::Drop);
+        assert_eq!(
+            rule_for(
+                "right.R",
+                false,
+                &[RuleOverride::parse("right.*=average").unwrap()],
+                &right
+            ),
+            ChannelRule::Average
+        );
+        assert!(RuleOverride::parse("nope").is_err());
+        assert!(RuleOverride::parse("a=blur").is_err());
+        assert!(RuleOverride::parse("[=drop").is_err());
+    }
+}
