@@ -161,8 +161,11 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     let mut input = ExrInput::open_layer(&job.input, job.part.as_ref(), job.layer.as_deref())?;
     let mut params = job.params.clone();
     // Every channel beside the beauty is carried by its rule, except by the
-    // order-statistic foils (a per-channel median breaks every sum).
-    let carried = if matches!(params.method, Method::Median | Method::AlphaTrim) {
+    // order-statistic foils (a per-channel median breaks every sum) and into
+    // a Radiance picture (R, G, B only).
+    let carried = if matches!(params.method, Method::Median | Method::AlphaTrim)
+        || crate::io::rgbe::is_rgbe_path(&job.output)
+    {
         Vec::new()
     } else {
         // Views beside the default (the first `multiView` name).
@@ -179,6 +182,18 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
             channels::rule_for(name, uint, &job.channel_rules, &other_views)
         })
     };
+    for (name, rule) in &carried {
+        let uint = input.header().channels.list.iter().any(|c| {
+            c.name.to_string() == *name && c.sample_type == exr::meta::attribute::SampleType::U32
+        });
+        if uint && *rule != channels::ChannelRule::Nearest {
+            return Err(Error::Config(format!(
+                "{}: --channel-rule: {name} holds unsigned integers (ids): nearest or drop, not {}",
+                job.input.display(),
+                rule.name()
+            )));
+        }
+    }
     let nfiltered = input.channels().len();
     if nfiltered > MAX_CHANNELS {
         return Err(Error::Channels {

@@ -99,7 +99,6 @@ pub fn info(path: &std::path::Path) -> crate::Result<String> {
                             && c.sample_type == exr::meta::attribute::SampleType::U32
                     });
                     match crate::filter::channels::rule_for(name, uint, &[], &views) {
-                        _ if uint => dropped.push(format!("{name} (uint: not carried yet)")),
                         ChannelRule::Drop => dropped.push(name.clone()),
                         r => carried.push(format!("{name} {}", r.name())),
                     }

@@ -476,10 +476,8 @@ impl ExrInput {
     }
 
     /// Carry the channels beside the beauty's: each gets `rule(name, uint)`;
-    /// those it drops, and channels of unsigned integers (not carried yet:
-    /// their ids would pass through f32), stay dropped. Returns the
-    /// carried channels and their rules. Call before
-    /// [`ExrInput::add_aux_channels`].
+    /// those it drops stay dropped. Returns the carried channels and their
+    /// rules. Call before [`ExrInput::add_aux_channels`].
     pub fn carry_channels(
         &mut self,
         rule: impl Fn(&str, bool) -> ChannelRule,
@@ -495,7 +493,7 @@ impl ExrInput {
             }
             let uint = ch.sample_type == SampleType::U32;
             let r = rule(&name, uint);
-            if r == ChannelRule::Drop || uint {
+            if r == ChannelRule::Drop {
                 continue;
             }
             added.push(Selected {
@@ -702,7 +700,15 @@ impl ExrInput {
             for (k, sel) in self.selected.iter().enumerate() {
                 let t = channels[sel.index].sample_type;
                 let src = &block.data[line * line_bytes + ch_off[sel.index]..][..bw * bytes_of(t)];
-                convert(t, src, &mut dst[(line * n + k) * stride + at..][..bw]);
+                convert(t, src, &mut dst[(line * n + k) * stride + at..][..bw]).map_err(|v| {
+                    unsupported(
+                        path,
+                        format!(
+                            "uint channel {} holds {v}, above 2^24: f32 cannot carry such ids exactly; drop it with --channel-rule '{}=drop'",
+                            sel.name, sel.name
+                        ),
+                    )
+                })?;
             }
         }
         Ok(Landed {
@@ -737,7 +743,13 @@ struct Decoded {
     bytes: (usize, usize),
 }
 
-fn convert(t: SampleType, src: &[u8], dst: &mut [f32]) {
+/// Ids up to this are exact in f32 (2^24); a uint channel holding more is
+/// refused rather than carried wrong.
+pub const MAX_EXACT_ID: u32 = 1 << 24;
+
+/// Decode samples of type `t` into f32; `Err(v)`: a uint sample `v` above
+/// [`MAX_EXACT_ID`].
+fn convert(t: SampleType, src: &[u8], dst: &mut [f32]) -> std::result::Result<(), u32> {
     match t {
         SampleType::F16 => {
             for (d, b) in dst.iter_mut().zip(src.chunks_exact(2)) {
@@ -750,11 +762,18 @@ fn convert(t: SampleType, src: &[u8], dst: &mut [f32]) {
             }
         }
         SampleType::U32 => {
+            let mut max = 0;
             for (d, b) in dst.iter_mut().zip(src.chunks_exact(4)) {
-                *d = u32::from_ne_bytes([b[0], b[1], b[2], b[3]]) as f32;
+                let v = u32::from_ne_bytes([b[0], b[1], b[2], b[3]]);
+                max = max.max(v);
+                *d = v as f32;
+            }
+            if max > MAX_EXACT_ID {
+                return Err(max);
             }
         }
     }
+    Ok(())
 }
 
 pub(crate) fn base_name(name: &str) -> &str {

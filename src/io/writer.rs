@@ -103,27 +103,32 @@ pub fn views_with_channels(views: &[String], channels: &[String]) -> Vec<String>
         .collect()
 }
 
-/// The output sample type that keeps the input's (`--pixel-type same`): f16
-/// when every channel written was f16 in the input, else f32 (which holds f16
-/// and f32 values exactly; u32 channels are written as f32 too). One type for
-/// all channels: the pipeline rounds every channel alike.
+/// The output sample type that keeps each channel's input type
+/// (`--pixel-type same`): f16, f32, or u32 for ids carried by their nearest
+/// sample (a u32 beauty channel, filtered, becomes f32).
 pub fn same_precision(input_header: &Header, channels: &[String]) -> Vec<Precision> {
     channels
         .iter()
-        .map(|n| {
-            let half = input_header
-                .channels
-                .list
-                .iter()
-                .find(|c| c.name.to_string() == *n)
-                .is_some_and(|c| c.sample_type == SampleType::F16);
-            if half {
-                Precision::F16
-            } else {
-                Precision::F32
-            }
+        .map(|n| match input_type(input_header, n) {
+            Some(SampleType::F16) => Precision::F16,
+            Some(SampleType::U32) if !is_beauty_name(n) => Precision::U32,
+            _ => Precision::F32,
         })
         .collect()
+}
+
+fn input_type(input_header: &Header, name: &str) -> Option<SampleType> {
+    input_header
+        .channels
+        .list
+        .iter()
+        .find(|c| c.name.eq(name))
+        .map(|c| c.sample_type)
+}
+
+/// A colour or alpha channel's last name component (R, G, B, Y, A).
+fn is_beauty_name(name: &str) -> bool {
+    matches!(name.rsplit('.').next(), Some("R" | "G" | "B" | "Y" | "A"))
 }
 
 /// The sample type of each of `channels` in the output: the one asked for,
@@ -133,9 +138,14 @@ pub fn output_types(
     input_header: &Header,
     channels: &[String],
 ) -> Vec<Precision> {
+    let same = same_precision(input_header, channels);
     match settings.precision {
-        Some(p) => vec![p; channels.len()],
-        None => same_precision(input_header, channels),
+        // Ids stay u32 whatever float type the rest is given.
+        Some(p) => same
+            .iter()
+            .map(|&t| if t == Precision::U32 { t } else { p })
+            .collect(),
+        None => same,
     }
 }
 
@@ -474,6 +484,7 @@ impl ExrOutput {
                 let sample_type = match t {
                     Precision::F32 => SampleType::F32,
                     Precision::F16 => SampleType::F16,
+                    Precision::U32 => SampleType::U32,
                 };
                 ChannelDescription::new(Text::from(n.as_str()), sample_type, linear)
             })
@@ -594,6 +605,10 @@ impl ExrOutput {
                                     &half::f16::from_f32(*v).to_bits().to_ne_bytes(),
                                 )
                             }),
+                            // Whole numbers (the pipeline's rounding checked).
+                            Precision::U32 => src
+                                .iter()
+                                .for_each(|v| data.extend_from_slice(&(*v as u32).to_ne_bytes())),
                         }
                     }
                 }

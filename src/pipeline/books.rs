@@ -323,5 +323,9 @@ fn round(v: f64, p: Precision) -> Option<f32> {
             let f = half::f16::from_f64(v);
             f.is_finite().then(|| f.to_f32())
         }
+        Precision::U32 => {
+            let f = v as f32;
+            (f >= 0.0 && f <= u32::MAX as f32 && f.fract() == 0.0 && f as f64 == v).then_some(f)
+        }
     }
 }

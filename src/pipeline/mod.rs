@@ -86,6 +86,9 @@ pub enum Precision {
     F32,
     /// 16-bit float (refuses values beyond ±65504).
     F16,
+    /// 32-bit unsigned integer (ids: written as the integers they hold,
+    /// refusing anything else).
+    U32,
 }
 
 impl Precision {
@@ -94,6 +97,7 @@ impl Precision {
         match self {
             Precision::F32 => "f32",
             Precision::F16 => "f16",
+            Precision::U32 => "u32",
         }
     }
 }

@@ -22,6 +22,7 @@ const AOVS: &str = "tests/data/exr/small/aovs_multilayer.exr";
 /// and the input's own sums were rounded too (5e-8 there).
 const SUM_TOL: f64 = 1e-6;
 
+/// Each channel's samples as f64 (ids too: they are below 2^24 here).
 fn planes(path: &Path) -> HashMap<String, Vec<f64>> {
     let img = exr::prelude::read_all_flat_layers_from_file(path).expect("read");
     img.layer_data[0]
@@ -61,11 +62,24 @@ fn aovs_still_sum_to_the_beauty_and_every_channel_is_carried() {
                 .unwrap_or_else(|e| panic!("{} S={s}: {e}", method.name()));
             let tag = format!("{} S={s}", method.name());
             let o = planes(&out);
-            // Every float channel is written; the uint ids are listed as dropped.
-            for name in input.keys().filter(|n| *n != "id") {
+            // Every channel is written, nothing dropped.
+            for name in input.keys() {
                 assert!(o.contains_key(name), "{tag}: {name} missing");
             }
-            assert_eq!(r.dropped_channels, ["id"], "{tag}");
+            assert!(
+                r.dropped_channels.is_empty(),
+                "{tag}: {:?}",
+                r.dropped_channels
+            );
+            // Ids stay u32 and take only values of the input.
+            assert_eq!(r.channel_rules["id"], "nearest", "{tag}");
+            assert!(
+                o["id"].iter().all(|v| input["id"].contains(v)),
+                "{tag}: an id that is not in the input"
+            );
+            if s == 1 {
+                assert_eq!(o["id"], input["id"], "{tag}: ids not copied");
+            }
             assert_eq!(r.channel_rules["diffuse.R"], "additive", "{tag}");
             assert_eq!(r.channel_rules["Z"], "average", "{tag}");
             assert_eq!(r.channel_rules["R"], "colour", "{tag}");
@@ -126,7 +140,7 @@ fn carried_channels_are_bit_identical_for_any_tile_strip_and_threads() {
             ..Default::default()
         };
         let r = filter_file(&j, &|_, _| {}).unwrap();
-        assert_eq!(r.channels.len(), 17);
+        assert_eq!(r.channels.len(), 18);
         digests.push(r.digest);
     }
     assert!(digests.windows(2).all(|d| d[0] == d[1]), "{digests:?}");
@@ -238,4 +252,63 @@ fn channel_rules_on_the_command_line() {
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(e.contains("blur") && e.trim().lines().count() == 1, "{e}");
     assert!(RuleOverride::parse("Z").is_err());
+}
+
+#[test]
+fn ids_stay_uint_and_ids_f32_cannot_hold_are_refused() {
+    use exr::prelude::*;
+    let dir = tmpdir();
+    let (w, h) = (9, 6);
+    let write = |path: &Path, big: u32| {
+        let f = |v: f32| FlatSamples::F32(vec![v; w * h]);
+        let ids: Vec<u32> = (0..w * h)
+            .map(|i| if i == 7 { big } else { (i / 9) as u32 })
+            .collect();
+        let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = [
+            AnyChannel::new("B", f(0.2)),
+            AnyChannel::new("G", f(0.5)),
+            AnyChannel::new("R", f(0.9)),
+            AnyChannel::new("objectId", FlatSamples::U32(ids)),
+        ]
+        .into_iter()
+        .collect();
+        let layer = Layer::new(
+            (w, h),
+            LayerAttributes::named(""),
+            Encoding::FAST_LOSSLESS,
+            AnyChannels::sort(channels),
+        );
+        Image::from_layer(layer)
+            .write()
+            .to_file(path)
+            .expect("write");
+    };
+    let ok = dir.path().join("ok.exr");
+    write(&ok, 16_777_216);
+    let out = dir.path().join("out.exr");
+    let r = filter_file(&job(&ok, &out, Method::Gauss, 3), &|_, _| {}).unwrap();
+    assert_eq!(r.channel_rules["objectId"], "nearest");
+    let meta = exr::meta::MetaData::read_from_file(&out, false).unwrap();
+    let id = meta.headers[0]
+        .channels
+        .list
+        .iter()
+        .find(|c| c.name.to_string() == "objectId")
+        .expect("objectId written");
+    assert_eq!(id.sample_type, SampleType::U32);
+    // 2^24 + 1 would come back as 2^24: refused, naming the channel and the way out.
+    let big = dir.path().join("big.exr");
+    write(&big, 16_777_217);
+    let e = filter_file(&job(&big, &out, Method::Gauss, 3), &|_, _| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("objectId") && e.contains("16777217") && e.contains("--channel-rule"),
+        "{e}"
+    );
+    // With the rule to drop it, the rest is filtered.
+    let mut j = job(&big, &out, Method::Gauss, 3);
+    j.channel_rules = vec![RuleOverride::parse("objectId=drop").unwrap()];
+    let r = filter_file(&j, &|_, _| {}).unwrap();
+    assert_eq!(r.dropped_channels, ["objectId"]);
 }
