@@ -387,6 +387,14 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     if let Some(l) = &job.layer {
         settings.push(("layer", l.as_str().into()));
     }
+    if !job.channel_rules.is_empty() {
+        let rules: Vec<String> = job
+            .channel_rules
+            .iter()
+            .map(|o| format!("{}={}", o.pattern(), o.rule.name()))
+            .collect();
+        settings.push(("channel_rules", rules.join(";").into()));
+    }
     let provenance = settings
         .iter()
         .map(|(k, v)| match v {

@@ -240,6 +240,8 @@ fn channel_rules_on_the_command_line() {
         "{written:?}"
     );
     assert_eq!(r["channel_rules"]["Z"], "nearest");
+    // The file and the report say which rules were given.
+    assert_eq!(r["settings"]["channel_rules"], "specular.*=drop;Z=nearest");
     let zi = &planes(Path::new(AOVS))["Z"];
     let zo = &planes(&out)["Z"];
     assert!(
