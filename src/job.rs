@@ -168,16 +168,7 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     {
         Vec::new()
     } else {
-        // Views beside the default (the first `multiView` name).
-        let other_views: Vec<String> = input
-            .header()
-            .own_attributes
-            .multi_view_names
-            .iter()
-            .flatten()
-            .skip(1)
-            .map(|t| t.to_string())
-            .collect();
+        let other_views = crate::io::reader::other_views(input.header());
         input.carry_channels(|name, uint| {
             channels::rule_for(name, uint, &job.channel_rules, &other_views)
         })

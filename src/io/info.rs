@@ -84,14 +84,7 @@ pub fn info(path: &std::path::Path) -> crate::Result<String> {
                 let _ = writeln!(s, "  filtered: {}", names.join(", "));
                 // What `filter` does with the rest by default (--channel-rule
                 // changes it; median and alpha-trim carry nothing).
-                let views: Vec<String> = h
-                    .own_attributes
-                    .multi_view_names
-                    .iter()
-                    .flatten()
-                    .skip(1)
-                    .map(|t| t.to_string())
-                    .collect();
+                let views = super::reader::other_views(h);
                 let (mut carried, mut dropped) = (Vec::new(), Vec::new());
                 for name in &rest {
                     let uint = h.channels.list.iter().any(|c| {

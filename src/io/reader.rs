@@ -776,6 +776,19 @@ fn convert(t: SampleType, src: &[u8], dst: &mut [f32]) -> std::result::Result<()
     Ok(())
 }
 
+/// The views of a stereo file beside its default one (the first `multiView`
+/// name): their channels are images of their own, not the beauty's layers.
+pub(crate) fn other_views(header: &Header) -> Vec<String> {
+    header
+        .own_attributes
+        .multi_view_names
+        .iter()
+        .flatten()
+        .skip(1)
+        .map(|t| t.to_string())
+        .collect()
+}
+
 pub(crate) fn base_name(name: &str) -> &str {
     name.rsplit('.').next().unwrap_or(name)
 }
