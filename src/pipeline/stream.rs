@@ -31,7 +31,7 @@ use crate::geometry::{Grid, Halo};
 
 /// Most channels one job filters: the beauty (R, G, B, A) and what it
 /// carries beside it.
-pub const MAX_CHANNELS: usize = 64;
+pub const MAX_CHANNELS: usize = 1024;
 
 /// A finished batch of output rows, `[row][channel][x]`.
 #[derive(Debug)]

@@ -314,3 +314,43 @@ fn ids_stay_uint_and_ids_f32_cannot_hold_are_refused() {
     let r = filter_file(&j, &|_, _| {}).unwrap();
     assert_eq!(r.dropped_channels, ["objectId"]);
 }
+
+#[test]
+fn a_render_with_a_hundred_channels_is_carried_whole() {
+    // Production files carry dozens of passes (Blender's full set, per-light
+    // layers, cryptomatte): none is dropped for their number.
+    let dir = tmpdir();
+    let input = dir.path().join("many.exr");
+    let mut names: Vec<String> = ["R", "G", "B"].iter().map(|s| s.to_string()).collect();
+    for k in 0..33 {
+        for c in ["R", "G", "B"] {
+            names.push(format!("light{k:02}.{c}"));
+        }
+    }
+    let refs: Vec<&str> = names.iter().map(String::as_str).collect();
+    // The beauty is the sum of the 33 per-light layers, one of them hot.
+    let light = |x: usize, y: usize, k: usize| {
+        if (x, y, k) == (7, 5, 3) {
+            500.0
+        } else {
+            0.01 * (k + 1) as f32
+        }
+    };
+    write_named(&input, 18, 12, &refs, &[], |x, y, c| {
+        if c < 3 {
+            (0..33).map(|k| light(x, y, k)).sum()
+        } else {
+            light(x, y, (c - 3) / 3)
+        }
+    });
+    let out = dir.path().join("out.exr");
+    let mut j = job(&input, &out, Method::EpGauss, 3);
+    j.channel_rules = vec![RuleOverride::parse("light*=additive").unwrap()];
+    let r = filter_file(&j, &|_, _| {}).unwrap();
+    assert_eq!(r.channels.len(), 102);
+    assert!(r.samples_spread >= 1);
+    let o = planes(&out);
+    let layers: Vec<String> = (0..33).map(|k| format!("light{k:02}")).collect();
+    let layers: Vec<&str> = layers.iter().map(String::as_str).collect();
+    assert_sums_to_beauty(&o, &layers, "102 channels");
+}
