@@ -23,6 +23,8 @@ pub struct Books {
     zeroed: Vec<u64>,
     first_nonfinite: Option<(usize, usize, usize)>,
     coverage: Option<Coverage>,
+    /// Channels of data, not light ([`super::Job::data`]).
+    data: Vec<bool>,
 }
 
 impl Books {
@@ -37,7 +39,15 @@ impl Books {
             zeroed: vec![0; inputs],
             first_nonfinite: None,
             coverage: None,
+            data: Vec::new(),
         }
+    }
+
+    /// Channels of data (one flag per filtered channel): their samples are
+    /// neither checked for NaN and infinities nor zeroed (a sky's depth is
+    /// infinite), and they stay out of the ledger.
+    pub fn set_data(&mut self, data: Vec<bool>) {
+        self.data = data;
     }
 
     /// `--edge pad`: output values are divided by their pixel's coverage,
@@ -63,6 +73,7 @@ impl Books {
             strip,
             in_w,
             &self.names,
+            &self.data,
             self.nonfinite,
             &mut self.zeroed,
             &mut self.first_nonfinite,
@@ -87,6 +98,7 @@ impl Books {
             acc,
             (a, b, w),
             &self.names,
+            &self.data,
             precision,
             self.coverage.as_ref(),
         )?;
@@ -138,6 +150,7 @@ fn ingest(
     strip: &mut Strip,
     in_w: usize,
     names: &[String],
+    data: &[bool],
     nonfinite: NonFinite,
     zeroed: &mut [u64],
     first_nonfinite: &mut Option<(usize, usize, usize)>,
@@ -145,10 +158,11 @@ fn ingest(
     let nall = zeroed.len();
     let row_len = nall * in_w;
     let nch = names.len();
+    let is_data = |c: usize| data.get(c).copied().unwrap_or(false);
     if nonfinite == NonFinite::Zero {
         // Zero them (counted, first one kept) before anything reads them.
         for (r, row) in strip.data.chunks_mut(row_len).enumerate() {
-            for c in 0..nall {
+            for c in (0..nall).filter(|&c| !is_data(c)) {
                 for (x, v) in row[c * in_w..(c + 1) * in_w].iter_mut().enumerate() {
                     if !v.is_finite() {
                         *v = 0.0;
@@ -165,7 +179,7 @@ fn ingest(
         .par_chunks(row_len)
         .map(|row| {
             let mut s = Sums::new(nch);
-            for c in 0..nall {
+            for c in (0..nall).filter(|&c| !is_data(c)) {
                 let ch = &row[c * in_w..(c + 1) * in_w];
                 if let Some(x) = ch.iter().position(|v| !v.is_finite()) {
                     return Err((x, c));
@@ -216,6 +230,7 @@ fn finish_rows(
     acc: Option<&RowWindow<f64>>,
     (a, b, w): (usize, usize, usize),
     names: &[String],
+    data_ch: &[bool],
     precision: &[Precision],
     coverage: Option<&Coverage>,
 ) -> Result<(OutRows, Sums, Sums, Vec<u64>)> {
@@ -242,7 +257,10 @@ fn finish_rows(
                         }
                         None => tmp.copy_from_slice(base_row),
                     }
-                    raw.add_slice(c, tmp);
+                    let is_data = data_ch.get(c).copied().unwrap_or(false);
+                    if !is_data {
+                        raw.add_slice(c, tmp);
+                    }
                     if let Some(cov) = coverage {
                         for (x, v) in tmp.iter_mut().enumerate() {
                             let share = cov.at(x, y);
@@ -254,7 +272,13 @@ fn finish_rows(
                     let dst = &mut out[c * w..(c + 1) * w];
                     for (x, (d, &val)) in dst.iter_mut().zip(tmp.iter()).enumerate() {
                         let p = precision[c];
-                        let r = round(val, p).ok_or_else(|| Error::Value {
+                        // Data passes as it is, infinities included.
+                        let r = if is_data && !val.is_finite() {
+                            Some(val as f32)
+                        } else {
+                            round(val, p)
+                        };
+                        let r = r.ok_or_else(|| Error::Value {
                             path: Default::default(),
                             reason: format!(
                                 "output value {val:e} at pixel ({x}, {y}) in channel {} does not fit in {}{}",
@@ -271,6 +295,7 @@ fn finish_rows(
                         digest = fnv(digest, val.to_bits());
                     }
                     match coverage {
+                        _ if is_data => {}
                         Some(cov) => {
                             for (x, (t, &d)) in weighted.iter_mut().zip(dst.iter()).enumerate() {
                                 *t = d as f64 * cov.at(x, y);

@@ -282,7 +282,9 @@ impl ExcessStage {
                 for x in 0..w {
                     let mut y = 0.0;
                     for (c, &l) in lum.iter().enumerate().take(nch) {
-                        y += l * ch(c, x);
+                        if l != 0.0 {
+                            y += l * ch(c, x);
+                        }
                     }
                     yrow[x] = y;
                     let (n, se2) = stats.pixel(lum, y, |c| ch(c, x));

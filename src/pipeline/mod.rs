@@ -178,6 +178,10 @@ pub struct Job {
     /// What the stage does with each channel ([`Job::new`]: spread where
     /// the luminance weight is not 0, else the base filter).
     pub modes: Vec<ChannelMode>,
+    /// Channels of data, not light (carried `average` and `nearest`: depth,
+    /// normals, ids): out of the ledger, and their values may be infinite
+    /// (a sky's depth) or NaN, which pass as they are.
+    pub data: Vec<bool>,
     /// Channels read after `channels` but not written: the statistics of
     /// `ep-box` (variance, sample count).
     pub aux: Vec<String>,
@@ -196,11 +200,13 @@ impl Job {
             .iter()
             .map(|&l| ChannelMode::of(l, None, grid.s))
             .collect();
+        let data = vec![false; channels.len()];
         Job {
             grid,
             channels,
             luminance,
             modes,
+            data,
             aux: Vec::new(),
             stats: None,
             padded_from: None,
@@ -211,6 +217,9 @@ impl Job {
     pub fn with_rules(mut self, rules: &[Option<ChannelRule>]) -> Self {
         for ((m, &l), &r) in self.modes.iter_mut().zip(&self.luminance).zip(rules) {
             *m = ChannelMode::of(l, r, self.grid.s);
+        }
+        for (d, &r) in self.data.iter_mut().zip(rules) {
+            *d = matches!(r, Some(ChannelRule::Average | ChannelRule::Nearest));
         }
         self
     }

@@ -534,7 +534,7 @@ impl SpreadStage {
                     let xbars = ep.xbar0_row(&view, y as i64, w);
                     let luma = |row: &[f32], i: usize| {
                         let mut x = 0.0;
-                        for c in 0..nch {
+                        for c in (0..nch).filter(|&c| lum[c] != 0.0) {
                             x += lum[c] * row[c * in_w + i] as f64;
                         }
                         x
@@ -545,7 +545,9 @@ impl SpreadStage {
                     lrows.resize(s * in_w, 0.0f64);
                     for (bb, lrow) in lrows.chunks_exact_mut(in_w).enumerate() {
                         let row = input.get(y * s + bb);
-                        for c in 0..nch {
+                        // Channels of weight 0 (alpha, carried data that may
+                        // be infinite) do not enter it.
+                        for c in (0..nch).filter(|&c| lum[c] != 0.0) {
                             let lw = lum[c];
                             for (l, &v) in lrow.iter_mut().zip(&row[c * in_w..(c + 1) * in_w]) {
                                 *l += lw * v as f64;

@@ -235,6 +235,7 @@ impl Streamer {
         let nall = job.strip_channels();
         let mut books = Books::new(job.channels.clone(), nall);
         books.set_nonfinite(cfg.nonfinite);
+        books.set_data(job.data.clone());
         if let Some(cov) = coverage {
             books.set_coverage(cov);
         }

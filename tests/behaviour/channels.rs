@@ -354,3 +354,58 @@ fn a_render_with_a_hundred_channels_is_carried_whole() {
     let layers: Vec<&str> = layers.iter().map(String::as_str).collect();
     assert_sums_to_beauty(&o, &layers, "102 channels");
 }
+
+#[test]
+fn an_infinite_depth_passes_as_data_while_the_beauty_is_still_checked() {
+    // Renderers write the sky's depth as infinity: depth is data, not light,
+    // so it is carried as it is (and kept out of the ledger).
+    let dir = tmpdir();
+    let input = dir.path().join("sky.exr");
+    let (w, h) = (12, 18);
+    write_named(
+        &input,
+        w,
+        h,
+        &["R", "G", "B", "Z"],
+        &[],
+        |_, y, c| match c {
+            3 if y < 3 => f32::INFINITY,
+            3 => 4.0 + y as f32,
+            _ => 0.5,
+        },
+    );
+    for s in [1, 3] {
+        let out = dir.path().join(format!("o{s}.exr"));
+        let r = filter_file(&job(&input, &out, Method::EpGauss, s), &|_, _| {})
+            .unwrap_or_else(|e| panic!("S={s}: {e}"));
+        assert_eq!(r.channel_rules["Z"], "average");
+        assert!(r.energy_rel_error.iter().all(|e| e.abs() <= ENERGY_TOL));
+        let (i, o) = (planes(&input), planes(&out));
+        if s == 1 {
+            assert_eq!(i["Z"], o["Z"], "copied, infinities included");
+        } else {
+            // The first output row is sky, the last is not.
+            assert!(o["Z"][..w / s].iter().all(|z| z.is_infinite()));
+            assert!(o["Z"][(h / s - 1) * (w / s)..]
+                .iter()
+                .all(|z| z.is_finite()));
+        }
+        assert!(o["R"].iter().all(|&v| v == 0.5));
+    }
+    // An infinite value in the beauty is still refused.
+    let bad = dir.path().join("bad.exr");
+    write_named(&bad, w, h, &["R", "G", "B"], &[], |x, y, _| {
+        if (x, y) == (2, 2) {
+            f32::INFINITY
+        } else {
+            0.5
+        }
+    });
+    let e = filter_file(
+        &job(&bad, &dir.path().join("x.exr"), Method::Gauss, 3),
+        &|_, _| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("non-finite"), "{e}");
+}
