@@ -340,8 +340,17 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         crate::pipeline::estimate_bytes(&pipe_job, &params, &job.pipeline, input.block_bytes());
     let limit = job.max_memory.unwrap_or_else(default_max_memory);
     if need > limit {
+        let hint = if carried.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; {} of its {} channels are carried beside the beauty, and --channel-rule 'PATTERN=drop' leaves some out",
+                carried.len(),
+                channels.len()
+            )
+        };
         return Err(Error::Config(format!(
-            "{}: filtering this {w}x{h} image needs about {} MiB, more than the {} MiB allowed (--max-memory)",
+            "{}: filtering this {w}x{h} image needs about {} MiB, more than the {} MiB allowed (--max-memory){hint}",
             job.input.display(),
             need >> 20,
             limit >> 20

@@ -409,3 +409,26 @@ fn an_infinite_depth_passes_as_data_while_the_beauty_is_still_checked() {
     .to_string();
     assert!(e.contains("non-finite"), "{e}");
 }
+
+#[test]
+fn over_the_memory_limit_the_error_says_how_many_channels_are_carried() {
+    let dir = tmpdir();
+    let mut j = job(
+        Path::new(AOVS),
+        &dir.path().join("o.exr"),
+        Method::EpGauss,
+        3,
+    );
+    j.max_memory = Some(1 << 20);
+    let e = filter_file(&j, &|_, _| {}).unwrap_err().to_string();
+    assert!(
+        e.contains("--max-memory") && e.contains("14 of its 18 channels") && e.contains("drop"),
+        "{e}"
+    );
+    assert!(!e.contains('\n'), "one line: {e}");
+    // Dropping them is what it says: the beauty alone fits.
+    j.channel_rules = vec![RuleOverride::parse("*=drop").unwrap()];
+    j.max_memory = Some(2 << 20);
+    let r = filter_file(&j, &|_, _| {}).unwrap();
+    assert_eq!(r.channels, ["R", "G", "B", "A"]);
+}
