@@ -94,9 +94,11 @@ impl RuleOverride {
     }
 }
 
-/// Layer names (any dot-component, any case) of light that adds up to the
-/// beauty: Blender's passes (DiffDir, GlossInd, Emit, Env...), Arnold's and
-/// RenderMan's AOVs and the generic words.
+/// Words (of a layer name, any case) of light that adds up to the beauty:
+/// Blender's passes (DiffDir, GlossInd, Emit, Env; light groups
+/// `Combined_<group>`), Arnold's (`diffuse_direct`, `RGBA_<group>`),
+/// RenderMan's (`directDiffuse`), V-Ray's (`VRayLighting`,
+/// `VRayGlobalIllumination`) and the generic ones.
 const ADDITIVE_WORDS: &[&str] = &[
     "diffuse",
     "diff",
@@ -119,6 +121,8 @@ const ADDITIVE_WORDS: &[&str] = &[
     "background",
     "direct",
     "indirect",
+    "ind",
+    "dir",
     "sss",
     "subsurface",
     "volume",
@@ -126,33 +130,84 @@ const ADDITIVE_WORDS: &[&str] = &[
     "sheen",
     "light",
     "lights",
+    "lighting",
+    "illumination",
+    "gi",
     "lpe",
     "caustic",
     "caustics",
     "reflection",
+    "reflect",
     "refraction",
+    "refract",
+    "combined",
+    "beauty",
+    "rgba",
+    "ci",
 ];
 
-/// Layer or channel names of ids and masks.
-const NEAREST_WORDS: &[&str] = &[
-    "id",
-    "objectid",
-    "object_id",
-    "materialid",
-    "material_id",
-    "indexob",
-    "indexma",
-    "mask",
-    "matte",
-];
+/// Words of ids and masks.
+const NEAREST_WORDS: &[&str] = &["id", "ids", "index", "indexob", "indexma", "mask", "matte"];
 
-/// Layer or channel names of averaged data (checked before the additive
-/// words: `DiffCol` is an albedo, not light).
+/// Words of averaged data, checked before the additive ones (`DiffCol` and
+/// `VRayDiffuseFilter` are albedos, not light).
 const AVERAGE_WORDS: &[&str] = &[
-    "z", "depth", "n", "normal", "normals", "p", "position", "pref", "motion", "vector",
-    "velocity", "uv", "albedo", "col", "diffcol", "glosscol", "transcol", "ao", "shadow",
-    "variance", "var", "se", "mist", "alpha",
+    "z",
+    "depth",
+    "n",
+    "normal",
+    "normals",
+    "p",
+    "position",
+    "pref",
+    "motion",
+    "vector",
+    "velocity",
+    "uv",
+    "albedo",
+    "col",
+    "color",
+    "colour",
+    "filter",
+    "diffcol",
+    "glosscol",
+    "transcol",
+    "ao",
+    "occlusion",
+    "shadow",
+    "variance",
+    "var",
+    "se",
+    "mist",
+    "alpha",
 ];
+
+/// The words of one component of a channel name, lowercased: split at
+/// `_`, `-`, spaces and digits, and where lower case turns to upper
+/// (`diffuse_direct`, `directDiffuse`, `Combined_Key`, `light00`).
+fn words(component: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut cur = String::new();
+    let mut prev_lower = false;
+    for ch in component.chars() {
+        if !ch.is_alphabetic() {
+            if !cur.is_empty() {
+                out.push(std::mem::take(&mut cur));
+            }
+            prev_lower = false;
+            continue;
+        }
+        if ch.is_uppercase() && prev_lower && !cur.is_empty() {
+            out.push(std::mem::take(&mut cur));
+        }
+        prev_lower = ch.is_lowercase();
+        cur.extend(ch.to_lowercase());
+    }
+    if !cur.is_empty() {
+        out.push(cur);
+    }
+    out
+}
 
 /// The default rule of a carried channel `name` (`uint`: its samples are
 /// unsigned integers).
@@ -160,22 +215,27 @@ pub fn default_rule(name: &str, uint: bool) -> ChannelRule {
     if uint {
         return ChannelRule::Nearest;
     }
-    let lower = name.to_ascii_lowercase();
-    let parts: Vec<&str> = lower.split('.').collect();
+    let parts: Vec<&str> = name.split('.').collect();
     let (layers, last) = parts.split_at(parts.len() - 1);
-    let is = |words: &[&str], w: &str| words.contains(&w);
-    if lower.contains("crypto") || parts.iter().any(|p| is(NEAREST_WORDS, p)) {
+    // Each component as a whole (`IndexOB`, `DiffCol`) and its words.
+    let has = |comps: &[&str], list: &[&str]| {
+        comps.iter().any(|c| {
+            list.contains(&c.to_ascii_lowercase().as_str())
+                || words(c).iter().any(|w| list.contains(&w.as_str()))
+        })
+    };
+    if name.to_ascii_lowercase().contains("crypto") || has(&parts, NEAREST_WORDS) {
         return ChannelRule::Nearest;
     }
-    if layers.iter().any(|p| is(AVERAGE_WORDS, p)) || layers.is_empty() {
-        // Unlayered channels that are not the beauty (Z, a mask...).
+    if layers.is_empty() || has(layers, AVERAGE_WORDS) {
+        // Unlayered channels beside the beauty (Z, a mask...) and data.
         return ChannelRule::Average;
     }
     // An AOV's alpha is coverage, not light.
-    if last[0] == "a" {
+    if last[0].eq_ignore_ascii_case("a") {
         return ChannelRule::Average;
     }
-    if layers.iter().any(|p| is(ADDITIVE_WORDS, p)) {
+    if has(layers, ADDITIVE_WORDS) {
         return ChannelRule::Additive;
     }
     ChannelRule::Average
@@ -232,10 +292,37 @@ mod tests {
             ("CryptoObject00.R", Nearest),
             ("objectId.R", Nearest),
             ("mystery.R", Average),
+            // Production names: Arnold, Blender light groups, RenderMan, V-Ray.
+            ("diffuse_direct.R", Additive),
+            ("specular_indirect.G", Additive),
+            ("RGBA_key.B", Additive),
+            ("ViewLayer.Combined_Key.R", Additive),
+            ("directDiffuse.R", Additive),
+            ("VRayLighting.G", Additive),
+            ("VRayGlobalIllumination.B", Additive),
+            ("VRayReflection.R", Additive),
+            ("light00.R", Additive),
+            ("VRayDiffuseFilter.R", Average),
+            ("VRayZDepth.Z", Average),
+            ("VRayObjectID.R", Nearest),
+            ("ViewLayer.Denoising Albedo.G", Average),
+            ("ViewLayer.Denoising Normal.X", Average),
+            ("ViewLayer.IndexOB.X", Nearest),
+            ("ViewLayer.Emit.B", Additive),
+            ("ViewLayer.AO.R", Average),
+            ("ViewLayer.DiffInd.R", Additive),
+            ("ViewLayer.Vector.X", Average),
+            ("diffuse_indirect.A", Average),
         ] {
             assert_eq!(default_rule(name, false), rule, "{name}");
         }
         assert_eq!(default_rule("anything", true), Nearest);
+        assert_eq!(
+            words("VRayGlobalIllumination"),
+            ["vray", "global", "illumination"]
+        );
+        assert_eq!(words("diffuse_direct2"), ["diffuse", "direct"]);
+        assert_eq!(words("Denoising Albedo"), ["denoising", "albedo"]);
     }
 
     #[test]
