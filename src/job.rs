@@ -160,12 +160,9 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     check_not_same_file(&job.input, &job.output)?;
     let mut input = ExrInput::open_layer(&job.input, job.part.as_ref(), job.layer.as_deref())?;
     let mut params = job.params.clone();
-    // Every channel beside the beauty is carried by its rule, except by the
-    // order-statistic foils (a per-channel median breaks every sum) and into
-    // a Radiance picture (R, G, B only).
-    let carried = if matches!(params.method, Method::Median | Method::AlphaTrim)
-        || crate::io::rgbe::is_rgbe_path(&job.output)
-    {
+    // Every channel beside the beauty is carried by its rule, except into a
+    // Radiance picture (R, G, B only).
+    let carried = if crate::io::rgbe::is_rgbe_path(&job.output) {
         Vec::new()
     } else {
         let other_views = crate::io::reader::other_views(input.header());

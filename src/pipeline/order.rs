@@ -3,11 +3,14 @@
 //! pixel (at S = 1: the 3 x 3 pixels around it, reflected at the borders),
 //! per channel, sorts them and averages what is left after trimming from
 //! each end. They discard energy by design; the ledger reports how much.
+//! Carried ids and masks (`nearest`) take the centre sample instead: a
+//! median of ids is an id only by luck.
 
 use rayon::prelude::*;
 
 use super::stream::{MethodStats, Stage, WindowUse};
 use super::window::RowWindow;
+use super::ChannelMode;
 use crate::filter::{Method, ValidParams};
 use crate::geometry::{mirror, Grid, Halo};
 
@@ -19,14 +22,17 @@ pub struct OrderStage {
     w: usize,
     h: usize,
     nch: usize,
+    modes: Vec<ChannelMode>,
     trim: Trim,
     out: RowWindow<f64>,
     out_done: usize,
 }
 
 impl OrderStage {
-    /// A stage for `grid` over `nch` channels (the skeleton has checked them).
-    pub fn new(grid: Grid, nch: usize, params: &ValidParams) -> Self {
+    /// A stage for `grid` over channels of `modes` (the skeleton has checked
+    /// them).
+    pub fn new(grid: Grid, modes: Vec<ChannelMode>, params: &ValidParams) -> Self {
+        let nch = modes.len();
         let trim = match params.method {
             Method::Median => Trim::Median,
             _ => Trim::Alpha(params.alpha),
@@ -36,6 +42,7 @@ impl OrderStage {
             w: grid.out_w(),
             h: grid.out_h(),
             nch,
+            modes,
             trim,
             out: RowWindow::new(nch * grid.out_w()),
             out_done: 0,
@@ -70,12 +77,21 @@ impl Stage for OrderStage {
             self.out.push_stale(0.0);
         }
         let (w, h, nch, trim) = (self.w, self.h, self.nch, self.trim);
+        let modes = &self.modes;
         let rows = self.out.range_mut(a, b);
         rows.into_par_iter()
             .enumerate()
             .for_each_init(Vec::new, |vals, (k, row)| {
                 let y = a + k;
                 for c in 0..nch {
+                    if modes[c] == ChannelMode::Nearest {
+                        // The centre sample, as it is.
+                        let r = &input.get(y * s + (s - 1) / 2)[c * in_w..(c + 1) * in_w];
+                        for x in 0..w {
+                            row[c * w + x] = r[x * s + (s - 1) / 2] as f64;
+                        }
+                        continue;
+                    }
                     for x in 0..w {
                         vals.clear();
                         if s == 1 {

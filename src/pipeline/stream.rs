@@ -200,7 +200,9 @@ impl Streamer {
                     cfg.tile,
                 )?)
             }
-            Method::Median | Method::AlphaTrim => Box::new(OrderStage::new(grid, nch, params)),
+            Method::Median | Method::AlphaTrim => {
+                Box::new(OrderStage::new(grid, job.modes.clone(), params))
+            }
             _ => {
                 let nall = job.strip_channels();
                 let stats_ok = |st: &StatsLayout| {

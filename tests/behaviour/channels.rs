@@ -432,3 +432,32 @@ fn over_the_memory_limit_the_error_says_how_many_channels_are_carried() {
     let r = filter_file(&j, &|_, _| {}).unwrap();
     assert_eq!(r.channels, ["R", "G", "B", "A"]);
 }
+
+#[test]
+fn the_foils_carry_every_channel_too() {
+    // median, alpha-trim and clamp lose energy and break sums by design,
+    // but a user comparing them still gets every channel, ids intact.
+    let dir = tmpdir();
+    let input = planes(Path::new(AOVS));
+    for method in [Method::Median, Method::AlphaTrim, Method::Clamp] {
+        for s in [1, 3] {
+            let tag = format!("{} S={s}", method.name());
+            let out = dir.path().join(format!("{}_{s}.exr", method.name()));
+            let r = filter_file(&job(Path::new(AOVS), &out, method, s), &|_, _| {})
+                .unwrap_or_else(|e| panic!("{tag}: {e}"));
+            assert!(r.dropped_channels.is_empty(), "{tag}");
+            let o = planes(&out);
+            for name in input.keys() {
+                assert!(o.contains_key(name), "{tag}: {name} missing");
+            }
+            assert!(
+                o["id"].iter().all(|v| input["id"].contains(v)),
+                "{tag}: ids"
+            );
+            if s == 1 {
+                assert_eq!(o["Z"], input["Z"], "{tag}: Z not copied");
+                assert_eq!(o["id"], input["id"], "{tag}: ids not copied");
+            }
+        }
+    }
+}
