@@ -12,7 +12,7 @@ use crate::io::{find_stats, ExrInput, OutputSettings, PartSelect, SppFrom, Stats
 use crate::pipeline::edge::{Coverage, Cropped};
 use crate::pipeline::stream::MAX_CHANNELS;
 use crate::pipeline::{run, ChannelMode, Job, MethodStats, PipelineConfig, Progress};
-use crate::stats::{peak_rss_bytes, EpBoxReport, Report, StatsReport};
+use crate::stats::{peak_rss_bytes, EpBoxReport, PartReport, Report, StatsReport};
 
 /// The ledger must balance to this relative error before rounding, or the
 /// output is not written. The pipeline's own bound is 1e-12 (each sample's
@@ -154,10 +154,186 @@ pub fn check_not_same_file(input: &Path, output: &Path) -> Result<()> {
 }
 
 /// Run `job`, reporting progress as (output rows done, output rows).
+///
+/// A multi-part input: the part chosen with `--part` is filtered and, at
+/// S = 1 into an EXR without `--band`, every other part is copied bit for bit
+/// beside it (parts of deep data are left out); at S > 1 the others cannot
+/// stay (OpenEXR requires one display window in every part) and are left
+/// out with a warning. `--part all` filters every part with the same
+/// settings into one multi-part output.
 pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
-    let cpu_start = crate::stats::cpu_seconds().unwrap_or(0.0);
     job.params.validate()?;
     check_not_same_file(&job.input, &job.output)?;
+    let to_rgbe = crate::io::rgbe::is_rgbe_path(&job.output);
+    let parts = crate::io::parts::list(&job.input)?;
+    if parts.len() < 2 {
+        return filter_part(job, progress);
+    }
+    let name_of = |i: usize| parts[i].name.clone();
+    let chosen: Vec<usize> = match &job.part {
+        None => return filter_part(job, progress), // its error lists the parts
+        Some(PartSelect::All) => {
+            if job.band.is_some() || to_rgbe {
+                return Err(Error::Config(format!(
+                    "{}: --part all writes a multi-part EXR: not with --band or a Radiance output; filter one part at a time with --part",
+                    job.input.display()
+                )));
+            }
+            parts.iter().filter(|p| !p.deep).map(|p| p.index).collect()
+        }
+        Some(PartSelect::Index(i)) => vec![*i],
+        Some(PartSelect::Name(n)) => match parts.iter().find(|p| &p.name == n) {
+            Some(p) => vec![p.index],
+            None => return filter_part(job, progress), // its error names the parts
+        },
+    };
+    if chosen.iter().any(|&i| i >= parts.len()) || chosen.is_empty() {
+        return filter_part(job, progress); // its error says what is wrong
+    }
+    let all = matches!(job.part, Some(PartSelect::All));
+    let carry = all || (job.params.supersample == 1 && job.band.is_none() && !to_rgbe);
+    if !carry {
+        let mut report = filter_part(job, progress)?;
+        let why = if to_rgbe {
+            "a Radiance picture has one part".to_string()
+        } else if job.band.is_some() {
+            "a --band file holds one part".to_string()
+        } else {
+            format!(
+                "at S = {} their display windows would differ from the filtered part's, which OpenEXR does not allow; --part all filters every part",
+                job.params.supersample
+            )
+        };
+        let left: Vec<String> = parts
+            .iter()
+            .filter(|p| p.index != chosen[0])
+            .map(|p| format!("{:?}", p.name))
+            .collect();
+        report.warnings.push(format!(
+            "{}: the other parts ({}) are not in the output: {why}",
+            job.input.display(),
+            left.join(", ")
+        ));
+        report.parts = parts
+            .iter()
+            .map(|p| PartReport {
+                index: p.index,
+                name: p.name.clone(),
+                action: if p.index == chosen[0] {
+                    "filtered"
+                } else {
+                    "left out"
+                }
+                .into(),
+                why: (p.index != chosen[0]).then(|| why.clone()),
+                report: None,
+            })
+            .collect();
+        return Ok(report);
+    }
+    // Each filtered part into a file of its own beside the output, then
+    // every part into the output, in the input's order.
+    let dir = crate::io::destination::Destination::resolve(&job.output)?
+        .named()
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
+    let tmp = tempfile::Builder::new()
+        .prefix(".epfilt-parts-")
+        .tempdir_in(&dir)
+        .map_err(|e| Error::io(&dir, e))?;
+    let mut reports: Vec<Option<Report>> = vec![None; parts.len()];
+    let mut sources = Vec::new();
+    let mut entries = Vec::new();
+    let mut warnings = Vec::new();
+    for p in &parts {
+        // --part all: a part with nothing to filter (no colour channels, or
+        // a layout epfilt does not filter) is copied at S = 1, else left out.
+        let mut unfilterable = None;
+        if all && !p.deep {
+            let sel = PartSelect::Index(p.index);
+            if let Err(Error::Unsupported { reason, .. }) =
+                ExrInput::open_layer(&job.input, Some(&sel), job.layer.as_deref())
+            {
+                unfilterable = Some(reason);
+            }
+        }
+        if let Some(reason) = unfilterable.as_ref().filter(|_| job.params.supersample > 1) {
+            let why = format!(
+                "it cannot be filtered ({reason}), and at S = {} a copy's display window would differ from the filtered parts'",
+                job.params.supersample
+            );
+            warnings.push(format!(
+                "{}: part {:?} is left out: {why}",
+                job.input.display(),
+                p.name
+            ));
+            entries.push((p.index, "left out", Some(why)));
+            continue;
+        }
+        if chosen.contains(&p.index) && unfilterable.is_none() {
+            let mut sub = job.clone();
+            sub.part = Some(PartSelect::Index(p.index));
+            sub.output = tmp.path().join(format!("part{}.exr", p.index));
+            let mut r = filter_part(&sub, progress)?;
+            // What it says of its file, it says of its part of the output.
+            let own = sub.output.display().to_string();
+            let named = format!("{} (part {:?})", job.output.display(), p.name);
+            for w in r.warnings.iter_mut() {
+                *w = w.replace(&own, &named);
+            }
+            warnings.extend(r.warnings.iter().cloned());
+            r.output = job.output.display().to_string();
+            sources.push(crate::io::parts::PartSource {
+                path: sub.output.clone(),
+                part: 0,
+                name: name_of(p.index),
+            });
+            reports[p.index] = Some(r);
+        } else if p.deep {
+            let why = "deep data cannot be written".to_string();
+            warnings.push(format!(
+                "{}: part {:?} is left out: {why}",
+                job.input.display(),
+                p.name
+            ));
+            entries.push((p.index, "left out", Some(why)));
+            continue;
+        } else {
+            sources.push(crate::io::parts::PartSource {
+                path: job.input.clone(),
+                part: p.index,
+                name: name_of(p.index),
+            });
+            entries.push((p.index, "copied", None));
+            continue;
+        }
+        entries.push((p.index, "filtered", None));
+    }
+    crate::io::parts::assemble(&job.output, &sources)?;
+    let part_reports: Vec<PartReport> = entries
+        .into_iter()
+        .map(|(i, action, why)| PartReport {
+            index: i,
+            name: name_of(i),
+            action: action.into(),
+            why,
+            report: reports[i].clone().map(Box::new),
+        })
+        .collect();
+    let first = chosen[0];
+    let mut report = reports[first]
+        .take()
+        .ok_or_else(|| Error::Internal("a multi-part run filtered no part".into()))?;
+    report.warnings = warnings;
+    report.parts = part_reports;
+    Ok(report)
+}
+
+/// Filter one part of the input (the only one, or `job.part`) into
+/// `job.output`.
+fn filter_part(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
+    let cpu_start = crate::stats::cpu_seconds().unwrap_or(0.0);
     let mut input = ExrInput::open_layer(&job.input, job.part.as_ref(), job.layer.as_deref())?;
     let mut params = job.params.clone();
     // Every channel beside the beauty is carried by its rule, except into a
@@ -372,7 +548,13 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     // What the file and the report say about how they were made.
     let mut settings = params.settings();
     // Each channel's sample type: the one asked for, or its own.
-    let types = crate::io::writer::output_types(&job.output_settings, header, &channels);
+    // The filtered colour channels come first (no carry rule).
+    let beauty = input
+        .channel_rules()
+        .iter()
+        .take_while(|r| r.is_none())
+        .count();
+    let types = crate::io::writer::output_types(&job.output_settings, header, &channels, beauty);
     settings.push(("pixel_type", crate::io::writer::types_name(&types).into()));
     // (A cropped run is the filtering of the cropped image, header and all.)
     if padded_from.is_some() {
@@ -441,6 +623,7 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         &out_header,
         s,
         &channels,
+        beauty,
         &out_settings,
         &rgbe_lines,
     )?;
@@ -674,6 +857,7 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         energy_on_disk_decoded: output_lossy,
         warnings,
         band: band_sums,
+        parts: Vec::new(),
     };
     report.set_ledger(&ledger);
     Ok(report)

@@ -355,7 +355,9 @@ struct FilterArgs {
     /// the others f32), f32 or f16 for all (f16 refuses values it cannot hold).
     #[arg(long, default_value = "same")]
     pixel_type: String,
-    /// Part of a multi-part input, by name or index.
+    /// Part of a multi-part input, by name or index, or `all` (every part
+    /// filtered into one multi-part output). With one part, at S = 1 the
+    /// others are copied bit for bit; at S > 1 they are left out, with a warning.
     #[arg(long)]
     part: Option<String>,
     /// Layer whose R,G,B (or Y) channels are filtered, e.g. ViewLayer.Combined

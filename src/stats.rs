@@ -146,6 +146,28 @@ pub struct Report {
     pub warnings: Vec<String>,
     /// `--band`: which rows this file holds, and their share of the energy.
     pub band: Option<BandReport>,
+    /// A multi-part input: what became of every part, in the file's order
+    /// (empty for a single-part input). With `--part all` the fields above
+    /// are the first filtered part's.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub parts: Vec<PartReport>,
+}
+
+/// What became of one part of a multi-part input.
+#[derive(Clone, Debug, Serialize)]
+pub struct PartReport {
+    /// Its index in the input.
+    pub index: usize,
+    /// Its name.
+    pub name: String,
+    /// `filtered`, `copied` (bit for bit) or `left out`.
+    pub action: String,
+    /// Why it was left out.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub why: Option<String>,
+    /// The filtered part's own report.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub report: Option<Box<Report>>,
 }
 
 /// One band of a `--band` run.
@@ -226,6 +248,51 @@ impl Report {
 
     /// The human summary, a few lines.
     pub fn summary(&self) -> String {
+        let filtered: Vec<&PartReport> = self.parts.iter().filter(|p| p.report.is_some()).collect();
+        if filtered.len() > 1 {
+            // --part all: each filtered part's summary, then the list.
+            let mut s = String::new();
+            for p in &filtered {
+                if let Some(r) = &p.report {
+                    s.push_str(&format!(
+                        "part {} {:?}: {}",
+                        p.index,
+                        p.name,
+                        r.own_summary()
+                    ));
+                }
+            }
+            s.push_str(&self.parts_list());
+            return s;
+        }
+        let mut s = self.own_summary();
+        s.push_str(&self.parts_list());
+        s
+    }
+
+    /// What became of each part of a multi-part input, a line each.
+    fn parts_list(&self) -> String {
+        let mut s = String::new();
+        if !self.parts.is_empty() {
+            s.push_str("  parts of the input:\n");
+        }
+        for p in &self.parts {
+            s.push_str(&format!(
+                "    {} {:?}: {}{}\n",
+                p.index,
+                p.name,
+                p.action,
+                p.why
+                    .as_ref()
+                    .map(|w| format!(" ({w})"))
+                    .unwrap_or_default()
+            ));
+        }
+        s
+    }
+
+    /// This run's (or part's) summary.
+    fn own_summary(&self) -> String {
         let mut s = format!(
             "{} -> {}: {} S={}{} {}x{} -> {}x{}\n  {:.2} s, {:.1} Mpx/s; noisy {} spread {} capped {}{}\n",
             self.input,

@@ -16,6 +16,7 @@ pub mod destination;
 pub mod info;
 pub mod mapped;
 pub mod output;
+pub mod parts;
 pub mod reader;
 pub mod rgbe;
 pub mod variance;

@@ -21,12 +21,14 @@ pub enum Output {
 impl Output {
     /// Start the output of a run at `dest`: S x S input samples per pixel of
     /// an input described by `input_header` (and `rgbe_lines`, the header
-    /// lines of a Radiance input, kept in a Radiance output).
+    /// lines of a Radiance input, kept in a Radiance output); the first
+    /// `beauty` of `channels` are the filtered colour.
     pub fn create(
         dest: &Path,
         input_header: &Header,
         s: usize,
         channels: &[String],
+        beauty: usize,
         settings: &OutputSettings,
         rgbe_lines: &[String],
     ) -> Result<Self> {
@@ -36,6 +38,7 @@ impl Output {
                 input_header,
                 s,
                 channels,
+                beauty,
                 settings,
             )?)));
         }

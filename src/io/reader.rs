@@ -48,11 +48,18 @@ pub enum PartSelect {
     Index(usize),
     /// By the part's `name` attribute.
     Name(String),
+    /// Every part (`filter --part all`: each filtered into one multi-part
+    /// output); a single-part file's only part.
+    All,
 }
 
 impl PartSelect {
-    /// Parse `--part`: a number is an index, anything else a name.
+    /// Parse `--part`: a number is an index, `all` every part, anything else
+    /// a name.
     pub fn parse(s: &str) -> Self {
+        if s == "all" {
+            return PartSelect::All;
+        }
         s.parse()
             .map(PartSelect::Index)
             .unwrap_or_else(|_| PartSelect::Name(s.to_string()))
@@ -123,6 +130,153 @@ fn part_name(h: &Header) -> String {
         .unwrap_or_default()
 }
 
+/// The headers, checked, and the offset tables of the EXR file `bytes`
+/// (whose total size must fit in it), and where the chunks start.
+pub(crate) fn parse_meta(path: &Path, bytes: &[u8]) -> Result<(MetaData, Vec<Vec<u64>>, usize)> {
+    let mut read = PeekRead::new(Tracking::new(bytes));
+    let meta = parse_headers_from(path, &mut read)?;
+    let (tables, chunks_start) = read_tables(path, bytes, &mut read, &meta)?;
+    Ok((meta, tables, chunks_start))
+}
+
+/// The offset tables that follow the headers (`read` is just past them),
+/// whose total size must fit in the file, and where the chunks start.
+fn read_tables(
+    path: &Path,
+    bytes: &[u8],
+    read: &mut PeekRead<Tracking<&[u8]>>,
+    meta: &MetaData,
+) -> Result<(Vec<Vec<u64>>, usize)> {
+    let table_bytes: usize = meta
+        .headers
+        .iter()
+        .map(|h| h.chunk_count.saturating_mul(8))
+        .sum();
+    if read.byte_position().saturating_add(table_bytes) > bytes.len() {
+        return Err(invalid(
+            path,
+            "truncated: the chunk offset table does not fit in the file",
+        ));
+    }
+    let tables = MetaData::read_offset_tables(read, &meta.headers)
+        .map_err(|e| Error::from_exr(path, e, "offset table"))?;
+    Ok((tables.into_vec(), read.byte_position()))
+}
+
+/// The headers, checked, of the EXR file `bytes`.
+pub(crate) fn parse_headers(path: &Path, bytes: &[u8]) -> Result<MetaData> {
+    parse_headers_from(path, &mut PeekRead::new(Tracking::new(bytes)))
+}
+
+fn parse_headers_from(path: &Path, read: &mut PeekRead<Tracking<&[u8]>>) -> Result<MetaData> {
+    let exr_err = |e| Error::from_exr(path, e, "");
+    if !magic_number::is_exr(read).map_err(exr_err)? {
+        return Err(invalid(path, "not an OpenEXR file (no EXR magic number)"));
+    }
+    let requirements =
+        Requirements::read(read).map_err(|e| Error::from_exr(path, e, "version field"))?;
+    requirements
+        .validate()
+        .map_err(|e| Error::from_exr(path, e, "version field"))?;
+    let headers = Header::read_all(read, &requirements, false)
+        .map_err(|e| Error::from_exr(path, e, "header"))?;
+    MetaData::validate(&headers, false).map_err(|e| Error::from_exr(path, e, "header"))?;
+    Ok(MetaData {
+        requirements,
+        headers,
+    })
+}
+
+/// Read the chunk at `offset` of `bytes` and check that it is the block of
+/// part `part` the offset table says (`expected`). Returns it and the end of
+/// its bytes.
+pub(crate) fn read_chunk(
+    path: &Path,
+    bytes: &[u8],
+    meta: &MetaData,
+    part: usize,
+    offset: usize,
+    expected: TileCoordinates,
+) -> Result<(Chunk, usize)> {
+    let header = &meta.headers[part];
+    let mut slice = bytes
+        .get(offset..)
+        .ok_or_else(|| invalid(path, format!("chunk at byte {offset} lies past the end")))?;
+    let chunk = Chunk::read(&mut slice, meta)
+        .map_err(|e| Error::from_exr(path, e, &format!("chunk at byte {offset}")))?;
+    let end = bytes.len() - slice.len();
+    if chunk.layer_index != part {
+        return Err(invalid(
+            path,
+            format!(
+                "chunk at byte {offset} belongs to part {}",
+                chunk.layer_index
+            ),
+        ));
+    }
+    let found = header
+        .get_block_data_indices(&chunk.compressed_block)
+        .map_err(|e| Error::from_exr(path, e, &format!("chunk at byte {offset}")))?;
+    if found != expected {
+        return Err(invalid(
+            path,
+            format!(
+                "chunk at byte {offset} holds block {:?} but the offset table says {:?}",
+                found.tile_index, expected.tile_index
+            ),
+        ));
+    }
+    Ok((chunk, end))
+}
+
+/// Decompress `chunk` (read at `offset`) after checking the sizes it claims;
+/// a damaged block gives an error naming it, never a panic or an abort.
+pub(crate) fn decode_checked(
+    path: &Path,
+    meta: &MetaData,
+    offset: usize,
+    chunk: Chunk,
+) -> Result<UncompressedBlock> {
+    let header = &meta.headers[chunk.layer_index];
+    let at = |e| Error::from_exr(path, e, &format!("chunk at byte {offset}"));
+    let found = header
+        .get_block_data_indices(&chunk.compressed_block)
+        .map_err(at)?;
+    // Sizes the chunk claims, before a decoder allocates them (an
+    // allocation failure aborts; see `chunk_sizes`).
+    let block_size = header
+        .get_absolute_block_pixel_coordinates(found)
+        .map_err(at)?
+        .size;
+    let data: &[u8] = match &chunk.compressed_block {
+        CompressedBlock::ScanLine(b) => &b.compressed_pixels_le,
+        CompressedBlock::Tile(t) => &t.compressed_pixels_le,
+        _ => &[],
+    };
+    super::chunk_sizes::check(
+        header.compression,
+        &header.channels,
+        block_size.0,
+        block_size.1,
+        data,
+    )
+    .map_err(|reason| invalid(path, format!("block at byte {offset}: {reason}")))?;
+    // A panic inside a codec becomes an error naming the block.
+    IN_DECODER.with(|f| f.set(true));
+    let block = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        UncompressedBlock::decompress_chunk(chunk, meta, false)
+    }));
+    IN_DECODER.with(|f| f.set(false));
+    block
+        .map_err(|_| {
+            invalid(
+                path,
+                format!("block at byte {offset}: the decoder failed on damaged data"),
+            )
+        })?
+        .map_err(|e| Error::from_exr(path, e, &format!("block at byte {offset}")))
+}
+
 impl ExrInput {
     /// Open and check `path`; `part` chooses a part of a multi-part file.
     /// The colour layer is chosen as [`ExrInput::open_layer`] does without one.
@@ -140,27 +294,19 @@ impl ExrInput {
             return Self::open_rgbe(path, map, part, layer);
         }
         let bytes = map.bytes();
-        let exr_err = |e| Error::from_exr(path, e, "");
         let mut read = PeekRead::new(Tracking::new(bytes));
-        if !magic_number::is_exr(&mut read).map_err(exr_err)? {
-            return Err(invalid(path, "not an OpenEXR file (no EXR magic number)"));
-        }
-        let requirements =
-            Requirements::read(&mut read).map_err(|e| Error::from_exr(path, e, "version field"))?;
-        requirements
-            .validate()
-            .map_err(|e| Error::from_exr(path, e, "version field"))?;
-        let headers = Header::read_all(&mut read, &requirements, false)
-            .map_err(|e| Error::from_exr(path, e, "header"))?;
-        MetaData::validate(&headers, false).map_err(|e| Error::from_exr(path, e, "header"))?;
-        let meta = MetaData {
-            requirements,
-            headers,
-        };
+        let meta = parse_headers_from(path, &mut read)?;
 
         // Choose the part before reading offset tables (their size is checked).
         let part = match (part, meta.headers.len()) {
             (Some(PartSelect::Index(i)), n) if *i < n => *i,
+            (Some(PartSelect::All), 1) => 0,
+            (Some(PartSelect::All), n) => {
+                return Err(Error::Config(format!(
+                    "{}: --part all: this command reads one of the file's {n} parts; choose one with --part NAME|INDEX",
+                    path.display()
+                )))
+            }
             (Some(PartSelect::Index(i)), n) => {
                 return Err(Error::Config(format!(
                     "{}: --part {i} but the file has {n} part(s)",
@@ -190,28 +336,14 @@ impl ExrInput {
                 return Err(unsupported(
                     path,
                     format!(
-                        "multi-part file with {n} parts ({}): choose one with --part NAME|INDEX",
+                        "multi-part file with {n} parts ({}): choose one with --part NAME|INDEX, or filter every part with --part all",
                         names.join(", ")
                     ),
                 ));
             }
         };
         // Offset tables: their total size must fit in the file.
-        let table_bytes: usize = meta
-            .headers
-            .iter()
-            .map(|h| h.chunk_count.saturating_mul(8))
-            .sum();
-        if read.byte_position().saturating_add(table_bytes) > bytes.len() {
-            return Err(invalid(
-                path,
-                "truncated: the chunk offset table does not fit in the file",
-            ));
-        }
-        let tables = MetaData::read_offset_tables(&mut read, &meta.headers)
-            .map_err(|e| Error::from_exr(path, e, "offset table"))?;
-        let chunks_start = read.byte_position();
-
+        let (tables, chunks_start) = read_tables(path, bytes, &mut read, &meta)?;
         let header = &meta.headers[part];
         if header.deep {
             return Err(unsupported(
@@ -603,68 +735,16 @@ impl ExrInput {
         place: Place<'_>,
     ) -> Result<Landed> {
         let path = &self.path;
-        let bytes = self.map.bytes();
         let header = self.header();
-        let mut slice = &bytes[offset..];
-        let chunk = Chunk::read(&mut slice, &self.meta)
-            .map_err(|e| Error::from_exr(path, e, &format!("chunk at byte {offset}")))?;
-        let end = bytes.len() - slice.len();
-        if chunk.layer_index != self.part {
-            return Err(invalid(
-                path,
-                format!(
-                    "chunk at byte {offset} belongs to part {}",
-                    chunk.layer_index
-                ),
-            ));
-        }
-        let found = header
-            .get_block_data_indices(&chunk.compressed_block)
-            .map_err(|e| Error::from_exr(path, e, &format!("chunk at byte {offset}")))?;
-        if found != expected {
-            return Err(invalid(
-                path,
-                format!(
-                    "chunk at byte {offset} holds block {:?} but the offset table says {:?}",
-                    found.tile_index, expected.tile_index
-                ),
-            ));
-        }
-        // Sizes the chunk claims, before a decoder allocates them (an
-        // allocation failure aborts; see `chunk_sizes`).
-        let block_size = header
-            .get_absolute_block_pixel_coordinates(found)
-            .map_err(|e| Error::from_exr(path, e, &format!("chunk at byte {offset}")))?
-            .size;
-        let data: &[u8] = match &chunk.compressed_block {
-            CompressedBlock::ScanLine(b) => &b.compressed_pixels_le,
-            CompressedBlock::Tile(t) => &t.compressed_pixels_le,
-            _ => &[],
-        };
-        super::chunk_sizes::check(
-            header.compression,
-            &header.channels,
-            block_size.0,
-            block_size.1,
-            data,
-        )
-        .map_err(|reason| invalid(path, format!("block at byte {offset}: {reason}")))?;
-        // A damaged block must give an error, never take the process down: a
-        // panic inside a codec becomes an error naming the block.
-        let meta = &self.meta;
-        IN_DECODER.with(|f| f.set(true));
-        let block = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            UncompressedBlock::decompress_chunk(chunk, meta, false)
-        }));
-        IN_DECODER.with(|f| f.set(false));
-        let block = block
-            .map_err(|_| {
-                invalid(
-                    path,
-                    format!("block at byte {offset}: the decoder failed on damaged data"),
-                )
-            })?
-            .map_err(|e| Error::from_exr(path, e, &format!("block at byte {offset}")))?;
+        let (chunk, end) = read_chunk(
+            path,
+            self.map.bytes(),
+            &self.meta,
+            self.part,
+            offset,
+            expected,
+        )?;
+        let block = decode_checked(path, &self.meta, offset, chunk)?;
         let (bw, bh) = (block.index.pixel_size.0, block.index.pixel_size.1);
         let channels = &header.channels.list;
         let line_bytes: usize = channels.iter().map(|c| bw * bytes_of(c.sample_type)).sum();

@@ -105,13 +105,15 @@ pub fn views_with_channels(views: &[String], channels: &[String]) -> Vec<String>
 
 /// The output sample type that keeps each channel's input type
 /// (`--pixel-type same`): f16, f32, or u32 for ids carried by their nearest
-/// sample (a u32 beauty channel, filtered, becomes f32).
-pub fn same_precision(input_header: &Header, channels: &[String]) -> Vec<Precision> {
+/// sample. The first `beauty` channels are the filtered colour: a u32 one
+/// becomes f32 (its filtered values are not whole numbers).
+pub fn same_precision(input_header: &Header, channels: &[String], beauty: usize) -> Vec<Precision> {
     channels
         .iter()
-        .map(|n| match input_type(input_header, n) {
+        .enumerate()
+        .map(|(k, n)| match input_type(input_header, n) {
             Some(SampleType::F16) => Precision::F16,
-            Some(SampleType::U32) if !is_beauty_name(n) => Precision::U32,
+            Some(SampleType::U32) if k >= beauty => Precision::U32,
             _ => Precision::F32,
         })
         .collect()
@@ -126,19 +128,16 @@ fn input_type(input_header: &Header, name: &str) -> Option<SampleType> {
         .map(|c| c.sample_type)
 }
 
-/// A colour or alpha channel's last name component (R, G, B, Y, A).
-fn is_beauty_name(name: &str) -> bool {
-    matches!(name.rsplit('.').next(), Some("R" | "G" | "B" | "Y" | "A"))
-}
-
 /// The sample type of each of `channels` in the output: the one asked for,
-/// or each channel's own ([`same_precision`]).
+/// or each channel's own ([`same_precision`]; the first `beauty` are the
+/// filtered colour).
 pub fn output_types(
     settings: &OutputSettings,
     input_header: &Header,
     channels: &[String],
+    beauty: usize,
 ) -> Vec<Precision> {
-    let same = same_precision(input_header, channels);
+    let same = same_precision(input_header, channels, beauty);
     match settings.precision {
         // Ids stay u32 whatever float type the rest is given.
         Some(p) => same
@@ -193,12 +192,12 @@ pub(crate) fn choose_compression(
     }
 }
 
-/// Rewrite a finished single-part file's header with its attributes sorted
-/// by name. exr writes custom attributes in hash-map order, which changes
-/// from run to run: without this, two runs of the same command give files
-/// whose pixels are identical but whose bytes are not. The attributes keep
-/// their bytes and the header its length (the spec allows any order), so the
-/// offset table after it stays right.
+/// Rewrite a finished file's headers (every part's) with their attributes
+/// sorted by name. exr writes custom attributes in hash-map order, which
+/// changes from run to run: without this, two runs of the same command give
+/// files whose pixels are identical but whose bytes are not. The attributes
+/// keep their bytes and each header its length (the spec allows any order),
+/// so the offset tables after them stay right.
 pub(crate) fn sort_header_attributes(
     file: &std::fs::File,
     replace: Option<(&str, &str)>,
@@ -214,55 +213,75 @@ pub(crate) fn sort_header_attributes(
         return Err(bad("not an OpenEXR file"));
     }
     let flags = u32::from_le_bytes([buf[4], buf[5], buf[6], buf[7]]);
-    if flags & 0x1000 != 0 || flags & 0x800 != 0 {
-        return Ok(()); // multi-part or deep: not what this writer makes
+    if flags & 0x800 != 0 {
+        return Ok(()); // deep: not what epfilt writes
     }
-    let mut at = 8;
-    let mut attrs: Vec<&[u8]> = Vec::new();
+    let multi = flags & 0x1000 != 0;
     let cstr_end = |from: usize| buf[from..].iter().position(|&b| b == 0).map(|p| from + p);
+    // Each header: where it starts and its attributes.
+    let mut headers: Vec<(usize, Vec<&[u8]>)> = Vec::new();
+    let mut at = 8;
     loop {
-        let name_end = cstr_end(at).ok_or_else(|| bad("header runs past 1 MiB"))?;
-        if name_end == at {
-            break; // the empty name ends the header
+        let start = at;
+        let mut attrs: Vec<&[u8]> = Vec::new();
+        loop {
+            let name_end = cstr_end(at).ok_or_else(|| bad("header runs past 1 MiB"))?;
+            if name_end == at {
+                at += 1;
+                break; // the empty name ends the header
+            }
+            let type_end = cstr_end(name_end + 1).ok_or_else(|| bad("truncated attribute type"))?;
+            let size_at = type_end + 1;
+            let size = buf
+                .get(size_at..size_at + 4)
+                .map(|b| i32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .ok_or_else(|| bad("truncated attribute size"))?;
+            let end = usize::try_from(size)
+                .ok()
+                .and_then(|n| (size_at + 4).checked_add(n))
+                .filter(|&e| e <= buf.len())
+                .ok_or_else(|| bad("attribute size out of range"))?;
+            attrs.push(&buf[at..end]);
+            at = end;
         }
-        let type_end = cstr_end(name_end + 1).ok_or_else(|| bad("truncated attribute type"))?;
-        let size_at = type_end + 1;
-        let size = buf
-            .get(size_at..size_at + 4)
-            .map(|b| i32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .ok_or_else(|| bad("truncated attribute size"))?;
-        let end = usize::try_from(size)
-            .ok()
-            .and_then(|n| (size_at + 4).checked_add(n))
-            .filter(|&e| e <= buf.len())
-            .ok_or_else(|| bad("attribute size out of range"))?;
-        attrs.push(&buf[at..end]);
-        at = end;
+        headers.push((start, attrs));
+        // A multi-part file's headers end with an empty one.
+        if !multi || buf.get(at).is_none_or(|&b| b == 0) {
+            break;
+        }
     }
     fn name(a: &[u8]) -> &[u8] {
         a.iter().position(|&b| b == 0).map_or(a, |p| &a[..p])
     }
-    let mut sorted: Vec<Vec<u8>> = attrs.iter().map(|a| a.to_vec()).collect();
-    sorted.sort_by(|a, b| name(a).cmp(name(b)));
-    // A text attribute's value replaced by one of the same length (what was
-    // not known when the header was written).
-    if let Some((key, value)) = replace {
-        let a = sorted
-            .iter_mut()
-            .find(|a| name(a) == key.as_bytes())
-            .ok_or_else(|| bad("the attribute to fill is missing"))?;
-        let start = a.len() - value.len();
-        if a.len() < value.len() + key.len() + 4 {
-            return Err(bad("the attribute to fill is too short"));
+    let mut replace = replace;
+    let mut writes: Vec<(usize, Vec<u8>)> = Vec::new();
+    for (start, attrs) in &headers {
+        let mut sorted: Vec<Vec<u8>> = attrs.iter().map(|a| a.to_vec()).collect();
+        sorted.sort_by(|a, b| name(a).cmp(name(b)));
+        // A text attribute's value replaced by one of the same length (what
+        // was not known when the header was written), in the first header
+        // that has it.
+        if let Some((key, value)) = replace {
+            if let Some(a) = sorted.iter_mut().find(|a| name(a) == key.as_bytes()) {
+                if a.len() < value.len() + key.len() + 4 {
+                    return Err(bad("the attribute to fill is too short"));
+                }
+                let from = a.len() - value.len();
+                a[from..].copy_from_slice(value.as_bytes());
+                replace = None;
+            }
         }
-        a[start..].copy_from_slice(value.as_bytes());
+        if !sorted.iter().map(Vec::as_slice).eq(attrs.iter().copied()) {
+            writes.push((*start, sorted.concat()));
+        }
     }
-    if sorted.iter().map(Vec::as_slice).eq(attrs.iter().copied()) {
-        return Ok(());
+    if replace.is_some() {
+        return Err(bad("the attribute to fill is missing"));
     }
-    let bytes: Vec<u8> = sorted.concat();
-    f.seek(SeekFrom::Start(8))?;
-    f.write_all(&bytes)?;
+    for (start, bytes) in writes {
+        f.seek(SeekFrom::Start(start as u64))?;
+        f.write_all(&bytes)?;
+    }
     f.flush()
 }
 
@@ -278,10 +297,11 @@ impl ExrOutput {
         input_header: &Header,
         s: usize,
         channels: &[String],
+        beauty: usize,
         settings: &OutputSettings,
     ) -> Result<Self> {
         let (w, h) = (input_header.layer_size.0 / s, input_header.layer_size.1 / s);
-        let types = output_types(settings, input_header, channels);
+        let types = output_types(settings, input_header, channels, beauty);
         let (compression, note) =
             choose_compression(dest, input_header.compression, settings, &types)?;
         let mut header = Self::fresh_header(w, h, channels, compression, &types);

@@ -14,6 +14,7 @@ mod farm;
 mod features;
 mod foils;
 mod invariance;
+mod parts;
 mod reference;
 mod rgbe;
 mod robust;
