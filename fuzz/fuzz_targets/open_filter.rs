@@ -25,7 +25,12 @@ fuzz_target!(
     let mut job = FilterJob::new(input, dir.path().join("out.exr"), FilterParams::new(method, s));
     job.pipeline = PipelineConfig { threads: 1, ..Default::default() };
     job.output_settings.precision = Some(Precision::F32);
-    job.part = Some(epfilt::io::PartSelect::Index(0));
+    // Multi-part files: part 0 (the others copied at S = 1) or every part.
+    job.part = Some(if pick & 0x20 == 0 {
+        epfilt::io::PartSelect::Index(0)
+    } else {
+        epfilt::io::PartSelect::All
+    });
     job.max_memory = Some(256 << 20);
     // ep-box: the first colour channel doubles as a luminance variance,
     // so any file with colour reaches the engine.
