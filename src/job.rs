@@ -258,11 +258,23 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
                 unfilterable = Some(reason);
             }
         }
-        if let Some(reason) = unfilterable.as_ref().filter(|_| job.params.supersample > 1) {
-            let why = format!(
-                "it cannot be filtered ({reason}), and at S = {} a copy's display window would differ from the filtered parts'",
-                job.params.supersample
-            );
+        let filter_it = chosen.contains(&p.index) && unfilterable.is_none();
+        let left_out = if filter_it {
+            None
+        } else if p.deep {
+            Some("deep data cannot be written".to_string())
+        } else {
+            unfilterable
+                .as_ref()
+                .filter(|_| job.params.supersample > 1)
+                .map(|reason| {
+                    format!(
+                        "it cannot be filtered ({reason}), and at S = {} a copy's display window would differ from the filtered parts'",
+                        job.params.supersample
+                    )
+                })
+        };
+        if let Some(why) = left_out {
             warnings.push(format!(
                 "{}: part {:?} is left out: {why}",
                 job.input.display(),
@@ -271,7 +283,7 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
             entries.push((p.index, "left out", Some(why)));
             continue;
         }
-        if chosen.contains(&p.index) && unfilterable.is_none() {
+        if filter_it {
             let mut sub = job.clone();
             sub.part = Some(PartSelect::Index(p.index));
             sub.output = tmp.path().join(format!("part{}.exr", p.index));
@@ -290,15 +302,7 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
                 name: name_of(p.index),
             });
             reports[p.index] = Some(r);
-        } else if p.deep {
-            let why = "deep data cannot be written".to_string();
-            warnings.push(format!(
-                "{}: part {:?} is left out: {why}",
-                job.input.display(),
-                p.name
-            ));
-            entries.push((p.index, "left out", Some(why)));
-            continue;
+            entries.push((p.index, "filtered", None));
         } else {
             sources.push(crate::io::parts::PartSource {
                 path: job.input.clone(),
@@ -306,10 +310,15 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
                 name: name_of(p.index),
             });
             entries.push((p.index, "copied", None));
-            continue;
         }
-        entries.push((p.index, "filtered", None));
     }
+    // The report's own fields are the first filtered part's.
+    let Some(first) = reports.iter().position(Option::is_some) else {
+        return Err(Error::Unsupported {
+            path: job.input.clone(),
+            reason: "no part of this file has colour channels to filter".into(),
+        });
+    };
     crate::io::parts::assemble(&job.output, &sources)?;
     let part_reports: Vec<PartReport> = entries
         .into_iter()
@@ -321,7 +330,6 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
             report: reports[i].clone().map(Box::new),
         })
         .collect();
-    let first = chosen[0];
     let mut report = reports[first]
         .take()
         .ok_or_else(|| Error::Internal("a multi-part run filtered no part".into()))?;

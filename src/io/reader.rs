@@ -892,9 +892,12 @@ const BEAUTY_LAYERS: &[&str] = &[
 /// Y (+ A); `None` when it has neither.
 fn layer_colour(names: &[String], layer: &str) -> Option<Vec<&'static str>> {
     let has = |c: &str| names.iter().any(|n| *n == format!("{layer}{c}"));
+    // In a named layer, Y beside an X is a vector's component (normals
+    // `N.X N.Y N.Z`, motion `vel.X vel.Y`), not a luminance.
+    let vector = !layer.is_empty() && has("X");
     let mut wanted = if has("R") && has("G") && has("B") {
         vec!["R", "G", "B"]
-    } else if has("Y") {
+    } else if has("Y") && !vector {
         vec!["Y"]
     } else {
         return None;
@@ -1188,5 +1191,27 @@ impl Source for ExrSource<'_> {
         };
         self.buf_y0 += n;
         Ok(Some(strip))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn names(v: &[&str]) -> Vec<String> {
+        v.iter().map(|s| s.to_string()).collect()
+    }
+
+    #[test]
+    fn a_vector_layer_is_not_a_luminance() {
+        let n = names(&[
+            "Y", "N.X", "N.Y", "N.Z", "vel.X", "vel.Y", "grey.Y", "grey.A",
+        ]);
+        assert_eq!(layer_colour(&n, ""), Some(vec!["Y"]));
+        assert_eq!(layer_colour(&n, "N."), None);
+        assert_eq!(layer_colour(&n, "vel."), None);
+        assert_eq!(layer_colour(&n, "grey."), Some(vec!["Y", "A"]));
+        // Unlayered X, Y, Z (a Radiance XYZE picture's) keep their Y.
+        assert_eq!(layer_colour(&names(&["X", "Y", "Z"]), ""), Some(vec!["Y"]));
     }
 }

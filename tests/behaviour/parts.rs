@@ -232,3 +232,62 @@ fn a_uint_channel_named_like_colour_stays_uint() {
         assert!(values.iter().all(|&v| v < (w * h) as u64), "S={s}");
     }
 }
+
+/// A two-part file written by the `exr` crate: `depth` (Z only) first, then
+/// `beauty` (R, G, B) unless `colour` is false.
+fn write_two_parts(path: &Path, colour: bool) {
+    use exr::prelude::*;
+    let (w, h) = (8, 6);
+    let f = |v: f32| FlatSamples::F32((0..w * h).map(|i| v + i as f32).collect());
+    let layer = |name: &str, chans: Vec<(&str, f32)>| {
+        let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = chans
+            .into_iter()
+            .map(|(n, v)| AnyChannel::new(n, f(v)))
+            .collect();
+        Layer::new(
+            (w, h),
+            LayerAttributes::named(name),
+            Encoding::FAST_LOSSLESS,
+            AnyChannels::sort(list),
+        )
+    };
+    let second = if colour {
+        layer("beauty", vec![("R", 1.0), ("G", 2.0), ("B", 3.0)])
+    } else {
+        layer("normals", vec![("N.X", 1.0), ("N.Y", 2.0)])
+    };
+    let layers: SmallVec<[_; 2]> = [layer("depth", vec![("Z", 5.0)]), second]
+        .into_iter()
+        .collect();
+    Image::from_layers(
+        ImageAttributes::new(IntegerBounds::from_dimensions((w, h))),
+        layers,
+    )
+    .write()
+    .to_file(path)
+    .expect("write");
+}
+
+#[test]
+fn part_all_reports_the_first_part_it_filters_and_refuses_a_file_with_none() {
+    let dir = tmpdir();
+    let input = dir.path().join("two.exr");
+    write_two_parts(&input, true);
+    let out = dir.path().join("out.exr");
+    let mut j = job(&input, &out, Method::EpGauss, 1);
+    j.part = Some(PartSelect::All);
+    let r = filter_file(&j, &|_, _| {}).unwrap();
+    let actions: Vec<&str> = r.parts.iter().map(|p| p.action.as_str()).collect();
+    assert_eq!(actions, ["copied", "filtered"]);
+    assert_eq!(r.channels, ["R", "G", "B"]);
+    assert_eq!(parts_of(&out)["depth"], parts_of(&input)["depth"]);
+    // Nothing to filter anywhere: refused, and no output.
+    let none = dir.path().join("none.exr");
+    write_two_parts(&none, false);
+    let out2 = dir.path().join("out2.exr");
+    let mut j = job(&none, &out2, Method::EpGauss, 1);
+    j.part = Some(PartSelect::All);
+    let e = filter_file(&j, &|_, _| {}).unwrap_err().to_string();
+    assert!(e.contains("none.exr") && e.contains("no part"), "{e}");
+    assert!(!out2.exists());
+}
