@@ -10,7 +10,7 @@ use epfilt::filter::channels::RuleOverride;
 use epfilt::{filter_file, Method, PipelineConfig};
 
 use crate::common::{epfilt_run, read_json, ENERGY_TOL};
-use crate::exr_io::{job, tmpdir, write_named};
+use crate::exr_io::{job, tmpdir, write_flat, write_named};
 
 /// A multi-layer render written by the OpenEXR library (see
 /// `tests/data/exr/README.md`): R, G, B, A = diffuse + specular + emission,
@@ -266,24 +266,16 @@ fn ids_stay_uint_and_ids_f32_cannot_hold_are_refused() {
         let ids: Vec<u32> = (0..w * h)
             .map(|i| if i == 7 { big } else { (i / 9) as u32 })
             .collect();
-        let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = [
-            AnyChannel::new("B", f(0.2)),
-            AnyChannel::new("G", f(0.5)),
-            AnyChannel::new("R", f(0.9)),
-            AnyChannel::new("objectId", FlatSamples::U32(ids)),
-        ]
-        .into_iter()
-        .collect();
-        let layer = Layer::new(
+        write_flat(
+            path,
             (w, h),
-            LayerAttributes::named(""),
-            Encoding::FAST_LOSSLESS,
-            AnyChannels::sort(channels),
+            vec![
+                ("B", f(0.2)),
+                ("G", f(0.5)),
+                ("R", f(0.9)),
+                ("objectId", FlatSamples::U32(ids)),
+            ],
         );
-        Image::from_layer(layer)
-            .write()
-            .to_file(path)
-            .expect("write");
     };
     let ok = dir.path().join("ok.exr");
     write(&ok, 16_777_216);

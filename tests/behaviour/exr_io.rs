@@ -83,6 +83,24 @@ pub fn read_planar(path: &Path) -> Img {
     })
 }
 
+/// Write one unnamed layer of `channels` (any order, any sample types) with
+/// the `exr` crate's high-level API.
+pub fn write_flat(path: &Path, size: (usize, usize), channels: Vec<(&str, FlatSamples)>) {
+    let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = channels
+        .into_iter()
+        .map(|(n, v)| AnyChannel::new(n, v))
+        .collect();
+    Image::from_layer(Layer::new(
+        size,
+        LayerAttributes::named(""),
+        Encoding::FAST_LOSSLESS,
+        AnyChannels::sort(list),
+    ))
+    .write()
+    .to_file(path)
+    .expect("write");
+}
+
 pub fn job(input: &Path, output: &Path, method: Method, s: usize) -> FilterJob {
     let mut j = FilterJob::new(input, output, params(method, s));
     j.pipeline = PipelineConfig {

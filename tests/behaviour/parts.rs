@@ -9,7 +9,7 @@ use epfilt::io::PartSelect;
 use epfilt::{filter_file, Method};
 
 use crate::common::ENERGY_TOL;
-use crate::exr_io::{job, tmpdir};
+use crate::exr_io::{job, tmpdir, write_flat};
 
 /// Four parts written by the OpenEXR library (`tests/data/exr/generated/
 /// make_generated.py`): 0 RGB float PIZ, 1 Y half tiled ZIP in decreasing
@@ -206,23 +206,16 @@ fn a_uint_channel_named_like_colour_stays_uint() {
     let path = dir.path().join("in.exr");
     let f = |v: f32| FlatSamples::F32(vec![v; w * h]);
     let ids: Vec<u32> = (0..(w * h) as u32).collect();
-    let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = [
-        AnyChannel::new("B", f(0.2)),
-        AnyChannel::new("G", f(0.5)),
-        AnyChannel::new("R", f(0.9)),
-        AnyChannel::new("matte.A", FlatSamples::U32(ids)),
-    ]
-    .into_iter()
-    .collect();
-    Image::from_layer(Layer::new(
+    write_flat(
+        &path,
         (w, h),
-        LayerAttributes::named(""),
-        Encoding::FAST_LOSSLESS,
-        AnyChannels::sort(channels),
-    ))
-    .write()
-    .to_file(&path)
-    .unwrap();
+        vec![
+            ("B", f(0.2)),
+            ("G", f(0.5)),
+            ("R", f(0.9)),
+            ("matte.A", FlatSamples::U32(ids)),
+        ],
+    );
     let out = dir.path().join("out.exr");
     for s in [1, 3] {
         filter_file(&job(&path, &out, Method::EpGauss, s), &|_, _| {}).unwrap();
