@@ -169,7 +169,6 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     if parts.len() < 2 {
         return filter_part(job, progress);
     }
-    let name_of = |i: usize| parts[i].name.clone();
     let chosen: Vec<usize> = match &job.part {
         None => return filter_part(job, progress), // its error lists the parts
         Some(PartSelect::All) => {
@@ -191,48 +190,72 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         return filter_part(job, progress); // its error says what is wrong
     }
     let all = matches!(job.part, Some(PartSelect::All));
-    let carry = all || (job.params.supersample == 1 && job.band.is_none() && !to_rgbe);
-    if !carry {
-        let mut report = filter_part(job, progress)?;
-        let why = if to_rgbe {
-            "a Radiance picture has one part".to_string()
-        } else if job.band.is_some() {
-            "a --band file holds one part".to_string()
-        } else {
-            format!(
-                "at S = {} their display windows would differ from the filtered part's, which OpenEXR does not allow; --part all filters every part",
-                job.params.supersample
-            )
-        };
-        let left: Vec<String> = parts
-            .iter()
-            .filter(|p| p.index != chosen[0])
-            .map(|p| format!("{:?}", p.name))
-            .collect();
-        report.warnings.push(format!(
-            "{}: the other parts ({}) are not in the output: {why}",
-            job.input.display(),
-            left.join(", ")
-        ));
-        report.parts = parts
-            .iter()
-            .map(|p| PartReport {
-                index: p.index,
-                name: p.name.clone(),
-                action: if p.index == chosen[0] {
-                    "filtered"
-                } else {
-                    "left out"
-                }
-                .into(),
-                why: (p.index != chosen[0]).then(|| why.clone()),
-                report: None,
-            })
-            .collect();
-        return Ok(report);
+    if all || (job.params.supersample == 1 && job.band.is_none() && !to_rgbe) {
+        filter_and_assemble(job, &parts, &chosen, progress)
+    } else {
+        filter_one_part_of_many(job, &parts, chosen[0], to_rgbe, progress)
     }
-    // Each filtered part into a file of its own beside the output, then
-    // every part into the output, in the input's order.
+}
+
+/// One part of a multi-part input filtered alone: the others are named in a
+/// warning and the report as left out, with why.
+fn filter_one_part_of_many(
+    job: &FilterJob,
+    parts: &[crate::io::parts::PartInfo],
+    chosen: usize,
+    to_rgbe: bool,
+    progress: Progress<'_>,
+) -> Result<Report> {
+    let mut report = filter_part(job, progress)?;
+    let why = if to_rgbe {
+        "a Radiance picture has one part".to_string()
+    } else if job.band.is_some() {
+        "a --band file holds one part".to_string()
+    } else {
+        format!(
+            "at S = {} their display windows would differ from the filtered part's, which OpenEXR does not allow; --part all filters every part",
+            job.params.supersample
+        )
+    };
+    let left: Vec<String> = parts
+        .iter()
+        .filter(|p| p.index != chosen)
+        .map(|p| format!("{:?}", p.name))
+        .collect();
+    report.warnings.push(format!(
+        "{}: the other parts ({}) are not in the output: {why}",
+        job.input.display(),
+        left.join(", ")
+    ));
+    report.parts = parts
+        .iter()
+        .map(|p| PartReport {
+            index: p.index,
+            name: p.name.clone(),
+            action: if p.index == chosen {
+                "filtered"
+            } else {
+                "left out"
+            }
+            .into(),
+            why: (p.index != chosen).then(|| why.clone()),
+            report: None,
+        })
+        .collect();
+    Ok(report)
+}
+
+/// Filter the `chosen` parts of a multi-part input, each into a file of its
+/// own beside the output, then assemble the output from them and the input's
+/// other parts (copied), in the input's order.
+fn filter_and_assemble(
+    job: &FilterJob,
+    parts: &[crate::io::parts::PartInfo],
+    chosen: &[usize],
+    progress: Progress<'_>,
+) -> Result<Report> {
+    let all = matches!(job.part, Some(PartSelect::All));
+    let name_of = |i: usize| parts[i].name.clone();
     let dir = crate::io::destination::Destination::resolve(&job.output)?
         .named()
         .parent()
@@ -246,7 +269,7 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     let mut sources = Vec::new();
     let mut entries = Vec::new();
     let mut warnings = Vec::new();
-    for p in &parts {
+    for p in parts {
         // --part all: a part with nothing to filter (no colour channels, or
         // a layout epfilt does not filter) is copied at S = 1, else left out.
         let mut unfilterable = None;
