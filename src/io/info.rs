@@ -134,6 +134,12 @@ pub fn info(path: &std::path::Path) -> crate::Result<String> {
             h.shared_attributes.pixel_aspect
         );
     }
+    if meta.headers.len() > 1 {
+        let _ = writeln!(
+            s,
+            "filter: choose a part with --part NAME|INDEX (at S = 1 the others are copied bit for bit, at S > 1 left out), or filter every part with --part all"
+        );
+    }
     Ok(s)
 }
 

@@ -284,3 +284,30 @@ fn part_all_reports_the_first_part_it_filters_and_refuses_a_file_with_none() {
     assert!(e.contains("none.exr") && e.contains("no part"), "{e}");
     assert!(!out2.exists());
 }
+
+#[test]
+fn info_says_what_filter_does_with_the_parts_and_the_cli_reports_each() {
+    let text = crate::common::epfilt_ok(&["info", MULTI]);
+    assert!(
+        text.contains("--part all") && text.contains("copied"),
+        "{text}"
+    );
+    let dir = tmpdir();
+    let out = dir.path().join("out.exr");
+    let o = crate::common::epfilt_run(&[
+        "filter",
+        MULTI,
+        out.to_str().unwrap(),
+        "-s",
+        "1",
+        "--part",
+        "all",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let said =
+        String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr);
+    assert!(
+        said.contains("parts of the input") && said.contains("\"ids_uint_none_negorigin\": copied"),
+        "{said}"
+    );
+}
