@@ -18,7 +18,7 @@ use exr::prelude::{SmallVec, Text};
 use rayon::prelude::*;
 
 use super::mapped::MappedFile;
-use super::reader::{decode_checked, parse_headers, parse_meta, read_chunk};
+use super::reader::{block_bytes, decode_checked, parse_headers, parse_meta, read_chunk};
 use crate::error::{Error, Result};
 
 /// One part of a file.
@@ -79,9 +79,12 @@ struct Opened {
     tables: Vec<Vec<u64>>,
 }
 
-/// Chunks checked (decoded) at a time, in parallel; memory stays a few
-/// blocks per thread whatever the part.
+/// Chunks checked (decoded) at a time, in parallel, at most.
 const CHECK_BATCH: usize = 64;
+
+/// Decoded bytes a batch of checks may hold: fewer chunks at a time where
+/// the blocks are large.
+const CHECK_BYTES: u64 = 64 << 20;
 
 /// Write `dest` (through a temporary file beside it) as a multi-part file
 /// of `sources`, in that order, each part's chunks copied. Returns the
@@ -119,6 +122,20 @@ pub fn assemble(dest: &Path, sources: &[PartSource]) -> Result<u64> {
                 reason: format!("part {} holds deep data, which cannot be written", src.part),
             });
         }
+        // What a decoder allocates per block comes from the header: bound it
+        // before any is checked (as the reader does for the part it filters).
+        let limit = crate::job::default_max_memory();
+        if block_bytes(h) > limit {
+            return Err(Error::InvalidFile {
+                path: src.path.clone(),
+                reason: format!(
+                    "part {}: one block claims {} MiB decoded, more than the {} MiB a block may take",
+                    src.part,
+                    block_bytes(h) >> 20,
+                    limit >> 20
+                ),
+            });
+        }
         which.push(k);
     }
     let headers: SmallVec<[Header; 3]> = sources
@@ -146,7 +163,9 @@ pub fn assemble(dest: &Path, sources: &[PartSource]) -> Result<u64> {
                 let o = &opened[k];
                 let header = &o.meta.headers[src.part];
                 let blocks: Vec<_> = header.blocks_increasing_y_order().enumerate().collect();
-                for batch in blocks.chunks(CHECK_BATCH) {
+                let per_batch =
+                    (CHECK_BYTES / block_bytes(header).max(1)).clamp(1, CHECK_BATCH as u64);
+                for batch in blocks.chunks(per_batch as usize) {
                     let checked: Result<Vec<(usize, Chunk)>> = batch
                         .par_iter()
                         .map(|&(index, tile)| {

@@ -187,6 +187,18 @@ fn parse_headers_from(path: &Path, read: &mut PeekRead<Tracking<&[u8]>>) -> Resu
     })
 }
 
+/// Bytes of one decompressed block of the part `h` (all channels), as its
+/// header claims: what a decoder allocates for it.
+pub(crate) fn block_bytes(h: &Header) -> u64 {
+    let px = match h.blocks {
+        exr::meta::BlockDescription::ScanLines => {
+            h.layer_size.0 as u64 * h.compression.scan_lines_per_block() as u64
+        }
+        exr::meta::BlockDescription::Tiles(t) => t.tile_size.0 as u64 * t.tile_size.1 as u64,
+    };
+    px.saturating_mul(h.channels.bytes_per_pixel as u64)
+}
+
 /// Read the chunk at `offset` of `bytes` and check that it is the block of
 /// part `part` the offset table says (`expected`). Returns it and the end of
 /// its bytes.
@@ -549,14 +561,7 @@ impl ExrInput {
     /// Bytes of one decompressed block of this file (all channels), as the
     /// header claims: what a decoder allocates for it.
     pub fn block_bytes(&self) -> u64 {
-        let h = self.header();
-        let px = match h.blocks {
-            exr::meta::BlockDescription::ScanLines => {
-                h.layer_size.0 as u64 * h.compression.scan_lines_per_block() as u64
-            }
-            exr::meta::BlockDescription::Tiles(t) => t.tile_size.0 as u64 * t.tile_size.1 as u64,
-        };
-        px.saturating_mul(h.channels.bytes_per_pixel as u64)
+        block_bytes(self.header())
     }
 
     /// Names of the channels that will be filtered, in strip order.

@@ -311,3 +311,29 @@ fn info_says_what_filter_does_with_the_parts_and_the_cli_reports_each() {
         "{said}"
     );
 }
+
+#[test]
+fn a_copied_part_claiming_huge_blocks_is_refused_before_decoding() {
+    // Part 1's tile description (32 x 16) made to claim 2^20 x 2^20 tiles:
+    // a decoder would allocate terabytes for one of them.
+    let bytes = std::fs::read(MULTI).unwrap();
+    let key = b"tiles\0tiledesc\0";
+    let at = bytes
+        .windows(key.len())
+        .position(|w| w == key)
+        .expect("a tiled part")
+        + key.len()
+        + 4;
+    let mut bad = bytes.clone();
+    bad[at..at + 4].copy_from_slice(&(1u32 << 20).to_le_bytes());
+    bad[at + 4..at + 8].copy_from_slice(&(1u32 << 20).to_le_bytes());
+    let dir = tmpdir();
+    let input = dir.path().join("huge.exr");
+    std::fs::write(&input, &bad).unwrap();
+    let out = dir.path().join("out.exr");
+    let mut j = job(&input, &out, Method::Gauss, 1);
+    j.part = Some(PartSelect::Index(0));
+    let e = filter_file(&j, &|_, _| {}).unwrap_err().to_string();
+    assert!(e.contains("huge.exr") && e.lines().count() == 1, "{e}");
+    assert!(!out.exists());
+}
