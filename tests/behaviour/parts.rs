@@ -165,6 +165,23 @@ fn at_s2_one_part_is_written_and_the_others_are_named_as_left_out() {
     assert_eq!(r.parts.iter().filter(|p| p.action == "left out").count(), 3);
 }
 
+/// Write `bytes` as `name` in `dir` and filter its part 0 at S = 1 (the
+/// others to be copied), which must fail: the error and the output path.
+fn refused_with_part0(
+    dir: &Path,
+    name: &str,
+    bytes: &[u8],
+    method: Method,
+) -> (String, std::path::PathBuf) {
+    let input = dir.join(name);
+    std::fs::write(&input, bytes).unwrap();
+    let out = dir.join("out.exr");
+    let mut j = job(&input, &out, method, 1);
+    j.part = Some(PartSelect::Index(0));
+    let e = filter_file(&j, &|_, _| {}).unwrap_err().to_string();
+    (e, out)
+}
+
 #[test]
 fn a_damaged_part_that_would_be_copied_is_an_error_and_leaves_no_output() {
     use exr::io::{PeekRead, Tracking};
@@ -182,12 +199,7 @@ fn a_damaged_part_that_would_be_copied_is_an_error_and_leaves_no_output() {
     for b in &mut bad[at + 24..at + 40] {
         *b ^= 0x5a;
     }
-    let input = dir.path().join("bad.exr");
-    std::fs::write(&input, &bad).unwrap();
-    let out = dir.path().join("out.exr");
-    let mut j = job(&input, &out, Method::EpGauss, 1);
-    j.part = Some(PartSelect::Index(0));
-    let e = filter_file(&j, &|_, _| {}).unwrap_err().to_string();
+    let (e, out) = refused_with_part0(dir.path(), "bad.exr", &bad, Method::EpGauss);
     assert!(e.contains("bad.exr") && e.lines().count() == 1, "{e}");
     assert!(!out.exists(), "a half-written output was left");
     let left: Vec<_> = std::fs::read_dir(dir.path())
@@ -328,12 +340,7 @@ fn a_copied_part_claiming_huge_blocks_is_refused_before_decoding() {
     bad[at..at + 4].copy_from_slice(&(1u32 << 20).to_le_bytes());
     bad[at + 4..at + 8].copy_from_slice(&(1u32 << 20).to_le_bytes());
     let dir = tmpdir();
-    let input = dir.path().join("huge.exr");
-    std::fs::write(&input, &bad).unwrap();
-    let out = dir.path().join("out.exr");
-    let mut j = job(&input, &out, Method::Gauss, 1);
-    j.part = Some(PartSelect::Index(0));
-    let e = filter_file(&j, &|_, _| {}).unwrap_err().to_string();
+    let (e, out) = refused_with_part0(dir.path(), "huge.exr", &bad, Method::Gauss);
     assert!(e.contains("huge.exr") && e.lines().count() == 1, "{e}");
     assert!(!out.exists());
 }
