@@ -124,6 +124,76 @@ fn same_share(a: &Image, b: &Image) -> f64 {
     same as f64 / (a.w * a.h) as f64
 }
 
+/// The oracle's thresholds: a sample is an outlier when its luminance is
+/// above this many times the truth's mean over its 3x3 samples.
+const ORACLE_OVER: [f64; 4] = [2.0, 3.0, 4.0, 8.0];
+
+/// The oracle's input and the share of samples it corrected: `input` with
+/// every sample whose luminance is above `over` times the mean of the
+/// truth's luminance over its 3x3 samples (at least 1e-3) replaced by the
+/// truth's sample, and the light they held above the truth spread evenly
+/// over every sample, per channel, so the energy is the input's. It knows
+/// which samples are outliers and what they should be, and spreads their
+/// excess so thinly that it adds no visible error: no outlier-only filter
+/// that treats that share of the samples can expect to do better, so its
+/// gauss factor estimates the floor for such filters.
+fn oracle_input(input: &Image, truth: &Image, over: f64) -> (Image, f64) {
+    let (w, h) = (input.w, input.h);
+    let mut out = input.clone();
+    let mut excess = [0.0f64; 3];
+    let mut n = 0usize;
+    for y in 0..h {
+        for x in 0..w {
+            let mut local = 0.0;
+            for yy in y.saturating_sub(1)..=(y + 1).min(h - 1) {
+                for xx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
+                    local += truth.y(xx, yy);
+                }
+            }
+            let cells = ((y + 1).min(h - 1) + 1 - y.saturating_sub(1))
+                * ((x + 1).min(w - 1) + 1 - x.saturating_sub(1));
+            if input.y(x, y) <= over * (local / cells as f64).max(1e-3) {
+                continue;
+            }
+            n += 1;
+            for (c, e) in excess.iter_mut().enumerate() {
+                let k = (y * 3 + c) * w + x;
+                *e += input.data[k] as f64 - truth.data[k] as f64;
+                out.data[k] = truth.data[k];
+            }
+        }
+    }
+    for (k, v) in out.data.iter_mut().enumerate() {
+        *v = (*v as f64 + excess[(k / w) % 3] / (w * h) as f64) as f32;
+    }
+    (out, n as f64 / (w * h) as f64)
+}
+
+impl Image {
+    fn write(&self, path: &Path) -> Result<()> {
+        let (w, at) = (self.w, |x: usize, y: usize, c: usize| {
+            self.data[(y * 3 + c) * self.w + x]
+        });
+        exr::prelude::write_rgb_file(path, w, self.h, |x, y| {
+            (at(x, y, 0), at(x, y, 1), at(x, y, 2))
+        })
+        .with_context(|| path.display().to_string())
+    }
+}
+
+/// The oracle floors of one super-sampled input (see [`oracle_input`]).
+#[derive(Clone, Debug)]
+struct Oracle {
+    input: String,
+    /// Share of the samples ep-gauss spread at its defaults.
+    spread: f64,
+    /// ep-gauss's factor at its defaults.
+    ep_gauss: f64,
+    /// Per [`ORACLE_OVER`]: the share of samples the oracle corrected and
+    /// the gauss factor of its input.
+    factors: Vec<(f64, f64)>,
+}
+
 /// Footprints of the reference's lights: connected components above the
 /// threshold, each grown by one pixel.
 fn lights(r: &Image) -> Vec<Vec<(usize, usize)>> {
@@ -390,6 +460,7 @@ fn main() -> Result<()> {
         bail!("no renders in {}", dir.display());
     }
     let mut rows = Vec::new();
+    let mut oracles = Vec::new();
     // Per scene: the lowest-spp pixel-resolution input and ep-box, the
     // lowest-spp super-sampled input's gauss and ep-gauss, the reference.
     let mut montages: BTreeMap<String, Montage> = BTreeMap::new();
@@ -478,6 +549,34 @@ fn main() -> Result<()> {
                 shown.push((ctx.path(&tag), m.name().into()));
             }
         }
+        if inp.s > 1 && inp.reference_s == inp.s {
+            let truth = Image::read(&inp.reference)?;
+            let base = rel_mse(&linear_noisy["gauss"], &refs["gauss"]);
+            let mut factors = Vec::new();
+            for over in ORACLE_OVER {
+                let tag = format!("{}-oracle-{over}", inp.name);
+                let (img, share) = oracle_input(&input_img, &truth, over);
+                img.write(&ctx.path(&tag))?;
+                let (out, _) = ctx.run(
+                    &ctx.path(&tag),
+                    Method::Gauss,
+                    inp.s,
+                    &format!("{tag}-gauss"),
+                )?;
+                factors.push((share, rel_mse(&out, &refs["gauss"]) / base));
+            }
+            if let Some(r) = rows
+                .iter()
+                .find(|r| r.input == inp.name && r.method == "ep-gauss")
+            {
+                oracles.push(Oracle {
+                    input: inp.name.clone(),
+                    spread: r.spread as f64 / (input_img.w * input_img.h) as f64,
+                    ep_gauss: r.factor,
+                    factors,
+                });
+            }
+        }
         // Keep the montage's files: the context's folder lives to the end.
         let entry = montages.entry(inp.scene.clone()).or_default();
         let slot = if inp.s == 1 {
@@ -492,7 +591,7 @@ fn main() -> Result<()> {
             entry.2 = Some(inp.reference.clone());
         }
     }
-    let md = markdown(&rows, &dir);
+    let md = markdown(&rows, &oracles, &dir);
     print!("{md}");
     if write {
         std::fs::create_dir_all(out_dir.join("renders"))?;
@@ -539,7 +638,7 @@ fn csv(rows: &[Row]) -> String {
     s
 }
 
-fn markdown(rows: &[Row], dir: &Path) -> String {
+fn markdown(rows: &[Row], oracles: &[Oracle], dir: &Path) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
@@ -639,6 +738,42 @@ fn markdown(rows: &[Row], dir: &Path) -> String {
             of("median"),
             of("alpha-trim")
         );
+    }
+    if !oracles.is_empty() {
+        let _ = writeln!(
+            s,
+            "\n## How low outlier-only filtering can go (super-sampled inputs)\n\n\
+             An oracle that knows the reference replaces every sample above `k` times the \
+             reference's mean luminance over its 3x3 samples by the reference's sample, spreads the \
+             light they held above the reference evenly over the whole frame (energy exact, too \
+             thin to see), and filters with the Gaussian. It knows which samples are outliers and \
+             what they should be, so its factor estimates the floor for filters that treat only \
+             outliers (share of samples treated; factor). Where the outliers carry much of the frame's \
+             light (tiny bulbs in a dark room) the even spread is itself an error, and the oracle is \
+             no floor. **spread**: the share of samples ep-gauss \
+             spread at its defaults.\n"
+        );
+        let head: Vec<String> = ORACLE_OVER
+            .iter()
+            .map(|k| format!("oracle k = {k}"))
+            .collect();
+        let _ = writeln!(s, "| input | ep-gauss | spread | {} |", head.join(" | "));
+        let _ = writeln!(s, "|---|---|---|{}", "---|".repeat(head.len()));
+        for o in oracles {
+            let f: Vec<String> = o
+                .factors
+                .iter()
+                .map(|(q, f)| format!("{:.2}%; {f:.3}", 100.0 * q))
+                .collect();
+            let _ = writeln!(
+                s,
+                "| {} | {:.3} | {:.2}% | {} |",
+                o.input,
+                o.ep_gauss,
+                100.0 * o.spread,
+                f.join(" | ")
+            );
+        }
     }
     let _ = writeln!(s, "\n## Every run\n");
     let _ = writeln!(
