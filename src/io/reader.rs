@@ -248,7 +248,7 @@ pub(crate) fn decode_checked(
     meta: &MetaData,
     offset: usize,
     chunk: Chunk,
-) -> Result<UncompressedBlock> {
+) -> Result<BlockBytes> {
     let header = &meta.headers[chunk.layer_index];
     let at = |e| Error::from_exr(path, e, &format!("chunk at byte {offset}"));
     let found = header
@@ -276,7 +276,17 @@ pub(crate) fn decode_checked(
     // A panic inside a codec becomes an error naming the block.
     IN_DECODER.with(|f| f.set(true));
     let block = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        UncompressedBlock::decompress_chunk(chunk, meta, false)
+        if cfg!(target_endian = "little")
+            && matches!(header.compression, Compression::ZIP1 | Compression::ZIP16)
+        {
+            decompress_zip_chunk(header, chunk)
+        } else {
+            UncompressedBlock::decompress_chunk(chunk, meta, false).map(|b| BlockBytes {
+                index: b.index,
+                data: b.data,
+                split: false,
+            })
+        }
     }));
     IN_DECODER.with(|f| f.set(false));
     block
@@ -287,6 +297,109 @@ pub(crate) fn decode_checked(
             )
         })?
         .map_err(|e| Error::from_exr(path, e, &format!("block at byte {offset}")))
+}
+
+/// A decompressed block: where it lies, and its bytes, either in OpenEXR's
+/// order (native endian) or, for ZIP, left split as
+/// [`super::zip::unpredict`] leaves them.
+pub(crate) struct BlockBytes {
+    pub(crate) index: exr::block::BlockIndex,
+    pub(crate) data: Vec<u8>,
+    split: bool,
+}
+
+impl BlockBytes {
+    /// `dst.len()` samples of type `t` from byte `at` of the block (which
+    /// holds them: the caller checked the block's size).
+    fn read(&self, t: SampleType, at: usize, dst: &mut [f32]) -> std::result::Result<(), u32> {
+        let n = dst.len() * bytes_of(t);
+        if !self.split {
+            return convert(t, &self.data[at..at + n], dst);
+        }
+        let half = self.data.len().div_ceil(2);
+        if at % 2 != 0 || self.data.len() % 2 != 0 {
+            // Whole samples of 2 or 4 bytes never get here; kept total.
+            let bytes: Vec<u8> = (at..at + n)
+                .map(|j| super::zip::split_byte(&self.data, j))
+                .collect();
+            return convert(t, &bytes, dst);
+        }
+        // Byte `at + 2i` is `lo[i]`, byte `at + 2i + 1` is `hi[i]` (little
+        // endian: this path is taken on little-endian machines only).
+        let lo = &self.data[at / 2..][..n / 2];
+        let hi = &self.data[half + at / 2..][..n / 2];
+        match t {
+            SampleType::F16 => {
+                for ((d, &a), &b) in dst.iter_mut().zip(lo).zip(hi) {
+                    *d = half::f16::from_bits(u16::from_le_bytes([a, b])).to_f32();
+                }
+            }
+            SampleType::F32 => {
+                for ((d, a), b) in dst
+                    .iter_mut()
+                    .zip(lo.chunks_exact(2))
+                    .zip(hi.chunks_exact(2))
+                {
+                    *d = f32::from_le_bytes([a[0], b[0], a[1], b[1]]);
+                }
+            }
+            SampleType::U32 => {
+                let mut max = 0;
+                for ((d, a), b) in dst
+                    .iter_mut()
+                    .zip(lo.chunks_exact(2))
+                    .zip(hi.chunks_exact(2))
+                {
+                    let v = u32::from_le_bytes([a[0], b[0], a[1], b[1]]);
+                    max = max.max(v);
+                    *d = v as f32;
+                }
+                if max > MAX_EXACT_ID {
+                    return Err(max);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// [`UncompressedBlock::decompress_chunk`] for a ZIP or ZIPS chunk on a
+/// little-endian machine, through [`super::zip::unpredict`] (no buffer kept
+/// per thread, no second copy of the block): the same block, the same
+/// checks.
+fn decompress_zip_chunk(header: &Header, chunk: Chunk) -> exr::error::Result<BlockBytes> {
+    let indices = header.get_block_data_indices(&chunk.compressed_block)?;
+    let section = header.get_absolute_block_pixel_coordinates(indices)?;
+    section.validate(Some(header.layer_size))?;
+    let packed = match chunk.compressed_block {
+        CompressedBlock::ScanLine(b) => b.compressed_pixels_le,
+        CompressedBlock::Tile(t) => t.compressed_pixels_le,
+        _ => {
+            return Err(exr::error::Error::NotSupported(
+                "deep data not supported yet".into(),
+            ))
+        }
+    };
+    let expected = section.size.area() * header.channels.bytes_per_pixel;
+    // A block that would not shrink is stored as it is.
+    let (data, split) = if packed.len() == expected {
+        (packed, false)
+    } else {
+        let t = super::zip::unpredict(&packed, expected).ok_or(exr::error::Error::Invalid(
+            "zlib-compressed data malformed".into(),
+        ))?;
+        (t, true)
+    };
+    Ok(BlockBytes {
+        data,
+        split,
+        index: exr::block::BlockIndex {
+            layer: chunk.layer_index,
+            pixel_position: section.position.to_usize("data indices start")?,
+            level: indices.level_index,
+            pixel_size: section.size,
+        },
+    })
 }
 
 impl ExrInput {
@@ -706,6 +819,7 @@ impl ExrInput {
             input: self,
             next_row: 0,
             buf: Vec::new(),
+            head: 0,
             buf_y0: 0,
             row_len: self.selected.len() * w,
             released: None,
@@ -784,8 +898,8 @@ impl ExrInput {
         for line in 0..bh {
             for (k, sel) in self.selected.iter().enumerate() {
                 let t = channels[sel.index].sample_type;
-                let src = &block.data[line * line_bytes + ch_off[sel.index]..][..bw * bytes_of(t)];
-                convert(t, src, &mut dst[(line * n + k) * stride + at..][..bw]).map_err(|v| {
+                let from = line * line_bytes + ch_off[sel.index];
+                block.read(t, from, &mut dst[(line * n + k) * stride + at..][..bw]).map_err(|v| {
                     unsupported(
                         path,
                         format!(
@@ -1042,7 +1156,9 @@ pub const READ_AHEAD_BYTES: u64 = 24 << 20;
 pub struct ExrSource<'a> {
     input: &'a ExrInput,
     next_row: usize,
+    /// Decoded rows; those before `head` (values) are handed over.
     buf: Vec<f32>,
+    head: usize,
     buf_y0: usize,
     row_len: usize,
     /// Byte range of the file consumed (and released) so far.
@@ -1070,14 +1186,17 @@ impl Source for ExrSource<'_> {
     fn next_strip(&mut self, max_rows: usize) -> Result<Option<Strip>> {
         let (w, h) = self.input.size();
         let nch = self.input.selected.len();
-        let buffered = |s: &Self| s.buf.len() / s.row_len;
+        let buffered = |s: &Self| (s.buf.len() - s.head) / s.row_len;
         // Decode whole block rows until the strip is covered; two chunks per
         // worker at a time so small blocks still decode in parallel, but no
         // more than READ_AHEAD_BYTES of decoded blocks: wide blocks (6 MB at
         // 32k float RGB) times many workers would make memory grow with the
         // thread count.
         let by_bytes = (READ_AHEAD_BYTES / self.input.block_bytes().max(1)).max(2) as usize;
-        while buffered(self) < max_rows && self.next_row < self.input.rows.len() {
+        // A batch is decoded only once the last is handed over (its last
+        // strip may be short): the buffer is then reused as it is, never
+        // moved or grown around rows still held.
+        while buffered(self) == 0 && self.next_row < self.input.rows.len() {
             let want_chunks = (2 * rayon::current_num_threads()).min(by_bytes);
             let mut end = self.next_row;
             let mut chunks = 0;
@@ -1091,13 +1210,16 @@ impl Source for ExrSource<'_> {
             }
             let batch = &self.input.rows[self.next_row..end];
             let total: usize = batch.iter().map(|r| r.y1 - r.y0).sum();
-            let base = self.buf.len();
-            self.buf.resize(base + total * self.row_len, 0.0);
+            // Grow exactly: doubling would hold up to twice the read-ahead.
+            self.buf.clear();
+            self.head = 0;
+            self.buf.reserve_exact(total * self.row_len);
+            self.buf.resize(total * self.row_len, 0.0);
             let mut span = (usize::MAX, 0usize);
             if batch.iter().all(|r| r.chunks.len() == 1) {
                 // Scan lines: each block decodes straight into its rows.
                 let mut slices = Vec::with_capacity(batch.len());
-                let mut rest = &mut self.buf[base..];
+                let mut rest = &mut self.buf[..];
                 for r in batch {
                     let (head, tail) = rest.split_at_mut((r.y1 - r.y0) * self.row_len);
                     slices.push(head);
@@ -1125,7 +1247,7 @@ impl Source for ExrSource<'_> {
                 // Tiles: decode each into its own buffer, then place it.
                 let decoded: Vec<Result<Vec<Decoded>>> =
                     batch.par_iter().map(|r| self.input.decode_row(r)).collect();
-                let mut row_base = base;
+                let mut row_base = 0;
                 for (row, blocks) in batch.iter().zip(decoded) {
                     let lines = row.y1 - row.y0;
                     for Decoded {
@@ -1181,14 +1303,17 @@ impl Source for ExrSource<'_> {
                 Err(invalid(&self.input.path, "missing rows"))
             };
         }
-        // Hand over the front rows, copying whichever part is smaller.
+        // Hand over a copy of the front rows, exactly as large as they are
+        // (handing over the buffer itself would send its whole read-ahead
+        // capacity down the pipeline with every strip, and draining it would
+        // move the rest at every strip).
         let k = n * self.row_len;
-        let data = if k >= self.buf.len() - k {
-            let rest = self.buf.split_off(k);
-            std::mem::replace(&mut self.buf, rest)
-        } else {
-            self.buf.drain(..k).collect()
-        };
+        let data = self.buf[self.head..self.head + k].to_vec();
+        self.head += k;
+        if self.head == self.buf.len() {
+            self.buf.clear();
+            self.head = 0;
+        }
         let strip = Strip {
             y0: self.buf_y0,
             rows: n,
