@@ -316,7 +316,7 @@ impl BlockBytes {
         if !self.split {
             return convert(t, &self.data[at..at + n], dst);
         }
-        let half = self.data.len().div_ceil(2);
+        let mid = self.data.len().div_ceil(2);
         if at % 2 != 0 || self.data.len() % 2 != 0 {
             // Whole samples of 2 or 4 bytes never get here; kept total.
             let bytes: Vec<u8> = (at..at + n)
@@ -327,7 +327,7 @@ impl BlockBytes {
         // Byte `at + 2i` is `lo[i]`, byte `at + 2i + 1` is `hi[i]` (little
         // endian: this path is taken on little-endian machines only).
         let lo = &self.data[at / 2..][..n / 2];
-        let hi = &self.data[half + at / 2..][..n / 2];
+        let hi = &self.data[mid + at / 2..][..n / 2];
         match t {
             SampleType::F16 => {
                 for ((d, &a), &b) in dst.iter_mut().zip(lo).zip(hi) {
