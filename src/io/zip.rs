@@ -89,7 +89,7 @@ pub fn unpredict(packed: &[u8], expected: usize) -> Option<Vec<u8>> {
 /// added lane by lane in a `u64` (no carry between lanes), the prefix in
 /// three shifted adds.
 #[inline]
-fn run8(prev: u8, d: &mut [u8]) -> [u8; 8] {
+fn run8(prev: u8, d: &[u8]) -> [u8; 8] {
     const LOW: u64 = 0x7f7f_7f7f_7f7f_7f7f;
     const HIGH: u64 = 0x8080_8080_8080_8080;
     #[inline]
