@@ -57,6 +57,16 @@ fn search(c: &mut Criterion) {
             }
         })
     });
+    // The same with wide widths on the coarse grid (the default).
+    let ep = ep.with_coarse(4.0);
+    g.bench_function("dense 1e2..1e5 coarse", |b| {
+        let mut fold = Folded::default();
+        b.iter(|| {
+            for &(x, y, m, xb) in &list {
+                black_box(ep.search_in(&f, x, y, m, xb, &mut fold));
+            }
+        })
+    });
     g.finish();
 }
 

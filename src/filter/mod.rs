@@ -107,7 +107,7 @@ pub fn default_tolerance(s: usize) -> f64 {
 /// the stage's own halo (tested beside each stage).
 pub fn halo(p: &FilterParams) -> crate::geometry::Halo {
     let reach = |rho: f64| (p.cutoff * rho + 0.5).floor().max(0.0) as usize;
-    let shell = |rho: f64| (p.cutoff * rho).floor().max(0.0) as usize;
+    let shell = |rho: f64| (ep_gauss::avg_cutoff(p.cutoff) * rho).floor().max(0.0) as usize;
     let max_rho = p.max_radius.max(p.radius);
     match p.method {
         Method::Box => crate::geometry::Halo::default(),

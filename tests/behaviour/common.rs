@@ -281,12 +281,16 @@ pub fn reference(img: &Img, s: usize, p: &FilterParams, lum: &[f64]) -> (Vec<f64
         vec![p.radius]
     };
     // xbar and w0 of Relation 14 at radius rho around pixel (x, y): Gaussian
-    // weights over the square |dx|, |dy| <= floor(cutoff * rho).
+    // weights over the disc dx^2 + dy^2 <= (min(cutoff, 2.5) * rho)^2.
     let xbar_w0 = |x: usize, y: usize, rho: f64| -> (f64, f64) {
-        let r = (p.cutoff * rho).floor() as i64;
+        let rr = p.cutoff.min(epfilt::filter::ep_gauss::AVG_CUTOFF) * rho;
+        let r = rr.floor() as i64;
         let (mut num, mut den) = (0.0, 0.0);
         for dy in -r..=r {
             for dx in -r..=r {
+                if (dx * dx + dy * dy) as f64 > rr * rr {
+                    continue;
+                }
                 let g = (-((dx * dx + dy * dy) as f64) / (rho * rho)).exp();
                 num += g * ybox[mirror(y as i64 + dy, h) * w + mirror(x as i64 + dx, w)];
                 den += g;
