@@ -474,13 +474,7 @@ impl SpreadStage {
                         continue;
                     }
                     let ch = &r[c * in_w..(c + 1) * in_w];
-                    for (px, out) in core.iter_mut().enumerate() {
-                        let mut acc = 0.0;
-                        for &v in &ch[px * s..(px + 1) * s] {
-                            acc += v as f64;
-                        }
-                        *out += lw * acc;
-                    }
+                    box_add(core, ch, s, lw);
                 }
             }
             core.iter_mut().for_each(|v| *v *= inv);
@@ -909,6 +903,40 @@ impl SpreadStage {
                     dst.iter_mut().for_each(|v| *v *= inv);
                 }
             });
+    }
+}
+
+/// `out[px] += lw * (sum of ch[px * s .. (px + 1) * s])`, the sum taken
+/// left to right in f64: the same arithmetic for every `s`, with the common
+/// factors in loops of their own, which the compiler unrolls (the box
+/// luminance took 0.07 s of a 6144x6144 run at S = 3 with a loop of
+/// variable length, 0.03-0.04 s so).
+#[inline]
+fn box_add(out: &mut [f64], ch: &[f32], s: usize, lw: f64) {
+    #[inline(always)]
+    fn fixed<const S: usize>(out: &mut [f64], ch: &[f32], lw: f64) {
+        for (o, v) in out.iter_mut().zip(ch.chunks_exact(S)) {
+            let mut acc = 0.0;
+            for &v in v {
+                acc += v as f64;
+            }
+            *o += lw * acc;
+        }
+    }
+    match s {
+        1 => fixed::<1>(out, ch, lw),
+        2 => fixed::<2>(out, ch, lw),
+        3 => fixed::<3>(out, ch, lw),
+        4 => fixed::<4>(out, ch, lw),
+        _ => {
+            for (o, v) in out.iter_mut().zip(ch.chunks_exact(s)) {
+                let mut acc = 0.0;
+                for &v in v {
+                    acc += v as f64;
+                }
+                *o += lw * acc;
+            }
+        }
     }
 }
 
