@@ -131,6 +131,12 @@ pub struct Level {
     norm: f64,
     /// Weight of one super-sample of `p` in the average.
     pub w0: f64,
+    /// `1 / norm`, `1 / w0 = S^2 norm` and `1 / (1 - w0)`: the search's
+    /// steps as products (a division costs ten of them, and each of the 4-5
+    /// widths a search evaluates took five in a row).
+    inv_norm: f64,
+    inv_w0: f64,
+    inv_1mw0: f64,
     /// Its spread on the 2x coarser grid (`--coarse-from`), when on.
     pub coarse: Option<Coarse>,
 }
@@ -211,7 +217,7 @@ impl Folded {
             acc += gy * dot4(&gh[..=span], row);
             self.cost += (span + 1) as u64;
         }
-        acc / lv.norm
+        acc * lv.inv_norm
     }
 }
 
@@ -271,6 +277,8 @@ pub struct EpGauss {
     s: usize,
     tol: f64,
     levels: Vec<Level>,
+    /// Each level's `w0`, packed for the guess's binary search.
+    w0s: Vec<f64>,
     t_hi: f64,
     t_lo: f64,
     /// Rungs that double a width's area (its cost in the search).
@@ -336,6 +344,9 @@ impl EpGauss {
                     g1,
                     norm,
                     w0: 1.0 / (s2 * norm),
+                    inv_norm: 1.0 / norm,
+                    inv_w0: s2 * norm,
+                    inv_1mw0: 1.0 / (1.0 - 1.0 / (s2 * norm)),
                     coarse: None,
                 }
             })
@@ -350,6 +361,7 @@ impl EpGauss {
         EpGauss {
             s,
             tol,
+            w0s: levels.iter().map(|l| l.w0).collect(),
             levels,
             t_hi,
             t_lo,
@@ -510,11 +522,14 @@ impl EpGauss {
             if !(xbar > 0.0) || !xbar.is_finite() {
                 return (f64::INFINITY, xbar);
             }
-            let t = x0 / xbar;
-            if !t.is_finite() {
-                return (f64::INFINITY, xbar);
-            }
-            (relation14(t, self.levels[l].w0), xbar)
+            // Relation 14 times xbar above and below: one division.
+            let den = xbar * lv.inv_w0 - x0;
+            let d = if den > 0.0 {
+                (x0 - xbar).abs() / den
+            } else {
+                f64::INFINITY
+            };
+            (if d.is_nan() { f64::INFINITY } else { d }, xbar)
         };
         // Guess from Relations 12-14: with `bg` the average without the
         // sample (Relation 12), Relation 14 is exactly `D = (x0/bg - 1) * w0`,
@@ -598,17 +613,17 @@ impl EpGauss {
     /// The narrowest level whose `w0` would meet the tolerance if the average
     /// without the sample stayed what it is at level `l` (`xbar` there).
     fn level_for_weight(&self, x0: f64, xbar: f64, l: usize) -> Option<usize> {
-        let w = self.levels[l].w0;
-        let bg = (xbar - w * x0) / (1.0 - w);
+        let lv = &self.levels[l];
+        let bg = (xbar - lv.w0 * x0) * lv.inv_1mw0;
         if !(bg > 0.0) || !(x0 > bg) {
             return None;
         }
-        let need = self.tol / (x0 / bg - 1.0);
+        let need = self.tol * bg / (x0 - bg);
         if !need.is_finite() {
             return None;
         }
         // w0 falls as the width grows: first level at or below `need`.
-        Some(self.levels.partition_point(|lv| lv.w0 > need))
+        Some(self.w0s.partition_point(|&w0| w0 > need))
     }
 
     /// The super-sampling factor.
@@ -731,8 +746,8 @@ fn rung_where((l1, d1): (usize, f64), (l2, d2): (usize, f64), tol: f64) -> Optio
     if !(d1.is_finite() && d2 > 0.0 && d2 < d1 && l2 > l1) {
         return None;
     }
-    let slope = (d2.ln() - d1.ln()) / (l2 - l1) as f64;
-    let x = l2 as f64 + (tol.ln() - d2.ln()) / slope;
+    // log D = log d2 + (l - l2) log(d2/d1) / (l2 - l1) meets log tol at x.
+    let x = l2 as f64 + (tol / d2).ln() * (l2 - l1) as f64 / (d2 / d1).ln();
     (x.is_finite() && x >= 0.0).then(|| (x.ceil() as usize).min(1 << 16))
 }
 

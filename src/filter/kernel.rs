@@ -79,6 +79,14 @@ impl Kernel1d {
         &self.w[a * width..(a + 1) * width]
     }
 
+    /// Where the weights of a sample in output pixel `p` start when all of
+    /// them land inside `0..n` (no reflection: [`Kernel1d::fold`] would
+    /// write [`Kernel1d::row`] as it is); `None` near the edges.
+    #[inline]
+    pub fn interior(&self, p: usize, n: usize) -> Option<usize> {
+        (p >= self.reach && p + self.reach < n).then(|| p - self.reach)
+    }
+
     /// Reflect the weights of a sample at sub-offset `a` in output pixel `p`
     /// onto `0..n`. Writes the weights of the contiguous targets
     /// `start..start + out.len()` into `out` and returns `start`.
@@ -266,6 +274,16 @@ impl Coarse {
     pub fn fold(&self, a: usize, px: usize, n_coarse: usize, out: &mut Vec<f64>) -> usize {
         let s = self.kernel.s() / 2;
         self.kernel.fold((px % 2) * s + a, px / 2, n_coarse, out)
+    }
+
+    /// The phase (row of `kernel`) and first coarse cell of a sample at
+    /// sub-offset `a` of fine pixel `px` when its weights need no reflection
+    /// ([`Kernel1d::interior`]).
+    #[inline]
+    pub fn interior(&self, a: usize, px: usize, n_coarse: usize) -> Option<(usize, usize)> {
+        let s = self.kernel.s() / 2;
+        let phase = (px % 2) * s + a;
+        self.kernel.interior(px / 2, n_coarse).map(|st| (phase, st))
     }
 }
 

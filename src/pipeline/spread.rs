@@ -92,13 +92,24 @@ struct Noisy {
     capped: bool,
 }
 
+/// Where the weights of one axis of a spread are.
+#[derive(Clone, Copy, Debug)]
+enum Weights {
+    /// Reflected at an edge: at this offset in the chunk's arena.
+    Arena(usize),
+    /// Inside the image: a row of the level's kernel as it is (level,
+    /// phase), read in place instead of copied.
+    Kernel(u16, u16),
+}
+
 #[derive(Clone, Copy, Debug)]
 struct Spread {
     xs: usize,
     xl: usize,
     ys: usize,
     yl: usize,
-    off: usize,
+    wx: Weights,
+    wy: Weights,
     /// Where its value in each channel is, in the chunk's values.
     voff: usize,
 }
@@ -761,38 +772,78 @@ impl SpreadStage {
                     }
                 }));
                 // Wide kernels on the coarse grid, the others at full
-                // resolution; each list keeps the batch order.
+                // resolution; each list keeps the batch order. Kernels inside
+                // the image are read in place, the others reflected into the
+                // arena.
+                let lv = n.level;
                 let (sp, list) = match &level.coarse {
                     Some(c) => {
                         self.stats.coarse += 1;
-                        let sp = fold_both(&mut self.carena, &mut tmp, voff, |across, t| {
-                            if across {
-                                c.fold(i % s, i / s, ncw, t)
-                            } else {
-                                c.fold(j % s, j / s, nch_rows, t)
+                        let arena = &mut self.carena;
+                        let mut axis = |q: usize, n_c: usize| match c.interior(q % s, q / s, n_c) {
+                            Some((ph, st)) => {
+                                (st, c.kernel.row(ph).len(), Weights::Kernel(lv, ph as u16))
                             }
-                        });
-                        (sp, &mut cspreads)
+                            None => {
+                                let st = c.fold(q % s, q / s, n_c, &mut tmp);
+                                let off = arena.len();
+                                arena.extend_from_slice(&tmp);
+                                (st, tmp.len(), Weights::Arena(off))
+                            }
+                        };
+                        let (xs, xl, wx) = axis(i, ncw);
+                        let (ys, yl, wy) = axis(j, nch_rows);
+                        (
+                            Spread {
+                                xs,
+                                xl,
+                                ys,
+                                yl,
+                                wx,
+                                wy,
+                                voff,
+                            },
+                            &mut cspreads,
+                        )
                     }
                     None => {
                         let k = &level.kernel;
-                        let sp = fold_both(&mut self.arena, &mut tmp, voff, |across, t| {
-                            if across {
-                                k.fold(i % s, i / s, w, t)
-                            } else {
-                                k.fold(j % s, j / s, h, t)
+                        let arena = &mut self.arena;
+                        let mut axis = |q: usize, n_f: usize| match k.interior(q / s, n_f) {
+                            Some(st) => {
+                                (st, k.row(q % s).len(), Weights::Kernel(lv, (q % s) as u16))
                             }
-                        });
-                        (sp, &mut spreads)
+                            None => {
+                                let st = k.fold(q % s, q / s, n_f, &mut tmp);
+                                let off = arena.len();
+                                arena.extend_from_slice(&tmp);
+                                (st, tmp.len(), Weights::Arena(off))
+                            }
+                        };
+                        let (xs, xl, wx) = axis(i, w);
+                        let (ys, yl, wy) = axis(j, h);
+                        (
+                            Spread {
+                                xs,
+                                xl,
+                                ys,
+                                yl,
+                                wx,
+                                wy,
+                                voff,
+                            },
+                            &mut spreads,
+                        )
                     }
                 };
                 self.stats.spread_taps += (sp.xl * sp.yl) as u64;
                 list.push(sp);
             }
             if !spreads.is_empty() {
+                let rows = |l: u16, ph: u16| ep.levels()[l as usize].kernel.row(ph as usize);
                 scatter(
                     &mut self.acc,
-                    &self.arena,
+                    (&self.arena, &rows),
                     &self.vals,
                     &spreads,
                     w,
@@ -803,9 +854,15 @@ impl SpreadStage {
             if !cspreads.is_empty() {
                 self.coarse_used = true;
                 let tile = (self.tile / 2).max(1);
+                let rows = |l: u16, ph: u16| {
+                    ep.levels()[l as usize]
+                        .coarse
+                        .as_ref()
+                        .map_or(&[][..], |c| c.kernel.row(ph as usize))
+                };
                 scatter(
                     &mut self.cacc,
-                    &self.carena,
+                    (&self.carena, &rows),
                     &self.vals,
                     &cspreads,
                     ncw,
@@ -940,36 +997,11 @@ fn box_add(out: &mut [f64], ch: &[f32], s: usize, lw: f64) {
     }
 }
 
-/// A sample's kernel reflected across (`fold(true, ..)`) and down
-/// (`fold(false, ..)`), appended to `arena`: the [`Spread`] that points at it.
-fn fold_both(
-    arena: &mut Vec<f64>,
-    tmp: &mut Vec<f64>,
-    voff: usize,
-    fold: impl Fn(bool, &mut Vec<f64>) -> usize,
-) -> Spread {
-    let off = arena.len();
-    let xs = fold(true, tmp);
-    let xl = tmp.len();
-    arena.extend_from_slice(tmp);
-    let ys = fold(false, tmp);
-    let yl = tmp.len();
-    arena.extend_from_slice(tmp);
-    Spread {
-        xs,
-        xl,
-        ys,
-        yl,
-        off,
-        voff,
-    }
-}
-
 /// Add `spreads` (in order) into the accumulator, one task per tile of
 /// columns: each pixel receives its contributions in the given order.
-fn scatter(
+fn scatter<'k>(
     acc: &mut RowWindow<f64>,
-    arena: &[f64],
+    (arena, rows): (&[f64], &(dyn Fn(u16, u16) -> &'k [f64] + Sync)),
     vals: &[f64],
     spreads: &[Spread],
     w: usize,
@@ -1001,8 +1033,12 @@ fn scatter(
                 if cx0 >= cx1 {
                     continue;
                 }
-                let wx = &arena[sp.off + cx0 - sp.xs..sp.off + cx1 - sp.xs];
-                let wy = &arena[sp.off + sp.xl..sp.off + sp.xl + sp.yl];
+                let weights = |at: Weights, len: usize| match at {
+                    Weights::Arena(off) => &arena[off..off + len],
+                    Weights::Kernel(l, ph) => rows(l, ph),
+                };
+                let wx = &weights(sp.wx, sp.xl)[cx0 - sp.xs..cx1 - sp.xs];
+                let wy = weights(sp.wy, sp.yl);
                 let v = &vals[sp.voff..sp.voff + nch];
                 // Colour without alpha, the common case: the three channels in
                 // one loop (each value gets the same products in the same
