@@ -86,7 +86,7 @@ fn defaults(method: &str) -> BTreeMap<&'static str, String> {
             set("max_radius", "16");
             set("cutoff", "3");
             set("support", "1");
-            set("coarse_from", "4");
+            set("coarse_from", "2");
         }
         "ep-box" => {
             set("d", "5");
@@ -118,7 +118,7 @@ fn grid(quick: bool) -> Vec<(&'static str, Vec<Axis>)> {
                     ("width_step", vec!["0.1", "0.4"]),
                     ("max_radius", vec!["4", "16"]),
                     ("support", vec!["0", "1"]),
-                    ("coarse_from", vec!["0", "4"]),
+                    ("coarse_from", vec!["0", "2"]),
                 ],
             ),
             (
