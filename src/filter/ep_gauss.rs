@@ -474,6 +474,13 @@ impl EpGauss {
         (xbar > 0.0 && xbar.is_finite()).then_some((self.t_hi * xbar, self.t_lo * xbar))
     }
 
+    /// Whether a sample can fail the test by being too dark (`t_lo > 0`:
+    /// `tol < w0`, far below the default): otherwise only samples
+    /// brighter than the bound of [`EpGauss::bounds`] are noisy.
+    pub fn low_outliers(&self) -> bool {
+        self.t_lo > 0.0
+    }
+
     /// Cheap path: is the sample noisy at the base width? Only the few that are
     /// go to [`EpGauss::search`]. Relation 14 solved for `t = x0/xbar` once:
     /// noisy iff `t > (1 + tol/w0)/(1 + tol)`, or (`tol < 1`)

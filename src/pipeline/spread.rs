@@ -527,8 +527,8 @@ impl SpreadStage {
         let found: Vec<Found> = (a..b)
             .into_par_iter()
             .map_init(
-                <(Vec<f64>, Vec<(usize, f64, f64, f64)>)>::default,
-                |(lrows, flagged), y| {
+                <(Vec<f64>, Vec<(usize, f64, f64, f64)>, Vec<f64>)>::default,
+                |(lrows, flagged, pmax), y| {
                     let mut found = Vec::new();
                     let mut vals = Vec::new();
                     let mut kept = 0u64;
@@ -562,18 +562,36 @@ impl SpreadStage {
                     // Which pixels hold a noisy sample: one branch-free test of
                     // all their samples first (most hold none).
                     flagged.clear();
-                    for (px, &xbar) in xbars.iter().enumerate() {
-                        let Some((hi, lo)) = ep.bounds(xbar) else {
-                            continue;
-                        };
-                        let mut any = false;
-                        for bb in 0..s {
-                            for &x0 in &lrows[bb * in_w + px * s..bb * in_w + (px + 1) * s] {
-                                any |= x0 > 0.0 && (x0 > hi || x0 < lo);
+                    if ep.low_outliers() {
+                        for (px, &xbar) in xbars.iter().enumerate() {
+                            let Some((hi, lo)) = ep.bounds(xbar) else {
+                                continue;
+                            };
+                            let mut any = false;
+                            for bb in 0..s {
+                                for &x0 in &lrows[bb * in_w + px * s..bb * in_w + (px + 1) * s] {
+                                    any |= x0 > 0.0 && (x0 > hi || x0 < lo);
+                                }
+                            }
+                            if any {
+                                flagged.push((px, xbar, hi, lo));
                             }
                         }
-                        if any {
-                            flagged.push((px, xbar, hi, lo));
+                    } else {
+                        // Only bright samples can fail (`lo <= 0`): a pixel
+                        // holds one iff its brightest sample is above `hi`.
+                        pmax.clear();
+                        pmax.resize(w, f64::NEG_INFINITY);
+                        for lrow in lrows.chunks_exact(in_w) {
+                            row_max(pmax, lrow, s);
+                        }
+                        for (px, (&xbar, &m)) in xbars.iter().zip(pmax.iter()).enumerate() {
+                            let Some((hi, lo)) = ep.bounds(xbar) else {
+                                continue;
+                            };
+                            if m > hi {
+                                flagged.push((px, xbar, hi, lo));
+                            }
                         }
                     }
                     // Row-major order: by input row, then column.
@@ -960,6 +978,33 @@ impl SpreadStage {
                     dst.iter_mut().for_each(|v| *v *= inv);
                 }
             });
+    }
+}
+
+/// `out[px] = max(out[px], ch[px * s .. (px + 1) * s])`, with the common
+/// factors in loops of their own, as in [`box_add`].
+#[inline]
+fn row_max(out: &mut [f64], ch: &[f64], s: usize) {
+    #[inline(always)]
+    fn fixed<const S: usize>(out: &mut [f64], ch: &[f64]) {
+        for (o, v) in out.iter_mut().zip(ch.chunks_exact(S)) {
+            for &v in v {
+                *o = o.max(v);
+            }
+        }
+    }
+    match s {
+        1 => fixed::<1>(out, ch),
+        2 => fixed::<2>(out, ch),
+        3 => fixed::<3>(out, ch),
+        4 => fixed::<4>(out, ch),
+        _ => {
+            for (o, v) in out.iter_mut().zip(ch.chunks_exact(s)) {
+                for &v in v {
+                    *o = o.max(v);
+                }
+            }
+        }
     }
 }
 
