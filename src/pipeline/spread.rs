@@ -114,6 +114,24 @@ struct Spread {
     voff: usize,
 }
 
+impl Spread {
+    fn new(
+        (xs, xl, wx): (usize, usize, Weights),
+        (ys, yl, wy): (usize, usize, Weights),
+        voff: usize,
+    ) -> Self {
+        Spread {
+            xs,
+            xl,
+            ys,
+            yl,
+            wx,
+            wy,
+            voff,
+        }
+    }
+}
+
 struct YView<'a> {
     win: &'a RowWindow<f64>,
     h: usize,
@@ -798,60 +816,26 @@ impl SpreadStage {
                     Some(c) => {
                         self.stats.coarse += 1;
                         let arena = &mut self.carena;
-                        let mut axis = |q: usize, n_c: usize| match c.interior(q % s, q / s, n_c) {
-                            Some((ph, st)) => {
-                                (st, c.kernel.row(ph).len(), Weights::Kernel(lv, ph as u16))
-                            }
-                            None => {
-                                let st = c.fold(q % s, q / s, n_c, &mut tmp);
-                                let off = arena.len();
-                                arena.extend_from_slice(&tmp);
-                                (st, tmp.len(), Weights::Arena(off))
-                            }
+                        let mut axis = |q: usize, n: usize| {
+                            let (a, p) = (q % s, q / s);
+                            let inside = c.interior(a, p, n);
+                            place(&c.kernel, inside, lv, arena, &mut tmp, |t| {
+                                c.fold(a, p, n, t)
+                            })
                         };
-                        let (xs, xl, wx) = axis(i, ncw);
-                        let (ys, yl, wy) = axis(j, nch_rows);
-                        (
-                            Spread {
-                                xs,
-                                xl,
-                                ys,
-                                yl,
-                                wx,
-                                wy,
-                                voff,
-                            },
-                            &mut cspreads,
-                        )
+                        let (x, y) = (axis(i, ncw), axis(j, nch_rows));
+                        (Spread::new(x, y, voff), &mut cspreads)
                     }
                     None => {
                         let k = &level.kernel;
                         let arena = &mut self.arena;
-                        let mut axis = |q: usize, n_f: usize| match k.interior(q / s, n_f) {
-                            Some(st) => {
-                                (st, k.row(q % s).len(), Weights::Kernel(lv, (q % s) as u16))
-                            }
-                            None => {
-                                let st = k.fold(q % s, q / s, n_f, &mut tmp);
-                                let off = arena.len();
-                                arena.extend_from_slice(&tmp);
-                                (st, tmp.len(), Weights::Arena(off))
-                            }
+                        let mut axis = |q: usize, n: usize| {
+                            let (a, p) = (q % s, q / s);
+                            let inside = k.interior(p, n).map(|st| (a, st));
+                            place(k, inside, lv, arena, &mut tmp, |t| k.fold(a, p, n, t))
                         };
-                        let (xs, xl, wx) = axis(i, w);
-                        let (ys, yl, wy) = axis(j, h);
-                        (
-                            Spread {
-                                xs,
-                                xl,
-                                ys,
-                                yl,
-                                wx,
-                                wy,
-                                voff,
-                            },
-                            &mut spreads,
-                        )
+                        let (x, y) = (axis(i, w), axis(j, h));
+                        (Spread::new(x, y, voff), &mut spreads)
                     }
                 };
                 self.stats.spread_taps += (sp.xl * sp.yl) as u64;
@@ -1038,6 +1022,33 @@ fn box_add(out: &mut [f64], ch: &[f32], s: usize, lw: f64) {
                 }
                 *o += lw * acc;
             }
+        }
+    }
+}
+
+/// One axis of a sample's spread: its first target, its length and where
+/// its weights are. `inside` (phase, first target) when the kernel's row
+/// lands whole inside the image, read in place; otherwise `fold` reflects
+/// it into `tmp` and it is appended to `arena`.
+fn place(
+    kernel: &Kernel1d,
+    inside: Option<(usize, usize)>,
+    level: u16,
+    arena: &mut Vec<f64>,
+    tmp: &mut Vec<f64>,
+    fold: impl FnOnce(&mut Vec<f64>) -> usize,
+) -> (usize, usize, Weights) {
+    match inside {
+        Some((phase, start)) => (
+            start,
+            kernel.row(phase).len(),
+            Weights::Kernel(level, phase as u16),
+        ),
+        None => {
+            let start = fold(tmp);
+            let off = arena.len();
+            arena.extend_from_slice(tmp);
+            (start, tmp.len(), Weights::Arena(off))
         }
     }
 }
