@@ -127,7 +127,7 @@ pub struct Level {
     span: Vec<usize>,
     /// 1-D weights `g(d/rho)`, `d = -shell..=shell`.
     g1: Vec<f64>,
-    /// `sum_q g(|q-p|/rho) = (sum g1)^2`.
+    /// `sum_q g(|q-p|/rho)` over the disc: `sum_dy g(dy) sum_{|dx| <= span} g(dx)`.
     norm: f64,
     /// Weight of one super-sample of `p` in the average.
     pub w0: f64,
