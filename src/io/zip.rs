@@ -42,6 +42,11 @@ pub fn compress(le: &[u8], level: u8) -> Vec<u8> {
     }
 }
 
+/// Room the inflater asks for past the end of its output: zune-inflate
+/// 0.2's `FASTLOOP_MAX_BYTES_WRITTEN` (about 600 bytes) and
+/// `FASTCOPY_BYTES`, with a margin.
+const INFLATE_SLACK: usize = 4096;
+
 /// Decode the zlib stream of one ZIP / ZIPS block that holds `expected`
 /// bytes: inflate (at most `expected` bytes) and undo the delta predictor,
 /// leaving the bytes split: byte `j` of the block is `out[j / 2]` for even
@@ -57,9 +62,13 @@ pub fn compress(le: &[u8], level: u8) -> Vec<u8> {
 /// reader takes the samples straight from the split bytes: no second buffer,
 /// and one pass less over the block.
 pub fn unpredict(packed: &[u8], expected: usize) -> Option<Vec<u8>> {
+    // The decoder's fast loop wants `INFLATE_SLACK` bytes of room past
+    // what it writes: a buffer of exactly `expected` bytes is grown at its
+    // last few hundred bytes, and growing doubles its capacity (held until
+    // the block is dropped: twice the block, per decoding worker).
     let options = zune_inflate::DeflateOptions::default()
         .set_limit(expected)
-        .set_size_hint(expected);
+        .set_size_hint(expected + INFLATE_SLACK);
     let mut t = zune_inflate::DeflateDecoder::new_with_options(packed, options)
         .decode_zlib()
         .ok()?;
