@@ -187,8 +187,8 @@ pub fn assemble(dest: &Path, sources: &[PartSource]) -> Result<u64> {
                                 offset,
                                 tile.location,
                             )?;
-                            decode_checked(&o.path, &o.meta, offset, chunk.clone())?;
-                            Ok((index, chunk))
+                            decode_checked(&o.path, &o.meta, offset, &chunk)?;
+                            Ok((index, chunk.to_chunk()))
                         })
                         .collect();
                     let checked = match checked {

@@ -199,46 +199,163 @@ pub(crate) fn block_bytes(h: &Header) -> u64 {
     px.saturating_mul(h.channels.bytes_per_pixel as u64)
 }
 
+/// One chunk as it lies in the mapped file: its part, the block it holds and
+/// its compressed bytes, borrowed (decoding ZIP and uncompressed blocks copies
+/// nothing out of the map; `exr`'s `Chunk::read` copies every block).
+pub(crate) struct RawChunk<'a> {
+    pub(crate) layer_index: usize,
+    block: RawBlock,
+    /// Which block of the part it is.
+    pub(crate) indices: TileCoordinates,
+    /// The compressed bytes.
+    pub(crate) data: &'a [u8],
+}
+
+/// What a chunk's leader says about its block.
+#[derive(Clone, Copy)]
+enum RawBlock {
+    /// A scan-line block starting at this y (in the data window).
+    ScanLine(i32),
+    /// A tile.
+    Tile,
+}
+
+impl RawChunk<'_> {
+    /// The owned chunk `exr`'s decoders and writer take (a copy of the bytes).
+    pub(crate) fn to_chunk(&self) -> Chunk {
+        let compressed_pixels_le = self.data.to_vec();
+        Chunk {
+            layer_index: self.layer_index,
+            compressed_block: match self.block {
+                RawBlock::ScanLine(y_coordinate) => {
+                    CompressedBlock::ScanLine(exr::block::chunk::CompressedScanLineBlock {
+                        y_coordinate,
+                        compressed_pixels_le,
+                    })
+                }
+                RawBlock::Tile => CompressedBlock::Tile(exr::block::chunk::CompressedTileBlock {
+                    coordinates: self.indices,
+                    compressed_pixels_le,
+                }),
+            },
+        }
+    }
+}
+
+/// Little-endian `i32`s of a chunk's leader, read from a slice.
+struct Leader<'a> {
+    bytes: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Leader<'a> {
+    fn i32(&mut self) -> Option<i32> {
+        let b = self.bytes.get(self.at..self.at + 4)?;
+        self.at += 4;
+        Some(i32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
+
+    fn usize(&mut self) -> Option<usize> {
+        self.i32().and_then(|v| usize::try_from(v).ok())
+    }
+
+    fn take(&mut self, n: usize) -> Option<&'a [u8]> {
+        let b = self.bytes.get(self.at..self.at.checked_add(n)?)?;
+        self.at += n;
+        Some(b)
+    }
+}
+
 /// Read the chunk at `offset` of `bytes` and check that it is the block of
-/// part `part` the offset table says (`expected`). Returns it and the end of
-/// its bytes.
-pub(crate) fn read_chunk(
+/// part `part` the offset table says (`expected`). Returns it, its bytes
+/// borrowed from `bytes`, and the end of its bytes. The leader is parsed as
+/// `exr`'s `Chunk::read` does, with the same bounds (a block's bytes at most
+/// what the block holds uncompressed, levels below 32).
+pub(crate) fn read_chunk<'a>(
     path: &Path,
-    bytes: &[u8],
+    bytes: &'a [u8],
     meta: &MetaData,
     part: usize,
     offset: usize,
     expected: TileCoordinates,
-) -> Result<(Chunk, usize)> {
-    let header = &meta.headers[part];
-    let mut slice = bytes
-        .get(offset..)
-        .ok_or_else(|| invalid(path, format!("chunk at byte {offset} lies past the end")))?;
-    let chunk = Chunk::read(&mut slice, meta)
-        .map_err(|e| Error::from_exr(path, e, &format!("chunk at byte {offset}")))?;
-    let end = bytes.len() - slice.len();
-    if chunk.layer_index != part {
+) -> Result<(RawChunk<'a>, usize)> {
+    let at = |what: &str| invalid(path, format!("chunk at byte {offset}: {what}"));
+    if offset >= bytes.len() {
         return Err(invalid(
             path,
-            format!(
-                "chunk at byte {offset} belongs to part {}",
-                chunk.layer_index
-            ),
+            format!("chunk at byte {offset} lies past the end"),
         ));
     }
-    let found = header
-        .get_block_data_indices(&chunk.compressed_block)
-        .map_err(|e| Error::from_exr(path, e, &format!("chunk at byte {offset}")))?;
-    if found != expected {
+    let mut r = Leader { bytes, at: offset };
+    let truncated = "the file ends inside it";
+    let layer_index = if meta.requirements.is_multilayer() {
+        let n = r.i32().ok_or_else(|| at(truncated))?;
+        usize::try_from(n)
+            .ok()
+            .filter(|&n| n < meta.headers.len())
+            .ok_or_else(|| at(&format!("invalid part number {n}")))?
+    } else {
+        0
+    };
+    if layer_index != part {
+        return Err(invalid(
+            path,
+            format!("chunk at byte {offset} belongs to part {layer_index}"),
+        ));
+    }
+    let header = &meta.headers[part];
+    if header.deep {
+        return Err(unsupported(path, "deep data"));
+    }
+    let (block, indices) = match header.blocks {
+        exr::meta::BlockDescription::ScanLines => {
+            let y = r.i32().ok_or_else(|| at(truncated))?;
+            let indices = header
+                .get_scan_line_block_tile_coordinates(y)
+                .map_err(|e| Error::from_exr(path, e, &format!("chunk at byte {offset}")))?;
+            (RawBlock::ScanLine(y), indices)
+        }
+        exr::meta::BlockDescription::Tiles(_) => {
+            let mut v = [0usize; 4];
+            for x in &mut v {
+                *x = r.usize().ok_or_else(|| at("invalid tile coordinates"))?;
+            }
+            if v[2] > 31 || v[3] > 31 {
+                return Err(at("level index exceeding integer maximum"));
+            }
+            let indices = TileCoordinates {
+                tile_index: exr::math::Vec2(v[0], v[1]),
+                level_index: exr::math::Vec2(v[2], v[3]),
+            };
+            (RawBlock::Tile, indices)
+        }
+    };
+    let size = r.usize().ok_or_else(|| at("invalid block size"))?;
+    let max = header.max_block_byte_size();
+    if size > max {
+        return Err(at(&format!(
+            "it claims {size} bytes, more than its block holds uncompressed ({max})"
+        )));
+    }
+    let data = r.take(size).ok_or_else(|| at(truncated))?;
+    if indices != expected {
         return Err(invalid(
             path,
             format!(
                 "chunk at byte {offset} holds block {:?} but the offset table says {:?}",
-                found.tile_index, expected.tile_index
+                indices.tile_index, expected.tile_index
             ),
         ));
     }
-    Ok((chunk, end))
+    Ok((
+        RawChunk {
+            layer_index,
+            block,
+            indices,
+            data,
+        },
+        r.at,
+    ))
 }
 
 /// Decompress `chunk` (read at `offset`) after checking the sizes it claims;
@@ -247,30 +364,23 @@ pub(crate) fn decode_checked(
     path: &Path,
     meta: &MetaData,
     offset: usize,
-    chunk: Chunk,
+    chunk: &RawChunk<'_>,
 ) -> Result<BlockBytes> {
     let header = &meta.headers[chunk.layer_index];
     let at = |e| Error::from_exr(path, e, &format!("chunk at byte {offset}"));
-    let found = header
-        .get_block_data_indices(&chunk.compressed_block)
-        .map_err(at)?;
+    let found = chunk.indices;
     // Sizes the chunk claims, before a decoder allocates them (an
     // allocation failure aborts; see `chunk_sizes`).
     let block_size = header
         .get_absolute_block_pixel_coordinates(found)
         .map_err(at)?
         .size;
-    let data: &[u8] = match &chunk.compressed_block {
-        CompressedBlock::ScanLine(b) => &b.compressed_pixels_le,
-        CompressedBlock::Tile(t) => &t.compressed_pixels_le,
-        _ => &[],
-    };
     super::chunk_sizes::check(
         header.compression,
         &header.channels,
         block_size.0,
         block_size.1,
-        data,
+        chunk.data,
     )
     .map_err(|reason| invalid(path, format!("block at byte {offset}: {reason}")))?;
     // A panic inside a codec becomes an error naming the block.
@@ -281,7 +391,7 @@ pub(crate) fn decode_checked(
         {
             decompress_zip_chunk(header, chunk)
         } else {
-            UncompressedBlock::decompress_chunk(chunk, meta, false).map(|b| BlockBytes {
+            UncompressedBlock::decompress_chunk(chunk.to_chunk(), meta, false).map(|b| BlockBytes {
                 index: b.index,
                 data: b.data,
                 split: false,
@@ -367,25 +477,17 @@ impl BlockBytes {
 /// little-endian machine, through [`super::zip::unpredict`] (no buffer kept
 /// per thread, no second copy of the block): the same block, the same
 /// checks.
-fn decompress_zip_chunk(header: &Header, chunk: Chunk) -> exr::error::Result<BlockBytes> {
-    let indices = header.get_block_data_indices(&chunk.compressed_block)?;
+fn decompress_zip_chunk(header: &Header, chunk: &RawChunk<'_>) -> exr::error::Result<BlockBytes> {
+    let indices = chunk.indices;
     let section = header.get_absolute_block_pixel_coordinates(indices)?;
     section.validate(Some(header.layer_size))?;
-    let packed = match chunk.compressed_block {
-        CompressedBlock::ScanLine(b) => b.compressed_pixels_le,
-        CompressedBlock::Tile(t) => t.compressed_pixels_le,
-        _ => {
-            return Err(exr::error::Error::NotSupported(
-                "deep data not supported yet".into(),
-            ))
-        }
-    };
+    let packed = chunk.data;
     let expected = section.size.area() * header.channels.bytes_per_pixel;
     // A block that would not shrink is stored as it is.
     let (data, split) = if packed.len() == expected {
-        (packed, false)
+        (packed.to_vec(), false)
     } else {
-        let t = super::zip::unpredict(&packed, expected).ok_or(exr::error::Error::Invalid(
+        let t = super::zip::unpredict(packed, expected).ok_or(exr::error::Error::Invalid(
             "zlib-compressed data malformed".into(),
         ))?;
         (t, true)
@@ -863,7 +965,7 @@ impl ExrInput {
             offset,
             expected,
         )?;
-        let block = decode_checked(path, &self.meta, offset, chunk)?;
+        let block = decode_checked(path, &self.meta, offset, &chunk)?;
         let (bw, bh) = (block.index.pixel_size.0, block.index.pixel_size.1);
         let channels = &header.channels.list;
         let line_bytes: usize = channels.iter().map(|c| bw * bytes_of(c.sample_type)).sum();
@@ -1330,6 +1432,128 @@ mod tests {
 
     fn names(v: &[&str]) -> Vec<String> {
         v.iter().map(|s| s.to_string()).collect()
+    }
+
+    /// `exr`'s own reading of a chunk, with the checks `read_chunk` makes:
+    /// what the borrowed reader must agree with.
+    fn exr_read_chunk(
+        bytes: &[u8],
+        meta: &MetaData,
+        part: usize,
+        offset: usize,
+        expected: TileCoordinates,
+    ) -> Option<(Chunk, usize)> {
+        let mut slice = bytes.get(offset..)?;
+        let chunk = Chunk::read(&mut slice, meta).ok()?;
+        let end = bytes.len() - slice.len();
+        let found = meta.headers[chunk.layer_index]
+            .get_block_data_indices(&chunk.compressed_block)
+            .ok()?;
+        (chunk.layer_index == part && found == expected).then_some((chunk, end))
+    }
+
+    /// What a flat chunk holds (`Chunk` has no `PartialEq`).
+    fn key(c: &Chunk) -> (usize, Option<i32>, Option<TileCoordinates>, &[u8]) {
+        match &c.compressed_block {
+            CompressedBlock::ScanLine(b) => (
+                c.layer_index,
+                Some(b.y_coordinate),
+                None,
+                &b.compressed_pixels_le,
+            ),
+            CompressedBlock::Tile(t) => (
+                c.layer_index,
+                None,
+                Some(t.coordinates),
+                &t.compressed_pixels_le,
+            ),
+            _ => unreachable!("deep parts are skipped"),
+        }
+    }
+
+    #[test]
+    fn borrowed_chunks_are_the_chunks_exr_reads() {
+        // Every block of every flat part of the repository's files, damaged
+        // ones included, and every block's leader cut short or with a
+        // corrupted size: the same chunk and end, or an error for both.
+        let mut files = Vec::new();
+        let mut dirs = vec![std::path::PathBuf::from("tests/data/exr")];
+        while let Some(d) = dirs.pop() {
+            for e in std::fs::read_dir(&d).unwrap().flatten() {
+                let p = e.path();
+                if p.is_dir() {
+                    dirs.push(p);
+                } else if p.extension().is_some_and(|x| x == "exr") || d.ends_with("Damaged") {
+                    files.push(p);
+                }
+            }
+        }
+        files.sort();
+        let (mut blocks, mut agreed_errors) = (0, 0);
+        for path in &files {
+            let bytes = std::fs::read(path).unwrap();
+            let Ok((meta, tables, _)) = parse_meta(path, &bytes) else {
+                continue;
+            };
+            for (part, header) in meta.headers.iter().enumerate() {
+                if header.deep {
+                    continue;
+                }
+                for (index, tile) in header.blocks_increasing_y_order().enumerate() {
+                    let Some(&offset) = tables[part].get(index) else {
+                        continue;
+                    };
+                    let offset = offset as usize;
+                    let mut variants = vec![bytes.clone()];
+                    // Cut inside the leader and inside the data.
+                    for cut in [offset + 2, offset + 6, offset + 9, offset + 40] {
+                        if cut < bytes.len() {
+                            variants.push(bytes[..cut].to_vec());
+                        }
+                    }
+                    // A size field of -1 and of i32::MAX where a scan-line
+                    // block (4 bytes on) or a tile (16 bytes on) keeps it.
+                    let skip = if meta.requirements.is_multilayer() {
+                        4
+                    } else {
+                        0
+                    };
+                    for field in [4, 16] {
+                        for v in [-1i32, i32::MAX] {
+                            let at = offset + skip + field;
+                            if at + 4 <= bytes.len() {
+                                let mut b = bytes.clone();
+                                b[at..at + 4].copy_from_slice(&v.to_le_bytes());
+                                variants.push(b);
+                            }
+                        }
+                    }
+                    for b in &variants {
+                        let ours = read_chunk(path, b, &meta, part, offset, tile.location).ok();
+                        let theirs = exr_read_chunk(b, &meta, part, offset, tile.location);
+                        match (ours, theirs) {
+                            (Some((c, end)), Some((d, e))) => {
+                                assert!(
+                                    key(&c.to_chunk()) == key(&d) && end == e,
+                                    "{path:?} block {index}"
+                                );
+                                blocks += 1;
+                            }
+                            (None, None) => agreed_errors += 1,
+                            (o, t) => panic!(
+                                "{path:?} part {part} block {index}: ours {}, exr's {}",
+                                o.is_some(),
+                                t.is_some()
+                            ),
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            blocks > 1000 && agreed_errors > 1000,
+            "{blocks} {agreed_errors}"
+        );
     }
 
     #[test]
