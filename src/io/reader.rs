@@ -1312,11 +1312,16 @@ impl Source for ExrSource<'_> {
             }
             let batch = &self.input.rows[self.next_row..end];
             let total: usize = batch.iter().map(|r| r.y1 - r.y0).sum();
-            // Grow exactly: doubling would hold up to twice the read-ahead.
-            self.buf.clear();
+            // Every value of the batch is written by its blocks (they cover
+            // its rows, as the offset table was checked to say), so the
+            // buffer keeps its old values rather than being cleared (a pass
+            // over the whole image, on the reader's critical path). It grows
+            // exactly: doubling would hold up to twice the read-ahead.
+            let len = total * self.row_len;
             self.head = 0;
-            self.buf.reserve_exact(total * self.row_len);
-            self.buf.resize(total * self.row_len, 0.0);
+            self.buf.truncate(len);
+            self.buf.reserve_exact(len - self.buf.len());
+            self.buf.resize(len, 0.0);
             let mut span = (usize::MAX, 0usize);
             if batch.iter().all(|r| r.chunks.len() == 1) {
                 // Scan lines: each block decodes straight into its rows.
@@ -1412,10 +1417,6 @@ impl Source for ExrSource<'_> {
         let k = n * self.row_len;
         let data = self.buf[self.head..self.head + k].to_vec();
         self.head += k;
-        if self.head == self.buf.len() {
-            self.buf.clear();
-            self.head = 0;
-        }
         let strip = Strip {
             y0: self.buf_y0,
             rows: n,
