@@ -624,11 +624,19 @@ impl SpreadStage {
                                 }
                                 if support.keeps(x0, hi, lo, |di, dj| {
                                     let (ni, nj) = (i as i64 + di, j as i64 + dj);
-                                    (ni >= 0
+                                    if !(ni >= 0
                                         && nj >= 0
                                         && (ni as usize) < in_w
                                         && (nj as usize) < in_h)
-                                        .then(|| luma(input.get(nj as usize), ni as usize))
+                                    {
+                                        return None;
+                                    }
+                                    let (ni, nj) = (ni as usize, nj as usize);
+                                    // This pixel row's samples are in `lrows`.
+                                    Some(match nj.checked_sub(y * s).filter(|&b| b < s) {
+                                        Some(b) => lrows[b * in_w + ni],
+                                        None => luma(input.get(nj), ni),
+                                    })
                                 }) {
                                     kept += 1;
                                     continue;
@@ -966,14 +974,17 @@ impl SpreadStage {
 }
 
 /// `out[px] = max(out[px], ch[px * s .. (px + 1) * s])`, with the common
-/// factors in loops of their own, as in [`box_add`].
+/// factors in loops of their own, as in [`box_add`]. A comparison, not
+/// `f64::max` (whose NaN rule costs a branch per value): the same result
+/// while `out` holds no NaN (it starts at -inf), and a NaN value is passed
+/// over by both.
 #[inline]
 fn row_max(out: &mut [f64], ch: &[f64], s: usize) {
     #[inline(always)]
     fn fixed<const S: usize>(out: &mut [f64], ch: &[f64]) {
         for (o, v) in out.iter_mut().zip(ch.chunks_exact(S)) {
             for &v in v {
-                *o = o.max(v);
+                *o = if v > *o { v } else { *o };
             }
         }
     }
@@ -985,7 +996,7 @@ fn row_max(out: &mut [f64], ch: &[f64], s: usize) {
         _ => {
             for (o, v) in out.iter_mut().zip(ch.chunks_exact(s)) {
                 for &v in v {
-                    *o = o.max(v);
+                    *o = if v > *o { v } else { *o };
                 }
             }
         }
