@@ -259,9 +259,9 @@ impl Streamer {
         let (in_w, in_h) = (self.grid.in_w, self.grid.in_h);
         self.books.take(&mut strip, self.rows_in, in_w, in_h)?;
         let a = self.rows_in;
-        for row in strip.data.chunks(self.nall * in_w) {
-            self.input.push_copy(row);
-        }
+        // The strip's buffer becomes the window's rows (no copy).
+        self.input
+            .push_rows(std::mem::take(&mut strip.data), strip.rows);
         self.rows_in += strip.rows;
         self.stage.arrive(&mut self.input, a, self.rows_in);
         let end = self

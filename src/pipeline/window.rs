@@ -7,11 +7,19 @@
 use std::collections::VecDeque;
 
 /// Rows `first..first + len()` of equal length.
+///
+/// Rows live in blocks: one row each for rows pushed one at a time, several
+/// for a strip taken whole ([`RowWindow::push_rows`], the input's rows: no
+/// copy). A block leaves when its last row does.
 #[derive(Debug)]
 pub struct RowWindow<T> {
     first: usize,
     row_len: usize,
-    rows: VecDeque<Vec<T>>,
+    /// Each row held: its block (counted from `base`) and first value.
+    rows: VecDeque<(usize, usize)>,
+    blocks: VecDeque<Vec<T>>,
+    /// The number of the block at the front of `blocks`.
+    base: usize,
     spare: Vec<Vec<T>>,
     high_water: usize,
 }
@@ -23,6 +31,8 @@ impl<T: Copy> RowWindow<T> {
             first: 0,
             row_len,
             rows: VecDeque::new(),
+            blocks: VecDeque::new(),
+            base: 0,
             spare: Vec::new(),
             high_water: 0,
         }
@@ -43,14 +53,21 @@ impl<T: Copy> RowWindow<T> {
         self.high_water
     }
 
+    /// Append `v` as a block of `n` whole rows.
+    fn push_block(&mut self, v: Vec<T>, n: usize) {
+        let id = self.base + self.blocks.len();
+        self.rows.extend((0..n).map(|k| (id, k * self.row_len)));
+        self.blocks.push_back(v);
+        self.high_water = self.high_water.max(self.rows.len());
+    }
+
     /// Append a row filled with `fill`; returns it.
     pub fn push(&mut self, fill: T) -> &mut [T] {
         let mut v = self.spare.pop().unwrap_or_default();
         v.clear();
         v.resize(self.row_len, fill);
-        self.rows.push_back(v);
-        self.high_water = self.high_water.max(self.rows.len());
-        self.rows
+        self.push_block(v, 1);
+        self.blocks
             .back_mut()
             .map(|v| v.as_mut_slice())
             .unwrap_or(&mut [])
@@ -61,8 +78,14 @@ impl<T: Copy> RowWindow<T> {
         let mut v = self.spare.pop().unwrap_or_default();
         v.clear();
         v.extend_from_slice(row);
-        self.rows.push_back(v);
-        self.high_water = self.high_water.max(self.rows.len());
+        self.push_block(v, 1);
+    }
+
+    /// Append `rows` rows held in order in `data` (of `rows` times the row
+    /// length), keeping its buffer.
+    pub fn push_rows(&mut self, data: Vec<T>, rows: usize) {
+        assert_eq!(data.len(), rows * self.row_len, "a strip of whole rows");
+        self.push_block(data, rows);
     }
 
     /// Append a row for a caller that overwrites every value: a recycled
@@ -70,10 +93,7 @@ impl<T: Copy> RowWindow<T> {
     /// `fill`.
     pub fn push_stale(&mut self, fill: T) {
         match self.spare.pop() {
-            Some(v) if v.len() == self.row_len => {
-                self.rows.push_back(v);
-                self.high_water = self.high_water.max(self.rows.len());
-            }
+            Some(v) if v.len() == self.row_len => self.push_block(v, 1),
             other => {
                 if let Some(v) = other {
                     self.spare.push(v);
@@ -86,28 +106,54 @@ impl<T: Copy> RowWindow<T> {
     /// Row `y` (absolute). Panics if not held: a halo bug, not an input error.
     #[inline]
     pub fn get(&self, y: usize) -> &[T] {
-        &self.rows[y - self.first]
+        let (b, at) = self.rows[y - self.first];
+        &self.blocks[b - self.base][at..at + self.row_len]
     }
 
     /// Mutable rows `a..b` (absolute), in order.
     pub fn range_mut(&mut self, a: usize, b: usize) -> Vec<&mut [T]> {
-        let first = self.first;
-        self.rows
-            .range_mut(a - first..b - first)
-            .map(|v| v.as_mut_slice())
-            .collect()
+        let mut out = Vec::with_capacity(b.saturating_sub(a));
+        if a >= b {
+            return out;
+        }
+        if self.row_len == 0 {
+            out.extend((a..b).map(|_| <&mut [T]>::default()));
+            return out;
+        }
+        let (first, row_len, base) = (self.first, self.row_len, self.base);
+        let (b0, at0) = self.rows[a - first];
+        let (b1, at1) = self.rows[b - 1 - first];
+        for (k, block) in self.blocks.range_mut(b0 - base..=b1 - base).enumerate() {
+            let id = b0 + k;
+            let from = if id == b0 { at0 } else { 0 };
+            let to = if id == b1 { at1 + row_len } else { block.len() };
+            out.extend(block[from..to].chunks_exact_mut(row_len));
+        }
+        out
     }
 
-    /// Drop rows below `y`, keeping their buffers for reuse.
+    /// Drop rows below `y`, keeping the buffers of single rows for reuse.
     pub fn evict_below(&mut self, y: usize) {
         while self.first < y && !self.rows.is_empty() {
-            if let Some(v) = self.rows.pop_front() {
-                self.spare.push(v);
-            }
+            self.rows.pop_front();
             self.first += 1;
         }
         if self.rows.is_empty() && self.first < y {
             self.first = y;
+        }
+        // Blocks before the first row held (all of them when none is).
+        let keep_from = self
+            .rows
+            .front()
+            .map_or(self.base + self.blocks.len(), |r| r.0);
+        while self.base < keep_from {
+            if let Some(v) = self.blocks.pop_front() {
+                // A buffer of one row is kept; a strip's goes.
+                if v.len() == self.row_len {
+                    self.spare.push(v);
+                }
+            }
+            self.base += 1;
         }
     }
 }
@@ -129,5 +175,42 @@ mod tests {
         assert_eq!(w.end(), 6);
         assert_eq!(w.high_water(), 5);
         assert_eq!(w.range_mut(4, 6).len(), 2);
+    }
+
+    #[test]
+    fn strips_taken_whole_mix_with_single_rows() {
+        let mut w = RowWindow::<u8>::new(2);
+        w.push_rows(vec![0, 0, 1, 1, 2, 2], 3);
+        w.push_copy(&[3, 3]);
+        w.push_rows(vec![4, 4, 5, 5], 2);
+        assert_eq!((w.first(), w.end(), w.high_water()), (0, 6, 6));
+        for y in 0..6 {
+            assert_eq!(w.get(y), &[y as u8; 2]);
+        }
+        for (k, r) in w.range_mut(1, 5).into_iter().enumerate() {
+            assert_eq!(r, &[k as u8 + 1; 2]);
+            r[0] = 9;
+        }
+        assert_eq!(w.get(4), &[9, 4]);
+        // The first block leaves with its last row, not before.
+        w.evict_below(2);
+        assert_eq!((w.first(), w.get(2)), (2, &[9u8, 2][..]));
+        w.evict_below(5);
+        assert_eq!((w.first(), w.get(5)), (5, &[5u8, 5][..]));
+        assert_eq!(w.blocks.len(), 1);
+        w.evict_below(9);
+        assert_eq!((w.first(), w.end(), w.blocks.len()), (9, 9, 0));
+        // The single row's buffer is kept for reuse, the strips' are not.
+        assert_eq!(w.spare.len(), 1);
+        w.push(7);
+        assert_eq!(w.get(9), &[7, 7]);
+        // Zero-length rows are still rows.
+        let mut z = RowWindow::<u8>::new(0);
+        z.push(0);
+        z.push_rows(Vec::new(), 2);
+        assert_eq!(
+            (z.end(), z.get(2).len(), z.range_mut(0, 3).len()),
+            (3, 0, 3)
+        );
     }
 }
