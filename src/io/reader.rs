@@ -200,8 +200,9 @@ pub(crate) fn block_bytes(h: &Header) -> u64 {
 }
 
 /// One chunk as it lies in the mapped file: its part, the block it holds and
-/// its compressed bytes, borrowed (decoding ZIP and uncompressed blocks copies
-/// nothing out of the map; `exr`'s `Chunk::read` copies every block).
+/// its compressed bytes, borrowed (a ZIP or ZIPS block is inflated from the
+/// map; other codecs take a copy, [`RawChunk::to_chunk`], as `exr`'s
+/// `Chunk::read` made of every block).
 pub(crate) struct RawChunk<'a> {
     pub(crate) layer_index: usize,
     block: RawBlock,

@@ -73,14 +73,6 @@ impl<T: Copy> RowWindow<T> {
             .unwrap_or(&mut [])
     }
 
-    /// Append a copy of `row` (of the window's row length).
-    pub fn push_copy(&mut self, row: &[T]) {
-        let mut v = self.spare.pop().unwrap_or_default();
-        v.clear();
-        v.extend_from_slice(row);
-        self.push_block(v, 1);
-    }
-
     /// Append `rows` rows held in order in `data` (of `rows` times the row
     /// length), keeping its buffer.
     pub fn push_rows(&mut self, data: Vec<T>, rows: usize) {
@@ -181,7 +173,7 @@ mod tests {
     fn strips_taken_whole_mix_with_single_rows() {
         let mut w = RowWindow::<u8>::new(2);
         w.push_rows(vec![0, 0, 1, 1, 2, 2], 3);
-        w.push_copy(&[3, 3]);
+        w.push(3);
         w.push_rows(vec![4, 4, 5, 5], 2);
         assert_eq!((w.first(), w.end(), w.high_water()), (0, 6, 6));
         for y in 0..6 {
