@@ -289,34 +289,78 @@ impl Coarse {
 
 /// Gather taps of the tent upsampling: for each of `n_fine` fine indices,
 /// the coarse cells (of `n_fine.div_ceil(2)`) that give it weight, in
-/// increasing order, with the reflected [`TENT`] weights.
+/// increasing order, with the reflected [`TENT`] weights. A fine index takes
+/// one cell or two neighbouring ones (the tent spans four fine indices, and
+/// reflection only folds a cell's weights onto indices it already reaches),
+/// so the taps are kept flat: a first cell and two weights, the second 0
+/// where there is one cell.
 #[derive(Clone, Debug)]
 pub struct TentTaps {
-    taps: Vec<Vec<(usize, f64)>>,
+    first: Vec<usize>,
+    w: Vec<[f64; 2]>,
+    two: Vec<bool>,
 }
 
 impl TentTaps {
     /// Taps of `n_fine` fine indices.
     pub fn new(n_fine: usize) -> Self {
         let n_coarse = n_fine.div_ceil(2);
-        let mut taps = vec![Vec::new(); n_fine];
+        let mut taps: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n_fine];
         for c in 0..n_coarse {
             for (t, &tw) in TENT.iter().enumerate() {
                 let f = mirror(2 * c as i64 - 1 + t as i64, n_fine);
-                let list: &mut Vec<(usize, f64)> = &mut taps[f];
+                let list = &mut taps[f];
                 match list.last_mut() {
                     Some(last) if last.0 == c => last.1 += tw,
                     _ => list.push((c, tw)),
                 }
             }
         }
-        TentTaps { taps }
+        let mut out = TentTaps {
+            first: Vec::with_capacity(n_fine),
+            w: Vec::with_capacity(n_fine),
+            two: Vec::with_capacity(n_fine),
+        };
+        for list in taps {
+            match list[..] {
+                [(c, w)] => {
+                    out.first.push(c);
+                    out.w.push([w, 0.0]);
+                    out.two.push(false);
+                }
+                [(c, w0), (c1, w1)] if c1 == c + 1 => {
+                    out.first.push(c);
+                    out.w.push([w0, w1]);
+                    out.two.push(true);
+                }
+                _ => unreachable!("a fine index takes one cell or two neighbours: {list:?}"),
+            }
+        }
+        out
     }
 
-    /// The coarse cells and weights of fine index `f`.
+    /// The coarse cells and weights of fine index `f`: the first cell, and
+    /// one weight per cell from it.
     #[inline]
-    pub fn of(&self, f: usize) -> &[(usize, f64)] {
-        &self.taps[f]
+    pub fn of(&self, f: usize) -> (usize, &[f64]) {
+        let n = 1 + usize::from(self.two[f]);
+        (self.first[f], &self.w[f][..n])
+    }
+
+    /// The tent gather of one row of coarse cells `src` into fine row `dst`
+    /// (`dst.len()` fine indices): each value is `0 + w0 * a (+ w1 * b)`,
+    /// summed in the order of [`TentTaps::of`].
+    #[inline]
+    pub fn gather(&self, src: &[f64], dst: &mut [f64]) {
+        let taps = self.first.iter().zip(&self.w).zip(&self.two);
+        for (d, ((&c, &[w0, w1]), &two)) in dst.iter_mut().zip(taps) {
+            let mut u = 0.0;
+            u += w0 * src[c];
+            if two {
+                u += w1 * src[c + 1];
+            }
+            *d = u;
+        }
     }
 }
 
@@ -375,15 +419,31 @@ mod tests {
             let t = TentTaps::new(n);
             let mut per_cell = vec![0.0; n.div_ceil(2)];
             for f in 0..n {
-                let mut last = None;
-                for &(c, w) in t.of(f) {
-                    assert!(last.is_none_or(|l| l < c), "cells in order");
-                    last = Some(c);
-                    per_cell[c] += w;
+                let (first, w) = t.of(f);
+                for (k, &w) in w.iter().enumerate() {
+                    per_cell[first + k] += w;
                 }
             }
             for (c, &w) in per_cell.iter().enumerate() {
                 assert!((w - 1.0).abs() < SUM_TOL, "n={n} cell {c}: {w}");
+            }
+        }
+    }
+
+    #[test]
+    fn tent_gather_is_the_sum_of_the_listed_taps() {
+        for n in 1..12 {
+            let t = TentTaps::new(n);
+            let src: Vec<f64> = (0..n.div_ceil(2)).map(|c| 1.5 + c as f64 * 0.37).collect();
+            let mut got = vec![f64::NAN; n];
+            t.gather(&src, &mut got);
+            for (f, &g) in got.iter().enumerate() {
+                let (first, w) = t.of(f);
+                let mut want = 0.0;
+                for (k, &w) in w.iter().enumerate() {
+                    want += w * src[first + k];
+                }
+                assert_eq!(g.to_bits(), want.to_bits(), "n={n} f={f}");
             }
         }
     }

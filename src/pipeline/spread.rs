@@ -889,10 +889,13 @@ impl SpreadStage {
     /// each coarse row upsampled across once (when first needed: final, as
     /// every coarse row a final row reads is), then down, in tap order.
     fn upsample(&mut self, a: usize, b: usize) {
-        let (w, nch) = (self.w, self.nch);
+        let w = self.w;
         let ncw = w.div_ceil(2);
         let last = (a..b)
-            .filter_map(|y| self.tent_y.of(y).last().map(|t| t.0))
+            .map(|y| {
+                let (c, w) = self.tent_y.of(y);
+                c + w.len() - 1
+            })
             .max()
             .unwrap_or(0);
         while self.cacc.end() <= last {
@@ -907,37 +910,44 @@ impl SpreadStage {
             let mut rows = self.hup.range_mut(from, last + 1);
             rows.par_iter_mut().enumerate().for_each(|(k, row)| {
                 let src = cacc.get(from + k);
-                for c in 0..nch {
-                    let src = &src[c * ncw..(c + 1) * ncw];
-                    for (x, d) in row[c * w..(c + 1) * w].iter_mut().enumerate() {
-                        let mut u = 0.0;
-                        for &(cx, t) in tent_x.of(x) {
-                            u += t * src[cx];
-                        }
-                        *d = u;
-                    }
+                for (src, dst) in src.chunks_exact(ncw).zip(row.chunks_exact_mut(w)) {
+                    tent_x.gather(src, dst);
                 }
             });
         }
         let (hup, tent_y) = (&self.hup, &self.tent_y);
         let mut rows = self.acc.range_mut(a, b);
         rows.par_iter_mut().enumerate().for_each(|(k, row)| {
-            let taps = tent_y.of(a + k);
-            for (x, d) in row.iter_mut().enumerate() {
-                let mut u = 0.0;
-                for &(cy, t) in taps {
-                    u += t * hup.get(cy)[x];
-                }
-                // Untouched pixels keep their bits (and an input's -0.0).
+            // The same sum as the gather across: `0 + w0 * a (+ w1 * b)`.
+            let (c, w) = tent_y.of(a + k);
+            let add = |d: &mut f64, u: f64| {
                 if u != 0.0 {
                     *d += u;
                 }
+            };
+            match *w {
+                [w0] => {
+                    let r0 = hup.get(c);
+                    for (d, &v0) in row.iter_mut().zip(r0) {
+                        let mut u = 0.0;
+                        u += w0 * v0;
+                        add(d, u);
+                    }
+                }
+                [w0, w1] => {
+                    let (r0, r1) = (hup.get(c), hup.get(c + 1));
+                    for ((d, &v0), &v1) in row.iter_mut().zip(r0).zip(r1) {
+                        let mut u = 0.0;
+                        u += w0 * v0;
+                        u += w1 * v1;
+                        add(d, u);
+                    }
+                }
+                _ => unreachable!("one or two coarse rows per fine row"),
             }
         });
     }
 
-    /// The vertical gather of the base kernel for output rows `a..b`:
-    /// `(sum of taps x horizontal-pass rows) / S^2`, summed in tap order.
     fn make_base_rows(&mut self, a: usize, b: usize) {
         let (w, h, nch, in_h) = (self.w, self.h, self.nch, self.grid.in_h);
         for _ in a..b {
