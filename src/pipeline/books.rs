@@ -181,11 +181,12 @@ fn ingest(
             let mut s = Sums::new(nch);
             for c in (0..nall).filter(|&c| !is_data(c)) {
                 let ch = &row[c * in_w..(c + 1) * in_w];
-                if let Some(x) = ch.iter().position(|v| !v.is_finite()) {
-                    return Err((x, c));
-                }
-                if c < nch {
-                    s.add_slice(c, ch);
+                // The sum says whether every value was finite: the slice is
+                // searched only when one was not.
+                if !(c < nch && s.add_slice(c, ch)) {
+                    if let Some(x) = ch.iter().position(|v| !v.is_finite()) {
+                        return Err((x, c));
+                    }
                 }
             }
             Ok(s)
@@ -302,7 +303,9 @@ fn finish_rows(
                             }
                             rounded.add_slice(c, weighted);
                         }
-                        None => rounded.add_slice(c, dst),
+                        None => {
+                            rounded.add_slice(c, dst);
+                        }
                     }
                 }
                 Ok((raw, rounded, digest))

@@ -87,11 +87,16 @@ pub struct Sums {
 }
 
 impl Sums {
-    /// Add the values of channel `c` (see [`sum_lanes`]).
-    pub fn add_slice<T: Copy + Into<f64>>(&mut self, c: usize, values: &[T]) {
+    /// Add the values of channel `c` (see [`sum_lanes`]); returns whether
+    /// they were all finite, as their absolute sum is for `f32` values: a
+    /// sum of finite `f32` values (at most 3.4e38 each, fewer than 2^60 of
+    /// them) cannot reach infinity in `f64`, and one infinity or NaN makes it
+    /// infinite or NaN.
+    pub fn add_slice<T: Copy + Into<f64>>(&mut self, c: usize, values: &[T]) -> bool {
         let (s, m) = sum_lanes(values);
         self.values[c].merge(&s);
         self.mass[c].add(m);
+        m.is_finite()
     }
 }
 
@@ -204,6 +209,24 @@ impl Ledger {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn add_slice_says_whether_every_value_was_finite() {
+        let mut s = Sums::new(1);
+        // The largest finite values, many of them: the absolute sum stays
+        // finite in f64.
+        assert!(s.add_slice(0, &vec![f32::MAX; 100_003]));
+        assert!(s.add_slice(0, &[f32::MIN, f32::MAX, -0.0, 1e-45]));
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            for at in [0, 5, 16, 17] {
+                let mut v = vec![1.0f32; 18];
+                v[at] = bad;
+                assert!(!Sums::new(1).add_slice(0, &v), "{bad} at {at}");
+            }
+        }
+        // Infinities of both signs do not cancel in the absolute sum.
+        assert!(!Sums::new(1).add_slice(0, &[f32::INFINITY, f32::NEG_INFINITY]));
+    }
 
     #[test]
     fn lane_sums_are_exact_on_cancelling_extremes() {
