@@ -87,8 +87,8 @@ pub struct Report {
     /// ep-gauss: noisy samples kept with the base kernel as parts of a
     /// feature (the support rule).
     pub samples_kept: u64,
-    /// ep-gauss: the width search's work, luminance values read plus
-    /// average weights applied (0 for the other methods).
+    /// ep-gauss: the width search's work, the luminance values the widths
+    /// it tried need plus average weights applied (0 for the other methods).
     pub search_cost: u64,
     /// ep-gauss: weights the spreading wrote, per channel (0 for the others).
     pub spread_taps: u64,

@@ -109,6 +109,15 @@ pub fn disc_spans(r: f64) -> Vec<usize> {
         .collect()
 }
 
+/// Entries a quadrant row grows past what the width being tried needs
+/// (within the padding). Each width the search tries is about one entry
+/// wider per row than the last, and starting a row's growth costs more than
+/// its entries: a row grown this far ahead serves the next few widths. On
+/// 6144x6144 S=3 fireflies of 1e2..1e5 the search took 0.36 s growing to the
+/// span, 0.31 s with 12 ahead (0.32 s with 6, 0.30 s with 24, 0.32 s
+/// growing every row to the padding), for 12% more values read.
+const GROW_AHEAD: usize = 12;
+
 /// Guesses from the background before the search falls back to galloping
 /// and bisection (each guess is exact where the background is flat).
 const MAX_GUESSES: usize = 6;
@@ -153,8 +162,12 @@ pub struct Folded {
     stride: usize,
     /// Entries valid in each row of the quadrant.
     ext: Vec<usize>,
-    /// Luminance values read plus quadrant entries weighed, over every
-    /// search this scratch served: the search's cost.
+    /// Entries of each row the widths tried so far needed (`ext` reaches
+    /// past them: `GROW_AHEAD`).
+    used: Vec<usize>,
+    /// Luminance values the widths tried needed plus quadrant entries
+    /// weighed, over every search this scratch served: the search's cost
+    /// (its path's, whatever it reads ahead).
     cost: u64,
 }
 
@@ -164,6 +177,8 @@ impl Folded {
         self.f.resize(self.stride * self.stride, 0.0);
         self.ext.clear();
         self.ext.resize(self.stride, 0);
+        self.used.clear();
+        self.used.resize(self.stride, 0);
     }
 
     /// Make the quadrant entries of `lv`'s support valid about padded column
@@ -172,19 +187,26 @@ impl Folded {
     fn grow(&mut self, rows: &impl LumRows, cx: i64, cy: i64, lv: &Level) {
         let cx = cx as usize;
         for (dy, &span) in lv.span.iter().enumerate() {
+            let nrows = 1 + usize::from(dy > 0) as u64;
+            let used = self.used[dy];
+            if used <= span {
+                // Entry 0 sums `nrows` values, the others twice as many.
+                self.cost += nrows * (2 * (span + 1 - used) as u64 - u64::from(used == 0));
+                self.used[dy] = span + 1;
+            }
             let have = self.ext[dy];
-            let need = span + 1;
-            if have >= need {
+            if have > span {
                 continue;
             }
+            // Past the span, for the next widths (`GROW_AHEAD`).
+            let span = (span + GROW_AHEAD).min(self.stride - 1);
+            let need = span + 1;
             let up = rows.row(cy - dy as i64);
             let dn = (dy > 0).then(|| rows.row(cy + dy as i64));
-            let nrows = 1 + usize::from(dy > 0) as u64;
             let mut out = &mut self.f[dy * self.stride + have..dy * self.stride + need];
             if have == 0 {
                 out[0] = up[cx] + dn.map_or(0.0, |d| d[cx]);
                 out = &mut out[1..];
-                self.cost += nrows;
             }
             // dx = a..=span: the right side forwards, the left side backwards.
             let a = have.max(1);
@@ -192,7 +214,6 @@ impl Folded {
             if a > span {
                 continue;
             }
-            self.cost += 2 * nrows * (span + 1 - a) as u64;
             let (ur, ul) = (&up[cx + a..=cx + span], &up[cx - span..=cx - a]);
             for ((o, &r), &l) in out.iter_mut().zip(ur).zip(ul.iter().rev()) {
                 *o = r + l;

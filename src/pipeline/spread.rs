@@ -156,7 +156,8 @@ pub struct SpreadStats {
     /// Noisy samples kept with the base kernel as parts of a feature (the
     /// support rule).
     pub kept: u64,
-    /// The width search's work: luminance values read plus (folded) average
+    /// The width search's work: the luminance values the widths it tried
+    /// need (each counted once; it reads a few ahead) plus (folded) average
     /// weights applied.
     pub search_cost: u64,
     /// Weights the spreading wrote, per channel (the reflected kernels'
