@@ -296,9 +296,8 @@ impl Coarse {
 /// where there is one cell.
 #[derive(Clone, Debug)]
 pub struct TentTaps {
-    first: Vec<usize>,
-    w: Vec<[f64; 2]>,
-    two: Vec<bool>,
+    /// Per fine index: first cell, weights, whether the second is a tap.
+    taps: Vec<(usize, [f64; 2], bool)>,
 }
 
 impl TentTaps {
@@ -316,35 +315,23 @@ impl TentTaps {
                 }
             }
         }
-        let mut out = TentTaps {
-            first: Vec::with_capacity(n_fine),
-            w: Vec::with_capacity(n_fine),
-            two: Vec::with_capacity(n_fine),
-        };
-        for list in taps {
-            match list[..] {
-                [(c, w)] => {
-                    out.first.push(c);
-                    out.w.push([w, 0.0]);
-                    out.two.push(false);
-                }
-                [(c, w0), (c1, w1)] if c1 == c + 1 => {
-                    out.first.push(c);
-                    out.w.push([w0, w1]);
-                    out.two.push(true);
-                }
+        let taps = taps
+            .into_iter()
+            .map(|list| match list[..] {
+                [(c, w)] => (c, [w, 0.0], false),
+                [(c, w0), (c1, w1)] if c1 == c + 1 => (c, [w0, w1], true),
                 _ => unreachable!("a fine index takes one cell or two neighbours: {list:?}"),
-            }
-        }
-        out
+            })
+            .collect();
+        TentTaps { taps }
     }
 
     /// The coarse cells and weights of fine index `f`: the first cell, and
     /// one weight per cell from it.
     #[inline]
     pub fn of(&self, f: usize) -> (usize, &[f64]) {
-        let n = 1 + usize::from(self.two[f]);
-        (self.first[f], &self.w[f][..n])
+        let (c, ref w, two) = self.taps[f];
+        (c, &w[..1 + usize::from(two)])
     }
 
     /// The tent gather of one row of coarse cells `src` into fine row `dst`
@@ -352,8 +339,7 @@ impl TentTaps {
     /// summed in the order of [`TentTaps::of`].
     #[inline]
     pub fn gather(&self, src: &[f64], dst: &mut [f64]) {
-        let taps = self.first.iter().zip(&self.w).zip(&self.two);
-        for (d, ((&c, &[w0, w1]), &two)) in dst.iter_mut().zip(taps) {
+        for (d, &(c, [w0, w1], two)) in dst.iter_mut().zip(&self.taps) {
             let mut u = 0.0;
             u += w0 * src[c];
             if two {
