@@ -543,202 +543,201 @@ impl SpreadStage {
         // Each row's noisy samples in row-major order, and their values (nch
         // each, in the same order).
         type Found = (Vec<Noisy>, Vec<f32>, u64);
-        let found: Vec<Found> = (a..b)
-            .into_par_iter()
-            .map_init(
-                <(Vec<f64>, Vec<(usize, f64, f64, f64)>, Vec<f64>)>::default,
-                |(lrows, flagged, pmax), y| {
-                    let mut found = Vec::new();
-                    let mut vals = Vec::new();
-                    let mut kept = 0u64;
-                    let Some(ep) = ep else {
-                        return (found, vals, kept);
-                    };
-                    let view = YView { win: ybox, h };
-                    let xbars = ep.xbar0_row(&view, y as i64, w);
-                    let luma = |row: &[f32], i: usize| {
-                        let mut x = 0.0;
-                        for c in (0..nch).filter(|&c| lum[c] != 0.0) {
-                            x += lum[c] * row[c * in_w + i] as f64;
-                        }
-                        x
-                    };
-                    // The luminance of the pixel row's samples, a row at a time
-                    // (the same sum, in the same order, as `luma`).
-                    lrows.clear();
-                    lrows.resize(s * in_w, 0.0f64);
-                    for (bb, lrow) in lrows.chunks_exact_mut(in_w).enumerate() {
-                        let row = input.get(y * s + bb);
-                        // Channels of weight 0 (alpha, carried data that may
-                        // be infinite) do not enter it.
-                        for c in (0..nch).filter(|&c| lum[c] != 0.0) {
-                            let lw = lum[c];
-                            for (l, &v) in lrow.iter_mut().zip(&row[c * in_w..(c + 1) * in_w]) {
-                                *l += lw * v as f64;
-                            }
-                        }
-                    }
-                    // Which pixels hold a noisy sample: one branch-free test of
-                    // all their samples first (most hold none).
-                    flagged.clear();
-                    if ep.low_outliers() {
-                        for (px, &xbar) in xbars.iter().enumerate() {
-                            let Some((hi, lo)) = ep.bounds(xbar) else {
-                                continue;
-                            };
-                            let mut any = false;
-                            for bb in 0..s {
-                                for &x0 in &lrows[bb * in_w + px * s..bb * in_w + (px + 1) * s] {
-                                    any |= x0 > 0.0 && (x0 > hi || x0 < lo);
-                                }
-                            }
-                            if any {
-                                flagged.push((px, xbar, hi, lo));
-                            }
-                        }
-                    } else {
-                        // Only bright samples can fail (`lo <= 0`): a pixel
-                        // holds one iff its brightest sample is above `hi`.
-                        pmax.clear();
-                        pmax.resize(w, f64::NEG_INFINITY);
-                        for lrow in lrows.chunks_exact(in_w) {
-                            row_max(pmax, lrow, s);
-                        }
-                        for (px, (&xbar, &m)) in xbars.iter().zip(pmax.iter()).enumerate() {
-                            let Some((hi, lo)) = ep.bounds(xbar) else {
-                                continue;
-                            };
-                            if m > hi {
-                                flagged.push((px, xbar, hi, lo));
-                            }
-                        }
-                    }
-                    // Row-major order: by input row, then column.
-                    for bb in 0..s {
-                        let j = y * s + bb;
-                        let lrow = &lrows[bb * in_w..(bb + 1) * in_w];
-                        for &(px, xbar, hi, lo) in flagged.iter() {
-                            for i in px * s..(px + 1) * s {
-                                let x0 = lrow[i];
-                                if !(x0 > 0.0 && (x0 > hi || x0 < lo)) {
-                                    continue;
-                                }
-                                if support.keeps(x0, hi, lo, |di, dj| {
-                                    let (ni, nj) = (i as i64 + di, j as i64 + dj);
-                                    if !(ni >= 0
-                                        && nj >= 0
-                                        && (ni as usize) < in_w
-                                        && (nj as usize) < in_h)
-                                    {
-                                        return None;
-                                    }
-                                    let (ni, nj) = (ni as usize, nj as usize);
-                                    // This pixel row's samples are in `lrows`.
-                                    Some(match nj.checked_sub(y * s).filter(|&b| b < s) {
-                                        Some(b) => lrows[b * in_w + ni],
-                                        None => luma(input.get(nj), ni),
-                                    })
-                                }) {
-                                    kept += 1;
-                                    continue;
-                                }
-                                if let Some((st, carriers)) = pixel_stats.filter(|_| x0 > hi) {
-                                    // S = 1: the sample is pixel (i, j) = (px, y).
-                                    let row = input.get(j);
-                                    let (n, se2) = st.pixel(lum, x0, |c| row[c * in_w + i] as f64);
-                                    let hot = || {
-                                        let r = COMPACT_REACH as i64;
-                                        let mut count = 0;
-                                        for yy in
-                                            (y as i64 - r).max(0)..=(y as i64 + r).min(h as i64 - 1)
-                                        {
-                                            let lrow = view.row(yy);
-                                            for xx in px.saturating_sub(COMPACT_REACH)
-                                                ..=(px + COMPACT_REACH).min(w - 1)
-                                            {
-                                                let v = lrow[pad + xx];
-                                                if v < x0 / COMPACT_RATIO {
-                                                    continue;
-                                                }
-                                                let xb = ep.xbar0(&view, xx, yy);
-                                                count += usize::from(
-                                                    ep.bounds(xb).is_some_and(|(hi, _)| v > hi),
-                                                );
-                                            }
-                                        }
-                                        count
-                                    };
-                                    if carriers.keeps(x0, se2, n, hot) {
-                                        kept += 1;
-                                        continue;
-                                    }
-                                }
-                                let row = input.get(j);
-                                vals.extend((0..nch).map(|c| row[c * in_w + i]));
-                                found.push(Noisy {
-                                    i: i as u32,
-                                    j: j as u32,
-                                    x0,
-                                    xbar0: xbar,
-                                    level: 0,
-                                    capped: false,
-                                });
-                            }
-                        }
-                    }
-                    (found, vals, kept)
-                },
-            )
-            .collect();
-        // Phase 2: the horizontal pass of the base kernel, the spread
-        // samples taken out (zeroed in a copy of their row).
-        let mut hrows = self.hpass.range_mut(a * s, b * s);
-        hrows
-            .par_chunks_mut(s)
-            .zip(found.par_iter())
-            .enumerate()
-            .for_each_init(Vec::new, |scratch, (k, (hs, (list, _, _)))| {
-                let y = a + k;
-                for (bb, hrow) in hs.iter_mut().enumerate() {
-                    let j = y * s + bb;
-                    let mut row = input.get(j);
-                    let first = list.partition_point(|n| (n.j as usize) < j);
-                    let last = list.partition_point(|n| (n.j as usize) <= j);
-                    if first < last {
-                        scratch.clear();
-                        scratch.extend_from_slice(row);
-                        for n in &list[first..last] {
-                            // Coverage (alpha) and averaged data are not
-                            // spread: they keep the base kernel.
-                            for c in (0..nch).filter(|&c| modes[c] == ChannelMode::Spread) {
-                                scratch[c * in_w + n.i as usize] = 0.0;
-                            }
-                        }
-                        row = scratch.as_slice();
-                    }
-                    for c in 0..nch {
-                        let src = &row[c * in_w..(c + 1) * in_w];
-                        let dst = &mut hrow[c * w..(c + 1) * w];
-                        if modes[c] == ChannelMode::Nearest {
-                            // The centre sample, as it is.
-                            for (x, d) in dst.iter_mut().enumerate() {
-                                *d = src[x * s + (s - 1) / 2] as f64;
-                            }
-                            continue;
-                        }
-                        for (x, d) in dst.iter_mut().enumerate() {
-                            let (start, taps) = cols.taps(x);
-                            // -0.0 is the additive identity: a sum of -0.0
-                            // samples stays -0.0 (an input -0.0 survives).
-                            let mut acc = -0.0;
-                            for (t, &v) in taps.iter().zip(&src[start..start + taps.len()]) {
-                                acc += t * v as f64;
-                            }
-                            *d = acc;
-                        }
+        // A task's scratch: the pixel row's luminance, its flagged pixels
+        // (column, xbar, bounds) and their brightest samples.
+        type Scratch = (Vec<f64>, Vec<(usize, f64, f64, f64)>, Vec<f64>);
+        let find = |(lrows, flagged, pmax): &mut Scratch, y: usize| -> Found {
+            let mut found = Vec::new();
+            let mut vals = Vec::new();
+            let mut kept = 0u64;
+            let Some(ep) = ep else {
+                return (found, vals, kept);
+            };
+            let view = YView { win: ybox, h };
+            let xbars = ep.xbar0_row(&view, y as i64, w);
+            let luma = |row: &[f32], i: usize| {
+                let mut x = 0.0;
+                for c in (0..nch).filter(|&c| lum[c] != 0.0) {
+                    x += lum[c] * row[c * in_w + i] as f64;
+                }
+                x
+            };
+            // The luminance of the pixel row's samples, a row at a time
+            // (the same sum, in the same order, as `luma`).
+            lrows.clear();
+            lrows.resize(s * in_w, 0.0f64);
+            for (bb, lrow) in lrows.chunks_exact_mut(in_w).enumerate() {
+                let row = input.get(y * s + bb);
+                // Channels of weight 0 (alpha, carried data that may
+                // be infinite) do not enter it.
+                for c in (0..nch).filter(|&c| lum[c] != 0.0) {
+                    let lw = lum[c];
+                    for (l, &v) in lrow.iter_mut().zip(&row[c * in_w..(c + 1) * in_w]) {
+                        *l += lw * v as f64;
                     }
                 }
-            });
+            }
+            // Which pixels hold a noisy sample: one branch-free test of
+            // all their samples first (most hold none).
+            flagged.clear();
+            if ep.low_outliers() {
+                for (px, &xbar) in xbars.iter().enumerate() {
+                    let Some((hi, lo)) = ep.bounds(xbar) else {
+                        continue;
+                    };
+                    let mut any = false;
+                    for bb in 0..s {
+                        for &x0 in &lrows[bb * in_w + px * s..bb * in_w + (px + 1) * s] {
+                            any |= x0 > 0.0 && (x0 > hi || x0 < lo);
+                        }
+                    }
+                    if any {
+                        flagged.push((px, xbar, hi, lo));
+                    }
+                }
+            } else {
+                // Only bright samples can fail (`lo <= 0`): a pixel
+                // holds one iff its brightest sample is above `hi`.
+                pmax.clear();
+                pmax.resize(w, f64::NEG_INFINITY);
+                for lrow in lrows.chunks_exact(in_w) {
+                    row_max(pmax, lrow, s);
+                }
+                for (px, (&xbar, &m)) in xbars.iter().zip(pmax.iter()).enumerate() {
+                    let Some((hi, lo)) = ep.bounds(xbar) else {
+                        continue;
+                    };
+                    if m > hi {
+                        flagged.push((px, xbar, hi, lo));
+                    }
+                }
+            }
+            // Row-major order: by input row, then column.
+            for bb in 0..s {
+                let j = y * s + bb;
+                let lrow = &lrows[bb * in_w..(bb + 1) * in_w];
+                for &(px, xbar, hi, lo) in flagged.iter() {
+                    for i in px * s..(px + 1) * s {
+                        let x0 = lrow[i];
+                        if !(x0 > 0.0 && (x0 > hi || x0 < lo)) {
+                            continue;
+                        }
+                        if support.keeps(x0, hi, lo, |di, dj| {
+                            let (ni, nj) = (i as i64 + di, j as i64 + dj);
+                            if !(ni >= 0 && nj >= 0 && (ni as usize) < in_w && (nj as usize) < in_h)
+                            {
+                                return None;
+                            }
+                            let (ni, nj) = (ni as usize, nj as usize);
+                            // This pixel row's samples are in `lrows`.
+                            Some(match nj.checked_sub(y * s).filter(|&b| b < s) {
+                                Some(b) => lrows[b * in_w + ni],
+                                None => luma(input.get(nj), ni),
+                            })
+                        }) {
+                            kept += 1;
+                            continue;
+                        }
+                        if let Some((st, carriers)) = pixel_stats.filter(|_| x0 > hi) {
+                            // S = 1: the sample is pixel (i, j) = (px, y).
+                            let row = input.get(j);
+                            let (n, se2) = st.pixel(lum, x0, |c| row[c * in_w + i] as f64);
+                            let hot = || {
+                                let r = COMPACT_REACH as i64;
+                                let mut count = 0;
+                                for yy in (y as i64 - r).max(0)..=(y as i64 + r).min(h as i64 - 1) {
+                                    let lrow = view.row(yy);
+                                    for xx in px.saturating_sub(COMPACT_REACH)
+                                        ..=(px + COMPACT_REACH).min(w - 1)
+                                    {
+                                        let v = lrow[pad + xx];
+                                        if v < x0 / COMPACT_RATIO {
+                                            continue;
+                                        }
+                                        let xb = ep.xbar0(&view, xx, yy);
+                                        count += usize::from(
+                                            ep.bounds(xb).is_some_and(|(hi, _)| v > hi),
+                                        );
+                                    }
+                                }
+                                count
+                            };
+                            if carriers.keeps(x0, se2, n, hot) {
+                                kept += 1;
+                                continue;
+                            }
+                        }
+                        let row = input.get(j);
+                        vals.extend((0..nch).map(|c| row[c * in_w + i]));
+                        found.push(Noisy {
+                            i: i as u32,
+                            j: j as u32,
+                            x0,
+                            xbar0: xbar,
+                            level: 0,
+                            capped: false,
+                        });
+                    }
+                }
+            }
+            (found, vals, kept)
+        };
+        // Phase 2: the horizontal pass of the base kernel, the spread
+        // samples taken out (zeroed in a copy of their row).
+        let pass = |scratch: &mut Vec<f32>, y: usize, hs: &mut [&mut [f64]], list: &[Noisy]| {
+            for (bb, hrow) in hs.iter_mut().enumerate() {
+                let j = y * s + bb;
+                let mut row = input.get(j);
+                let first = list.partition_point(|n| (n.j as usize) < j);
+                let last = list.partition_point(|n| (n.j as usize) <= j);
+                if first < last {
+                    scratch.clear();
+                    scratch.extend_from_slice(row);
+                    for n in &list[first..last] {
+                        // Coverage (alpha) and averaged data are not
+                        // spread: they keep the base kernel.
+                        for c in (0..nch).filter(|&c| modes[c] == ChannelMode::Spread) {
+                            scratch[c * in_w + n.i as usize] = 0.0;
+                        }
+                    }
+                    row = scratch.as_slice();
+                }
+                for c in 0..nch {
+                    let src = &row[c * in_w..(c + 1) * in_w];
+                    let dst = &mut hrow[c * w..(c + 1) * w];
+                    if modes[c] == ChannelMode::Nearest {
+                        // The centre sample, as it is.
+                        for (x, d) in dst.iter_mut().enumerate() {
+                            *d = src[x * s + (s - 1) / 2] as f64;
+                        }
+                        continue;
+                    }
+                    for (x, d) in dst.iter_mut().enumerate() {
+                        let (start, taps) = cols.taps(x);
+                        // -0.0 is the additive identity: a sum of -0.0
+                        // samples stays -0.0 (an input -0.0 survives).
+                        let mut acc = -0.0;
+                        for (t, &v) in taps.iter().zip(&src[start..start + taps.len()]) {
+                            acc += t * v as f64;
+                        }
+                        *d = acc;
+                    }
+                }
+            }
+        };
+        // Both phases row by row in one task: the pass reads the rows the
+        // search for noise has just read.
+        let mut hrows = self.hpass.range_mut(a * s, b * s);
+        let found: Vec<Found> = hrows
+            .par_chunks_mut(s)
+            .enumerate()
+            .map_init(<(_, Vec<f32>)>::default, |(scratch, copy), (k, hs)| {
+                let y = a + k;
+                let f = find(scratch, y);
+                pass(copy, y, hs, &f.0);
+                f
+            })
+            .collect();
         for (list, vals, kept) in found {
             // Kept samples failed the test too; the spread ones are counted
             // when they are spread.
