@@ -13,6 +13,10 @@
 pub fn mirror(v: i64, n: usize) -> usize {
     debug_assert!(n > 0);
     let n = n as i64;
+    // Inside the image (nearly every call): no division.
+    if (0..n).contains(&v) {
+        return v as usize;
+    }
     let k = v.rem_euclid(2 * n);
     (if k < n { k } else { 2 * n - 1 - k }) as usize
 }
@@ -89,6 +93,14 @@ mod tests {
         assert_eq!(mirror(-6, 5), 4);
         for v in -20..20 {
             assert_eq!(mirror(v, 1), 0);
+        }
+        // Inside, itself; outside, the reflection (as the formula gives it).
+        for n in 1..9usize {
+            for v in -30..30i64 {
+                let k = v.rem_euclid(2 * n as i64) as usize;
+                let want = if k < n { k } else { 2 * n - 1 - k };
+                assert_eq!(mirror(v, n), want, "mirror({v}, {n})");
+            }
         }
     }
 

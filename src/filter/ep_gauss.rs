@@ -166,6 +166,9 @@ pub struct Folded {
     /// Entries of each row the widths tried so far needed (`ext` reaches
     /// past them: `GROW_AHEAD`).
     used: Vec<usize>,
+    /// Rows of the quadrant the current search has touched (the rest of
+    /// `ext` and `used` are still zero).
+    touched: usize,
     /// Luminance values the widths tried needed plus quadrant entries
     /// weighed, over every search this scratch served: the search's cost
     /// (its path's, whatever it reads ahead).
@@ -174,12 +177,19 @@ pub struct Folded {
 
 impl Folded {
     fn reset(&mut self, cap: usize) {
-        self.stride = cap + 1;
-        self.f.resize(self.stride * self.stride, 0.0);
-        self.ext.clear();
-        self.ext.resize(self.stride, 0);
-        self.used.clear();
-        self.used.resize(self.stride, 0);
+        if self.stride == cap + 1 {
+            // Only the rows the last search touched.
+            self.ext[..self.touched].fill(0);
+            self.used[..self.touched].fill(0);
+        } else {
+            self.stride = cap + 1;
+            self.f.resize(self.stride * self.stride, 0.0);
+            self.ext.clear();
+            self.ext.resize(self.stride, 0);
+            self.used.clear();
+            self.used.resize(self.stride, 0);
+        }
+        self.touched = 0;
     }
 
     /// Make the quadrant entries of `lv`'s support valid about padded column
@@ -187,6 +197,7 @@ impl Folded {
     /// narrower ones: each row grows outwards from what it holds).
     fn grow(&mut self, rows: &impl LumRows, cx: i64, cy: i64, lv: &Level) {
         let cx = cx as usize;
+        self.touched = self.touched.max(lv.span.len());
         for (dy, &span) in lv.span.iter().enumerate() {
             let nrows = 1 + usize::from(dy > 0) as u64;
             let used = self.used[dy];
@@ -651,8 +662,10 @@ impl EpGauss {
         if !need.is_finite() {
             return None;
         }
-        // w0 falls as the width grows: first level at or below `need`.
-        Some(self.w0s.partition_point(|&w0| w0 > need))
+        // w0 falls as the width grows: first level at or below `need`,
+        // counted without branches (a binary search mispredicts about every
+        // other step, and the ladder is a few dozen rungs).
+        Some(self.w0s.iter().map(|&w0| usize::from(w0 > need)).sum())
     }
 
     /// The super-sampling factor.
@@ -1002,6 +1015,11 @@ mod tests {
                 }
                 searched += 1;
                 let c = ep.search_in(&f, x, y, m, xb, &mut fold);
+                // The scratch, reused from search to search (it clears only
+                // the rows the last one touched), answers as a fresh one.
+                let fresh = ep.search(&f, x, y, m, xb);
+                assert_eq!((c.level, c.capped), (fresh.level, fresh.capped));
+                assert_eq!(c.cost, fresh.cost);
                 let l = c.level as usize;
                 found_area += (2 * ep.levels()[l].shell as u64 + 1).pow(2);
                 let d_at =
