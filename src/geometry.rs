@@ -94,12 +94,20 @@ mod tests {
         for v in -20..20 {
             assert_eq!(mirror(v, 1), 0);
         }
-        // Inside, itself; outside, the reflection (as the formula gives it).
+        // Inside, itself; outside, its image in either border.
         for n in 1..9usize {
+            let ni = n as i64;
             for v in -30..30i64 {
-                let k = v.rem_euclid(2 * n as i64) as usize;
-                let want = if k < n { k } else { 2 * n - 1 - k };
-                assert_eq!(mirror(v, n), want, "mirror({v}, {n})");
+                if (0..ni).contains(&v) {
+                    assert_eq!(mirror(v, n), v as usize);
+                }
+                assert_eq!(mirror(-1 - v, n), mirror(v, n), "left of {v}, n = {n}");
+                assert_eq!(
+                    mirror(2 * ni - 1 - v, n),
+                    mirror(v, n),
+                    "right of {v}, n = {n}"
+                );
+                assert!(mirror(v, n) < n);
             }
         }
     }
