@@ -475,11 +475,28 @@ impl EpGauss {
     /// horizontal then vertical pass, vectorized across the row. Equal to
     /// [`EpGauss::xbar0`] up to summation order.
     pub fn xbar0_row(&self, rows: &impl LumRows, y: i64, w: usize) -> Vec<f64> {
+        let (mut out, mut h) = (Vec::new(), Vec::new());
+        self.xbar0_row_into(rows, y, w, &mut out, &mut h);
+        out
+    }
+
+    /// [`EpGauss::xbar0_row`] into `out`, with the caller's scratch `h` (no
+    /// allocation once they have grown to `w`).
+    pub fn xbar0_row_into(
+        &self,
+        rows: &impl LumRows,
+        y: i64,
+        w: usize,
+        out: &mut Vec<f64>,
+        h: &mut Vec<f64>,
+    ) {
         let pad = self.pad();
         let lv = &self.levels[0];
         let c = lv.shell;
-        let mut out = vec![0.0; w];
-        let mut h = vec![0.0; w];
+        out.clear();
+        out.resize(w, 0.0);
+        h.clear();
+        h.resize(w, 0.0);
         for (k, &gy) in lv.g1.iter().enumerate() {
             let r = rows.row(y + k as i64 - c as i64);
             h.iter_mut().for_each(|v| *v = 0.0);
@@ -489,12 +506,11 @@ impl EpGauss {
                     *hv += g * v;
                 }
             }
-            for (o, &hv) in out.iter_mut().zip(&h) {
+            for (o, &hv) in out.iter_mut().zip(h.iter()) {
                 *o += gy * hv;
             }
         }
         out.iter_mut().for_each(|v| *v /= lv.norm);
-        out
     }
 
     /// The cheap path's bounds on `x0` for a pixel whose base average is

@@ -544,9 +544,15 @@ impl SpreadStage {
         // each, in the same order).
         type Found = (Vec<Noisy>, Vec<f32>, u64);
         // A task's scratch: the pixel row's luminance, its flagged pixels
-        // (column, xbar, bounds) and their brightest samples.
-        type Scratch = (Vec<f64>, Vec<(usize, f64, f64, f64)>, Vec<f64>);
-        let find = |(lrows, flagged, pmax): &mut Scratch, y: usize| -> Found {
+        // (column, xbar, bounds), their brightest samples, and the base
+        // width's averages (and their horizontal pass).
+        type Scratch = (
+            Vec<f64>,
+            Vec<(usize, f64, f64, f64)>,
+            Vec<f64>,
+            (Vec<f64>, Vec<f64>),
+        );
+        let find = |(lrows, flagged, pmax, (xbars, xh)): &mut Scratch, y: usize| -> Found {
             let mut found = Vec::new();
             let mut vals = Vec::new();
             let mut kept = 0u64;
@@ -554,7 +560,7 @@ impl SpreadStage {
                 return (found, vals, kept);
             };
             let view = YView { win: ybox, h };
-            let xbars = ep.xbar0_row(&view, y as i64, w);
+            ep.xbar0_row_into(&view, y as i64, w, xbars, xh);
             let luma = |row: &[f32], i: usize| {
                 let mut x = 0.0;
                 for c in (0..nch).filter(|&c| lum[c] != 0.0) {
