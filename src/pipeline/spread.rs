@@ -144,6 +144,20 @@ impl LumRows for YView<'_> {
     }
 }
 
+/// One classification task's scratch, reused from pixel row to pixel row.
+#[derive(Default)]
+struct FindScratch {
+    /// The pixel row's super-sample luminance, `S` sample rows.
+    lrows: Vec<f64>,
+    /// Its pixels that hold a noisy sample: column, xbar and bounds.
+    flagged: Vec<(usize, f64, f64, f64)>,
+    /// Each pixel's brightest sample.
+    pmax: Vec<f64>,
+    /// The base width's averages, and their horizontal pass.
+    xbars: Vec<f64>,
+    xh: Vec<f64>,
+}
+
 /// What ep-gauss counted, in super-samples.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct SpreadStats {
@@ -543,16 +557,14 @@ impl SpreadStage {
         // Each row's noisy samples in row-major order, and their values (nch
         // each, in the same order).
         type Found = (Vec<Noisy>, Vec<f32>, u64);
-        // A task's scratch: the pixel row's luminance, its flagged pixels
-        // (column, xbar, bounds), their brightest samples, and the base
-        // width's averages (and their horizontal pass).
-        type Scratch = (
-            Vec<f64>,
-            Vec<(usize, f64, f64, f64)>,
-            Vec<f64>,
-            (Vec<f64>, Vec<f64>),
-        );
-        let find = |(lrows, flagged, pmax, (xbars, xh)): &mut Scratch, y: usize| -> Found {
+        let find = |sc: &mut FindScratch, y: usize| -> Found {
+            let FindScratch {
+                lrows,
+                flagged,
+                pmax,
+                xbars,
+                xh,
+            } = sc;
             let mut found = Vec::new();
             let mut vals = Vec::new();
             let mut kept = 0u64;
@@ -737,12 +749,15 @@ impl SpreadStage {
         let found: Vec<Found> = hrows
             .par_chunks_mut(s)
             .enumerate()
-            .map_init(<(_, Vec<f32>)>::default, |(scratch, copy), (k, hs)| {
-                let y = a + k;
-                let f = find(scratch, y);
-                pass(copy, y, hs, &f.0);
-                f
-            })
+            .map_init(
+                <(FindScratch, Vec<f32>)>::default,
+                |(scratch, copy), (k, hs)| {
+                    let y = a + k;
+                    let f = find(scratch, y);
+                    pass(copy, y, hs, &f.0);
+                    f
+                },
+            )
             .collect();
         for (list, vals, kept) in found {
             // Kept samples failed the test too; the spread ones are counted
