@@ -141,6 +141,11 @@ pub struct Level {
     norm: f64,
     /// Weight of one super-sample of `p` in the average.
     pub w0: f64,
+    /// The search's cost of this width: luminance values its support sums
+    /// into the quadrant (entry 0 of a row sums its one or two values, the
+    /// others twice as many), and quadrant entries its average weighs.
+    grow_cost: u64,
+    avg_cost: u64,
     /// `1 / norm`, `1 / w0 = S^2 norm` and `1 / (1 - w0)`: the search's
     /// steps as products (a division costs ten of them, and each of the 4-5
     /// widths a search evaluates took five in a row).
@@ -163,11 +168,12 @@ pub struct Folded {
     stride: usize,
     /// Entries valid in each row of the quadrant.
     ext: Vec<usize>,
-    /// Entries of each row the widths tried so far needed (`ext` reaches
-    /// past them: `GROW_AHEAD`).
-    used: Vec<usize>,
+    /// What growing the widest support the current search grew costs
+    /// ([`Level::grow_cost`]: the supports nest, so this is the search's
+    /// whole growth, whatever it read ahead).
+    grown: u64,
     /// Rows of the quadrant the current search has touched (the rest of
-    /// `ext` and `used` are still zero).
+    /// `ext` is still zero).
     touched: usize,
     /// Luminance values the widths tried needed plus quadrant entries
     /// weighed, over every search this scratch served: the search's cost
@@ -180,16 +186,14 @@ impl Folded {
         if self.stride == cap + 1 {
             // Only the rows the last search touched.
             self.ext[..self.touched].fill(0);
-            self.used[..self.touched].fill(0);
         } else {
             self.stride = cap + 1;
             self.f.resize(self.stride * self.stride, 0.0);
             self.ext.clear();
             self.ext.resize(self.stride, 0);
-            self.used.clear();
-            self.used.resize(self.stride, 0);
         }
         self.touched = 0;
+        self.grown = 0;
     }
 
     /// Make the quadrant entries of `lv`'s support valid about padded column
@@ -198,14 +202,8 @@ impl Folded {
     fn grow(&mut self, rows: &impl LumRows, cx: i64, cy: i64, lv: &Level) {
         let cx = cx as usize;
         self.touched = self.touched.max(lv.span.len());
+        self.grown = self.grown.max(lv.grow_cost);
         for (dy, &span) in lv.span.iter().enumerate() {
-            let nrows = 1 + usize::from(dy > 0) as u64;
-            let used = self.used[dy];
-            if used <= span {
-                // Entry 0 sums `nrows` values, the others twice as many.
-                self.cost += nrows * (2 * (span + 1 - used) as u64 - u64::from(used == 0));
-                self.used[dy] = span + 1;
-            }
             let have = self.ext[dy];
             if have > span {
                 continue;
@@ -239,6 +237,12 @@ impl Folded {
         }
     }
 
+    /// End a search: its growth enters the cost; returns the cost so far.
+    fn finish(&mut self) -> u64 {
+        self.cost += std::mem::take(&mut self.grown);
+        self.cost
+    }
+
     /// The Gaussian average of `lv` (its support must be grown).
     #[inline]
     fn average(&mut self, lv: &Level) -> f64 {
@@ -248,8 +252,8 @@ impl Folded {
         for (dy, (&gy, &span)) in gh.iter().zip(&lv.span).enumerate() {
             let row = &self.f[dy * self.stride..dy * self.stride + span + 1];
             acc += gy * dot4(&gh[..=span], row);
-            self.cost += (span + 1) as u64;
         }
+        self.cost += lv.avg_cost;
         acc * lv.inv_norm
     }
 }
@@ -316,6 +320,10 @@ pub struct EpGauss {
     t_lo: f64,
     /// Rungs that double a width's area (its cost in the search).
     jump: usize,
+    /// The widest shell: the luminance rows' padding.
+    pad: usize,
+    /// `ln tol`, for the search's line through log D.
+    ln_tol: f64,
     cutoff: f64,
 }
 
@@ -369,10 +377,19 @@ impl EpGauss {
                         * (1..=shell)
                             .map(|dy| g1[shell + dy] * row_sum(dy))
                             .sum::<f64>();
+                let nrows = |dy: usize| 1 + u64::from(dy > 0);
+                let grow_cost = span
+                    .iter()
+                    .enumerate()
+                    .map(|(dy, &sp)| nrows(dy) * (2 * sp as u64 + 1))
+                    .sum();
+                let avg_cost = span.iter().map(|&sp| sp as u64 + 1).sum();
                 Level {
                     rho,
                     kernel: Kernel1d::gaussian(s, rho, cutoff),
                     shell,
+                    grow_cost,
+                    avg_cost,
                     span,
                     g1,
                     norm,
@@ -394,6 +411,8 @@ impl EpGauss {
         EpGauss {
             s,
             tol,
+            pad: levels.iter().map(|l| l.shell).max().unwrap_or(0),
+            ln_tol: tol.ln(),
             w0s: levels.iter().map(|l| l.w0).collect(),
             levels,
             t_hi,
@@ -424,8 +443,9 @@ impl EpGauss {
     }
 
     /// Columns of padding the luminance rows need (the widest average).
+    #[inline]
     pub fn pad(&self) -> usize {
-        self.levels.iter().map(|l| l.shell).max().unwrap_or(0)
+        self.pad
     }
 
     /// Rows either side the classification reads: the base test's, and at
@@ -600,27 +620,29 @@ impl EpGauss {
         let mut guesses = 0;
         // Relation 14 at the bracket's ends and at the failing width below
         // `lo`: log D falls about linearly with the rung.
-        let mut d_lo = if xbar0 > 0.0 {
+        // Each with its log (taken once, where it is evaluated).
+        let with_log = |d: f64| (d, d.ln());
+        let mut d_lo = with_log(if xbar0 > 0.0 {
             relation14(x0 / xbar0, self.levels[0].w0)
         } else {
             f64::INFINITY
-        };
-        let mut d_hi = f64::NAN;
-        let mut below: Option<(usize, f64)> = None;
+        });
+        let mut d_hi = (f64::NAN, f64::NAN);
+        let mut below: Option<(usize, (f64, f64))> = None;
         loop {
             match hi {
                 Some(h) if h - lo <= 1 => {
                     return Choice {
                         level: h as u16,
                         capped: false,
-                        cost: fold.cost - cost0,
+                        cost: fold.finish() - cost0,
                     }
                 }
                 None if lo == last => {
                     return Choice {
                         level: last as u16,
                         capped: true,
-                        cost: fold.cost - cost0,
+                        cost: fold.finish() - cost0,
                     }
                 }
                 _ => {}
@@ -643,11 +665,11 @@ impl EpGauss {
             // same line between the bracket's ends, else the guess, else the
             // midpoint.
             let cand = match hi {
-                None => match below.and_then(|b| rung_where(b, (lo, d_lo), self.tol)) {
+                None => match below.and_then(|b| rung_where(b, (lo, d_lo), self.ln_tol)) {
                     Some(r) => guess.map_or(r, |g| g.min(r)).min(lo + 2 * self.jump),
                     None => guess.map_or(lo + self.jump, |g| g.min(lo + self.jump)),
                 },
-                Some(h) => rung_where((lo, d_lo), (h, d_hi), self.tol)
+                Some(h) => rung_where((lo, d_lo), (h, d_hi), self.ln_tol)
                     .or(guess)
                     .unwrap_or((lo + upper).div_ceil(2)),
             }
@@ -656,11 +678,11 @@ impl EpGauss {
             let (d, xbar) = eval(cand);
             if d <= self.tol {
                 hi = Some(cand);
-                d_hi = d;
+                d_hi = with_log(d);
             } else {
                 below = Some((lo, d_lo));
                 lo = cand;
-                d_lo = d;
+                d_lo = with_log(d);
             }
             latest = (cand, xbar);
         }
@@ -799,14 +821,29 @@ impl Carriers {
 
 /// The first rung at or past which the line through two points
 /// `(rung, log D)` reaches `log tol`, when D falls from the first to the
-/// second (`None` otherwise: no trend to follow).
-fn rung_where((l1, d1): (usize, f64), (l2, d2): (usize, f64), tol: f64) -> Option<usize> {
+/// second (`None` otherwise: no trend to follow). Each D comes with its log.
+fn rung_where(
+    (l1, (d1, g1)): (usize, (f64, f64)),
+    (l2, (d2, g2)): (usize, (f64, f64)),
+    ln_tol: f64,
+) -> Option<usize> {
     if !(d1.is_finite() && d2 > 0.0 && d2 < d1 && l2 > l1) {
         return None;
     }
     // log D = log d2 + (l - l2) log(d2/d1) / (l2 - l1) meets log tol at x.
-    let x = l2 as f64 + (tol / d2).ln() * (l2 - l1) as f64 / (d2 / d1).ln();
-    (x.is_finite() && x >= 0.0).then(|| (x.ceil() as usize).min(1 << 16))
+    let x = l2 as f64 + (ln_tol - g2) * (l2 - l1) as f64 / (g2 - g1);
+    (x.is_finite() && x >= 0.0).then(|| ceil_rung(x))
+}
+
+/// `ceil(x)` as a rung, at most `2^16`, for finite `x >= 0`: by comparison
+/// (without SSE4.1, `f64::ceil` is a library call that took a tenth of
+/// [`rung_where`]'s time).
+#[inline]
+fn ceil_rung(x: f64) -> usize {
+    const MAX: usize = 1 << 16;
+    let x = x.min(MAX as f64);
+    let f = x as usize;
+    f + usize::from((f as f64) < x)
 }
 
 #[cfg(test)]
@@ -871,6 +908,28 @@ mod tests {
         assert!(c.keeps(1e30, 0.0, 2.0, none));
         assert!(!c.keeps(1e30, se2(1e30, 1.0, 16.0), 16.0, none));
         assert!(c.keeps(1e-30, 1e-90, 64.0, none));
+    }
+
+    #[test]
+    fn ceil_rung_is_ceil_capped() {
+        let next = |x: f64| f64::from_bits(x.to_bits() + 1);
+        let mut xs = vec![
+            0.0,
+            1e-300,
+            0.5,
+            1.0,
+            2.5,
+            65_535.5,
+            65_536.0,
+            1e9,
+            f64::MAX,
+        ];
+        for k in [1.0, 7.0, 4096.0, 65_535.0] {
+            xs.extend([k, next(k), f64::from_bits(f64::to_bits(k) - 1)]);
+        }
+        for x in xs {
+            assert_eq!(ceil_rung(x), (x.ceil() as usize).min(1 << 16), "{x:e}");
+        }
     }
 
     #[test]
