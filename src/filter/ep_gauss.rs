@@ -620,15 +620,13 @@ impl EpGauss {
         let mut guesses = 0;
         // Relation 14 at the bracket's ends and at the failing width below
         // `lo`: log D falls about linearly with the rung.
-        // Each with its log (taken once, where it is evaluated).
-        let with_log = |d: f64| (d, d.ln());
-        let mut d_lo = with_log(if xbar0 > 0.0 {
+        let mut d_lo = LogD::new(if xbar0 > 0.0 {
             relation14(x0 / xbar0, self.levels[0].w0)
         } else {
             f64::INFINITY
         });
-        let mut d_hi = (f64::NAN, f64::NAN);
-        let mut below: Option<(usize, (f64, f64))> = None;
+        let mut d_hi = LogD::new(f64::NAN);
+        let mut below: Option<(usize, LogD)> = None;
         loop {
             match hi {
                 Some(h) if h - lo <= 1 => {
@@ -665,11 +663,14 @@ impl EpGauss {
             // same line between the bracket's ends, else the guess, else the
             // midpoint.
             let cand = match hi {
-                None => match below.and_then(|b| rung_where(b, (lo, d_lo), self.ln_tol)) {
+                None => match below
+                    .as_mut()
+                    .and_then(|(l, d)| rung_where((*l, d), (lo, &mut d_lo), self.ln_tol))
+                {
                     Some(r) => guess.map_or(r, |g| g.min(r)).min(lo + 2 * self.jump),
                     None => guess.map_or(lo + self.jump, |g| g.min(lo + self.jump)),
                 },
-                Some(h) => rung_where((lo, d_lo), (h, d_hi), self.ln_tol)
+                Some(h) => rung_where((lo, &mut d_lo), (h, &mut d_hi), self.ln_tol)
                     .or(guess)
                     .unwrap_or((lo + upper).div_ceil(2)),
             }
@@ -678,11 +679,11 @@ impl EpGauss {
             let (d, xbar) = eval(cand);
             if d <= self.tol {
                 hi = Some(cand);
-                d_hi = with_log(d);
+                d_hi = LogD::new(d);
             } else {
                 below = Some((lo, d_lo));
                 lo = cand;
-                d_lo = with_log(d);
+                d_lo = LogD::new(d);
             }
             latest = (cand, xbar);
         }
@@ -819,18 +820,38 @@ impl Carriers {
     }
 }
 
+/// Relation 14's `D` at a width the search evaluated, with its log once
+/// [`rung_where`] has needed it (each taken at most once).
+#[derive(Clone, Copy, Debug)]
+struct LogD {
+    d: f64,
+    ln: Option<f64>,
+}
+
+impl LogD {
+    fn new(d: f64) -> Self {
+        LogD { d, ln: None }
+    }
+
+    fn ln(&mut self) -> f64 {
+        *self.ln.get_or_insert_with(|| self.d.ln())
+    }
+}
+
 /// The first rung at or past which the line through two points
 /// `(rung, log D)` reaches `log tol`, when D falls from the first to the
-/// second (`None` otherwise: no trend to follow). Each D comes with its log.
+/// second (`None` otherwise: no trend to follow).
 fn rung_where(
-    (l1, (d1, g1)): (usize, (f64, f64)),
-    (l2, (d2, g2)): (usize, (f64, f64)),
+    (l1, p1): (usize, &mut LogD),
+    (l2, p2): (usize, &mut LogD),
     ln_tol: f64,
 ) -> Option<usize> {
+    let (d1, d2) = (p1.d, p2.d);
     if !(d1.is_finite() && d2 > 0.0 && d2 < d1 && l2 > l1) {
         return None;
     }
     // log D = log d2 + (l - l2) log(d2/d1) / (l2 - l1) meets log tol at x.
+    let (g1, g2) = (p1.ln(), p2.ln());
     let x = l2 as f64 + (ln_tol - g2) * (l2 - l1) as f64 / (g2 - g1);
     (x.is_finite() && x >= 0.0).then(|| ceil_rung(x))
 }
