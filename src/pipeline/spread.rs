@@ -132,15 +132,29 @@ impl Spread {
     }
 }
 
+/// The box luminance rows a batch of searches reads, each looked up in the
+/// window once (a search fetches dozens of rows; the window's lookup is two
+/// ring-buffer indexings deep).
 struct YView<'a> {
-    win: &'a RowWindow<f64>,
+    rows: Vec<&'a [f64]>,
+    first: usize,
     h: usize,
+}
+
+impl<'a> YView<'a> {
+    fn new(win: &'a RowWindow<f64>, h: usize) -> Self {
+        YView {
+            rows: (win.first()..win.end()).map(|y| win.get(y)).collect(),
+            first: win.first(),
+            h,
+        }
+    }
 }
 
 impl LumRows for YView<'_> {
     #[inline]
     fn row(&self, vy: i64) -> &[f64] {
-        self.win.get(mirror(vy, self.h))
+        self.rows[mirror(vy, self.h) - self.first]
     }
 }
 
@@ -545,7 +559,8 @@ impl SpreadStage {
             self.hpass.push_stale(0.0); // every value is written below
         }
         let ep = self.ep.as_ref();
-        let ybox = &self.ybox;
+        let yview = YView::new(&self.ybox, h);
+        let yview = &yview;
         let lum = &self.lum;
         let modes = &self.modes;
         let cols = &self.cols;
@@ -571,8 +586,8 @@ impl SpreadStage {
             let Some(ep) = ep else {
                 return (found, vals, kept);
             };
-            let view = YView { win: ybox, h };
-            ep.xbar0_row_into(&view, y as i64, w, xbars, xh);
+            let view = yview;
+            ep.xbar0_row_into(view, y as i64, w, xbars, xh);
             let luma = |row: &[f32], i: usize| {
                 let mut x = 0.0;
                 for c in (0..nch).filter(|&c| lum[c] != 0.0) {
@@ -672,7 +687,7 @@ impl SpreadStage {
                                         if v < x0 / COMPACT_RATIO {
                                             continue;
                                         }
-                                        let xb = ep.xbar0(&view, xx, yy);
+                                        let xb = ep.xbar0(view, xx, yy);
                                         count += usize::from(
                                             ep.bounds(xb).is_some_and(|(hi, _)| v > hi),
                                         );
@@ -777,7 +792,7 @@ impl SpreadStage {
             .partition_point(|n| (n.j as usize) / s < target);
         let batch = &mut self.pending[..split];
         // Width search, one sample per task (each is independent of the rest).
-        let view = YView { win: &self.ybox, h };
+        let view = YView::new(&self.ybox, h);
         let cost: u64 = batch
             .par_iter_mut()
             .map_init(Folded::default, |fold, n| {
