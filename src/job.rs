@@ -995,9 +995,9 @@ fn plan_band(
         n,
         a,
         b,
-        // Even, so the window's 2x coarse grid (--coarse-from) is the
-        // whole image's.
-        wa: a.saturating_sub(m) & !1,
+        // A multiple of 4, so the window's 2x and 4x coarse grids
+        // (--coarse-from) are the whole image's.
+        wa: a.saturating_sub(m) & !3,
         wb: (b + m).min(out_h),
         out_h,
     })

@@ -339,8 +339,9 @@ struct FilterArgs {
     #[arg(long, default_value_t = 0.1)]
     width_step: f64,
     /// ep-gauss: spread widths of this radius (output pixels) and more on a 2x
-    /// coarser grid brought back with a tent: a quarter of the taps, energy
-    /// exact, no pixel given more than the full-resolution kernel would; 0 = off.
+    /// coarser grid, and from twice it on a 4x coarser grid, brought back with
+    /// a tent per halving: a quarter (a sixteenth) of the taps, energy exact,
+    /// no pixel given more than the full-resolution kernel would; 0 = off.
     #[arg(long, default_value_t = epfilt::filter::DEFAULT_COARSE_FROM)]
     coarse_from: f64,
     /// Output compression (none rle zips zip piz pxr24 b44 b44a dwaa dwab) [default: as input, but zip

@@ -423,13 +423,17 @@ impl EpGauss {
     }
 
     /// Spread the widths of radius `from` pixels and more on the 2x coarser
-    /// grid ([`Coarse`]; `0` or infinity: none). Level 0, the base kernel,
-    /// never is.
+    /// grid, and those of `2 from` and more on the 4x coarser one
+    /// ([`Coarse`]: the same size in cells; `0` or infinity: none). Level 0,
+    /// the base kernel, never is.
     pub fn with_coarse(mut self, from: f64) -> Self {
         let (s, cutoff) = (self.s, self.cutoff);
         for lv in self.levels.iter_mut().skip(1) {
             lv.coarse = if from > 0.0 && lv.rho >= from {
-                Coarse::new(s, lv.rho, cutoff)
+                let four = (lv.rho >= 2.0 * from)
+                    .then(|| Coarse::with_factor(s, lv.rho, cutoff, 4))
+                    .flatten();
+                four.or_else(|| Coarse::new(s, lv.rho, cutoff))
             } else {
                 None
             };

@@ -191,8 +191,10 @@ pub struct SpreadStats {
     /// Weights the spreading wrote, per channel (the reflected kernels'
     /// areas, on the coarse grid for the coarse ones).
     pub spread_taps: u64,
-    /// Samples spread on the 2x coarser grid (`--coarse-from`).
+    /// Samples spread on a coarser grid (`--coarse-from`), 2x or 4x.
     pub coarse: u64,
+    /// Of those, the samples spread on the 4x coarser grid.
+    pub coarse4: u64,
 }
 
 /// The Gaussian family's state between strips.
@@ -243,6 +245,17 @@ pub struct SpreadStage {
     carena: Vec<f64>,
     coarse_used: bool,
     up_done: usize,
+    /// The 4x grid: its accumulator (`[c][X]` rows of `ceil(w / 4)` cells),
+    /// its rows upsampled across to the 2x grid (`[c][x]` of `ceil(w / 2)`),
+    /// the tent's taps from it to the 2x grid, its arena and whether
+    /// anything was spread on it. Its share enters a 2x row once, just
+    /// before that row is upsampled.
+    cacc4: RowWindow<f64>,
+    hup4: RowWindow<f64>,
+    tent4_x: TentTaps,
+    tent4_y: TentTaps,
+    carena4: Vec<f64>,
+    coarse4_used: bool,
 }
 
 impl SpreadStage {
@@ -280,6 +293,11 @@ impl SpreadStage {
         let coarse = ep
             .as_ref()
             .is_some_and(|e| e.levels().iter().any(|l| l.coarse.is_some()));
+        let coarse4 = ep.as_ref().is_some_and(|e| {
+            e.levels()
+                .iter()
+                .any(|l| l.coarse.as_ref().is_some_and(|c| c.factor == 4))
+        });
         let halo = Halo {
             xbar_reach: ep.as_ref().map_or(0, |e| e.xbar_reach()),
             base_reach: base.reach(),
@@ -326,6 +344,12 @@ impl SpreadStage {
             carena: Vec::new(),
             coarse_used: false,
             up_done: 0,
+            cacc4: RowWindow::new(nch * w.div_ceil(4)),
+            hup4: RowWindow::new(nch * w.div_ceil(2)),
+            tent4_x: TentTaps::new(if coarse4 { w.div_ceil(2) } else { 0 }),
+            tent4_y: TentTaps::new(if coarse4 { h.div_ceil(2) } else { 0 }),
+            carena4: Vec::new(),
+            coarse4_used: false,
         }
     }
 
@@ -381,6 +405,10 @@ impl Stage for SpreadStage {
         let c = y.saturating_sub(2) / 2;
         self.cacc.evict_below(c);
         self.hup.evict_below(c);
+        // And 4x row K reaches 2x rows 2K - 1 ..= 2K + 2.
+        let k = c.saturating_sub(2) / 2;
+        self.cacc4.evict_below(k);
+        self.hup4.evict_below(k);
     }
 
     fn stats(&self) -> MethodStats {
@@ -422,6 +450,16 @@ impl Stage for SpreadStage {
                 name: "coarse rows upsampled",
                 rows: self.hup.high_water(),
                 row_bytes: nch * w * 8,
+            },
+            WindowUse {
+                name: "4x accumulator",
+                rows: self.cacc4.high_water(),
+                row_bytes: nch * w.div_ceil(4) * 8,
+            },
+            WindowUse {
+                name: "4x rows upsampled",
+                rows: self.hup4.high_water(),
+                row_bytes: nch * w.div_ceil(2) * 8,
             },
         ]
     }
@@ -820,7 +858,13 @@ impl SpreadStage {
         while self.cacc.end() < (need.div_ceil(2) + 1).min(nch_rows) {
             self.cacc.push(0.0);
         }
+        // 4x row K reaches fine rows 4K - 3 ..= 4K + 6.
+        let (ncw4, nch_rows4) = (w.div_ceil(4), h.div_ceil(4));
+        while self.cacc4.end() < (need.div_ceil(4) + 1).min(nch_rows4) {
+            self.cacc4.push(0.0);
+        }
         let mut cspreads = Vec::new();
+        let mut cspreads4 = Vec::new();
         // Spread in chunks of the (row-major) batch: the folded weights of one
         // chunk at a time bound the arena, and the order of contributions to
         // every pixel stays the batch order.
@@ -830,9 +874,11 @@ impl SpreadStage {
             // Reflect each sample's kernel once, in order.
             self.arena.clear();
             self.carena.clear();
+            self.carena4.clear();
             self.vals.clear();
             spreads.clear();
             cspreads.clear();
+            cspreads4.clear();
             let c1 = (c0 + SPREAD_CHUNK).min(split);
             for (n, x) in self.pending[c0..c1]
                 .iter()
@@ -851,7 +897,7 @@ impl SpreadStage {
                         0.0
                     }
                 }));
-                // Wide kernels on the coarse grid, the others at full
+                // Wide kernels on a coarse grid, the others at full
                 // resolution; each list keeps the batch order. Kernels inside
                 // the image are read in place, the others reflected into the
                 // arena.
@@ -859,7 +905,13 @@ impl SpreadStage {
                 let (sp, list) = match &level.coarse {
                     Some(c) => {
                         self.stats.coarse += 1;
-                        let arena = &mut self.carena;
+                        let four = c.factor == 4;
+                        self.stats.coarse4 += u64::from(four);
+                        let (arena, cells, list) = if four {
+                            (&mut self.carena4, (ncw4, nch_rows4), &mut cspreads4)
+                        } else {
+                            (&mut self.carena, (ncw, nch_rows), &mut cspreads)
+                        };
                         let mut axis = |q: usize, n: usize| {
                             let (a, p) = (q % s, q / s);
                             let inside = c.interior(a, p, n);
@@ -867,8 +919,8 @@ impl SpreadStage {
                                 c.fold(a, p, n, t)
                             })
                         };
-                        let (x, y) = (axis(i, ncw), axis(j, nch_rows));
-                        (Spread::new(x, y, voff), &mut cspreads)
+                        let (x, y) = (axis(i, cells.0), axis(j, cells.1));
+                        (Spread::new(x, y, voff), list)
                     }
                     None => {
                         let k = &level.kernel;
@@ -897,15 +949,15 @@ impl SpreadStage {
                     self.tile,
                 );
             }
+            let rows = |l: u16, ph: u16| {
+                ep.levels()[l as usize]
+                    .coarse
+                    .as_ref()
+                    .map_or(&[][..], |c| c.kernel.row(ph as usize))
+            };
             if !cspreads.is_empty() {
                 self.coarse_used = true;
                 let tile = (self.tile / 2).max(1);
-                let rows = |l: u16, ph: u16| {
-                    ep.levels()[l as usize]
-                        .coarse
-                        .as_ref()
-                        .map_or(&[][..], |c| c.kernel.row(ph as usize))
-                };
                 scatter(
                     &mut self.cacc,
                     (&self.carena, &rows),
@@ -916,72 +968,56 @@ impl SpreadStage {
                     tile,
                 );
             }
+            if !cspreads4.is_empty() {
+                // Through the 2x grid: its rows carry the 4x share.
+                self.coarse_used = true;
+                self.coarse4_used = true;
+                let tile = (self.tile / 4).max(1);
+                scatter(
+                    &mut self.cacc4,
+                    (&self.carena4, &rows),
+                    &self.vals,
+                    &cspreads4,
+                    ncw4,
+                    nch,
+                    tile,
+                );
+            }
         }
         self.pending.drain(..split);
         self.pending_v.drain(..split * nch);
     }
 
-    /// Add the coarse grid's share to the accumulator's final rows `a..b`:
-    /// each coarse row upsampled across once (when first needed: final, as
-    /// every coarse row a final row reads is), then down, in tap order.
+    /// Add the coarse grids' share to the accumulator's final rows `a..b`:
+    /// each 2x row upsampled across once (when first needed: final, as
+    /// every coarse row a final row reads is), then down, in tap order. Just
+    /// before a 2x row is upsampled, the 4x grid's share enters it the same
+    /// way (its 4x rows are final too: each reaches every fine row the 2x
+    /// rows it feeds reach).
     fn upsample(&mut self, a: usize, b: usize) {
-        let w = self.w;
-        let ncw = w.div_ceil(2);
-        let last = (a..b)
-            .map(|y| {
-                let (c, w) = self.tent_y.of(y);
-                c + w.len() - 1
-            })
-            .max()
-            .unwrap_or(0);
-        while self.cacc.end() <= last {
-            self.cacc.push(0.0);
-        }
-        let from = self.hup.end();
-        if last >= from {
-            for _ in from..=last {
-                self.hup.push_stale(0.0); // every value is written below
-            }
-            let (cacc, tent_x) = (&self.cacc, &self.tent_x);
-            let mut rows = self.hup.range_mut(from, last + 1);
-            rows.par_iter_mut().enumerate().for_each(|(k, row)| {
-                let src = cacc.get(from + k);
-                for (src, dst) in src.chunks_exact(ncw).zip(row.chunks_exact_mut(w)) {
-                    tent_x.gather(src, dst);
+        let (w, ncw) = (self.w, self.w.div_ceil(2));
+        let four = self.coarse4_used;
+        let (cacc4, hup4) = (&mut self.cacc4, &mut self.hup4);
+        let tents4 = (&self.tent4_x, &self.tent4_y);
+        tent_up(
+            (&mut self.cacc, &mut self.hup),
+            (&self.tent_x, &self.tent_y),
+            w,
+            &mut self.acc,
+            (a, b),
+            |cacc, from, last| {
+                if four {
+                    tent_up(
+                        (cacc4, hup4),
+                        tents4,
+                        ncw,
+                        cacc,
+                        (from, last + 1),
+                        |_, _, _| {},
+                    );
                 }
-            });
-        }
-        let (hup, tent_y) = (&self.hup, &self.tent_y);
-        let mut rows = self.acc.range_mut(a, b);
-        rows.par_iter_mut().enumerate().for_each(|(k, row)| {
-            // The same sum as the gather across: `0 + w0 * a (+ w1 * b)`.
-            let (c, w) = tent_y.of(a + k);
-            let add = |d: &mut f64, u: f64| {
-                if u != 0.0 {
-                    *d += u;
-                }
-            };
-            match *w {
-                [w0] => {
-                    let r0 = hup.get(c);
-                    for (d, &v0) in row.iter_mut().zip(r0) {
-                        let mut u = 0.0;
-                        u += w0 * v0;
-                        add(d, u);
-                    }
-                }
-                [w0, w1] => {
-                    let (r0, r1) = (hup.get(c), hup.get(c + 1));
-                    for ((d, &v0), &v1) in row.iter_mut().zip(r0).zip(r1) {
-                        let mut u = 0.0;
-                        u += w0 * v0;
-                        u += w1 * v1;
-                        add(d, u);
-                    }
-                }
-                _ => unreachable!("one or two coarse rows per fine row"),
-            }
-        });
+            },
+        );
     }
 
     fn make_base_rows(&mut self, a: usize, b: usize) {
@@ -1081,6 +1117,79 @@ fn box_add(out: &mut [f64], ch: &[f32], s: usize, lw: f64) {
             }
         }
     }
+}
+
+/// Bring a coarse grid into rows `a..b` of the grid twice as fine, `dst`
+/// (`[c][x]` rows of `n_fine` per channel; the coarse rows are `[c][X]` of
+/// `n_fine.div_ceil(2)`): each coarse row upsampled across into `up` once,
+/// when first needed (`before` sees the coarse rows `from..=last` just
+/// before), then down: each value `0 + w0 * a (+ w1 * b)`, added where it
+/// is not zero.
+fn tent_up(
+    (coarse, up): (&mut RowWindow<f64>, &mut RowWindow<f64>),
+    (tent_x, tent_y): (&TentTaps, &TentTaps),
+    n_fine: usize,
+    dst: &mut RowWindow<f64>,
+    (a, b): (usize, usize),
+    before: impl FnOnce(&mut RowWindow<f64>, usize, usize),
+) {
+    let n_coarse = n_fine.div_ceil(2);
+    let last = (a..b)
+        .map(|y| {
+            let (c, w) = tent_y.of(y);
+            c + w.len() - 1
+        })
+        .max()
+        .unwrap_or(0);
+    while coarse.end() <= last {
+        coarse.push(0.0);
+    }
+    let from = up.end();
+    if last >= from {
+        before(coarse, from, last);
+        for _ in from..=last {
+            up.push_stale(0.0); // every value is written below
+        }
+        let coarse = &*coarse;
+        let mut rows = up.range_mut(from, last + 1);
+        rows.par_iter_mut().enumerate().for_each(|(k, row)| {
+            let src = coarse.get(from + k);
+            for (src, dst) in src.chunks_exact(n_coarse).zip(row.chunks_exact_mut(n_fine)) {
+                tent_x.gather(src, dst);
+            }
+        });
+    }
+    let up = &*up;
+    let mut rows = dst.range_mut(a, b);
+    rows.par_iter_mut().enumerate().for_each(|(k, row)| {
+        // The same sum as the gather across: `0 + w0 * a (+ w1 * b)`.
+        let (c, w) = tent_y.of(a + k);
+        let add = |d: &mut f64, u: f64| {
+            if u != 0.0 {
+                *d += u;
+            }
+        };
+        match *w {
+            [w0] => {
+                let r0 = up.get(c);
+                for (d, &v0) in row.iter_mut().zip(r0) {
+                    let mut u = 0.0;
+                    u += w0 * v0;
+                    add(d, u);
+                }
+            }
+            [w0, w1] => {
+                let (r0, r1) = (up.get(c), up.get(c + 1));
+                for ((d, &v0), &v1) in row.iter_mut().zip(r0).zip(r1) {
+                    let mut u = 0.0;
+                    u += w0 * v0;
+                    u += w1 * v1;
+                    add(d, u);
+                }
+            }
+            _ => unreachable!("one or two coarse rows per fine row"),
+        }
+    });
 }
 
 /// One axis of a sample's spread: its first target, its length and where

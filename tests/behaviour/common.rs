@@ -364,28 +364,45 @@ pub fn reference(img: &Img, s: usize, p: &FilterParams, lum: &[f64]) -> (Vec<f64
                     }
                 }
             }
-            // Widths from --coarse-from: spread on the 2x coarser grid
-            // (reflected there), brought back with the tent (reflected at
-            // the image's edges).
+            // Widths from --coarse-from: spread on the 2x coarser grid, from
+            // twice that on the 4x one (reflected there), brought back with
+            // the tent once per halving (reflected at each grid's edges).
             let coarse = (p.method == Method::EpGauss
                 && rho > p.radius
                 && p.coarse_from > 0.0
                 && rho >= p.coarse_from)
-                .then(|| epfilt::filter::kernel::Coarse::new(s, rho, p.cutoff))
+                .then(|| {
+                    let four = (rho >= 2.0 * p.coarse_from)
+                        .then(|| epfilt::filter::kernel::Coarse::with_factor(s, rho, p.cutoff, 4))
+                        .flatten();
+                    four.or_else(|| epfilt::filter::kernel::Coarse::new(s, rho, p.cutoff))
+                })
                 .flatten();
             if let Some(k) = coarse {
                 let axis = |pix: usize, a: usize, n: usize| -> Vec<f64> {
-                    let nc = n.div_ceil(2);
-                    let row = k.kernel.row((pix % 2) * s + a);
-                    let rc = k.kernel.reach() as i64;
-                    let mut fine = vec![0.0; n];
-                    for (kk, &g) in row.iter().enumerate() {
-                        let cell = mirror((pix / 2) as i64 + kk as i64 - rc, nc) as i64;
-                        for (t, &tw) in epfilt::filter::kernel::TENT.iter().enumerate() {
-                            fine[mirror(2 * cell - 1 + t as i64, n)] += g * tw;
-                        }
+                    let f = k.factor;
+                    // Grid sizes from the fine one down to the coarse one.
+                    let mut sizes = vec![n];
+                    while sizes.len() < f.trailing_zeros() as usize + 1 {
+                        sizes.push(sizes.last().unwrap().div_ceil(2));
                     }
-                    fine
+                    let row = k.kernel.row((pix % f) * s + a);
+                    let rc = k.kernel.reach() as i64;
+                    let nc = *sizes.last().unwrap();
+                    let mut cur = vec![0.0; nc];
+                    for (kk, &g) in row.iter().enumerate() {
+                        cur[mirror((pix / f) as i64 + kk as i64 - rc, nc)] += g;
+                    }
+                    for &nf in sizes.iter().rev().skip(1) {
+                        let mut next = vec![0.0; nf];
+                        for (cell, &v) in cur.iter().enumerate() {
+                            for (t, &tw) in epfilt::filter::kernel::TENT.iter().enumerate() {
+                                next[mirror(2 * cell as i64 - 1 + t as i64, nf)] += v * tw;
+                            }
+                        }
+                        cur = next;
+                    }
+                    cur
                 };
                 let (fx, fy) = (axis(px, i % s, w), axis(py, j % s, h));
                 for (ty, &a) in fy.iter().enumerate() {

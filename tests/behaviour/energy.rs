@@ -223,8 +223,9 @@ fn alpha_stays_coverage_under_every_method() {
 #[test]
 fn wide_fireflies_on_the_coarse_grid_keep_energy_influence_and_bits() {
     // Fireflies of 1e3..1e5 in every corner, on every edge and inside, on
-    // odd and even sizes: their widths go to the coarse grid (--coarse-from),
-    // which reflects at the borders like the full-resolution kernels.
+    // odd and even sizes: their widths go to the coarse grids (--coarse-from:
+    // 2x, and 4x from twice that), which reflect at the borders like the
+    // full-resolution kernels.
     const INFLUENCE_SLACK: f64 = 1.10; // as for the lone firefly above
     for (s, w, h) in [(3, 41, 30), (2, 36, 47), (4, 25, 25)] {
         let (iw, ih) = (w * s, h * s);
@@ -250,6 +251,7 @@ fn wide_fireflies_on_the_coarse_grid_keep_energy_influence_and_bits() {
         let p = params(Method::EpGauss, s);
         let (a, stats) = run(&img, s, &p, &PipelineConfig::default());
         assert!(stats.eg().coarse >= 3, "S={s}: {:?}", stats.eg());
+        assert!(stats.eg().coarse4 >= 1, "S={s}: {:?}", stats.eg());
         for l in &stats.ledger {
             assert!(
                 l.rel_error <= ENERGY_TOL,
@@ -273,28 +275,42 @@ fn wide_fireflies_on_the_coarse_grid_keep_energy_influence_and_bits() {
         let total = |i: &Img| i.data.iter().map(|&v| v as f64).sum::<f64>();
         assert!((total(&a) - total(&c)).abs() <= 1e-6 * total(&c));
     }
-    // Relation 14 with the coarse grid: one firefly whose width is on it
-    // (radius about 7 px at S = 3) influences no output pixel beyond the
-    // tolerance, as at full resolution.
+    // Relation 14 with the coarse grids: one firefly whose width is on the
+    // 2x grid (radius about 3 px at S = 3), one on the 4x grid (about 7 px),
+    // influences no output pixel beyond the tolerance, as at full resolution.
     let s = 3;
-    let mut img = Img::new(60 * s, 60 * s, 1, |_, _, _| 1.0);
-    let (i, j) = (30 * s + 1, 30 * s);
-    img.set(i, j, 0, 300.0);
-    let p = params(Method::EpGauss, s);
-    let (with, stats) = run(&img, s, &p, &PipelineConfig::default());
-    assert_eq!(stats.eg().coarse, 1, "{:?}", stats.eg());
-    let mut clean = img.clone();
-    clean.set(i, j, 0, 0.0);
-    let (without, _) = run(&clean, s, &p, &PipelineConfig::default());
-    let s2 = (s * s) as f64;
-    let mut worst: f64 = 0.0;
-    for k in 0..with.data.len() {
-        let xbar = with.data[k] as f64;
-        let c = xbar - without.data[k] as f64;
-        let wgt = c * s2 / 300.0;
-        let xk = (xbar - c) * s2 / (s2 - wgt);
-        worst = worst.max((xbar - xk).abs() / xk);
+    for (mag, four) in [(60.0f32, false), (300.0, true)] {
+        let mut img = Img::new(60 * s, 60 * s, 1, |_, _, _| 1.0);
+        let (i, j) = (30 * s + 1, 30 * s);
+        img.set(i, j, 0, mag);
+        let p = params(Method::EpGauss, s);
+        let (with, stats) = run(&img, s, &p, &PipelineConfig::default());
+        assert_eq!(stats.eg().coarse, 1, "{mag}: {:?}", stats.eg());
+        assert_eq!(
+            stats.eg().coarse4,
+            u64::from(four),
+            "{mag}: {:?}",
+            stats.eg()
+        );
+        let mut clean = img.clone();
+        clean.set(i, j, 0, 0.0);
+        let (without, _) = run(&clean, s, &p, &PipelineConfig::default());
+        let s2 = (s * s) as f64;
+        let mut worst: f64 = 0.0;
+        for k in 0..with.data.len() {
+            let xbar = with.data[k] as f64;
+            let c = xbar - without.data[k] as f64;
+            let wgt = c * s2 / mag as f64;
+            let xk = (xbar - c) * s2 / (s2 - wgt);
+            worst = worst.max((xbar - xk).abs() / xk);
+        }
+        assert!(
+            worst <= p.tolerance * INFLUENCE_SLACK,
+            "{mag}: influence {worst}"
+        );
+        assert!(
+            worst > p.tolerance * 0.5,
+            "{mag}: spread far too wide: {worst}"
+        );
     }
-    assert!(worst <= p.tolerance * INFLUENCE_SLACK, "influence {worst}");
-    assert!(worst > p.tolerance * 0.5, "spread far too wide: {worst}");
 }

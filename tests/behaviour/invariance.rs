@@ -136,6 +136,7 @@ proptest! {
 /// 1e2..1e5, some on the borders and corners): wide kernels, a width search
 /// whose `D` is not monotone, reflections on every side. One answer for every
 /// cut, energy within the ledger's bound, and the search's work reported.
+/// Widths up to 8 px: the 2x and the 4x coarse grids both take part.
 #[test]
 fn dense_wide_fireflies_give_one_answer_and_keep_energy() {
     let s = 3;
@@ -146,6 +147,8 @@ fn dense_wide_fireflies_give_one_answer_and_keep_energy() {
     let c = stats.eg();
     assert!(c.spread > 300, "{c:?}");
     assert!(c.search_cost > 0 && c.spread_taps > c.spread, "{c:?}");
+    // Both coarse grids take part (from 2 px the 2x one, from 4 px the 4x).
+    assert!(c.coarse4 > 0 && c.coarse > c.coarse4, "{c:?}");
     for l in &stats.ledger {
         assert!(
             l.rel_error <= ENERGY_TOL,
