@@ -552,7 +552,7 @@ impl SpreadStage {
         let (s, w, pad, in_w, nch) = (self.grid.s, self.w, self.pad, self.grid.in_w, self.nch);
         let inv = self.inv_s2;
         for _ in a..b {
-            self.ybox.push(0.0);
+            self.ybox.push_stale(0.0); // every value is written below
         }
         let lum = &self.lum;
         let real_counts = self.real_counts.as_ref();
@@ -850,19 +850,13 @@ impl SpreadStage {
         self.stats.search_cost += cost;
         // Accumulator rows down to the widest reach of this batch.
         let need = (target + self.halo.spread_reach).min(h);
-        while self.acc.end() < need {
-            self.acc.push(-0.0);
-        }
+        grow_filled(&mut self.acc, need, -0.0);
         // Coarse rows reaching fine rows below `need` (and a spare).
         let (ncw, nch_rows) = (w.div_ceil(2), h.div_ceil(2));
-        while self.cacc.end() < (need.div_ceil(2) + 1).min(nch_rows) {
-            self.cacc.push(0.0);
-        }
+        grow_filled(&mut self.cacc, (need.div_ceil(2) + 1).min(nch_rows), 0.0);
         // 4x row K reaches fine rows 4K - 3 ..= 4K + 6.
         let (ncw4, nch_rows4) = (w.div_ceil(4), h.div_ceil(4));
-        while self.cacc4.end() < (need.div_ceil(4) + 1).min(nch_rows4) {
-            self.cacc4.push(0.0);
-        }
+        grow_filled(&mut self.cacc4, (need.div_ceil(4) + 1).min(nch_rows4), 0.0);
         let mut cspreads = Vec::new();
         let mut cspreads4 = Vec::new();
         // Spread in chunks of the (row-major) batch: the folded weights of one
@@ -1190,6 +1184,22 @@ fn tent_up(
             _ => unreachable!("one or two coarse rows per fine row"),
         }
     });
+}
+
+/// Rows of `win` up to `end` (absolute), the new ones filled with `fill`
+/// in parallel (an accumulator row of 2048 pixels and 3 channels is 48 KiB:
+/// filled one after another, they were a serial stretch of every strip).
+fn grow_filled(win: &mut RowWindow<f64>, end: usize, fill: f64) {
+    let from = win.end();
+    if end <= from {
+        return;
+    }
+    for _ in from..end {
+        win.push_stale(fill);
+    }
+    win.range_mut(from, end)
+        .into_par_iter()
+        .for_each(|r| r.fill(fill));
 }
 
 /// One axis of a sample's spread: its first target, its length and where
