@@ -598,6 +598,7 @@ impl SpreadStage {
         }
         let ep = self.ep.as_ref();
         let yview = YView::new(&self.ybox, h);
+        let lum_channels: &Vec<usize> = &(0..nch).filter(|&c| self.lum[c] != 0.0).collect();
         let yview = &yview;
         let lum = &self.lum;
         let modes = &self.modes;
@@ -639,11 +640,24 @@ impl SpreadStage {
             lrows.resize(s * in_w, 0.0f64);
             for (bb, lrow) in lrows.chunks_exact_mut(in_w).enumerate() {
                 let row = input.get(y * s + bb);
+                let ch = |c: usize| &row[c * in_w..(c + 1) * in_w];
                 // Channels of weight 0 (alpha, carried data that may
-                // be infinite) do not enter it.
-                for c in (0..nch).filter(|&c| lum[c] != 0.0) {
+                // be infinite) do not enter it. Three (colour): one pass.
+                if let [c0, c1, c2] = lum_channels[..] {
+                    let (l0, l1, l2) = (lum[c0], lum[c1], lum[c2]);
+                    let rows = ch(c0).iter().zip(ch(c1)).zip(ch(c2));
+                    for (l, ((&v0, &v1), &v2)) in lrow.iter_mut().zip(rows) {
+                        let mut x = 0.0;
+                        x += l0 * v0 as f64;
+                        x += l1 * v1 as f64;
+                        x += l2 * v2 as f64;
+                        *l = x;
+                    }
+                    continue;
+                }
+                for &c in lum_channels {
                     let lw = lum[c];
-                    for (l, &v) in lrow.iter_mut().zip(&row[c * in_w..(c + 1) * in_w]) {
+                    for (l, &v) in lrow.iter_mut().zip(ch(c)) {
                         *l += lw * v as f64;
                     }
                 }
