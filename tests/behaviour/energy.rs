@@ -116,6 +116,23 @@ fn smooth_image_through_ep_gauss_equals_gauss_bit_for_bit() {
     assert_eq!(bits(&a), bits(&b));
 }
 
+/// A lone firefly's largest influence on an output pixel, per Relation 13:
+/// with the output as the weighted average xbar (its weights over samples sum
+/// to S^2) and c the firefly's contribution (`with` less `without`), xbar
+/// without it is (xbar - c) * S^2 / (S^2 - W), W = c * S^2 / x0 its weight.
+fn worst_influence(with: &Img, without: &Img, s: usize, x0: f64) -> f64 {
+    let s2 = (s * s) as f64;
+    let mut worst: f64 = 0.0;
+    for (&a, &b) in with.data.iter().zip(&without.data) {
+        let xbar = a as f64;
+        let c = xbar - b as f64;
+        let wgt = c * s2 / x0;
+        let xk = (xbar - c) * s2 / (s2 - wgt);
+        worst = worst.max((xbar - xk).abs() / xk);
+    }
+    worst
+}
+
 #[test]
 fn a_lone_firefly_influences_no_pixel_beyond_the_tolerance() {
     // Influence per Relation 13 on each output pixel p: with the output as the
@@ -142,15 +159,7 @@ fn a_lone_firefly_influences_no_pixel_beyond_the_tolerance() {
             continue;
         }
         assert_eq!(stats.eg().spread, 1);
-        let s2 = (s * s) as f64;
-        let mut worst: f64 = 0.0;
-        for k in 0..with.data.len() {
-            let xbar = with.data[k] as f64;
-            let c = xbar - without.data[k] as f64;
-            let wgt = c * s2 / mag as f64;
-            let xk = (xbar - c) * s2 / (s2 - wgt);
-            worst = worst.max((xbar - xk).abs() / xk);
-        }
+        let worst = worst_influence(&with, &without, s, mag as f64);
         eprintln!(
             "mag {mag}: worst influence {worst:.4} level-spread {} capped {}",
             stats.eg().spread,
@@ -295,15 +304,7 @@ fn wide_fireflies_on_the_coarse_grid_keep_energy_influence_and_bits() {
         let mut clean = img.clone();
         clean.set(i, j, 0, 0.0);
         let (without, _) = run(&clean, s, &p, &PipelineConfig::default());
-        let s2 = (s * s) as f64;
-        let mut worst: f64 = 0.0;
-        for k in 0..with.data.len() {
-            let xbar = with.data[k] as f64;
-            let c = xbar - without.data[k] as f64;
-            let wgt = c * s2 / mag as f64;
-            let xk = (xbar - c) * s2 / (s2 - wgt);
-            worst = worst.max((xbar - xk).abs() / xk);
-        }
+        let worst = worst_influence(&with, &without, s, mag as f64);
         assert!(
             worst <= p.tolerance * INFLUENCE_SLACK,
             "{mag}: influence {worst}"
