@@ -629,7 +629,7 @@ impl SpreadStage {
             ep.xbar0_row_into(view, y as i64, w, xbars, xh);
             let luma = |row: &[f32], i: usize| {
                 let mut x = 0.0;
-                for c in (0..nch).filter(|&c| lum[c] != 0.0) {
+                for &c in lum_channels {
                     x += lum[c] * row[c * in_w + i] as f64;
                 }
                 x
