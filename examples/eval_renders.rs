@@ -603,7 +603,7 @@ fn main() -> Result<()> {
                 shown.push((r.clone(), "reference".into()));
             }
             let png = out_dir.join("renders").join(format!("{scene}.png"));
-            epfilt::preview::write_png(&shown, &png, 0.0)?;
+            epfilt::preview::write_png(&shown, &png, 0.0, &Default::default(), None)?;
         }
         eprintln!("wrote {}", out_dir.join("renders.md").display());
     }

@@ -6,7 +6,7 @@ use std::path::Path;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::io::ExrInput;
+use crate::io::Selection;
 use crate::pipeline::ledger::CompensatedSum;
 use crate::pipeline::Source;
 
@@ -46,19 +46,71 @@ impl Comparison {
     }
 }
 
-/// Compare `a` against the reference `b` (same size and channels).
-pub fn compare_files(a: &Path, b: &Path) -> Result<Comparison> {
-    let ia = ExrInput::open(a, None)?;
-    let ib = ExrInput::open(b, None)?;
+/// Limits a comparison must stay within (`compare --max-...`): what a
+/// script or a CI job checks, as `idiff` does.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Thresholds {
+    /// Largest RMSE allowed.
+    pub max_rmse: Option<f64>,
+    /// Largest relative MSE allowed.
+    pub max_rel_mse: Option<f64>,
+    /// Largest `|energy ratio - 1|` of any channel allowed.
+    pub max_energy_error: Option<f64>,
+}
+
+impl Comparison {
+    /// The worst `|sum(A) / sum(B) - 1|` over the channels.
+    pub fn energy_error(&self) -> f64 {
+        self.energy_ratio
+            .iter()
+            .map(|r| (r - 1.0).abs())
+            .fold(
+                0.0,
+                |m: f64, e| if e.is_nan() { f64::INFINITY } else { m.max(e) },
+            )
+    }
+
+    /// Each threshold exceeded, in words (empty: within every one).
+    pub fn exceeded(&self, t: &Thresholds) -> Vec<String> {
+        let mut out = Vec::new();
+        let mut check = |name: &str, value: f64, limit: Option<f64>| {
+            if let Some(l) = limit {
+                if !(value <= l) {
+                    out.push(format!("{name} {value:.6e} exceeds {l:e}"));
+                }
+            }
+        };
+        check("rmse", self.rmse, t.max_rmse);
+        check("rel_mse", self.rel_mse, t.max_rel_mse);
+        check("energy error", self.energy_error(), t.max_energy_error);
+        out
+    }
+}
+
+/// Compare `a` against the reference `b` (same size and channels), each
+/// read as `select` says (`--part`, `--layer`).
+pub fn compare_files(a: &Path, b: &Path, select: &Selection) -> Result<Comparison> {
+    let ia = select.open(a)?;
+    let ib = select.open(b)?;
     if ia.size() != ib.size() || ia.channels() != ib.channels() {
+        let say = |p: &Path, i: &crate::io::ExrInput| {
+            format!(
+                "{} is {}x{} with channels {}",
+                p.display(),
+                i.size().0,
+                i.size().1,
+                i.channels().join(", ")
+            )
+        };
+        let what = match (ia.size() != ib.size(), ia.channels() != ib.channels()) {
+            (true, true) => "size and channels",
+            (true, false) => "size",
+            _ => "channels",
+        };
         return Err(Error::Config(format!(
-            "{} ({:?}, {:?}) and {} ({:?}, {:?}) differ in size or channels",
-            a.display(),
-            ia.size(),
-            ia.channels(),
-            b.display(),
-            ib.size(),
-            ib.channels()
+            "{}; {}: they differ in {what}",
+            say(a, &ia),
+            say(b, &ib)
         )));
     }
     let (w, _) = ia.size();

@@ -92,6 +92,7 @@ fn scene_table(
             variance: false,
             compression: Compression::ZIP16,
             threads: 0,
+            format: None,
         },
         &|_, _| {},
     )?;
@@ -154,13 +155,13 @@ fn scene_table(
         let out = dir.join(format!("{name}_{file}.exr"));
         let method = params.method;
         let report = filter_file(&job(&noisy, &out, params), &|_, _| {})?;
-        let cmp = compare_files(&out, &truth)?;
+        let cmp = compare_files(&out, &truth, &Default::default())?;
         let through = if method == Method::Box {
             &truth
         } else {
             &truth_gauss
         };
-        let noise = compare_files(&out, through)?;
+        let noise = compare_files(&out, through, &Default::default())?;
         let ratio: f64 =
             report.energy_out.iter().sum::<f64>() / report.energy_in.iter().sum::<f64>();
         log(&format!("  {label:<22} done in {:.2} s", report.seconds));
@@ -184,6 +185,12 @@ fn scene_table(
         panels.push((out, label));
     }
     panels.push((truth.clone(), "truth".to_string()));
-    crate::preview::write_png(&panels, &dir.join(format!("{name}.png")), 0.0)?;
+    crate::preview::write_png(
+        &panels,
+        &dir.join(format!("{name}.png")),
+        0.0,
+        &Default::default(),
+        None,
+    )?;
     Ok(table)
 }

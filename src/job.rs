@@ -8,7 +8,10 @@ use crate::filter::channels::{self, RuleOverride};
 use crate::filter::ep_box::{Spp, StatsLayout};
 use crate::filter::{FilterParams, Method};
 use crate::geometry::Grid;
-use crate::io::{find_stats, ExrInput, OutputSettings, PartSelect, SppFrom, StatsRequest};
+use crate::io::provenance::{self, Fingerprint};
+use crate::io::{
+    find_stats, ExrInput, Format, OutputSettings, PartSelect, SppFrom, StatsRequest, ViewSelect,
+};
 use crate::pipeline::edge::{Coverage, Cropped};
 use crate::pipeline::stream::MAX_CHANNELS;
 use crate::pipeline::{run, ChannelMode, Job, MethodStats, PipelineConfig, Progress};
@@ -52,6 +55,14 @@ pub struct FilterJob {
     /// `--channel-rule`s for the channels beside the beauty (the last that
     /// matches wins; the rest get [`channels::default_rule`]).
     pub channel_rules: Vec<RuleOverride>,
+    /// `--format`: the output's format where its name does not say (`-`, a
+    /// name without an image extension). `None`: by the extension, and for
+    /// `-` the input's ([`crate::io::format::output_format`]).
+    pub format: Option<Format>,
+    /// `--view`: the view of a multi-view file to filter, or every view
+    /// (each as an image of its own, into one output); `None`: the default
+    /// view, the others left out with a warning.
+    pub view: Option<ViewSelect>,
 }
 
 /// An input whose width or height is not a multiple of the super-sampling
@@ -113,8 +124,130 @@ impl FilterJob {
             supersample_assumed: false,
             band: None,
             channel_rules: Vec::new(),
+            format: None,
+            view: None,
         }
     }
+
+    /// The format the output is written in: its extension's, or `format`,
+    /// or for `-` the input's; refused when the name says something filter
+    /// cannot write ([`crate::io::format::output_format`]).
+    pub fn output_format(&self) -> Result<Format> {
+        if let Some(f) = self.format.filter(|_| self.output.as_os_str() != "-") {
+            // Already resolved, or given: the name must agree.
+            return crate::io::format::output_format(&self.output, Some(f), None, WRITES, "filter");
+        }
+        let input = match self.format {
+            Some(_) => None,
+            None if self.output.as_os_str() == "-" => Some(crate::io::input_format(&self.input)?),
+            None => None,
+        };
+        crate::io::format::output_format(&self.output, self.format, input, WRITES, "filter")
+    }
+}
+
+/// What `filter` writes.
+pub const WRITES: &[Format] = &[Format::Exr, Format::Rgbe];
+
+impl FilterJob {
+    /// Every setting that decides the output's bytes, as text: the
+    /// method's settings, the output's format, compression and sample types,
+    /// the channels, parts, views and edge chosen, and epfilt's version; not
+    /// the threads, tiles, strips or memory limit, which do not change a
+    /// byte, nor the band (a band's bytes are the whole run's).
+    pub fn settings_text(&self) -> Result<String> {
+        let method: Vec<String> = self
+            .params
+            .settings()
+            .iter()
+            .map(|(k, v)| format!("{k}={v}"))
+            .collect();
+        let o = &self.output_settings;
+        let rules: Vec<String> = self
+            .channel_rules
+            .iter()
+            .map(|r| format!("{}={}", r.pattern(), r.rule.name()))
+            .collect();
+        Ok(format!(
+            "epfilt {}; {}; format={}; compression={}; pixel_type={:?}; allow_lossy={}; part={:?}; layer={:?}; view={:?}; channel_rules={}; edge={:?}; nonfinite={:?}; stats={:?}",
+            env!("CARGO_PKG_VERSION"),
+            method.join(" "),
+            self.output_format()?.name(),
+            o.compression.map_or("input".into(), crate::io::compression_name),
+            o.precision,
+            o.allow_lossy,
+            self.part,
+            self.layer,
+            self.view,
+            rules.join(";"),
+            self.edge,
+            self.pipeline.nonfinite,
+            self.stats,
+        ))
+    }
+
+    /// What this job's output records of its input and settings.
+    pub fn fingerprint(&self) -> Result<Fingerprint> {
+        Fingerprint::of(&self.input, &self.settings_text()?)
+    }
+
+    /// The band label an output of this job carries (`None` without a band;
+    /// it is checked against the band's file by [`existing_output`]).
+    fn band_text(&self) -> Option<String> {
+        self.band.map(|(k, n)| format!("{k}/{n}"))
+    }
+}
+
+/// What `--skip-existing` finds at a job's output.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Existing {
+    /// Nothing there.
+    Missing,
+    /// A complete output of this input and these settings: done.
+    Done,
+    /// Something that is not: it is redone, for this reason.
+    Redo(String),
+}
+
+/// Whether `job`'s output already exists as a complete output of its input
+/// and settings: readable, whole (every block present), made by epfilt from
+/// the same input with the same settings ([`provenance`]), and the same band
+/// or none.
+pub fn existing_output(job: &FilterJob) -> Result<Existing> {
+    let out = &job.output;
+    if out.as_os_str() == "-" {
+        return Ok(Existing::Missing);
+    }
+    match std::fs::metadata(out) {
+        Err(_) => return Ok(Existing::Missing),
+        Ok(m) if !m.is_file() => return Ok(Existing::Missing), // refused later
+        Ok(m) if m.len() == 0 => return Ok(Existing::Redo("it is empty".into())),
+        Ok(_) => {}
+    }
+    let recorded = match provenance::recorded(out) {
+        Ok(r) => r,
+        Err(why) => return Ok(Existing::Redo(format!("it is not a whole image ({why})"))),
+    };
+    let Some(found) = recorded.fingerprint else {
+        return Ok(Existing::Redo("it was not written by epfilt".into()));
+    };
+    let want = job.fingerprint()?;
+    let recorded_band = recorded
+        .band
+        .as_deref()
+        .map(|b| b.split_whitespace().next().unwrap_or(b).to_string());
+    Ok(if found.input != want.input {
+        Existing::Redo("it was made from another input".into())
+    } else if found.settings != want.settings {
+        Existing::Redo("it was made with other settings".into())
+    } else if recorded_band != job.band_text() {
+        Existing::Redo(match recorded.band {
+            Some(b) => format!("it is band {b}, not the whole image"),
+            None => "it is the whole image, not this band".into(),
+        })
+    } else {
+        Existing::Done
+    })
 }
 
 /// Half the machine's memory (at least 1 GiB), or 8 GiB where it cannot be read.
@@ -164,11 +297,24 @@ pub fn check_not_same_file(input: &Path, output: &Path) -> Result<()> {
 pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     job.params.validate()?;
     check_not_same_file(&job.input, &job.output)?;
-    let to_rgbe = crate::io::rgbe::is_rgbe_path(&job.output);
+    let job = &FilterJob {
+        format: Some(job.output_format()?),
+        ..job.clone()
+    };
+    let fingerprint = &job.fingerprint()?;
+    let to_rgbe = job.format == Some(Format::Rgbe);
     let parts = crate::io::parts::list(&job.input)?;
     if parts.len() < 2 {
-        return filter_part(job, progress);
+        return filter_views(job, fingerprint, progress);
     }
+    if job.view == Some(ViewSelect::All) {
+        return Err(Error::Config(format!(
+            "{}: --view all filters the views of one image; with a multi-part file, choose one part with --part",
+            job.input.display()
+        )));
+    }
+    let filter_part =
+        |job: &FilterJob, progress: Progress<'_>| filter_part(job, fingerprint, false, progress);
     let chosen: Vec<usize> = match &job.part {
         None => return filter_part(job, progress), // its error lists the parts
         Some(PartSelect::All) => {
@@ -191,22 +337,94 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     }
     let all = matches!(job.part, Some(PartSelect::All));
     if all || (job.params.supersample == 1 && job.band.is_none() && !to_rgbe) {
-        filter_and_assemble(job, &parts, &chosen, progress)
+        filter_and_assemble(job, fingerprint, &parts, &chosen, progress)
     } else {
-        filter_one_part_of_many(job, &parts, chosen[0], to_rgbe, progress)
+        filter_one_part_of_many(job, fingerprint, &parts, chosen[0], to_rgbe, progress)
     }
+}
+
+/// The views of a single-part input: the one chosen (or the default), or
+/// with `--view all` each view filtered as an image of its own and the
+/// results put together into one output.
+fn filter_views(
+    job: &FilterJob,
+    fingerprint: &Fingerprint,
+    progress: Progress<'_>,
+) -> Result<Report> {
+    if job.view != Some(ViewSelect::All) {
+        return filter_part(job, fingerprint, false, progress);
+    }
+    let views = crate::io::views::of(&job.input, job.part.as_ref())?;
+    if views.len() < 2 {
+        let mut one = job.clone();
+        one.view = None;
+        let mut report = filter_part(&one, fingerprint, false, progress)?;
+        report.warnings.push(format!(
+            "{}: --view all: the file has no other view to filter",
+            job.input.display()
+        ));
+        return Ok(report);
+    }
+    let refuse = |why: &str| {
+        Err(Error::Config(format!(
+            "{}: --view all writes every view into one EXR: {why}",
+            job.output.display()
+        )))
+    };
+    if job.format == Some(Format::Rgbe) {
+        return refuse("a Radiance picture holds one view");
+    }
+    if job.band.is_some() {
+        return refuse("not with --band; filter one view at a time with --view NAME");
+    }
+    if job.output_settings.allow_lossy {
+        return refuse("a lossy compression would round each view twice; choose a lossless one");
+    }
+    let dir = crate::io::destination::Destination::resolve(&job.output)?
+        .named()
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
+    let tmp = tempfile::Builder::new()
+        .prefix(".epfilt-views-")
+        .tempdir_in(&dir)
+        .map_err(|e| Error::io(&dir, e))?;
+    let mut reports = Vec::new();
+    let mut sources = Vec::new();
+    for (i, v) in views.iter().enumerate() {
+        let mut sub = job.clone();
+        sub.view = Some(ViewSelect::Name(v.clone()));
+        sub.output = tmp.path().join(format!("view{i}.exr"));
+        sub.format = Some(Format::Exr);
+        let mut r = filter_part(&sub, fingerprint, true, progress)?;
+        let own = sub.output.display().to_string();
+        let named = format!("{} (view {v:?})", job.output.display());
+        for w in r.warnings.iter_mut() {
+            *w = w.replace(&own, &named);
+        }
+        sources.push((sub.output.clone(), (i > 0).then(|| v.clone())));
+        reports.push(r);
+    }
+    crate::io::views::assemble(&sources, &job.output, &views, &fingerprint.text())?;
+    let mut report = reports.remove(0);
+    report.output = job.output.display().to_string();
+    for r in reports {
+        report.add_view(r);
+    }
+    Ok(report)
 }
 
 /// One part of a multi-part input filtered alone: the others are named in a
 /// warning and the report as left out, with why.
 fn filter_one_part_of_many(
     job: &FilterJob,
+    fingerprint: &Fingerprint,
     parts: &[crate::io::parts::PartInfo],
     chosen: usize,
     to_rgbe: bool,
     progress: Progress<'_>,
 ) -> Result<Report> {
-    let mut report = filter_part(job, progress)?;
+    let mut report = filter_part(job, fingerprint, false, progress)?;
     let why = if to_rgbe {
         "a Radiance picture has one part".to_string()
     } else if job.band.is_some() {
@@ -250,6 +468,7 @@ fn filter_one_part_of_many(
 /// other parts (copied), in the input's order.
 fn filter_and_assemble(
     job: &FilterJob,
+    fingerprint: &Fingerprint,
     parts: &[crate::io::parts::PartInfo],
     chosen: &[usize],
     progress: Progress<'_>,
@@ -310,7 +529,7 @@ fn filter_and_assemble(
             let mut sub = job.clone();
             sub.part = Some(PartSelect::Index(p.index));
             sub.output = tmp.path().join(format!("part{}.exr", p.index));
-            let mut r = filter_part(&sub, progress)?;
+            let mut r = filter_part(&sub, fingerprint, false, progress)?;
             // What it says of its file, it says of its part of the output.
             let own = sub.output.display().to_string();
             let named = format!("{} (part {:?})", job.output.display(), p.name);
@@ -362,20 +581,30 @@ fn filter_and_assemble(
 }
 
 /// Filter one part of the input (the only one, or `job.part`) into
-/// `job.output`.
-fn filter_part(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
+/// `job.output`, which records `fingerprint`. `exclusive`: one view of
+/// `--view all`, which carries nothing of the others.
+fn filter_part(
+    job: &FilterJob,
+    fingerprint: &Fingerprint,
+    exclusive: bool,
+    progress: Progress<'_>,
+) -> Result<Report> {
     let cpu_start = crate::stats::cpu_seconds().unwrap_or(0.0);
-    let mut input = ExrInput::open_layer(&job.input, job.part.as_ref(), job.layer.as_deref())?;
+    let view = match &job.view {
+        Some(ViewSelect::Name(v)) => Some(v.as_str()),
+        _ => None,
+    };
+    let mut input = ExrInput::open_view(&job.input, job.part.as_ref(), job.layer.as_deref(), view)?;
     let mut params = job.params.clone();
     // Every channel beside the beauty is carried by its rule, except into a
     // Radiance picture (R, G, B only).
-    let carried = if crate::io::rgbe::is_rgbe_path(&job.output) {
+    let to_rgbe = job.output_format()? == Format::Rgbe;
+    let scope = crate::io::reader::view_scope(&job.input, input.header(), view, exclusive)?;
+    let carried = if to_rgbe {
         Vec::new()
     } else {
-        let other_views = crate::io::reader::other_views(input.header());
-        input.carry_channels(|name, uint| {
-            channels::rule_for(name, uint, &job.channel_rules, &other_views)
-        })
+        input
+            .carry_channels(|name, uint| channels::rule_for(name, uint, &job.channel_rules, &scope))
     };
     for (name, rule) in &carried {
         let uint = input.header().channels.list.iter().any(|c| {
@@ -439,7 +668,7 @@ fn filter_part(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
             origin.1
         )));
     }
-    let mut warnings = Vec::new();
+    let mut warnings = dropped_warnings(job, &input, &scope, to_rgbe);
     // (samples per input row, samples read per row and rows: the crop,
     // grid size, the real size when the grid is padded)
     let mut padded_from = None;
@@ -613,10 +842,13 @@ fn filter_part(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         })
         .collect::<Vec<_>>()
         .join(" ");
-    let out_settings = OutputSettings {
+    let mut out_settings = OutputSettings {
         provenance: Some(provenance),
         ..job.output_settings.clone()
     };
+    out_settings
+        .extra
+        .push((provenance::FINGERPRINT.into(), fingerprint.text()));
     // A cropped input's output describes the cropped window (and a display
     // window that was the data window follows it).
     let mut out_header = header.clone();
@@ -631,7 +863,6 @@ fn filter_part(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     // --band K/N: output rows a..b, from the input rows of a window that
     // reaches `margin` output rows beyond them.
     let out_h = h / s;
-    let mut out_settings = out_settings;
     let band = match job.band {
         None => None,
         Some((k, n)) => {
@@ -640,10 +871,10 @@ fn filter_part(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
             out_header.own_attributes.layer_position.1 = origin.1 + (plan.a * s) as i32;
             out_settings
                 .extra
-                .push((BAND_ATTRIBUTE.into(), plan.label(s)));
+                .push((provenance::BAND.into(), plan.label(s)));
             out_settings.extra.push((
-                BAND_LEDGER_ATTRIBUTE.into(),
-                band_ledger_text(&channels, &[], &[]),
+                provenance::BAND_LEDGER.into(),
+                provenance::band_ledger_text(&channels, &[], &[]),
             ));
             Some(plan)
         }
@@ -651,6 +882,7 @@ fn filter_part(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     let rgbe_lines = input.rgbe().map(|r| r.lines.clone()).unwrap_or_default();
     let mut output = crate::io::output::Output::create(
         &job.output,
+        to_rgbe,
         &out_header,
         s,
         &channels,
@@ -701,8 +933,8 @@ fn filter_part(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
                     let inn = crate::pipeline::band::values(&hook_in);
                     let out_e: Vec<f64> = sums_out.iter().map(|v| v * s2).collect();
                     out.fill_attribute(
-                        BAND_LEDGER_ATTRIBUTE,
-                        band_ledger_text(&names, &inn, &out_e),
+                        provenance::BAND_LEDGER,
+                        provenance::band_ledger_text(&names, &inn, &out_e),
                     );
                 });
             let mut sink = crate::pipeline::band::BandSink::new(
@@ -894,38 +1126,57 @@ fn filter_part(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     Ok(report)
 }
 
-/// The header attribute of a band file: `K/N rows A-B of H S=s`.
-pub const BAND_ATTRIBUTE: &str = "epfiltBand";
-/// The header attribute of a band file holding, per channel, the energy of
-/// the input rows it owns and of the output rows it holds (times S²), as the
-/// bits of f64 in hexadecimal: `NAME:IN:OUT;` per channel.
-pub const BAND_LEDGER_ATTRIBUTE: &str = "epfiltBandLedger";
-
-/// The text of [`BAND_LEDGER_ATTRIBUTE`] (zeros where no sums are given yet:
-/// the header is written with it and filled in, same length, at the end).
-pub fn band_ledger_text(names: &[String], inn: &[f64], out: &[f64]) -> String {
-    names
+/// What the output leaves out of the input's channels, said as a warning
+/// (even under `-q`): other views, and what a Radiance picture cannot hold.
+/// Channels the user dropped with `--channel-rule` are not repeated back.
+fn dropped_warnings(
+    job: &FilterJob,
+    input: &ExrInput,
+    scope: &channels::ViewScope,
+    to_rgbe: bool,
+) -> Vec<String> {
+    let asked = |name: &str| job.channel_rules.iter().any(|r| r.matches(name));
+    let dropped: Vec<&String> = input
+        .dropped_channels()
         .iter()
-        .enumerate()
-        .map(|(c, n)| {
-            let i = inn.get(c).copied().unwrap_or(0.0);
-            let o = out.get(c).copied().unwrap_or(0.0);
-            format!("{n}:{:016x}:{:016x};", i.to_bits(), o.to_bits())
-        })
-        .collect()
-}
-
-/// Parse [`band_ledger_text`]: (name, input energy, output energy).
-pub fn parse_band_ledger(text: &str) -> Option<Vec<(String, f64, f64)>> {
-    text.split_terminator(';')
-        .map(|item| {
-            let mut parts = item.rsplitn(3, ':');
-            let o = u64::from_str_radix(parts.next()?, 16).ok()?;
-            let i = u64::from_str_radix(parts.next()?, 16).ok()?;
-            let n = parts.next()?;
-            Some((n.to_string(), f64::from_bits(i), f64::from_bits(o)))
-        })
-        .collect()
+        .filter(|n| !asked(n) || scope.excludes(n))
+        .collect();
+    let mut warnings = Vec::new();
+    let (mut views, rest): (Vec<&String>, Vec<&String>) =
+        dropped.into_iter().partition(|n| scope.excludes(n));
+    if scope.exclusive {
+        // One view of --view all: the others are filtered by their own runs.
+        views.clear();
+    }
+    if !views.is_empty() {
+        let mut names: Vec<&str> = views
+            .iter()
+            .filter_map(|n| scope.view_of(n).and_then(|v| scope.views.get(v)))
+            .map(String::as_str)
+            .collect();
+        names.dedup();
+        let list: Vec<&str> = views.iter().map(|s| s.as_str()).collect();
+        warnings.push(format!(
+            "{}: view(s) {} left out of the output ({}): --view NAME filters another view, --view all every view",
+            job.input.display(),
+            names.join(", "),
+            list.join(", ")
+        ));
+    }
+    if !rest.is_empty() {
+        let list: Vec<&str> = rest.iter().map(|s| s.as_str()).collect();
+        let why = if to_rgbe {
+            "a Radiance picture holds R, G, B only; write an EXR to keep them"
+        } else {
+            "no rule carries them"
+        };
+        warnings.push(format!(
+            "{}: channel(s) {} left out of the output: {why}",
+            job.input.display(),
+            list.join(", ")
+        ));
+    }
+    warnings
 }
 
 /// Where a band's rows are.
@@ -967,7 +1218,7 @@ fn plan_band(
             "--band {k}/{n}: the band must be 1 to N of N"
         )));
     }
-    if crate::io::rgbe::is_rgbe_path(&job.output) {
+    if job.output_format()? == Format::Rgbe {
         return Err(Error::Config(format!(
             "{}: --band writes EXR bands; `epfilt merge` puts them together",
             job.output.display()

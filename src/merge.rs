@@ -9,13 +9,16 @@ use std::time::Instant;
 
 use exr::block::chunk::{Chunk, CompressedBlock};
 use exr::block::writer::ChunksWriter;
-use exr::meta::attribute::{AttributeValue, Text};
+use exr::meta::attribute::Text;
 use exr::meta::header::Header;
 use exr::meta::{BlockDescription, MetaData};
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::job::{parse_band_ledger, BAND_ATTRIBUTE, BAND_LEDGER_ATTRIBUTE};
+use crate::io::provenance::{
+    parse_band_ledger, Fingerprint, BAND as BAND_ATTRIBUTE, BAND_LEDGER as BAND_LEDGER_ATTRIBUTE,
+    FINGERPRINT,
+};
 use crate::pipeline::ledger::CompensatedSum;
 
 /// What `merge` did.
@@ -75,14 +78,10 @@ struct Band {
     of: usize,
     s: usize,
     ledger: Vec<(String, f64, f64)>,
+    fingerprint: Option<Fingerprint>,
 }
 
-fn text_attribute(h: &Header, name: &str) -> Option<String> {
-    match h.own_attributes.other.get(&Text::from(name)) {
-        Some(AttributeValue::Text(t)) => Some(t.to_string()),
-        _ => None,
-    }
-}
+use crate::io::reader::text_attribute;
 
 fn not_a_band(path: &Path, why: impl Into<String>) -> Error {
     Error::InvalidFile {
@@ -124,6 +123,7 @@ fn read_band(path: &Path) -> Result<Band> {
         of: num(of)?,
         s,
         ledger,
+        fingerprint: text_attribute(&header, FINGERPRINT).and_then(|t| Fingerprint::parse(&t)),
         header,
     };
     if band.rows.1 - band.rows.0 != band.header.layer_size.1 {
@@ -146,14 +146,73 @@ fn whole_header(b: &Band) -> Header {
     h
 }
 
-/// Merge `parts` (in any order) into `output`.
-pub fn merge(parts: &[PathBuf], output: &Path) -> Result<MergeReport> {
+/// Refuse bands that are not of one run: each records the fingerprint of
+/// its input and of its settings ([`crate::io::provenance`]); the value most
+/// bands share is the run's, and a band that differs is named.
+fn same_run(bands: &[Band]) -> Result<()> {
+    let fingerprints: Vec<Option<&Fingerprint>> =
+        bands.iter().map(|b| b.fingerprint.as_ref()).collect();
+    if fingerprints.iter().all(Option::is_none) {
+        return Ok(()); // bands of an epfilt that did not record them
+    }
+    let odd_one = |key: &dyn Fn(&Fingerprint) -> &str, what: &str| -> Result<()> {
+        let keys: Vec<Option<&str>> = fingerprints.iter().map(|f| f.map(key)).collect();
+        let count = |k: Option<&str>| keys.iter().filter(|x| **x == k).count();
+        // The most common value (the first band's when tied).
+        let common = keys
+            .iter()
+            .copied()
+            .max_by_key(|k| {
+                (
+                    count(*k),
+                    std::cmp::Reverse(keys.iter().position(|x| x == k)),
+                )
+            })
+            .flatten();
+        let same: Vec<String> = bands
+            .iter()
+            .zip(&keys)
+            .filter(|(_, k)| **k == common)
+            .map(|(b, _)| b.k.to_string())
+            .collect();
+        if let Some((b, k)) = bands.iter().zip(&keys).find(|(_, k)| **k != common) {
+            return Err(Error::Config(format!(
+                "{}: band {}/{} was made {} than band(s) {} ({what} fingerprint {} against {}): not one run's bands",
+                b.path.display(),
+                b.k,
+                b.n,
+                if what == "input" { "from another input" } else { "with other settings" },
+                same.join(", "),
+                k.unwrap_or("missing"),
+                common.unwrap_or("missing"),
+            )));
+        }
+        Ok(())
+    };
+    odd_one(&|f| f.input.as_str(), "input")?;
+    odd_one(&|f| f.settings.as_str(), "settings")
+}
+
+/// Merge `parts` (in any order) into `output` (`format`: `--format`, for
+/// a name that does not end in `.exr`).
+pub fn merge(
+    parts: &[PathBuf],
+    output: &Path,
+    format: Option<crate::io::Format>,
+) -> Result<MergeReport> {
     let start = Instant::now();
     if parts.is_empty() {
         return Err(Error::Config(
             "merge needs the band files and an output".into(),
         ));
     }
+    crate::io::format::output_format(
+        output,
+        format,
+        Some(crate::io::Format::Exr),
+        &[crate::io::Format::Exr],
+        "merge",
+    )?;
     for p in parts {
         crate::job::check_not_same_file(p, output)?;
     }
@@ -161,6 +220,7 @@ pub fn merge(parts: &[PathBuf], output: &Path) -> Result<MergeReport> {
         .iter()
         .map(|p| read_band(p))
         .collect::<Result<Vec<_>>>()?;
+    same_run(&bands)?;
     bands.sort_by_key(|b| b.k);
     let first = &bands[0];
     let n = first.n;

@@ -11,7 +11,7 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
-use crate::io::ExrInput;
+use crate::io::{ExrInput, Format, Selection};
 use crate::pipeline::ledger::CompensatedSum;
 use crate::pipeline::{Source, Strip};
 
@@ -55,9 +55,15 @@ impl Display {
     }
 }
 
+/// What `preview` writes.
+pub const WRITES: &[Format] = &[Format::Png];
+
 /// Average luminance of an EXR file (one streaming pass).
 pub fn average_luminance(path: &Path) -> Result<f64> {
-    let input = ExrInput::open(path, None)?;
+    luminance_of(&ExrInput::open(path, None)?)
+}
+
+fn luminance_of(input: &ExrInput) -> Result<f64> {
     let (w, h) = input.size();
     let lum = input.luminance();
     let nch = lum.len();
@@ -79,16 +85,25 @@ pub fn average_luminance(path: &Path) -> Result<f64> {
 
 /// Write `inputs` (path, label) side by side as one sRGB PNG at `output`,
 /// under one display mapping (from the first image's average luminance and
-/// `exposure` stops). With one input and no label, a plain preview.
-pub fn write_png(inputs: &[(PathBuf, String)], output: &Path, exposure: f64) -> Result<()> {
+/// `exposure` stops), each read as `select` says. With one input and no
+/// label, a plain preview. `format`: `--format`, for a name that does not
+/// end in `.png`.
+pub fn write_png(
+    inputs: &[(PathBuf, String)],
+    output: &Path,
+    exposure: f64,
+    select: &Selection,
+    format: Option<Format>,
+) -> Result<()> {
+    crate::io::format::output_format(output, format, Some(Format::Png), WRITES, "preview")?;
     if inputs.is_empty() {
         return Err(Error::Config("preview needs at least one input".into()));
     }
-    let display = Display::for_average(average_luminance(&inputs[0].0)?, exposure);
     let opened: Vec<ExrInput> = inputs
         .iter()
-        .map(|(p, _)| ExrInput::open(p, None))
+        .map(|(p, _)| select.open(p))
         .collect::<Result<_>>()?;
+    let display = Display::for_average(luminance_of(&opened[0])?, exposure);
     let labelled = inputs.len() > 1 || !inputs[0].1.is_empty();
     let band = if labelled { LABEL_BAND } else { 0 };
     let widths: Vec<usize> = opened.iter().map(|i| i.size().0).collect();

@@ -14,7 +14,7 @@ use std::time::Instant;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::job::{filter_file, FilterJob};
+use crate::job::{existing_output, filter_file, Existing, FilterJob};
 use crate::pipeline::Progress;
 use crate::stats::Report;
 
@@ -373,6 +373,99 @@ pub fn task_from(
     Ok(None)
 }
 
+/// The file of band `k` of `n` of an output: `.bandKofN` before the
+/// extension (`beauty.0001.exr` -> `beauty.0001.band2of4.exr`), a name no
+/// frame pattern takes for a frame and `merge` puts back together.
+pub fn band_path(path: &Path, k: usize, n: usize) -> PathBuf {
+    let tag = format!("band{k}of{n}");
+    match (path.file_stem(), path.extension()) {
+        (Some(stem), Some(ext)) => path.with_file_name(format!(
+            "{}.{tag}.{}",
+            stem.to_string_lossy(),
+            ext.to_string_lossy()
+        )),
+        _ => PathBuf::from(format!("{}.{tag}", path.display())),
+    }
+}
+
+/// What one process of a farm does: a band of the rows (K of N, from 1)
+/// and a task's share of the frames.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Share {
+    /// `K` of `N` bands, `K` from 1.
+    pub band: Option<(usize, usize)>,
+    /// The task's share of a sequence's frames.
+    pub task: Option<Task>,
+}
+
+/// The band and the task of a run, from the flags and the array job's
+/// environment (read through `env`), by one rule:
+///
+/// * `--band K/N` counts from 1 (band 1/4 is the first of four, as the
+///   band files and `merge` say); `--band-index I --band-count N` counts
+///   from 0, as `--task-index` and the array indices do;
+/// * `--band env`, or `--band-count N` without an index, takes the index
+///   (and, where the engine sets it, the count) from the array job's
+///   environment as [`task_from`] does; the environment then picks the band,
+///   not the frames: a sequence's task is every frame unless
+///   `--task-index`/`--task-count` say otherwise;
+/// * otherwise the environment picks the task, as before.
+pub fn band_and_task(
+    band: Option<&str>,
+    band_index: Option<usize>,
+    band_count: Option<usize>,
+    task_index: Option<usize>,
+    task_count: Option<usize>,
+    env: &dyn Fn(&str) -> Option<String>,
+) -> Result<Share> {
+    let bad = |why: String| Error::Config(why);
+    let from_env =
+        band == Some("env") || (band.is_none() && band_index.is_none() && band_count.is_some());
+    if band.is_some() && (band_index.is_some() || band_count.is_some()) {
+        return Err(bad(
+            "--band and --band-index/--band-count say the same thing twice: give one".into(),
+        ));
+    }
+    let chosen = if from_env {
+        let t = task_from(None, band_count, env)?.ok_or_else(|| {
+            bad("--band env: no array job index in the environment (SLURM_ARRAY_TASK_ID, JOB_COMPLETION_INDEX, AWS_BATCH_JOB_ARRAY_INDEX); give --band K/N".into())
+        })?;
+        Some((t.index + 1, t.count))
+    } else if let Some(i) = band_index {
+        let n = band_count.ok_or_else(|| bad("--band-index needs --band-count".into()))?;
+        if i >= n {
+            return Err(bad(format!(
+                "--band-index {i} is not below --band-count {n} (band indices count from 0)"
+            )));
+        }
+        Some((i + 1, n))
+    } else if let Some(spec) = band {
+        let (k, n) = spec
+            .split_once('/')
+            .ok_or_else(|| bad(format!("--band {spec:?} is not K/N (or env)")))?;
+        let num = |s: &str, what: &str| {
+            s.trim()
+                .parse::<usize>()
+                .map_err(|_| bad(format!("--band {spec:?}: {what} is not a whole number")))
+        };
+        let (k, n) = (num(k, "K")?, num(n, "N")?);
+        if k == 0 || k > n {
+            return Err(bad(format!(
+                "--band {spec}: K counts from 1 to N in K/N (1/{n} is the first band, {n}/{n} the last); --band-index counts from 0, like --task-index"
+            )));
+        }
+        Some((k, n))
+    } else {
+        None
+    };
+    let task = if from_env {
+        task_from(task_index, task_count, &|_| None)?
+    } else {
+        task_from(task_index, task_count, env)?
+    };
+    Ok(Share { band: chosen, task })
+}
+
 /// A sequence to filter: one job template, whose input and output paths are
 /// replaced by each frame's.
 #[derive(Clone, Debug)]
@@ -387,7 +480,8 @@ pub struct SequenceJob {
     pub frames: Vec<i64>,
     /// This process's share; `None`: every frame.
     pub task: Option<Task>,
-    /// Leave frames whose output is already a file.
+    /// Leave frames whose output is already a complete output of their
+    /// input and these settings ([`existing_output`]); redo the others.
     pub skip_existing: bool,
     /// Stop at the first failed frame (the rest are reported as not run).
     pub fail_fast: bool,
@@ -399,7 +493,8 @@ pub struct SequenceJob {
 pub enum FrameStatus {
     /// Filtered and written.
     Done,
-    /// Its output existed (`skip_existing`).
+    /// Its output was already a complete output of its input and the
+    /// settings (`skip_existing`).
     Skipped,
     /// Its input is missing or damaged, or its output could not be written.
     Failed,
@@ -421,6 +516,10 @@ pub struct FrameOutcome {
     /// Why it failed, as one line.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
+    /// `skip_existing` found a file at its output that was not a complete
+    /// output of its input and the settings: why, and so it was redone.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub redone: Option<String>,
     /// The run's report (`done` frames).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub report: Option<Box<Report>>,
@@ -441,8 +540,11 @@ pub struct SequenceReport {
     pub task: Option<Task>,
     /// Frames done.
     pub done: usize,
-    /// Frames skipped (output existed).
+    /// Frames skipped (their outputs were complete).
     pub skipped: usize,
+    /// Frames redone although a file was at their output (it was not a
+    /// complete output of their input and the settings).
+    pub redone: usize,
     /// Frames that failed.
     pub failed: usize,
     /// Frames not run (after a failure, with fail-fast).
@@ -477,8 +579,16 @@ impl SequenceReport {
         } else {
             String::new()
         };
+        let redone = if self.redone > 0 {
+            format!(
+                " ({} redone: a file was there that was not a complete output of its input and these settings)",
+                self.redone
+            )
+        } else {
+            String::new()
+        };
         format!(
-            "{} -> {}{task}: {} done, {} skipped, {} failed{not_run} in {:.2} s; worst ledger error {:.1e}\n",
+            "{} -> {}{task}: {} done{redone}, {} skipped, {} failed{not_run} in {:.2} s; worst ledger error {:.1e}\n",
             self.input,
             self.output,
             self.done,
@@ -523,13 +633,17 @@ pub fn run_sequence(
     let mut stop = false;
     for (k, &frame) in frames.iter().enumerate() {
         let input = job.input.path(frame);
-        let output = job.output.path(frame);
+        let output = match job.template.band {
+            Some((b, n)) => band_path(&job.output.path(frame), b, n),
+            None => job.output.path(frame),
+        };
         let mut outcome = FrameOutcome {
             frame,
             input: input.display().to_string(),
             output: output.display().to_string(),
             status: FrameStatus::NotRun,
             error: None,
+            redone: None,
             report: None,
             seconds: 0.0,
         };
@@ -544,15 +658,26 @@ pub fn run_sequence(
             outcome: None,
         });
         let t = Instant::now();
-        if job.skip_existing && std::fs::metadata(&output).is_ok_and(|m| m.is_file()) {
-            outcome.status = FrameStatus::Skipped;
-        } else if !input.exists() {
+        let mut fj = job.template.clone();
+        fj.input = input.clone();
+        fj.output = output;
+        let existing = if job.skip_existing && input.exists() {
+            existing_output(&fj)
+        } else {
+            Ok(Existing::Missing)
+        };
+        if !input.exists() {
             outcome.status = FrameStatus::Failed;
             outcome.error = Some(format!("{}: no such file", input.display()));
+        } else if let Err(e) = existing {
+            outcome.status = FrameStatus::Failed;
+            outcome.error = Some(crate::error::one_line(&e));
+        } else if existing.as_ref().is_ok_and(|e| *e == Existing::Done) {
+            outcome.status = FrameStatus::Skipped;
         } else {
-            let mut fj = job.template.clone();
-            fj.input = input;
-            fj.output = output;
+            if let Ok(Existing::Redo(why)) = existing {
+                outcome.redone = Some(why);
+            }
             match filter_file(&fj, progress) {
                 Ok(report) => {
                     outcome.status = FrameStatus::Done;
@@ -590,6 +715,7 @@ pub fn run_sequence(
         task: job.task.clone(),
         done: count(FrameStatus::Done),
         skipped: count(FrameStatus::Skipped),
+        redone: outcomes.iter().filter(|o| o.redone.is_some()).count(),
         failed: count(FrameStatus::Failed),
         not_run: count(FrameStatus::NotRun),
         worst_ledger_error: worst,
@@ -604,6 +730,54 @@ mod tests {
 
     fn pattern(s: &str) -> FramePattern {
         FramePattern::parse(Path::new(s)).unwrap().unwrap()
+    }
+
+    #[test]
+    fn bands_count_from_1_in_k_of_n_and_from_0_by_index_or_environment() {
+        let none = env_of(&[]);
+        let share = |b: Option<&str>, i, n, env: &dyn Fn(&str) -> Option<String>| {
+            band_and_task(b, i, n, None, None, env)
+        };
+        assert_eq!(
+            share(Some("3/8"), None, None, &none).unwrap().band,
+            Some((3, 8))
+        );
+        assert_eq!(
+            share(None, Some(2), Some(8), &none).unwrap().band,
+            Some((3, 8))
+        );
+        for bad in ["0/8", "9/8", "3", "a/b"] {
+            assert!(share(Some(bad), None, None, &none).is_err(), "{bad}");
+        }
+        assert!(share(None, Some(8), Some(8), &none).is_err());
+        assert!(share(None, Some(1), None, &none).is_err());
+        assert!(share(Some("1/2"), Some(0), Some(2), &none).is_err());
+        assert!(share(Some("env"), None, None, &none).is_err());
+        // From the array's environment: the band, and then not the frames.
+        let slurm = env_of(&[
+            ("SLURM_ARRAY_TASK_ID", "2"),
+            ("SLURM_ARRAY_TASK_MIN", "0"),
+            ("SLURM_ARRAY_TASK_COUNT", "4"),
+        ]);
+        let s = share(Some("env"), None, None, &slurm).unwrap();
+        assert_eq!((s.band, s.task), (Some((3, 4)), None));
+        let s = share(None, None, Some(4), &slurm).unwrap();
+        assert_eq!(s.band, Some((3, 4)));
+        // Without a band the environment is the task's, as before.
+        let s = share(None, None, None, &slurm).unwrap();
+        assert_eq!((s.band, s.task.map(|t| t.index)), (None, Some(2)));
+    }
+
+    #[test]
+    fn band_files_are_named_apart_from_frames() {
+        let p = pattern("out/beauty.####.exr");
+        let band = band_path(&p.path(7), 2, 4);
+        assert_eq!(band, PathBuf::from("out/beauty.0007.band2of4.exr"));
+        assert_eq!(p.frame_of(band.to_str().unwrap()), None);
+        assert_eq!(
+            band_path(Path::new("plain"), 1, 2),
+            PathBuf::from("plain.band1of2")
+        );
     }
 
     #[test]

@@ -237,6 +237,40 @@ pub struct EpBoxReport {
 }
 
 impl Report {
+    /// Add the run of another view of the same image (`--view all`): its
+    /// channels, their ledger and rules, its counts, time and warnings join
+    /// this one's; the digest lists each view's.
+    pub fn add_view(&mut self, other: Report) {
+        let samples = |r: &Report| r.megapixels_per_second * r.seconds;
+        let total = samples(self) + samples(&other);
+        self.seconds += other.seconds;
+        self.megapixels_per_second = total / self.seconds.max(1e-9);
+        self.cpu_seconds = self.cpu_seconds.zip(other.cpu_seconds).map(|(a, b)| a + b);
+        self.samples_noisy += other.samples_noisy;
+        self.samples_spread += other.samples_spread;
+        self.samples_capped += other.samples_capped;
+        self.samples_kept += other.samples_kept;
+        self.search_cost += other.search_cost;
+        self.spread_taps += other.spread_taps;
+        self.energy_in.extend(other.energy_in);
+        self.energy_out.extend(other.energy_out);
+        self.energy_rel_error.extend(other.energy_rel_error);
+        self.energy_out_rounded.extend(other.energy_out_rounded);
+        self.energy_rel_error_rounded
+            .extend(other.energy_rel_error_rounded);
+        self.nonfinite_zeroed.extend(other.nonfinite_zeroed);
+        self.channel_rules.extend(other.channel_rules);
+        self.channels.extend(other.channels);
+        // Left out: what no view's run wrote.
+        let written = self.channels.clone();
+        self.dropped_channels
+            .retain(|d| other.dropped_channels.contains(d) && !written.contains(d));
+        self.digest = format!("{},{}", self.digest, other.digest);
+        self.peak_rss_bytes = self.peak_rss_bytes.max(other.peak_rss_bytes);
+        self.warnings.extend(other.warnings);
+        self.settings.insert("view".into(), "all".into());
+    }
+
     /// Fill the ledger fields from per-channel ledger lines.
     pub fn set_ledger(&mut self, ledger: &[ChannelLedger]) {
         self.energy_in = ledger.iter().map(|l| l.energy_in).collect();
@@ -339,6 +373,12 @@ impl Report {
             ));
         }
         if let Some(e) = &self.ep_box {
+            s.push_str(&format!(
+                "  ep-box statistics: variance {} ({}), samples per pixel {}\n",
+                e.variance_channels.join(", "),
+                e.variance_kind,
+                e.spp_from
+            ));
             s.push_str(&format!(
                 "  ep-box: L_tvis {:.4e}{}, D {}, {}% confidence, guard {}; reliable {}, noisy pixels {}, spread {}, guarded {}, trimmed {}, unresolved {}, passes {}\n",
                 e.l_tvis,

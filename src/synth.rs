@@ -33,7 +33,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::io::ExrOutput;
+use crate::io::{ExrOutput, Format};
 use crate::pipeline::{Precision, Sink};
 
 /// The high-variance case to model.
@@ -470,7 +470,13 @@ pub struct SynthJob {
     pub compression: Compression,
     /// Worker threads (0: all cores).
     pub threads: usize,
+    /// `--format` of both files where their names do not say (`-` is
+    /// OpenEXR unless told).
+    pub format: Option<Format>,
 }
+
+/// What `synth` writes.
+pub const WRITES: &[Format] = &[Format::Exr, Format::Rgbe];
 
 /// Summary of a `synth` run.
 #[derive(Clone, Debug, Serialize)]
@@ -492,6 +498,7 @@ pub struct SynthReport {
 /// One file `synth` writes.
 struct OutSpec<'a> {
     path: &'a Path,
+    format: Format,
     w: usize,
     h: usize,
     names: &'a [String],
@@ -505,7 +512,7 @@ fn write_streamed(
     rows: impl Fn(usize, usize) -> Vec<f32>,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<()> {
-    let mut out = if crate::io::rgbe::is_rgbe_path(spec.path) {
+    let mut out = if spec.format == Format::Rgbe {
         // A Radiance picture: R, G, B only (variance needs an EXR).
         if spec.names.len() != 3 {
             return Err(Error::Config(format!(
@@ -519,6 +526,7 @@ fn write_streamed(
             spec.w,
             spec.h,
             false,
+            &[],
             &[],
             &software,
         )?))
@@ -556,6 +564,12 @@ pub fn synth(job: &SynthJob, progress: &(dyn Fn(usize, usize) + Sync)) -> Result
             sc.hot
         )));
     }
+    // Both names are checked before anything is written.
+    let format_of = |p: &Path| {
+        crate::io::format::output_format(p, job.format, Some(Format::Exr), WRITES, "synth")
+    };
+    let out_format = format_of(&job.output)?;
+    let truth_format = job.truth.as_deref().map(format_of).transpose()?;
     let pool = crate::pipeline::thread_pool(job.threads)?;
     let start = Instant::now();
     let rgb: Vec<String> = ["R", "G", "B"].iter().map(|s| s.to_string()).collect();
@@ -576,6 +590,7 @@ pub fn synth(job: &SynthJob, progress: &(dyn Fn(usize, usize) + Sync)) -> Result
                 let strip = crate::pipeline::auto_strip_rows(iw, 3).max(s);
                 let spec = OutSpec {
                     path: &job.output,
+                    format: out_format,
                     w: iw,
                     h: ih,
                     names: &rgb,
@@ -587,6 +602,7 @@ pub fn synth(job: &SynthJob, progress: &(dyn Fn(usize, usize) + Sync)) -> Result
                 if let Some(t) = &job.truth {
                     let spec = OutSpec {
                         path: t,
+                        format: truth_format.unwrap_or(out_format),
                         w: sc.w,
                         h: sc.h,
                         strip: 64,
@@ -608,6 +624,7 @@ pub fn synth(job: &SynthJob, progress: &(dyn Fn(usize, usize) + Sync)) -> Result
                 let ints = [("spp", spp)];
                 let spec = OutSpec {
                     path: &job.output,
+                    format: out_format,
                     w: sc.w,
                     h: sc.h,
                     names: &names,
@@ -633,6 +650,7 @@ pub fn synth(job: &SynthJob, progress: &(dyn Fn(usize, usize) + Sync)) -> Result
                 if let Some(t) = &job.truth {
                     let spec = OutSpec {
                         path: t,
+                        format: truth_format.unwrap_or(out_format),
                         names: &rgb,
                         strip: 64,
                         ints: &[],

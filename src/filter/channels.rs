@@ -241,36 +241,94 @@ pub fn default_rule(name: &str, uint: bool) -> ChannelRule {
     ChannelRule::Average
 }
 
+/// Which view of a multi-view file a run writes, by OpenEXR's convention
+/// (`multiView`, the default view first): a channel of one name component
+/// (`R`) is the default view's; of more, its second-to-last component names
+/// its view when that is a view (`right.R`, `diffuse.right.R`), and
+/// otherwise it belongs to no view in particular (`diffuse.R`).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ViewScope {
+    /// The file's views, the default first (none: not a multi-view file).
+    pub views: Vec<String>,
+    /// The index of the view this run writes.
+    pub this: usize,
+    /// `--view all`: each view is a run of its own, so nothing of another
+    /// view is carried whatever the overrides, and channels of no view go
+    /// with the default view's run only.
+    pub exclusive: bool,
+}
+
+impl ViewScope {
+    /// The view of `name` (an index into `views`), if it has one.
+    pub fn view_of(&self, name: &str) -> Option<usize> {
+        let parts: Vec<&str> = name.split('.').collect();
+        match parts.as_slice() {
+            [] => None,
+            [_] => (!self.views.is_empty()).then_some(0),
+            [.., view, _] => self.views.iter().position(|v| v == view),
+        }
+    }
+
+    /// Whether `name` belongs to a view other than this run's.
+    pub fn excludes(&self, name: &str) -> bool {
+        if self.views.len() < 2 {
+            return false;
+        }
+        match self.view_of(name) {
+            Some(v) => v != self.this,
+            None => self.exclusive && self.this != 0,
+        }
+    }
+
+    /// The name of this run's view, if the file has views.
+    pub fn name(&self) -> Option<&str> {
+        self.views.get(self.this).map(String::as_str)
+    }
+}
+
 /// The rule for `name`: the last override that matches, else the default;
-/// by default the channels of a stereo file's other views (`right.R` where
-/// `multiView` names `left, right`) are dropped: a view is an image of its
-/// own, not a layer of the beauty's.
+/// the channels of a stereo file's other views (`right.R` where `multiView`
+/// names `left, right`) are dropped, unless an override keeps them in a
+/// single-view run: a view is an image of its own, not a layer of the
+/// beauty's.
 pub fn rule_for(
     name: &str,
     uint: bool,
     overrides: &[RuleOverride],
-    other_views: &[String],
+    scope: &ViewScope,
 ) -> ChannelRule {
-    overrides
-        .iter()
-        .rev()
-        .find(|o| o.matches(name))
-        .map_or_else(
-            || {
-                let view = name.split('.').next().unwrap_or("");
-                if name.contains('.') && other_views.iter().any(|v| v == view) {
-                    ChannelRule::Drop
-                } else {
-                    default_rule(name, uint)
-                }
-            },
-            |o| o.rule,
-        )
+    let given = overrides.iter().rev().find(|o| o.matches(name));
+    if scope.excludes(name) && (scope.exclusive || given.is_none()) {
+        return ChannelRule::Drop;
+    }
+    given.map_or_else(|| default_rule(name, uint), |o| o.rule)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn views_by_openexr_convention() {
+        let s = ViewScope {
+            views: vec!["left".into(), "right".into()],
+            this: 1,
+            exclusive: false,
+        };
+        assert_eq!(s.view_of("R"), Some(0));
+        assert_eq!(s.view_of("right.R"), Some(1));
+        assert_eq!(s.view_of("diffuse.right.R"), Some(1));
+        assert_eq!(s.view_of("left.R"), Some(0));
+        assert_eq!(s.view_of("diffuse.R"), None);
+        assert!(s.excludes("R") && s.excludes("diffuse.left.G"));
+        assert!(!s.excludes("right.G") && !s.excludes("diffuse.R"));
+        let exclusive = ViewScope {
+            exclusive: true,
+            ..s.clone()
+        };
+        assert!(exclusive.excludes("diffuse.R"));
+        assert!(!ViewScope::default().excludes("right.R"));
+    }
 
     #[test]
     fn defaults_by_name_and_type() {
@@ -331,19 +389,29 @@ mod tests {
             RuleOverride::parse("*=drop").unwrap(),
             RuleOverride::parse("mystery.*=additive").unwrap(),
         ];
-        assert_eq!(rule_for("mystery.R", false, &o, &[]), ChannelRule::Additive);
-        assert_eq!(rule_for("Z", false, &o, &[]), ChannelRule::Drop);
-        let right = ["right".to_string()];
-        assert_eq!(rule_for("right.R", false, &[], &right), ChannelRule::Drop);
+        let none = ViewScope::default();
         assert_eq!(
-            rule_for(
-                "right.R",
-                false,
-                &[RuleOverride::parse("right.*=average").unwrap()],
-                &right
-            ),
+            rule_for("mystery.R", false, &o, &none),
+            ChannelRule::Additive
+        );
+        assert_eq!(rule_for("Z", false, &o, &none), ChannelRule::Drop);
+        let stereo = ViewScope {
+            views: vec!["left".into(), "right".into()],
+            this: 0,
+            exclusive: false,
+        };
+        assert_eq!(rule_for("right.R", false, &[], &stereo), ChannelRule::Drop);
+        let keep = [RuleOverride::parse("right.*=average").unwrap()];
+        assert_eq!(
+            rule_for("right.R", false, &keep, &stereo),
             ChannelRule::Average
         );
+        // --view all: another view's channel is never carried.
+        let all = ViewScope {
+            exclusive: true,
+            ..stereo.clone()
+        };
+        assert_eq!(rule_for("right.R", false, &keep, &all), ChannelRule::Drop);
         assert!(RuleOverride::parse("nope").is_err());
         assert!(RuleOverride::parse("a=blur").is_err());
         assert!(RuleOverride::parse("[=drop").is_err());

@@ -228,6 +228,31 @@ impl FilterParams {
         v
     }
 
+    /// Whether this method, at this S, reads the setting of the command-line
+    /// option `option` (its long name, `-` or `_` between words): an option
+    /// it does not read is worth a warning, since the user expected it to
+    /// change something.
+    pub fn reads(&self, option: &str) -> bool {
+        use Method::*;
+        let m = self.method;
+        // ep-gauss at S = 1 reads ep-box's statistics for its carriers rule.
+        let carriers = m == EpBox || (m == EpGauss && self.supersample == 1);
+        match option.replace('-', "_").as_str() {
+            "tolerance" | "support" | "support_ratio" | "width_step" | "coarse_from" => {
+                m == EpGauss
+            }
+            "radius" | "cutoff" => matches!(m, EpGauss | Gauss | Clamp),
+            "max_radius" => matches!(m, EpGauss | EpBox),
+            "clamp" => m == Clamp,
+            "alpha" => m == AlphaTrim,
+            "guard" => matches!(m, EpBox | EpGauss),
+            "d" | "nmid" | "confidence" | "ltvis" | "passes" | "guard_confidence" => m == EpBox,
+            "carriers" | "carriers_fraction" | "carriers_rse" | "variance_channel"
+            | "variance_kind" | "spp" | "spp_channel" => carriers,
+            _ => true,
+        }
+    }
+
     /// Defaults for `method` at super-sampling `s` (radius 0.6 as Radiance's
     /// `pfilt -r`, cut-off 3 radii (the Gaussian has fallen to e^-9 = 1.2e-4),
     /// max radius 16, width step 10%).

@@ -94,8 +94,14 @@ impl Destination {
                 ),
             )),
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-                // A new name, or a link to one: create the link's target.
+                // A new name, or a link to one: create the link's target,
+                // in a folder that must exist.
                 let target = follow_links(path)?;
+                if let Some(dir) = target.parent().filter(|d| !d.as_os_str().is_empty()) {
+                    if !dir.is_dir() {
+                        return Err(refuse(dir, "the output folder does not exist"));
+                    }
+                }
                 Ok(Destination::File { named, target })
             }
             Err(e) => Err(Error::io(path, e)),

@@ -15,14 +15,25 @@ pub struct MappedFile {
 }
 
 impl MappedFile {
-    /// Map `path` read-only, with sequential read-ahead advice.
+    /// Map `path` read-only, with sequential read-ahead advice; `-` is
+    /// standard input ([`super::stdin`]), which must hold an OpenEXR file or
+    /// a Radiance picture.
     pub fn open(path: &Path) -> Result<Self> {
-        let file = File::open(path).map_err(|e| Error::io(path, e))?;
+        let stdin = super::stdin::is_stdin(path);
+        let file = if stdin {
+            super::stdin::file()?
+        } else {
+            File::open(path).map_err(|e| Error::io(path, e))?
+        };
         let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
         if len == 0 {
             return Err(Error::InvalidFile {
                 path: path.into(),
-                reason: "the file is empty".into(),
+                reason: if stdin {
+                    "standard input is empty".into()
+                } else {
+                    "the file is empty".into()
+                },
             });
         }
         // SAFETY: the map is read-only and private to this process. epfilt
@@ -33,6 +44,18 @@ impl MappedFile {
         // every mmap-based tool).
         let map = unsafe { Mmap::map(&file) }.map_err(|e| Error::io(path, e))?;
         let _ = map.advise(Advice::Sequential);
+        if stdin
+            && !matches!(
+                super::Format::sniff(&map),
+                Some(super::Format::Exr | super::Format::Rgbe)
+            )
+        {
+            return Err(Error::InvalidFile {
+                path: path.into(),
+                reason: "standard input holds neither an OpenEXR file nor a Radiance picture"
+                    .into(),
+            });
+        }
         Ok(MappedFile { map })
     }
 

@@ -7,30 +7,50 @@
 //!   decoder allocates them;
 //! * [`destination`]: output paths checked (links written through, `-` for
 //!   standard output, devices refused) and written through temporary files;
+//! * [`format`]: which format an output is written in (its extension, or
+//!   `--format`), never by accident; [`stdin`]: `-` as an input;
+//! * [`provenance`]: the fingerprint of input and settings every output
+//!   records, the band attributes, and the check that an existing output is
+//!   complete; [`views`]: multi-view files, and `--view all`'s output;
+//! * [`info`]: what a file holds, as text or JSON, and its raw attributes;
 //! * [`writer`]: a [`crate::pipeline::Sink`] that builds scan-line blocks,
 //!   compresses them in parallel and writes them with the chunk writer into a
 //!   temporary file in the destination directory.
 
 pub mod chunk_sizes;
 pub mod destination;
+pub mod format;
 pub mod info;
 pub mod mapped;
 pub mod output;
 pub mod parts;
+pub mod provenance;
 pub mod reader;
 pub mod rgbe;
+pub mod stdin;
 pub mod variance;
+pub mod views;
 pub mod writer;
 pub mod zip;
 
 pub use destination::{write_file, Destination, Staged};
+pub use format::Format;
 pub use info::info;
-pub use reader::{ExrInput, PartSelect};
+pub use reader::{ExrInput, PartSelect, Selection, ViewSelect};
 pub use variance::{find_stats, SppFrom, StatsChannels, StatsRequest};
 pub use writer::{ExrOutput, OutputSettings};
 
 use exr::meta::attribute::Chromaticities;
 use exr::prelude::Compression;
+
+/// The format of an input file by its first bytes (`-`: standard input).
+pub fn input_format(path: &std::path::Path) -> crate::Result<Format> {
+    let map = mapped::MappedFile::open(path)?;
+    Ok(match Format::sniff(map.bytes()) {
+        Some(Format::Rgbe) => Format::Rgbe,
+        _ => Format::Exr,
+    })
+}
 
 /// Luminance weights (the Y row of the RGB→XYZ matrix) of a file's
 /// chromaticities; Rec. 709 / sRGB primaries when absent or degenerate.

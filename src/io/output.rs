@@ -1,11 +1,11 @@
-//! The output of a filter run, whatever its format: an OpenEXR file, or a
-//! Radiance picture when the output's name ends in `.hdr`, `.pic` or `.rgbe`.
+//! The output of a filter run, whatever its format: an OpenEXR file or a
+//! Radiance picture ([`super::Format`], chosen by the caller).
 
 use std::path::Path;
 
 use exr::meta::header::Header;
 
-use super::rgbe::{is_rgbe_path, RgbeOutput};
+use super::rgbe::RgbeOutput;
 use super::{ExrOutput, OutputSettings};
 use crate::error::{Error, Result};
 use crate::pipeline::{Precision, Sink};
@@ -19,12 +19,15 @@ pub enum Output {
 }
 
 impl Output {
-    /// Start the output of a run at `dest`: S x S input samples per pixel of
+    /// Start the output of a run at `dest`, a Radiance picture when `rgbe`
+    /// (else OpenEXR): S x S input samples per pixel of
     /// an input described by `input_header` (and `rgbe_lines`, the header
     /// lines of a Radiance input, kept in a Radiance output); the first
     /// `beauty` of `channels` are the filtered colour.
+    #[allow(clippy::too_many_arguments)]
     pub fn create(
         dest: &Path,
+        rgbe: bool,
         input_header: &Header,
         s: usize,
         channels: &[String],
@@ -32,7 +35,7 @@ impl Output {
         settings: &OutputSettings,
         rgbe_lines: &[String],
     ) -> Result<Self> {
-        if !is_rgbe_path(dest) {
+        if !rgbe {
             return Ok(Output::Exr(Box::new(ExrOutput::create(
                 dest,
                 input_header,
@@ -67,7 +70,13 @@ impl Output {
         let software = settings.software();
         let (w, h) = (input_header.layer_size.0 / s, input_header.layer_size.1 / s);
         Ok(Output::Rgbe(Box::new(RgbeOutput::create(
-            dest, w, h, xyze, rgbe_lines, &software,
+            dest,
+            w,
+            h,
+            xyze,
+            rgbe_lines,
+            &settings.extra,
+            &software,
         )?)))
     }
 

@@ -66,6 +66,22 @@ impl PartSelect {
     }
 }
 
+/// Which image of a file a command reads (`--part`, `--layer`).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Selection {
+    /// The part of a multi-part file.
+    pub part: Option<PartSelect>,
+    /// The layer whose R, G, B (or Y) channels are the image.
+    pub layer: Option<String>,
+}
+
+impl Selection {
+    /// Open `path` as selected ([`ExrInput::open_layer`]).
+    pub fn open(&self, path: &Path) -> Result<ExrInput> {
+        ExrInput::open_layer(path, self.part.as_ref(), self.layer.as_deref())
+    }
+}
+
 #[derive(Clone, Debug)]
 struct BlockRow {
     y0: usize,
@@ -161,6 +177,75 @@ fn read_tables(
     let tables = MetaData::read_offset_tables(read, &meta.headers)
         .map_err(|e| Error::from_exr(path, e, "offset table"))?;
     Ok((tables.into_vec(), read.byte_position()))
+}
+
+/// The headers of the EXR file `bytes`, where its pixel data starts (past
+/// the offset tables) and the tables.
+pub(crate) fn parse_layout(path: &Path, bytes: &[u8]) -> Result<(MetaData, usize, Vec<Vec<u64>>)> {
+    let mut read = PeekRead::new(Tracking::new(bytes));
+    let meta = parse_headers_from(path, &mut read)?;
+    let (tables, start) = read_tables(path, bytes, &mut read, &meta)?;
+    Ok((meta, start, tables))
+}
+
+/// Check that the EXR file `bytes` is whole: every chunk its offset tables
+/// name lies in the file, its leader fits, names the right part and claims
+/// no more bytes than the file has (a file cut short, or one whose writer
+/// never filled in a block, fails). Deep parts are not checked.
+pub(crate) fn check_chunks(path: &Path, bytes: &[u8]) -> Result<(MetaData, Vec<Vec<u64>>)> {
+    let (meta, start, tables) = parse_layout(path, bytes)?;
+    let multi = meta.headers.len() > 1;
+    let i32_at = |at: usize| {
+        bytes
+            .get(at..at + 4)
+            .map(|b| i32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    };
+    for (part, (h, table)) in meta.headers.iter().zip(&tables).enumerate() {
+        if h.deep {
+            continue;
+        }
+        // Leader: [part] y size (scan lines) or [part] x y lx ly size (tiles).
+        let words = match h.blocks {
+            exr::meta::BlockDescription::ScanLines => 1,
+            exr::meta::BlockDescription::Tiles(_) => 4,
+        } + usize::from(multi);
+        for (k, &offset) in table.iter().enumerate() {
+            let missing = || {
+                invalid(
+                    path,
+                    format!("block {k} of part {part} is missing or cut short"),
+                )
+            };
+            let at = usize::try_from(offset).map_err(|_| missing())?;
+            if at < start || at >= bytes.len() {
+                return Err(missing());
+            }
+            if multi && i32_at(at) != Some(part as i32) {
+                return Err(missing());
+            }
+            let size = i32_at(at + 4 * words).ok_or_else(missing)?;
+            let end = usize::try_from(size)
+                .ok()
+                .and_then(|s| (at + 4 * words + 4).checked_add(s))
+                .ok_or_else(missing)?;
+            if end > bytes.len() {
+                return Err(missing());
+            }
+        }
+    }
+    Ok((meta, tables))
+}
+
+/// A text attribute of a header (the part's own custom attributes).
+pub(crate) fn text_attribute(h: &Header, name: &str) -> Option<String> {
+    match h
+        .own_attributes
+        .other
+        .get(&exr::meta::attribute::Text::from(name))
+    {
+        Some(exr::meta::attribute::AttributeValue::Text(t)) => Some(t.to_string()),
+        _ => None,
+    }
 }
 
 /// The headers, checked, of the EXR file `bytes`.
@@ -517,8 +602,26 @@ impl ExrInput {
     /// `ViewLayer.Combined`; by default the unlayered channels, else a layer
     /// named as the beauty, else the only layer with colour).
     pub fn open_layer(path: &Path, part: Option<&PartSelect>, layer: Option<&str>) -> Result<Self> {
+        Self::open_view(path, part, layer, None)
+    }
+
+    /// [`ExrInput::open_layer`] of one view of a multi-view file: its
+    /// colour channels are `layer.view.R` (`view.R` without a layer; the
+    /// default view's are named as without views).
+    pub fn open_view(
+        path: &Path,
+        part: Option<&PartSelect>,
+        layer: Option<&str>,
+        view: Option<&str>,
+    ) -> Result<Self> {
         let map = MappedFile::open(path)?;
         if super::rgbe::is_rgbe(map.bytes()) {
+            if let Some(v) = view {
+                return Err(Error::Config(format!(
+                    "{}: a Radiance picture has no views (--view {v:?})",
+                    path.display()
+                )));
+            }
             return Self::open_rgbe(path, map, part, layer);
         }
         let bytes = map.bytes();
@@ -602,7 +705,15 @@ impl ExrInput {
                 format!("{:?} compression", header.compression),
             ));
         }
-        let (selected, dropped) = choose_channels(path, header, layer)?;
+        let scope = view_scope(path, header, view, false)?;
+        let view_layer = match (scope.name(), layer) {
+            (Some(v), l) if scope.this > 0 => Some(match l {
+                Some(l) => format!("{}.{v}", l.trim_end_matches('.')),
+                None => v.to_string(),
+            }),
+            _ => layer.map(str::to_string),
+        };
+        let (selected, dropped) = choose_channels(path, header, view_layer.as_deref())?;
 
         // Level-0 block rows in increasing y, with checked offsets.
         let table = &tables[part];
@@ -1078,17 +1189,65 @@ fn convert(t: SampleType, src: &[u8], dst: &mut [f32]) -> std::result::Result<()
     Ok(())
 }
 
-/// The views of a stereo file beside its default one (the first `multiView`
-/// name): their channels are images of their own, not the beauty's layers.
-pub(crate) fn other_views(header: &Header) -> Vec<String> {
+/// The views of a multi-view file (`multiView`), the default first; empty
+/// for a file without views.
+pub(crate) fn views(header: &Header) -> Vec<String> {
     header
         .own_attributes
         .multi_view_names
         .iter()
         .flatten()
-        .skip(1)
         .map(|t| t.to_string())
         .collect()
+}
+
+/// Which view of a multi-view file to filter (`--view`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum ViewSelect {
+    /// One view, by name.
+    Name(String),
+    /// Every view, each filtered as its own image, into one output.
+    All,
+}
+
+impl ViewSelect {
+    /// Parse `--view`: `all`, or a view's name.
+    pub fn parse(s: &str) -> Self {
+        match s {
+            "all" => ViewSelect::All,
+            name => ViewSelect::Name(name.to_string()),
+        }
+    }
+}
+
+/// The view a run of `header`'s part writes: `view` by name, or the
+/// default; an unknown name is refused with the file's views.
+pub fn view_scope(
+    path: &Path,
+    header: &Header,
+    view: Option<&str>,
+    exclusive: bool,
+) -> Result<crate::filter::channels::ViewScope> {
+    let views = views(header);
+    let this = match view {
+        None => 0,
+        Some(v) => views.iter().position(|n| n == v).ok_or_else(|| {
+            Error::Config(format!(
+                "{}: --view {v:?}: {}",
+                path.display(),
+                if views.is_empty() {
+                    "the file has no views (no multiView attribute)".to_string()
+                } else {
+                    format!("its views are {}", views.join(", "))
+                }
+            ))
+        })?,
+    };
+    Ok(crate::filter::channels::ViewScope {
+        views,
+        this,
+        exclusive,
+    })
 }
 
 pub(crate) fn base_name(name: &str) -> &str {

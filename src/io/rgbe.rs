@@ -65,8 +65,12 @@ pub struct RgbeHeader {
     /// `PRIMARIES= rx ry gx gy bx by wx wy`, when given.
     pub primaries: Option<[f64; 8]>,
     /// The header lines kept on output (all but the first, `FORMAT=`,
-    /// `EXPOSURE=`, `COLORCORR=` and `SOFTWARE=`).
+    /// `EXPOSURE=`, `COLORCORR=`, `SOFTWARE=` and epfilt's own).
     pub lines: Vec<String>,
+    /// epfilt's own variables (`epfiltFingerprint=`, `epfiltBand=`...): what
+    /// a picture epfilt wrote records of how it was made
+    /// ([`super::provenance`]); not carried into an output.
+    pub epfilt: Vec<(String, String)>,
     /// Byte offset of the first scanline.
     pub data: usize,
 }
@@ -94,6 +98,7 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<RgbeHeader> {
     let mut scale = [1.0f64; 3];
     let mut primaries = None;
     let mut lines = Vec::new();
+    let mut epfilt = Vec::new();
     for line in text.lines().skip(1) {
         let num = |s: &str| -> Result<Vec<f64>> {
             s.split_whitespace()
@@ -140,6 +145,11 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<RgbeHeader> {
             }
         } else if line.starts_with("SOFTWARE=") {
             // Replaced by ours on output.
+        } else if let Some((name, value)) = line
+            .split_once('=')
+            .filter(|(n, _)| n.starts_with("epfilt"))
+        {
+            epfilt.push((name.to_string(), value.to_string()));
         } else {
             if let Some(p) = line.strip_prefix("PRIMARIES=") {
                 let v = num(p)?;
@@ -187,6 +197,7 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<RgbeHeader> {
         scale,
         primaries,
         lines,
+        epfilt,
         data: end + 2 + nl + 1,
     })
 }
@@ -435,12 +446,23 @@ pub fn write_scanline(pixels: &[[u8; 4]], out: &mut Vec<u8>, comp: &mut Vec<u8>)
     }
 }
 
-/// The header text of a written picture.
-pub fn header_text(w: usize, h: usize, xyze: bool, lines: &[String], software: &str) -> String {
+/// The header text of a written picture: the kept `lines`, epfilt's own
+/// variables `extra` (`name=value`), then `SOFTWARE=` and `FORMAT=`.
+pub fn header_text(
+    w: usize,
+    h: usize,
+    xyze: bool,
+    lines: &[String],
+    extra: &[(String, String)],
+    software: &str,
+) -> String {
     let mut s = String::from("#?RADIANCE\n");
     for l in lines {
         s.push_str(l);
         s.push('\n');
+    }
+    for (name, value) in extra {
+        s.push_str(&format!("{name}={value}\n"));
     }
     s.push_str(&format!("SOFTWARE={software}\n"));
     s.push_str(if xyze {
@@ -472,13 +494,14 @@ pub struct RgbeOutput {
 
 impl RgbeOutput {
     /// Start a `w` x `h` picture at `dest` (checked as every output is) with
-    /// these header lines.
+    /// these header lines and epfilt's own variables.
     pub fn create(
         dest: &Path,
         w: usize,
         h: usize,
         xyze: bool,
         lines: &[String],
+        extra: &[(String, String)],
         software: &str,
     ) -> Result<Self> {
         let staged = super::Staged::new(dest, ".hdr.tmp")?;
@@ -487,7 +510,7 @@ impl RgbeOutput {
             .try_clone()
             .map_err(|e| Error::io(staged.path(), e))?;
         let mut out = BufWriter::with_capacity(1 << 20, file);
-        out.write_all(header_text(w, h, xyze, lines, software).as_bytes())
+        out.write_all(header_text(w, h, xyze, lines, extra, software).as_bytes())
             .map_err(|e| Error::io(dest, e))?;
         Ok(RgbeOutput {
             dest: dest.into(),
@@ -606,7 +629,7 @@ mod tests {
         px: impl Fn(usize, usize) -> [f32; 3],
     ) -> (Vec<u8>, Vec<[u8; 4]>) {
         let mut bytes =
-            header_text(w, h, false, &["VIEW= -vtv -vh 45".into()], "test").into_bytes();
+            header_text(w, h, false, &["VIEW= -vtv -vh 45".into()], &[], "test").into_bytes();
         let mut all = Vec::new();
         let (mut line, mut comp) = (Vec::new(), Vec::new());
         for y in 0..h {

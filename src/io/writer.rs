@@ -323,6 +323,10 @@ impl ExrOutput {
         // in hash-map order, so one more of them would make the file's bytes
         // differ from run to run.
         own.software_name = Some(Text::from(settings.software().as_str()));
+        // What an input that epfilt wrote records of its own making is not
+        // this output's ([`super::provenance`]).
+        own.other
+            .retain(|k, _| !k.to_string().starts_with("epfilt"));
         for (k, v) in &settings.extra {
             own.other.insert(
                 Text::from(k.as_str()),

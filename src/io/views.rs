@@ -1,0 +1,126 @@
+//! Multi-view (stereo) files: their views, and one output put together from
+//! the runs that filtered each view as an image of its own (`--view all`).
+//!
+//! OpenEXR keeps the views of a single-part stereo file in one channel list
+//! (`R`, `G`, `B` of the default view, `right.R`... of the others; the
+//! `multiView` attribute lists them, the default first). Each view is a
+//! different picture, so `--view all` filters each with its own noise
+//! decisions into a file of its own, and this module copies their channels,
+//! value for value, into one file with the input's `multiView`.
+
+use std::path::{Path, PathBuf};
+
+use exr::meta::attribute::{ChannelDescription, ChannelList, Text};
+use exr::prelude::SmallVec;
+
+use super::{ExrInput, OutputSettings, PartSelect};
+use crate::error::{Error, Result};
+use crate::filter::channels::ChannelRule;
+use crate::pipeline::{Sink, Source, Strip};
+
+/// Rows copied at once.
+const STRIP_ROWS: usize = 64;
+
+/// The views of `path`'s part (`multiView`, the default first); empty when
+/// it has none.
+pub fn of(path: &Path, part: Option<&PartSelect>) -> Result<Vec<String>> {
+    let input = ExrInput::open(path, part)?;
+    Ok(super::reader::views(input.header()))
+}
+
+/// Write `dest` with every channel of `sources` (each a file and the layer
+/// of its colour: its view's, `None` for the default view), in that order,
+/// values as they are, under the first source's header attributes with
+/// `views` as its `multiView` and `fingerprint` recorded.
+pub fn assemble(
+    sources: &[(PathBuf, Option<String>)],
+    dest: &Path,
+    views: &[String],
+    fingerprint: &str,
+) -> Result<()> {
+    let mut inputs = Vec::with_capacity(sources.len());
+    for (path, layer) in sources {
+        let mut input = ExrInput::open_layer(path, None, layer.as_deref())?;
+        // Every channel, as it is (ids stay whole numbers).
+        input.carry_channels(|_, uint| {
+            if uint {
+                ChannelRule::Nearest
+            } else {
+                ChannelRule::Average
+            }
+        });
+        inputs.push(input);
+    }
+    let first = inputs
+        .first()
+        .ok_or_else(|| Error::Internal("no view to put together".into()))?;
+    let size = first.size();
+    if let Some(odd) = inputs.iter().find(|i| i.size() != size) {
+        return Err(Error::Internal(format!(
+            "{}: a view's size differs from the others'",
+            odd.path().display()
+        )));
+    }
+    let names: Vec<String> = inputs.iter().flat_map(|i| i.channels()).collect();
+    let mut header = first.header().clone();
+    let mut list: Vec<ChannelDescription> = inputs
+        .iter()
+        .flat_map(|i| i.header().channels.list.iter().cloned())
+        .collect();
+    list.sort_by(|a, b| a.name.cmp(&b.name));
+    header.channels = ChannelList::new(SmallVec::from_vec(list));
+    header.own_attributes.multi_view_names =
+        Some(views.iter().map(|v| Text::from(v.as_str())).collect());
+    // The settings the first view's run recorded, and that it was every view.
+    let software = header
+        .own_attributes
+        .software_name
+        .as_ref()
+        .map(|s| s.to_string())
+        .unwrap_or_default();
+    let prefix = format!("epfilt {} (", env!("CARGO_PKG_VERSION"));
+    let provenance = software
+        .strip_prefix(&prefix)
+        .and_then(|s| s.strip_suffix(')'))
+        .map(|s| format!("{s} view=all"));
+    let settings = OutputSettings {
+        compression: None,
+        precision: None,
+        allow_lossy: false,
+        provenance,
+        extra: vec![(super::provenance::FINGERPRINT.into(), fingerprint.into())],
+    };
+    let mut out = super::ExrOutput::create(dest, &header, 1, &names, 0, &settings)?;
+    let (w, h) = size;
+    let mut sources: Vec<_> = inputs
+        .iter()
+        .map(|i| (i.source(), i.channels().len()))
+        .collect();
+    let nch = names.len();
+    let mut y = 0;
+    let mut rows_buf = Vec::new();
+    while y < h {
+        let n = STRIP_ROWS.min(h - y);
+        let strips: Vec<(Strip, usize)> = sources
+            .iter_mut()
+            .map(|(src, k)| {
+                let strip = src
+                    .next_strip(n)?
+                    .filter(|s| s.rows == n)
+                    .ok_or_else(|| Error::Internal("a view ended early".into()))?;
+                Ok((strip, *k))
+            })
+            .collect::<Result<_>>()?;
+        rows_buf.clear();
+        rows_buf.reserve(n * nch * w);
+        for r in 0..n {
+            for (strip, k) in &strips {
+                rows_buf.extend_from_slice(&strip.data[r * k * w..(r + 1) * k * w]);
+            }
+        }
+        out.write_rows(y, n, &rows_buf)?;
+        y += n;
+    }
+    out.finish()?;
+    out.commit()
+}
