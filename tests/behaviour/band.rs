@@ -195,7 +195,7 @@ fn merge_refuses_incomplete_or_foreign_bands_and_band_refuses_what_cannot_merge(
         (vec![p("a1.exr"), p("a3.exr"), p("out.exr")], "cover"),
         (
             vec![p("a1.exr"), p("b2.exr"), p("a3.exr"), p("out.exr")],
-            "same command",
+            "b2.exr: band 2/3 was made with other settings",
         ),
         (vec![p("in.exr"), p("out.exr")], "not a band"),
         (

@@ -95,11 +95,12 @@ fn errors_are_one_line_naming_the_file() {
         FAILURE,
         "nope.exr",
     );
+    // A missing output folder: one usage error, as for a sequence.
     let nodir = dir.path().join("no/such/dir/out.exr");
     one_line_error(
         &epfilt(&["filter", &inp, nodir.to_str().unwrap()]),
-        FAILURE,
-        "no/such/dir",
+        USAGE,
+        "no/such/dir: the output folder does not exist",
     );
     one_line_error(
         &epfilt(&["filter", &inp, "x.exr", "-s", "9"]),
@@ -410,7 +411,8 @@ fn a_link_output_is_written_through_and_stays_a_link() {
             if existing {
                 std::fs::write(&real, b"old").unwrap();
             }
-            let link = dir.path().join(format!("link{k}{existing}"));
+            let ext = ["exr", "json", "png", "exr"][k];
+            let link = dir.path().join(format!("link{k}{existing}.{ext}"));
             std::os::unix::fs::symlink(&real, &link).unwrap();
             let args = &writers(&inp, dir.path(), link.to_str().unwrap())[*args_of];
             let args: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
@@ -716,7 +718,7 @@ fn a_size_not_a_multiple_of_s_is_refused_with_the_options_or_cropped() {
         let rep = d.join("r.json");
         filter_at_edge(&full_path, &out, &rep, s, method, "crop", "cropped");
         assert!(
-            std::fs::read(&out).unwrap() == std::fs::read(&expected).unwrap(),
+            crate::common::image_bytes(&out) == crate::common::image_bytes(&expected),
             "{method} S={s}: cropping differs from filtering the cropped image"
         );
         let json = read_json(&rep);
@@ -868,4 +870,139 @@ fn a_padded_edge_keeps_flat_fields_flat_and_energy_exact() {
         "pad",
     ]);
     one_line_error(&o, USAGE, "--edge crop");
+}
+
+#[test]
+fn completions_and_a_man_page_come_from_the_command_line_definition() {
+    for shell in ["bash", "zsh", "fish"] {
+        let text = epfilt_ok(&["completions", shell]);
+        assert!(
+            text.len() > 1000 && text.contains("filter") && text.contains("skip-existing"),
+            "{shell}: {} bytes",
+            text.len()
+        );
+    }
+    let man = epfilt_ok(&["man"]);
+    assert!(man.starts_with(".ie") || man.contains(".TH"), "{man:.200}");
+    assert!(
+        man.contains("epfilt") && man.contains("filter"),
+        "{man:.200}"
+    );
+    let o = epfilt(&["completions", "tcsh"]);
+    assert_eq!(o.status.code(), Some(USAGE));
+}
+
+#[test]
+fn filter_help_is_grouped_under_headings_with_examples() {
+    let text = epfilt_ok(&["filter", "--help"]);
+    for heading in [
+        "Input:",
+        "Method:",
+        "ep-gauss:",
+        "ep-box:",
+        "Channels:",
+        "Output:",
+        "Farm:",
+        "Performance:",
+        "Examples:",
+    ] {
+        assert!(text.contains(heading), "no {heading}: {text}");
+    }
+    assert!(text.contains("EPFILT_THREADS") && text.contains("EPFILT_MAX_MEMORY"));
+}
+
+#[test]
+fn an_option_the_method_ignores_and_too_many_threads_are_warnings() {
+    let dir = tmpdir();
+    let inp = input(dir.path());
+    let out = dir.path().join("o.exr");
+    let o = epfilt(&[
+        "filter",
+        &inp,
+        out.to_str().unwrap(),
+        "-q",
+        "--method",
+        "box",
+        "--tolerance",
+        "0.2",
+        "--d",
+        "3",
+        "--threads",
+        "100000",
+    ]);
+    assert!(o.status.success(), "{o:?}");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("warning: --tolerance has no effect with --method box"),
+        "{err}"
+    );
+    assert!(err.contains("--d has no effect"), "{err}");
+    assert!(err.contains("--threads 100000 is more than"), "{err}");
+    // The method's own options are silent; so are the environment's
+    // defaults when they fit.
+    let o = Command::new(env!("CARGO_BIN_EXE_epfilt"))
+        .args([
+            "filter",
+            &inp,
+            out.to_str().unwrap(),
+            "-q",
+            "--tolerance",
+            "0.2",
+        ])
+        .env("EPFILT_THREADS", "1")
+        .output()
+        .unwrap();
+    assert!(o.status.success() && o.stderr.is_empty(), "{o:?}");
+}
+
+#[test]
+fn the_environment_sets_defaults_under_the_flags() {
+    let dir = tmpdir();
+    let inp = input(dir.path());
+    let out = dir.path().join("o.exr");
+    let rep = dir.path().join("r.json");
+    let run = |env: &[(&str, &str)], extra: &[&str]| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_epfilt"));
+        c.args(["filter", &inp, out.to_str().unwrap(), "-q", "--report"])
+            .arg(&rep)
+            .args(extra);
+        for (k, v) in env {
+            c.env(k, v);
+        }
+        c.output().unwrap()
+    };
+    let o = run(&[("EPFILT_THREADS", "1")], &[]);
+    assert!(o.status.success(), "{o:?}");
+    assert_eq!(read_json(&rep)["threads"], 1);
+    let o = run(&[("EPFILT_THREADS", "1")], &["--threads", "2"]);
+    assert!(o.status.success(), "{o:?}");
+    assert_eq!(read_json(&rep)["threads"], 2, "the flag wins");
+    // A memory limit too small for the job is refused, naming the option.
+    let o = run(&[("EPFILT_MAX_MEMORY", "0")], &[]);
+    one_line_error(&o, USAGE, "--max-memory");
+}
+
+#[test]
+fn info_lists_every_attribute_and_speaks_json() {
+    let f = crate::corpus::data_dir().join("MultiResolution/ColorCodedLevels.exr");
+    let text = epfilt_ok(&["info", f.to_str().unwrap(), "--attributes"]);
+    for needle in [
+        "attributes:",
+        "channels (chlist): ",
+        "compression (compression): pxr24",
+        "dataWindow (box2i): (0, 0) - (511, 511)",
+        "tiles (tiledesc): 64x64",
+    ] {
+        assert!(text.contains(needle), "no {needle:?}: {text}");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&epfilt_ok(&["info", f.to_str().unwrap(), "--json"])).unwrap();
+    assert_eq!(json["format"], "exr");
+    assert_eq!(json["parts"][0]["width"], 512);
+    assert_eq!(json["parts"][0]["compression"], "pxr24");
+    assert_eq!(json["parts"][0]["filtered"][0], "R");
+    assert_eq!(
+        json["parts"][0]["attributes"]["lineOrder"][1],
+        "increasing y"
+    );
 }

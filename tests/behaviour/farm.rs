@@ -330,9 +330,10 @@ fn without_frames_the_frames_on_disk_and_aws_batch_arrays() {
     assert_eq!(done, vec![3, 7, 8, 20]);
     outputs_match_single_runs(d, &out_dir, [3, 7, 8, 20]);
 
-    // One file: --skip-existing leaves an existing output as it is.
+    // One file: --skip-existing leaves a complete output of this input and
+    // these settings as it is, and redoes anything else, saying why.
     let existing = out_dir.join("beauty.0003.exr");
-    std::fs::write(&existing, b"kept").unwrap();
+    let done = std::fs::read(&existing).unwrap();
     let out = epfilt(
         &[
             "filter",
@@ -344,7 +345,20 @@ fn without_frames_the_frames_on_disk_and_aws_batch_arrays() {
     );
     assert!(out.status.success(), "{out:?}");
     assert!(String::from_utf8_lossy(&out.stderr).contains("exists, skipped"));
-    assert_eq!(std::fs::read(&existing).unwrap(), b"kept");
+    assert_eq!(std::fs::read(&existing).unwrap(), done);
+    std::fs::write(&existing, b"kept").unwrap();
+    let out = epfilt(
+        &[
+            "filter",
+            d.join("beauty.0003.exr").to_str().unwrap(),
+            existing.to_str().unwrap(),
+            "--skip-existing",
+        ],
+        &[],
+    );
+    assert!(out.status.success(), "{out:?}");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("redone"));
+    assert_eq!(std::fs::read(&existing).unwrap(), done);
 }
 
 #[test]
@@ -405,4 +419,36 @@ fn sequence_usage_errors_are_one_line_and_exit_2() {
         assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
         assert!(err.contains(needle), "{args:?}: {err}");
     }
+}
+
+/// `scripts/slurm-ci`'s status when it skips (no Slurm, or not root).
+const SKIPPED: i32 = 77;
+
+#[test]
+fn a_real_slurm_cluster_runs_the_frame_array_and_the_band_merge() {
+    // The script starts a one-node cluster on 127.0.0.1 (.ci/run installs
+    // Slurm first), submits docs/farm/slurm-array.sh as an 8-task array and
+    // docs/farm/slurm-bands.sh + slurm-merge.sh as a 4-band array with an
+    // afterok merge, and compares every output with a single run.
+    let script = script_path("scripts/slurm-ci");
+    let out = command(
+        "bash",
+        &[
+            script.display().to_string(),
+            "--bin".into(),
+            env!("CARGO_BIN_EXE_epfilt").into(),
+        ],
+        &[],
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    eprintln!("{}", text.trim());
+    if out.status.code() == Some(SKIPPED) {
+        return;
+    }
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(text.contains("slurm-ci: passed"), "{text}");
 }

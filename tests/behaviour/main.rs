@@ -6,6 +6,7 @@ mod cli;
 mod common;
 mod corpus;
 mod damaged;
+mod data_safety;
 mod energy;
 mod ep_box;
 mod exr_io;

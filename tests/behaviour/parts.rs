@@ -15,7 +15,7 @@ use crate::exr_io::{job, tmpdir, write_flat};
 /// make_generated.py`): 0 RGB float PIZ, 1 Y half tiled ZIP in decreasing
 /// line order, 2 a uint `id` (no colour) with its data window at (-10, -20),
 /// 3 RGBA half DWAB.
-const MULTI: &str = "tests/data/exr/generated/multipart_mixed_4parts.exr";
+pub const MULTI: &str = "tests/data/exr/generated/multipart_mixed_4parts.exr";
 
 /// Every channel of every part, by part name, as read by the `exr` crate:
 /// (sample type, the samples' bits).

@@ -188,6 +188,7 @@ fn same_seed_same_bytes_at_any_thread_count() {
                     variance: true,
                     compression: Compression::ZIP16,
                     threads,
+                    format: None,
                 },
                 &|_, _| {},
             )
