@@ -81,10 +81,29 @@ fn dot4(a: &[f64], b: &[f64]) -> f64 {
     (l[0] + l[1]) + (l[2] + l[3]) + tail
 }
 
+/// [`dot4`] of f64 weights with f32 values (the box luminance is stored in
+/// f32: half the bytes for the search to read; every sum is in f64).
+#[inline]
+fn dot4_f32(a: &[f64], b: &[f32]) -> f64 {
+    let mut l = [0.0f64; 4];
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for k in 0..4 {
+            l[k] += x[k] * y[k] as f64;
+        }
+    }
+    let mut tail = 0.0;
+    for (x, y) in ra.iter().zip(rb) {
+        tail += x * *y as f64;
+    }
+    (l[0] + l[1]) + (l[2] + l[3]) + tail
+}
+
 /// Radius of the average's support in units of `rho`, at most the kernel's
 /// cutoff: the disc of `AVG_CUTOFF rho` holds all but `e^-6.25 = 0.2%` of a
 /// 2-D Gaussian's weight, and reading it costs 0.54x the square of `3 rho`.
-pub const AVG_CUTOFF: f64 = 2.5;
+pub const AVG_CUTOFF: f64 = 2.25;
 
 /// The average's support radius for kernel cutoff `cutoff`, in `rho`.
 pub fn avg_cutoff(cutoff: f64) -> f64 {
@@ -215,7 +234,7 @@ impl Folded {
             let dn = (dy > 0).then(|| rows.row(cy + dy as i64));
             let mut out = &mut self.f[dy * self.stride + have..dy * self.stride + need];
             if have == 0 {
-                out[0] = up[cx] + dn.map_or(0.0, |d| d[cx]);
+                out[0] = up[cx] as f64 + dn.map_or(0.0, |d| d[cx] as f64);
                 out = &mut out[1..];
             }
             // dx = a..=span: the right side forwards, the left side backwards.
@@ -226,12 +245,12 @@ impl Folded {
             }
             let (ur, ul) = (&up[cx + a..=cx + span], &up[cx - span..=cx - a]);
             for ((o, &r), &l) in out.iter_mut().zip(ur).zip(ul.iter().rev()) {
-                *o = r + l;
+                *o = r as f64 + l as f64;
             }
             if let Some(dn) = dn {
                 let (dr, dl) = (&dn[cx + a..=cx + span], &dn[cx - span..=cx - a]);
                 for ((o, &r), &l) in out.iter_mut().zip(dr).zip(dl.iter().rev()) {
-                    *o += r + l;
+                    *o += r as f64 + l as f64;
                 }
             }
         }
@@ -271,11 +290,14 @@ pub struct Choice {
 }
 
 /// Access to rows of box luminance, mirrored at the borders and padded by
-/// [`EpGauss::pad`] columns on each side.
+/// [`EpGauss::pad`] columns on each side. The values are f32 (the mean of a
+/// pixel's samples, computed in f64 and rounded once): the search reads them
+/// by the hundred million, and half the bytes is what it waits for; every
+/// average over them is summed in f64.
 pub trait LumRows {
     /// Row for virtual pixel row `vy` (any integer; the implementor mirrors it).
     /// Index `x + pad` holds virtual column `x`.
-    fn row(&self, vy: i64) -> &[f64];
+    fn row(&self, vy: i64) -> &[f32];
 }
 
 /// An in-memory field of box luminance with mirrored rows and padded,
@@ -284,7 +306,7 @@ pub trait LumRows {
 #[derive(Clone, Debug)]
 pub struct LumImage {
     h: usize,
-    rows: Vec<Vec<f64>>,
+    rows: Vec<Vec<f32>>,
 }
 
 impl LumImage {
@@ -294,7 +316,7 @@ impl LumImage {
         let rows = (0..h)
             .map(|y| {
                 (0..w + 2 * pad)
-                    .map(|i| f(crate::geometry::mirror(i as i64 - pad as i64, w), y))
+                    .map(|i| f(crate::geometry::mirror(i as i64 - pad as i64, w), y) as f32)
                     .collect()
             })
             .collect();
@@ -303,7 +325,7 @@ impl LumImage {
 }
 
 impl LumRows for LumImage {
-    fn row(&self, vy: i64) -> &[f64] {
+    fn row(&self, vy: i64) -> &[f32] {
         &self.rows[crate::geometry::mirror(vy, self.h)]
     }
 }
@@ -484,7 +506,7 @@ impl EpGauss {
             let r = rows.row(cy + k as i64 - c);
             let sp = lv.span[(k as i64 - c).unsigned_abs() as usize] as i64;
             let g = &lv.g1[(c - sp) as usize..=(c + sp) as usize];
-            acc += gy * dot4(g, &r[(cx - sp) as usize..=(cx + sp) as usize]);
+            acc += gy * dot4_f32(g, &r[(cx - sp) as usize..=(cx + sp) as usize]);
         }
         acc / lv.norm
     }
@@ -527,7 +549,7 @@ impl EpGauss {
             let sp = lv.span[k.abs_diff(c)];
             for (dx, &g) in lv.g1.iter().enumerate().take(c + sp + 1).skip(c - sp) {
                 for (hv, &v) in h.iter_mut().zip(&r[pad + dx - c..pad + dx - c + w]) {
-                    *hv += g * v;
+                    *hv += g * v as f64;
                 }
             }
             for (o, &hv) in out.iter_mut().zip(h.iter()) {
@@ -545,6 +567,13 @@ impl EpGauss {
     #[inline]
     pub fn bounds(&self, xbar: f64) -> Option<(f64, f64)> {
         (xbar > 0.0 && xbar.is_finite()).then_some((self.t_hi * xbar, self.t_lo * xbar))
+    }
+
+    /// Only samples brighter than their neighbourhood can be noise: the
+    /// dark side of Relation 14 (`t_lo`) is off.
+    pub fn bright_only(mut self) -> Self {
+        self.t_lo = f64::NEG_INFINITY;
+        self
     }
 
     /// Whether a sample can fail the test by being too dark (`t_lo > 0`:
@@ -697,7 +726,12 @@ impl EpGauss {
     /// without the sample stayed what it is at level `l` (`xbar` there).
     fn level_for_weight(&self, x0: f64, xbar: f64, l: usize) -> Option<usize> {
         let lv = &self.levels[l];
-        let bg = (xbar - lv.w0 * x0) * lv.inv_1mw0;
+        self.level_for_background(x0, (xbar - lv.w0 * x0) * lv.inv_1mw0)
+    }
+
+    /// The narrowest level whose `w0` meets the tolerance against
+    /// background `bg` (Relations 12-14: `D = (x0/bg - 1) w0`).
+    fn level_for_background(&self, x0: f64, bg: f64) -> Option<usize> {
         if !(bg > 0.0) || !(x0 > bg) {
             return None;
         }
@@ -728,32 +762,98 @@ impl EpGauss {
 /// of it: comparable in brightness, as parts of one feature are, where
 /// fireflies' heavy-tailed magnitudes rarely are. `min = 0` is the paper's
 /// rule as written.
+///
+/// **Compact pairs** (`compact > 0`): a sample with fewer than `min` but at
+/// least one such neighbour is kept too when the group is compact: at most
+/// `compact` samples within [`SUPPORT_REACH`] of it (itself included) fail
+/// the same test. A bulb a fraction of a pixel wide is two or three hot
+/// samples with nothing like them around; two fireflies that happen to touch
+/// lie among others like them (a caustic, a glossy floor, the halo of a
+/// light), which the count sees.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Support {
     min: usize,
     ratio: f64,
+    compact: usize,
+    over: f64,
+    level: f64,
+    region: usize,
 }
 
+/// Chebyshev reach, in super-samples, of the compact-pair count of
+/// [`Support`]: the 5 x 5 samples about a sample.
+pub const SUPPORT_REACH: usize = 2;
+
 impl Support {
-    /// At least `min` supporting neighbours within a factor `ratio`.
-    pub fn new(min: usize, ratio: f64) -> Self {
-        Support { min, ratio }
+    /// At least `min` supporting neighbours within a factor `ratio`; with
+    /// `compact > 0`, one is enough where at most `compact` samples within
+    /// [`SUPPORT_REACH`] fail the test.
+    pub fn new(min: usize, ratio: f64, compact: usize) -> Self {
+        Support {
+            min,
+            ratio,
+            compact,
+            over: 0.0,
+            level: 0.0,
+            region: 0,
+        }
+    }
+
+    /// A bright sample is kept too when at least `region` of its 8
+    /// neighbours are above `level` times its pixel's base average (and
+    /// within `ratio` of it): grain inside a bright feature (a glossy
+    /// highlight at a few samples per pixel), not a firefly on a dark
+    /// ground (`region = 0`: off).
+    pub fn with_region(mut self, region: usize, level: f64) -> Self {
+        self.region = region;
+        self.level = level;
+        self
+    }
+
+    /// A compact group is kept only when its sample is at least `over`
+    /// times the background about it (the median box luminance of the eight
+    /// pixels around its own, which the group's own pixels cannot move): a
+    /// bulb is hundreds to thousands of times its room, two fireflies that
+    /// touch rarely are.
+    pub fn with_over(mut self, over: f64) -> Self {
+        self.over = over;
+        self
+    }
+
+    /// Super-sample rows either side the rule reads.
+    pub fn reach(&self) -> usize {
+        if (self.compact > 0 && self.min > 1) || self.region > 0 {
+            SUPPORT_REACH
+        } else {
+            1
+        }
     }
 
     /// Whether a noisy sample of luminance `x0` (above `hi` or below `lo`)
     /// is kept as a feature; `neighbour(di, dj)` gives the luminance of the
-    /// sample at that offset, `None` outside the image.
+    /// sample at that offset (`|di|, |dj| <= reach()`), `None` outside the
+    /// image.
     #[inline]
+    #[allow(clippy::too_many_arguments)]
     pub fn keeps(
         &self,
         x0: f64,
+        xbar: f64,
         hi: f64,
         lo: f64,
         neighbour: impl Fn(i64, i64) -> Option<f64>,
+        background: impl FnOnce() -> f64,
     ) -> bool {
         if self.min == 0 {
             return false;
         }
+        let same = |v: f64| {
+            if x0 > hi {
+                v > hi && v * self.ratio >= x0
+            } else {
+                v > 0.0 && v < lo && v <= x0 * self.ratio
+            }
+        };
         let mut n = 0;
         for dj in -1..=1 {
             for di in -1..=1 {
@@ -761,18 +861,53 @@ impl Support {
                     continue;
                 }
                 let Some(v) = neighbour(di, dj) else { continue };
-                let same = if x0 > hi {
-                    v > hi && v * self.ratio >= x0
-                } else {
-                    v > 0.0 && v < lo && v <= x0 * self.ratio
-                };
-                n += usize::from(same);
+                n += usize::from(same(v));
                 if n >= self.min {
                     return true;
                 }
             }
         }
-        false
+        if self.region > 0 && x0 > hi && x0 <= self.level * xbar {
+            // Grain inside a bright feature: many samples within 2 of it
+            // are comparable to it (within `level` of it and above the
+            // pixel's average), where a firefly's are not.
+            let floor = xbar.max(x0 / self.level);
+            let r = SUPPORT_REACH as i64;
+            let mut count = 0;
+            for dj in -r..=r {
+                for di in -r..=r {
+                    if (di != 0 || dj != 0) && neighbour(di, dj).is_some_and(|v| v > floor) {
+                        count += 1;
+                        if count >= self.region {
+                            return true;
+                        }
+                    }
+                }
+            }
+        }
+        if n == 0 || self.compact == 0 || !(x0 > hi) {
+            return false;
+        }
+        if self.over > 0.0 && !(x0 >= self.over * background()) {
+            return false;
+        }
+        // Fewer than `min` neighbours: a compact group only.
+        let r = SUPPORT_REACH as i64;
+        let mut count = 1; // itself
+        for dj in -r..=r {
+            for di in -r..=r {
+                if di == 0 && dj == 0 {
+                    continue;
+                }
+                if neighbour(di, dj).is_some_and(|v| v > hi && v * self.ratio >= x0) {
+                    count += 1;
+                    if count > self.compact {
+                        return false;
+                    }
+                }
+            }
+        }
+        true
     }
 }
 
@@ -890,7 +1025,8 @@ mod tests {
                     continue;
                 }
                 let g = (-((dx * dx + dy * dy) as f64) / (lv.rho * lv.rho)).exp();
-                num += g * f.row(py as i64 + dy)[(px as i64 + ep.pad() as i64 + dx) as usize];
+                num +=
+                    g * f.row(py as i64 + dy)[(px as i64 + ep.pad() as i64 + dx) as usize] as f64;
                 den += g;
             }
         }
@@ -1180,7 +1316,7 @@ mod tests {
     #[test]
     fn support_keeps_samples_with_comparable_noisy_neighbours() {
         let (hi, lo) = (10.0, f64::NEG_INFINITY);
-        let rule = Support::new(1, 16.0);
+        let rule = Support::new(1, 16.0, 0);
         let field = |hot: &'static [((i64, i64), f64)]| {
             move |di: i64, dj: i64| -> Option<f64> {
                 Some(
@@ -1191,24 +1327,45 @@ mod tests {
             }
         };
         // Alone: a firefly.
-        assert!(!rule.keeps(1000.0, hi, lo, field(&[])));
+        assert!(!rule.keeps(1000.0, 1.0, hi, lo, field(&[]), || 1.0));
         // A neighbour above the same bound and within 16x: a feature.
-        assert!(rule.keeps(1000.0, hi, lo, field(&[((1, 1), 300.0)])));
+        assert!(rule.keeps(1000.0, 1.0, hi, lo, field(&[((1, 1), 300.0)]), || 1.0));
         // Above the bound but 100x dimmer: a faint firefly beside a bright one.
-        assert!(!rule.keeps(1000.0, hi, lo, field(&[((0, 1), 11.0)])));
+        assert!(!rule.keeps(1000.0, 1.0, hi, lo, field(&[((0, 1), 11.0)]), || 1.0));
         // Within 16x but below the bound: not noisy, no support.
-        assert!(!rule.keeps(100.0, 200.0, lo, field(&[((0, 1), 150.0)])));
+        assert!(!rule.keeps(100.0, 1.0, 200.0, lo, field(&[((0, 1), 150.0)]), || 1.0));
         // Outside the image counts for nothing.
-        assert!(!rule.keeps(1000.0, hi, lo, |_, _| None));
+        assert!(!rule.keeps(1000.0, 1.0, hi, lo, |_, _| None, || 1.0));
         // Two needed.
-        let two = Support::new(2, 16.0);
-        assert!(!two.keeps(1000.0, hi, lo, field(&[((1, 0), 900.0)])));
-        assert!(two.keeps(1000.0, hi, lo, field(&[((1, 0), 900.0), ((-1, 0), 800.0)])));
+        let two = Support::new(2, 16.0, 0);
+        assert!(!two.keeps(1000.0, 1.0, hi, lo, field(&[((1, 0), 900.0)]), || 1.0));
+        assert!(two.keeps(
+            1000.0,
+            1.0,
+            hi,
+            lo,
+            field(&[((1, 0), 900.0), ((-1, 0), 800.0)]),
+            || 1.0
+        ));
         // 0: the paper's rule, never kept.
-        assert!(!Support::new(0, 16.0).keeps(1000.0, hi, lo, field(&[((1, 0), 900.0)])));
+        assert!(!Support::new(0, 16.0, 0).keeps(
+            1000.0,
+            1.0,
+            hi,
+            lo,
+            field(&[((1, 0), 900.0)]),
+            || 1.0
+        ));
         // The dark side: a sample far below its pixel's average, with a
         // neighbour as dark.
-        assert!(rule.keeps(0.1, f64::INFINITY, 0.5, field(&[((1, 0), 0.2)])));
+        assert!(rule.keeps(
+            0.1,
+            1.0,
+            f64::INFINITY,
+            0.5,
+            field(&[((1, 0), 0.2)]),
+            || 1.0
+        ));
     }
 
     #[test]

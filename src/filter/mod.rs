@@ -90,16 +90,146 @@ impl Method {
     }
 }
 
+/// The exponent of the power law through the paper's two tolerances (0.25 at
+/// S = 3, 0.15 at S = 4, §5.2): a tolerance `t` at S = 3 is `t (3/S)^1.776`
+/// at S, following the expected relative deviation of a pixel average
+/// shrinking as S grows.
+pub const TOLERANCE_EXPONENT: f64 = 1.775_693_214_568_475;
+
 /// The paper's tolerance for S x S super-sampling: 0.25 at S = 3 and 0.15 at
 /// S = 4 (§5.2). Between and beyond, the power law through those two points,
-/// `0.25 * (3/S)^1.776`, which follows the expected relative deviation of a
-/// pixel average shrinking as S grows (S = 2: 0.51, S = 8: 0.044).
+/// `0.25 * (3/S)^1.776` (S = 2: 0.51, S = 8: 0.044). The defaults of
+/// ep-gauss are [`Quality::Default`]'s, which scale the same way.
 pub fn default_tolerance(s: usize) -> f64 {
+    scaled_tolerance(0.25, s)
+}
+
+/// A tolerance `t3` given at S = 3, at S (the paper's pair exactly at 3, 4).
+pub fn scaled_tolerance(t3: f64, s: usize) -> f64 {
     match s {
-        3 => 0.25,
-        4 => 0.15,
-        _ => 0.25 * (3.0 / s as f64).powf((0.25f64 / 0.15).ln() / (4.0f64 / 3.0).ln()),
+        3 => t3,
+        4 if t3 == 0.25 => 0.15,
+        _ => t3 * (3.0 / s.max(1) as f64).powf(TOLERANCE_EXPONENT),
     }
+}
+
+/// A named point on ep-gauss's speed/accuracy front (`--quality`), chosen on
+/// real renders (`scripts/eval-renders --sweep`, `docs/pareto.md`): each is a
+/// set of knob values, which the other options override one by one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Quality {
+    /// The fastest point that still removes most of the noise.
+    Fast,
+    /// The knee of the front: the defaults.
+    Default,
+    /// The least error, at a higher cost.
+    Best,
+}
+
+impl Quality {
+    /// Every preset, fastest first.
+    pub const ALL: [Quality; 3] = [Quality::Fast, Quality::Default, Quality::Best];
+
+    /// The name `--quality` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Quality::Fast => "fast",
+            Quality::Default => "default",
+            Quality::Best => "best",
+        }
+    }
+
+    /// Parse `--quality`.
+    pub fn parse(s: &str) -> Result<Self> {
+        match s {
+            "fast" => Ok(Quality::Fast),
+            "default" => Ok(Quality::Default),
+            "best" => Ok(Quality::Best),
+            other => Err(Error::Config(format!(
+                "--quality {other:?}: fast, default or best"
+            ))),
+        }
+    }
+
+    /// The preset's knob values in words, as `--help` prints them.
+    pub fn describe(self) -> String {
+        let k = self.knobs();
+        format!(
+            "--tolerance {} (at S = 3) --support {} --support-ratio {} --support-compact {} --support-over {} --support-region {} --support-level {} --radius {} --cutoff {}",
+            k.tolerance,
+            k.support,
+            k.support_ratio,
+            k.support_compact,
+            k.support_over,
+            k.support_region,
+            k.support_level,
+            k.radius,
+            k.cutoff
+        )
+    }
+
+    /// The preset's knobs: tolerance (at S = 3; scaled with S), support,
+    /// support ratio, compact pairs, base radius and cut-off.
+    pub fn knobs(self) -> Knobs {
+        match self {
+            Quality::Fast => Knobs {
+                tolerance: 0.25,
+                support: 1,
+                support_ratio: 16.0,
+                support_compact: 0,
+                support_over: 0.0,
+                support_region: 0,
+                support_level: 4.0,
+                radius: 0.6,
+                cutoff: 3.0,
+            },
+            Quality::Default => Knobs {
+                tolerance: 0.08,
+                support: 2,
+                support_ratio: 16.0,
+                support_compact: 2,
+                support_over: 150.0,
+                support_region: 8,
+                support_level: 4.0,
+                radius: 0.6,
+                cutoff: 3.0,
+            },
+            Quality::Best => Knobs {
+                tolerance: 0.25,
+                support: 1,
+                support_ratio: 16.0,
+                support_compact: 0,
+                support_over: 0.0,
+                support_region: 0,
+                support_level: 4.0,
+                radius: 0.6,
+                cutoff: 3.0,
+            },
+        }
+    }
+}
+
+/// The knob values of a [`Quality`] preset.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Knobs {
+    /// Relation 14 tolerance at S = 3.
+    pub tolerance: f64,
+    /// [`FilterParams::support`].
+    pub support: usize,
+    /// [`FilterParams::support_ratio`].
+    pub support_ratio: f64,
+    /// [`FilterParams::support_compact`].
+    pub support_compact: usize,
+    /// [`FilterParams::support_over`].
+    pub support_over: f64,
+    /// [`FilterParams::support_region`].
+    pub support_region: usize,
+    /// [`FilterParams::support_level`].
+    pub support_level: f64,
+    /// [`FilterParams::radius`].
+    pub radius: f64,
+    /// [`FilterParams::cutoff`].
+    pub cutoff: f64,
 }
 
 /// The halo of a job from its settings alone (no kernels built): what the
@@ -173,9 +303,26 @@ pub struct FilterParams {
     pub support: usize,
     /// ep-gauss: neighbours support a sample when within this factor of it.
     pub support_ratio: f64,
+    /// ep-gauss: a sample with one supporting neighbour (fewer than
+    /// `support`) is kept when at most this many samples around it fail the
+    /// test: a compact pair ([`ep_gauss::Support`]; 0: off).
+    pub support_compact: usize,
+    /// ep-gauss: a compact pair is kept only when its sample is at least this
+    /// many times the mean box luminance of the eight pixels about its own
+    /// (0: any).
+    pub support_over: f64,
+    /// ep-gauss: a bright sample is kept when at least this many of its
+    /// neighbours are above `support_level` times its pixel's base average
+    /// (grain inside a bright feature; 0: off).
+    pub support_region: usize,
+    /// See `support_region`.
+    pub support_level: f64,
     /// ep-gauss: widths of this radius (output pixels) and more are spread
     /// on the 2x coarser grid ([`kernel::Coarse`]); 0: none.
     pub coarse_from: f64,
+    /// The preset the knobs came from (`--quality`); options given one by
+    /// one override its values.
+    pub quality: Quality,
 }
 
 impl FilterParams {
@@ -189,6 +336,7 @@ impl FilterParams {
         ];
         match self.method {
             Method::EpGauss => v.extend([
+                ("quality", json!(self.quality.name())),
                 ("tolerance", json!(self.tolerance)),
                 ("radius", json!(self.radius)),
                 ("max_radius", json!(self.max_radius)),
@@ -196,6 +344,10 @@ impl FilterParams {
                 ("width_step", json!(self.width_step)),
                 ("support", json!(self.support)),
                 ("support_ratio", json!(self.support_ratio)),
+                ("support_compact", json!(self.support_compact)),
+                ("support_over", json!(self.support_over)),
+                ("support_region", json!(self.support_region)),
+                ("support_level", json!(self.support_level)),
                 ("coarse_from", json!(self.coarse_from)),
             ]),
             Method::Gauss => v.extend([
@@ -238,7 +390,8 @@ impl FilterParams {
         // ep-gauss at S = 1 reads ep-box's statistics for its carriers rule.
         let carriers = m == EpBox || (m == EpGauss && self.supersample == 1);
         match option.replace('-', "_").as_str() {
-            "tolerance" | "support" | "support_ratio" | "width_step" | "coarse_from" => {
+            "tolerance" | "support" | "support_ratio" | "support_compact" | "support_over"
+            | "support_region" | "support_level" | "width_step" | "coarse_from" | "quality" => {
                 m == EpGauss
             }
             "radius" | "cutoff" => matches!(m, EpGauss | Gauss | Clamp),
@@ -251,6 +404,47 @@ impl FilterParams {
             | "variance_kind" | "spp" | "spp_channel" => carriers,
             _ => true,
         }
+    }
+
+    /// `self` with the knobs of preset `q` (tolerance scaled to this S).
+    pub fn with_quality(mut self, q: Quality) -> Self {
+        let k = q.knobs();
+        self.quality = q;
+        self.tolerance = scaled_tolerance(k.tolerance, self.supersample);
+        // At S = 1 a neighbour is a whole pixel: a feature one pixel wide (a
+        // caustic's line, a thin highlight) gives each of its pixels at most
+        // two, and the carriers rule tells fireflies apart there
+        // (docs/DESIGN.md): one neighbour is enough.
+        self.support = if self.supersample == 1 {
+            k.support.min(1)
+        } else {
+            k.support
+        };
+        self.support_ratio = k.support_ratio;
+        self.support_compact = k.support_compact;
+        self.support_over = k.support_over;
+        self.support_region = k.support_region;
+        self.support_level = k.support_level;
+        self.radius = k.radius;
+        self.cutoff = k.cutoff;
+        self
+    }
+
+    /// The preset's knob values as `(option, value)`, tolerance at S = 3:
+    /// what `--quality` sets, for reports and the sweep.
+    pub fn quality_settings(&self) -> Vec<(&'static str, String)> {
+        let k = self.quality.knobs();
+        vec![
+            ("tolerance", k.tolerance.to_string()),
+            ("support", k.support.to_string()),
+            ("support_ratio", k.support_ratio.to_string()),
+            ("support_compact", k.support_compact.to_string()),
+            ("support_over", k.support_over.to_string()),
+            ("support_region", k.support_region.to_string()),
+            ("support_level", k.support_level.to_string()),
+            ("radius", k.radius.to_string()),
+            ("cutoff", k.cutoff.to_string()),
+        ]
     }
 
     /// Defaults for `method` at super-sampling `s` (radius 0.6 as Radiance's
@@ -274,7 +468,23 @@ impl FilterParams {
             alpha: 0.25,
             support: 1,
             support_ratio: 16.0,
+            support_compact: 0,
+            support_over: 0.0,
+            support_region: 0,
+            support_level: 4.0,
             coarse_from: DEFAULT_COARSE_FROM,
+            quality: Quality::Default,
+        }
+        .with_quality_if(method == Method::EpGauss)
+    }
+
+    /// ep-gauss's defaults are [`Quality::Default`]'s knobs; the base radius
+    /// and cut-off of the other methods stay 0.6 and 3.
+    fn with_quality_if(self, ep_gauss: bool) -> Self {
+        if ep_gauss {
+            self.with_quality(Quality::Default)
+        } else {
+            self
         }
     }
 
@@ -325,6 +535,30 @@ impl FilterParams {
             return bad(format!(
                 "--clamp must be a finite number >= 0, got {}",
                 self.clamp
+            ));
+        }
+        if self.support_compact > 25 {
+            return bad(format!(
+                "--support-compact must be 0..=25 samples, got {}",
+                self.support_compact
+            ));
+        }
+        if self.support_region > 24 {
+            return bad(format!(
+                "--support-region must be 0..=24 samples, got {}",
+                self.support_region
+            ));
+        }
+        if !(self.support_over.is_finite() && self.support_over >= 0.0) {
+            return bad(format!(
+                "--support-over must be a number >= 0, got {}",
+                self.support_over
+            ));
+        }
+        if !(self.support_level.is_finite() && self.support_level >= 1.0) {
+            return bad(format!(
+                "--support-level must be a number >= 1, got {}",
+                self.support_level
             ));
         }
         if self.support > 8 {

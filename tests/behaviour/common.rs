@@ -251,7 +251,7 @@ pub fn reference(img: &Img, s: usize, p: &FilterParams, lum: &[f64]) -> (Vec<f64
     };
     let lum_at =
         |i: usize, j: usize| -> f64 { (0..img.nch).map(|c| lum[c] * img.at(i, j, c) as f64).sum() };
-    // Box luminance per output pixel.
+    // Box luminance per output pixel, stored in f32 as the engine stores it.
     let mut ybox = vec![0.0; w * h];
     for y in 0..h {
         for x in 0..w {
@@ -261,7 +261,7 @@ pub fn reference(img: &Img, s: usize, p: &FilterParams, lum: &[f64]) -> (Vec<f64
                     acc += lum_at(i, j);
                 }
             }
-            ybox[y * w + x] = acc / (s * s) as f64;
+            ybox[y * w + x] = (acc / (s * s) as f64) as f32 as f64;
         }
     }
     let ladder: Vec<f64> = if p.method == Method::EpGauss {
@@ -330,26 +330,53 @@ pub fn reference(img: &Img, s: usize, p: &FilterParams, lum: &[f64]) -> (Vec<f64
                 let x0 = lum_at(i, j);
                 let (xb, w0) = xbar_w0(px, py, ladder[0]);
                 let noisy = |v: f64| v > 0.0 && xb > 0.0 && relation14(v / xb, w0) > p.tolerance;
-                // The support rule: noisy (brighter) neighbouring samples
-                // within the ratio keep it at the base width.
-                let mut support = 0;
-                for dj in -1i64..=1 {
-                    for di in -1i64..=1 {
-                        let (ni, nj) = (i as i64 + di, j as i64 + dj);
-                        if (di, dj) == (0, 0) || ni < 0 || nj < 0 {
-                            continue;
-                        }
-                        let (ni, nj) = (ni as usize, nj as usize);
-                        if ni >= img.w || nj >= img.h {
-                            continue;
-                        }
-                        let v = lum_at(ni, nj);
-                        if v > xb && noisy(v) && v * p.support_ratio >= x0 {
-                            support += 1;
+                // Samples within Chebyshev distance r of this one, in the
+                // image, and their luminance.
+                let around = |r: i64| {
+                    let mut out = Vec::new();
+                    for dj in -r..=r {
+                        for di in -r..=r {
+                            let (ni, nj) = (i as i64 + di, j as i64 + dj);
+                            if (di, dj) == (0, 0) || ni < 0 || nj < 0 {
+                                continue;
+                            }
+                            let (ni, nj) = (ni as usize, nj as usize);
+                            if ni < img.w && nj < img.h {
+                                out.push(lum_at(ni, nj));
+                            }
                         }
                     }
-                }
-                let kept = p.support > 0 && support >= p.support;
+                    out
+                };
+                // The support rule: noisy (brighter) neighbouring samples
+                // within the ratio keep it at the base width.
+                let same = |v: f64| v > xb && noisy(v) && v * p.support_ratio >= x0;
+                let support = around(1).into_iter().filter(|&v| same(v)).count();
+                // Grain inside a bright feature: comparable samples within 2.
+                let region = p.support_region > 0
+                    && x0 <= p.support_level * xb
+                    && around(2)
+                        .into_iter()
+                        .filter(|&v| v > xb.max(x0 / p.support_level))
+                        .count()
+                        >= p.support_region;
+                // A compact pair: one neighbour, few like it within 2, and far
+                // above the median of the eight pixels about its own.
+                let compact = p.support_compact > 0 && support >= 1 && {
+                    let mut ring: Vec<f64> = (-1i64..=1)
+                        .flat_map(|dy| (-1i64..=1).map(move |dx| (dx, dy)))
+                        .filter(|&d| d != (0, 0))
+                        .map(|(dx, dy)| {
+                            ybox[mirror(py as i64 + dy, h) * w + mirror(px as i64 + dx, w)]
+                        })
+                        .collect();
+                    ring.sort_by(f64::total_cmp);
+                    x0 >= p.support_over * ring[4]
+                        // At most `support_compact` with itself.
+                        && around(2).into_iter().filter(|&v| same(v)).count()
+                            < p.support_compact
+                };
+                let kept = p.support > 0 && (support >= p.support || region || compact);
                 if x0 > xb && noisy(x0) && !kept {
                     rho = *ladder.last().unwrap();
                     for &r in &ladder[1..] {

@@ -287,12 +287,15 @@ fn wide_fireflies_on_the_coarse_grid_keep_energy_influence_and_bits() {
     // Relation 14 with the coarse grids: one firefly whose width is on the
     // 2x grid (radius about 3 px at S = 3), one on the 4x grid (about 7 px),
     // influences no output pixel beyond the tolerance, as at full resolution.
+    // The magnitudes put the widths on those grids at tolerance 0.25 (a
+    // lower tolerance widens both).
     let s = 3;
     for (mag, four) in [(60.0f32, false), (300.0, true)] {
         let mut img = Img::new(60 * s, 60 * s, 1, |_, _, _| 1.0);
         let (i, j) = (30 * s + 1, 30 * s);
         img.set(i, j, 0, mag);
-        let p = params(Method::EpGauss, s);
+        let mut p = params(Method::EpGauss, s);
+        p.tolerance = 0.25;
         let (with, stats) = run(&img, s, &p, &PipelineConfig::default());
         assert_eq!(stats.eg().coarse, 1, "{mag}: {:?}", stats.eg());
         assert_eq!(

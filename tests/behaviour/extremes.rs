@@ -134,15 +134,24 @@ fn zero_tolerance_spreads_every_varying_sample_to_the_cap_and_a_huge_one_equals_
     let mut p = params(Method::EpGauss, s);
     p.tolerance = 0.0;
     p.max_radius = 2.0;
-    let (_, stats) = run(&img, s, &p, &PipelineConfig::default());
-    // Every sample whose luminance differs from its pixel average is noisy, and
-    // none can meet a zero tolerance: all capped but those kept as features
-    // (noisy neighbours support them).
+    // The paper's rule (`--support 0`, both sides of Relation 14): every
+    // sample whose luminance differs from its average is noisy, and none can
+    // meet a zero tolerance: all capped.
+    let mut paper = p.clone();
+    paper.support = 0;
+    let (_, stats) = run(&img, s, &paper, &PipelineConfig::default());
     assert!(
         stats.eg().noisy > (45 * 30 / 2) as u64,
         "noisy {}",
         stats.eg().noisy
     );
+    assert_eq!(stats.eg().capped, stats.eg().noisy);
+    assert!(stats.ledger.iter().all(|l| l.rel_error <= ENERGY_TOL));
+    // The defaults: only samples brighter than their average are noisy (at
+    // least every firefly), all capped but those kept as features.
+    let fireflies = (45.0f64 * 30.0 * 0.02).ceil() as u64;
+    let (_, stats) = run(&img, s, &p, &PipelineConfig::default());
+    assert!(stats.eg().noisy >= fireflies, "{:?}", stats.eg());
     assert!(stats.eg().kept > 0);
     assert_eq!(stats.eg().capped + stats.eg().kept, stats.eg().noisy);
     assert!(stats.ledger.iter().all(|l| l.rel_error <= ENERGY_TOL));

@@ -279,16 +279,17 @@ pub struct FilterArgs {
     /// and alpha-trim.
     #[arg(long, default_value = "ep-gauss", help_heading = "Method")]
     pub method: String,
-    /// Base Gaussian radius in output pixels (weight exp(-(d/r)^2)): ep-gauss, gauss, clamp.
-    #[arg(long, default_value_t = 0.6, help_heading = "Method")]
-    pub radius: f64,
+    /// Base Gaussian radius in output pixels (weight exp(-(d/r)^2)): ep-gauss,
+    /// gauss, clamp [default: 0.6; ep-gauss: its --quality's].
+    #[arg(long, help_heading = "Method")]
+    pub radius: Option<f64>,
     /// Largest Gaussian radius a noisy sample may get, in output pixels
     /// (ep-box: the largest spread radius, in pixels) [default: 16; ep-box: 8].
     #[arg(long, help_heading = "Method")]
     pub max_radius: Option<f64>,
-    /// Kernel cut-off in radii.
-    #[arg(long, default_value_t = 3.0, help_heading = "Method")]
-    pub cutoff: f64,
+    /// Kernel cut-off in radii [default: 3; ep-gauss: its --quality's].
+    #[arg(long, help_heading = "Method")]
+    pub cutoff: Option<f64>,
     /// What keeps real features from being spread. ep-box: all (default:
     /// carriers + range + stderr), carriers, range, stderr, both (range +
     /// stderr), none (§5.1 as written). ep-gauss: none (§5.2 as written)
@@ -303,19 +304,50 @@ pub struct FilterArgs {
     pub alpha: f64,
 
     // ---- ep-gauss ----
-    /// Relation 14 tolerance [default: 0.25 at S=3, 0.15 at S=4; 0.25*(3/S)^1.776 otherwise].
+    /// A point on ep-gauss's speed/accuracy front (docs/pareto.md): a set of
+    /// the knob values below, which each given option overrides.
+    #[arg(long, value_name = "fast|default|best", help_heading = "ep-gauss",
+          long_help = quality_help())]
+    pub quality: Option<String>,
+    /// Relation 14 tolerance, at this S [default: --quality's, given at S = 3
+    /// and scaled as 0.25 at 3 is to 0.15 at 4: t*(3/S)^1.776].
     #[arg(long, help_heading = "ep-gauss")]
     pub tolerance: Option<f64>,
     /// A noisy sample with at least this many noisy neighbouring
     /// super-samples (within --support-ratio of it) is a feature and keeps the
     /// base kernel; at S = 1 on a file with variance, so does a pixel whose
     /// mean enough samples carry (ep-box's carriers rule and --carriers*
-    /// settings). 0 = the paper's rule, neither.
-    #[arg(long, default_value_t = 1, help_heading = "ep-gauss")]
-    pub support: usize,
-    /// Neighbours support a sample when within this factor of its luminance.
-    #[arg(long, default_value_t = 16.0, help_heading = "ep-gauss")]
-    pub support_ratio: f64,
+    /// settings). 0 = the paper's rule, neither [default: --quality's].
+    #[arg(long, help_heading = "ep-gauss")]
+    pub support: Option<usize>,
+    /// Neighbours support a sample when within this factor of its luminance
+    /// [default: --quality's].
+    #[arg(long, help_heading = "ep-gauss")]
+    pub support_ratio: Option<f64>,
+    /// A sample with one supporting neighbour (fewer than --support) is kept
+    /// when at most this many super-samples within 2 of it fail the test: a
+    /// compact pair, a bulb a fraction of a pixel wide (0 = off) [default:
+    /// --quality's].
+    #[arg(long, help_heading = "ep-gauss")]
+    pub support_compact: Option<usize>,
+    /// ... and when it is at least this many times the median box luminance
+    /// of the eight pixels about its own: a bulb is hundreds of times its
+    /// room, two fireflies that touch rarely are (0 = any) [default:
+    /// --quality's].
+    #[arg(long, help_heading = "ep-gauss")]
+    pub support_over: Option<f64>,
+    /// A bright sample with fewer than --support noisy neighbours is kept too
+    /// when at least this many super-samples within 2 of it are comparable:
+    /// above its pixel's average and within --support-level of it (grain
+    /// inside a glossy highlight, not a firefly on a dark ground; 0 = off)
+    /// [default: --quality's].
+    #[arg(long, help_heading = "ep-gauss")]
+    pub support_region: Option<usize>,
+    /// See --support-region: comparable is within this factor of the sample,
+    /// which is itself at most this many times its pixel's average
+    /// [default: --quality's].
+    #[arg(long, help_heading = "ep-gauss")]
+    pub support_level: Option<f64>,
     /// Relative step of the ladder of widths the search picks from (its precision).
     #[arg(long, default_value_t = 0.1, help_heading = "ep-gauss")]
     pub width_step: f64,
@@ -456,9 +488,27 @@ pub struct FilterArgs {
     pub strip_rows: usize,
 }
 
+/// `--quality`'s long help: every preset's knob values.
+fn quality_help() -> String {
+    let mut s = String::from(
+        "A point on ep-gauss's speed/accuracy front, chosen on real renders \
+         (scripts/eval-renders --sweep, docs/pareto.md): a set of knob values, which each \
+         option given overrides. The report records the preset and the values used.",
+    );
+    for q in epfilt::filter::Quality::ALL {
+        s.push_str(&format!("\n  {:<8} {}", q.name(), q.describe()));
+    }
+    s
+}
+
 /// The ids of the options that decide a method's settings (the ones a
 /// method may ignore), as clap names them.
 pub const METHOD_OPTIONS: &[&str] = &[
+    "quality",
+    "support_compact",
+    "support_over",
+    "support_region",
+    "support_level",
     "radius",
     "max_radius",
     "cutoff",

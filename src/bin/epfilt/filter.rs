@@ -134,6 +134,12 @@ fn filter_job(
         .supersample
         .unwrap_or(if method == Method::EpBox { 1 } else { 3 });
     let mut params = FilterParams::new(method, s);
+    if let Some(q) = &a.quality {
+        let q = epfilt::filter::Quality::parse(q)?;
+        if method == Method::EpGauss {
+            params = params.with_quality(q);
+        }
+    }
     params.ep_box = epfilt::filter::ep_box::EpBoxParams {
         ltvis: a.ltvis,
         passes: a.passes,
@@ -144,15 +150,38 @@ fn filter_job(
         carriers_rse: a.carriers_rse,
         ..ep_box_params(&a.stats)?
     };
-    params.radius = a.radius;
-    params.support = if a.guard == "none" { 0 } else { a.support };
-    params.support_ratio = a.support_ratio;
+    if let Some(r) = a.radius {
+        params.radius = r;
+    }
+    if let Some(c) = a.cutoff {
+        params.cutoff = c;
+    }
+    if let Some(n) = a.support {
+        params.support = n;
+    }
+    if a.guard == "none" {
+        params.support = 0;
+    }
+    if let Some(r) = a.support_ratio {
+        params.support_ratio = r;
+    }
+    if let Some(n) = a.support_compact {
+        params.support_compact = n;
+    }
+    if let Some(o) = a.support_over {
+        params.support_over = o;
+    }
+    if let Some(n) = a.support_region {
+        params.support_region = n;
+    }
+    if let Some(l) = a.support_level {
+        params.support_level = l;
+    }
     params.clamp = a.clamp;
     params.alpha = a.alpha;
     if let Some(r) = a.max_radius {
         params.max_radius = r;
     }
-    params.cutoff = a.cutoff;
     params.width_step = a.width_step;
     params.coarse_from = a.coarse_from;
     if let Some(t) = a.tolerance {
