@@ -22,6 +22,9 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use plotters::prelude::*;
+
+#[path = "common/canvas.rs"]
+mod canvas;
 use serde_json::Value;
 
 const METHODS: [&str; 7] = [
@@ -609,23 +612,6 @@ fn colour(m: &str) -> RGBColor {
 }
 
 /// 8x8 text into an RGB buffer (plotters is built without a font engine).
-fn text(buf: &mut [u8], w: usize, x0: usize, y0: usize, s: &str, c: RGBColor) {
-    use font8x8::UnicodeFonts;
-    for (k, ch) in s.chars().enumerate() {
-        let Some(glyph) = font8x8::BASIC_FONTS.get(ch) else {
-            continue;
-        };
-        for (gy, bits) in glyph.iter().enumerate() {
-            for bx in 0..8 {
-                let (x, y) = (x0 + k * 8 + bx, y0 + gy);
-                if bits & (1 << bx) != 0 && x < w && (y * w + x) * 3 + 3 <= buf.len() {
-                    buf[(y * w + x) * 3..(y * w + x) * 3 + 3].copy_from_slice(&[c.0, c.1, c.2]);
-                }
-            }
-        }
-    }
-}
-
 fn plot(path: &Path, rows: &[Row], scenes: &[&str]) -> Result<()> {
     let (pw, ph) = (560usize, 440usize);
     let (w, h) = (pw * scenes.len(), ph + 40);
@@ -731,14 +717,9 @@ fn plot(path: &Path, rows: &[Row], scenes: &[&str]) -> Result<()> {
         root.present()?;
     }
     for (x, y, s, c) in labels {
-        text(&mut buf, w, x, y, &s, c);
+        canvas::text(&mut buf, w, x, y, &s, (c.0, c.1, c.2));
     }
-    let file = std::fs::File::create(path)?;
-    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w as u32, h as u32);
-    enc.set_color(png::ColorType::Rgb);
-    enc.set_depth(png::BitDepth::Eight);
-    enc.write_header()?.write_image_data(&buf)?;
-    Ok(())
+    canvas::save_png(path, &buf, w, h)
 }
 
 fn settings_text(r: &Row) -> String {

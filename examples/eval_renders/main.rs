@@ -34,6 +34,8 @@
 //! (`renders/<input>.png`: input, linear, methods, reference) into `--out`
 //! (default `docs`), and prints the Markdown.
 
+mod sweep;
+
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -379,14 +381,26 @@ fn set(params: &mut FilterParams, key: &str, value: &str) -> Result<()> {
         "cutoff" => params.cutoff = f()?,
         "width_step" => params.width_step = f()?,
         "d" => params.ep_box.d = f()?,
+        "nmid" => params.ep_box.nmid = f()?,
+        "passes" => params.ep_box.passes = value.parse()?,
+        "confidence" => params.ep_box.confidence = f()?,
         "carriers" => params.ep_box.carriers = f()?,
         "carriers_fraction" => params.ep_box.carriers_fraction = f()?,
         "carriers_rse" => params.ep_box.carriers_rse = f()?,
         "guard_confidence" => params.ep_box.guard_confidence = f()?,
         "support" => params.support = value.parse()?,
         "support_ratio" => params.support_ratio = f()?,
+        "support_compact" => params.support_compact = value.parse()?,
+        "support_over" => params.support_over = f()?,
+        "support_level" => params.support_level = f()?,
+        "support_region" => params.support_region = value.parse()?,
         "coarse_from" => params.coarse_from = f()?,
         "guard" => params.ep_box.guard = epfilt::filter::ep_box::Guard::parse(value)?,
+        "quality" => {
+            *params = params
+                .clone()
+                .with_quality(epfilt::filter::Quality::parse(value)?)
+        }
         other => bail!("--set {other}: unknown setting"),
     }
     Ok(())
@@ -424,6 +438,10 @@ impl Ctx {
 }
 
 fn main() -> Result<()> {
+    let argv: Vec<String> = std::env::args().skip(1).collect();
+    if argv.iter().any(|a| a == "--sweep") {
+        return sweep::run(&argv);
+    }
     let mut dir = PathBuf::from("../shared/renders");
     let mut out_dir = PathBuf::from("docs");
     let mut methods: Vec<Method> = Method::ALL.to_vec();

@@ -1,0 +1,719 @@
+//! `eval_renders --sweep`: ep-gauss over a grid of its knobs on every
+//! super-sampled render of every folder given, and the time per megapixel of
+//! each setting on the 6144x6144 bench input: the speed/accuracy trade, its
+//! Pareto front, today's defaults and the presets on it.
+//!
+//! ```text
+//! eval_renders --sweep [--renders DIR]... [--grid KEY=V1,V2,...]... [--bench FILE]
+//!     [--bench-runs N] [--threads N] [--out DIR] [--no-write]
+//! ```
+//!
+//! * **factor** per input, as for the defaults' table: relMSE of ep-gauss
+//!   against the Gaussian of the reference over the relMSE the Gaussian of
+//!   the same radius leaves; **error** of a setting: the geometric mean of its
+//!   factors over every input (each input counts the same);
+//!   **worst vs defaults**: the largest ratio of a setting's factor to the
+//!   old defaults' on any one input (above 1: some render got worse).
+//! * **peak**: the worst light's brightest pixel over the linear filter's.
+//! * **time**: seconds per input megapixel of ep-gauss on the bench file
+//!   (6144x6144 S=3 float ZIP, 1% fireflies 1e2..1e5, `examples/fireflies`),
+//!   the median of `--bench-runs` runs interleaved with as many of gauss,
+//!   and the ratio of the medians; without `--bench`, no times.
+//! * `tolerance` in the grid is the value at S = 3; inputs at other S get
+//!   `tolerance * (3/S)^1.776`, as the default does.
+//!
+//! Writes `pareto.md`, `pareto.csv` and `pareto.png` (error against time,
+//! the front joined, the old defaults, the new ones and the presets marked).
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use epfilt::filter::Quality;
+use epfilt::{filter_file, FilterJob, FilterParams, Method};
+
+use super::{inputs, lights, peak_ratio, rel_mse, set, Image, Input, ORACLE_OVER};
+
+#[path = "../common/canvas.rs"]
+mod canvas;
+
+/// The grid when none is given: the knobs the issue names, jointly.
+const DEFAULT_GRID: &[(&str, &[&str])] = &[
+    (
+        "tolerance",
+        &["0.25", "0.15", "0.1", "0.08", "0.06", "0.04"],
+    ),
+    ("support", &["0", "1", "2", "3"]),
+    ("support_ratio", &["4", "16"]),
+    ("radius", &["0.6", "0.65"]),
+    ("cutoff", &["2.5", "3"]),
+];
+
+/// One setting: key = value pairs over the defaults.
+type Setting = Vec<(String, String)>;
+
+struct Args {
+    renders: Vec<PathBuf>,
+    grid: Vec<(String, Vec<String>)>,
+    extra: Vec<Setting>,
+    bench: Option<PathBuf>,
+    bench_runs: usize,
+    threads: usize,
+    out: PathBuf,
+    write: bool,
+}
+
+fn parse(args: &[String]) -> Result<Args> {
+    let mut a = Args {
+        renders: Vec::new(),
+        grid: Vec::new(),
+        extra: Vec::new(),
+        bench: None,
+        bench_runs: 3,
+        threads: 2,
+        out: PathBuf::from("docs"),
+        write: true,
+    };
+    let mut it = args.iter();
+    while let Some(x) = it.next() {
+        let mut next = |what: &str| it.next().cloned().with_context(|| what.to_string());
+        match x.as_str() {
+            "--sweep" => {}
+            "--renders" => a.renders.push(next("--renders DIR")?.into()),
+            "--grid" => {
+                let kv = next("--grid KEY=V1,V2")?;
+                let (k, v) = kv.split_once('=').context("--grid KEY=V1,V2")?;
+                a.grid
+                    .push((k.to_string(), v.split(',').map(str::to_string).collect()));
+            }
+            "--also" => {
+                // One more setting beside the grid: KEY=V;KEY=V.
+                let kv = next("--also KEY=V;KEY=V")?;
+                a.extra.push(
+                    kv.split(';')
+                        .filter(|s| !s.is_empty())
+                        .map(|p| {
+                            let (k, v) = p.split_once('=').context("KEY=V")?;
+                            Ok((k.to_string(), v.to_string()))
+                        })
+                        .collect::<Result<_>>()?,
+                );
+            }
+            "--bench" => a.bench = Some(next("--bench FILE")?.into()),
+            "--bench-runs" => a.bench_runs = next("--bench-runs N")?.parse()?,
+            "--threads" => a.threads = next("--threads N")?.parse()?,
+            "--out" => a.out = next("--out DIR")?.into(),
+            "--no-write" => a.write = false,
+            other => bail!("--sweep: unknown argument {other:?}"),
+        }
+    }
+    if a.renders.is_empty() {
+        a.renders.push("../shared/renders".into());
+    }
+    if a.grid.is_empty() {
+        a.grid = DEFAULT_GRID
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.iter().map(|s| s.to_string()).collect()))
+            .collect();
+    }
+    Ok(a)
+}
+
+/// Every combination of the grid's values.
+fn settings(grid: &[(String, Vec<String>)]) -> Vec<Setting> {
+    let mut out: Vec<Setting> = vec![Vec::new()];
+    for (k, vs) in grid {
+        out = out
+            .into_iter()
+            .flat_map(|s| {
+                vs.iter().map(move |v| {
+                    let mut t = s.clone();
+                    t.push((k.clone(), v.clone()));
+                    t
+                })
+            })
+            .collect();
+    }
+    out
+}
+
+fn label(s: &Setting) -> String {
+    if s.is_empty() {
+        return "(defaults)".into();
+    }
+    s.iter()
+        .map(|(k, v)| format!("{k}={v}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// The knob values of a preset, as a setting.
+fn preset_setting(q: Quality) -> Setting {
+    FilterParams::new(Method::EpGauss, 3)
+        .with_quality(q)
+        .quality_settings()
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v))
+        .collect()
+}
+
+/// The old defaults (before the presets), as a setting.
+fn old_defaults() -> Setting {
+    [
+        ("tolerance", "0.25"),
+        ("support", "1"),
+        ("support_ratio", "16"),
+        ("radius", "0.6"),
+        ("cutoff", "3"),
+    ]
+    .iter()
+    .map(|(k, v)| (k.to_string(), v.to_string()))
+    .collect()
+}
+
+/// `params` at S for `setting` (the grid's tolerance is at S = 3).
+fn params_for(setting: &Setting, s: usize) -> Result<FilterParams> {
+    let mut p = FilterParams::new(Method::EpGauss, s);
+    for (k, v) in setting {
+        if k == "tolerance" {
+            let t: f64 = v.parse()?;
+            p.tolerance = t * (3.0 / s as f64).powf(epfilt::filter::TOLERANCE_EXPONENT);
+        } else if k == "quality" {
+            p = p.with_quality(Quality::parse(v)?);
+        } else {
+            set(&mut p, k, v)?;
+        }
+    }
+    Ok(p)
+}
+
+/// One super-sampled input with its linear filters, per radius.
+struct Prepared {
+    input: Input,
+    /// radius -> the linear filters at that radius.
+    by_radius: BTreeMap<String, Baseline>,
+    /// The oracle's best factor at radius 0.6.
+    oracle: Option<f64>,
+}
+
+/// The linear filters of one input at one radius.
+struct Baseline {
+    /// Gauss of the reference.
+    reference: Image,
+    /// Its lights.
+    lights: Vec<Vec<(usize, usize)>>,
+    /// relMSE of gauss of the input.
+    base: f64,
+    /// Its worst light's peak over the reference's.
+    lin_peak: f64,
+}
+
+/// A label drawn on the plot: position, text, colour.
+type Label = (usize, usize, String, (u8, u8, u8));
+
+struct Outcome {
+    setting: Setting,
+    factors: Vec<f64>,
+    peaks: Vec<f64>,
+    error: f64,
+    seconds_per_mpx: Option<f64>,
+    x_gauss: Option<f64>,
+}
+
+fn run_filter(tmp: &Path, input: &Path, p: FilterParams, tag: &str) -> Result<Image> {
+    let out = tmp.join(format!("{tag}.exr"));
+    let job = FilterJob::new(input, &out, p);
+    filter_file(&job, &|_, _| {}).with_context(|| format!("{tag}: {}", input.display()))?;
+    Image::read(&out)
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Seconds of `p` on the bench file (the run's own timer, which starts
+/// after the file is opened), `threads` threads.
+fn bench_seconds(bench: &Path, tmp: &Path, p: FilterParams, threads: usize) -> Result<f64> {
+    let out = tmp.join("bench-out.exr");
+    let mut job = FilterJob::new(bench, &out, p);
+    job.pipeline.threads = threads;
+    let r = filter_file(&job, &|_, _| {})?;
+    Ok(r.seconds)
+}
+
+pub fn run(args: &[String]) -> Result<()> {
+    let a = parse(args)?;
+    let tmp = tempfile::tempdir()?;
+    let mut prepared = Vec::new();
+    let radii: Vec<String> = {
+        let mut r: Vec<String> = a
+            .grid
+            .iter()
+            .find(|(k, _)| k == "radius")
+            .map_or_else(Vec::new, |(_, v)| v.clone());
+        for s in a.extra.iter().flatten().filter(|(k, _)| k == "radius") {
+            r.push(s.1.clone());
+        }
+        for q in Quality::ALL {
+            for (k, v) in preset_setting(q) {
+                if k == "radius" {
+                    r.push(v);
+                }
+            }
+        }
+        r.push("0.6".into());
+        r.sort();
+        r.dedup();
+        r
+    };
+    for dir in &a.renders {
+        for inp in inputs(dir)?.into_iter().filter(|i| i.s > 1) {
+            eprintln!("{}", inp.name);
+            let noisy = Image::read(&inp.path)?;
+            let mut by_radius = BTreeMap::new();
+            for r in &radii {
+                let mut pg = FilterParams::new(Method::Gauss, inp.s);
+                pg.radius = r.parse()?;
+                let mut pr = FilterParams::new(Method::Gauss, inp.reference_s);
+                pr.radius = pg.radius;
+                let reference = run_filter(tmp.path(), &inp.reference, pr, "ref")?;
+                let lin = run_filter(tmp.path(), &inp.path, pg, "lin")?;
+                let ls = lights(&reference);
+                let base = rel_mse(&lin, &reference);
+                let lin_peak = peak_ratio(&lin, &reference, &ls);
+                by_radius.insert(
+                    r.clone(),
+                    Baseline {
+                        reference,
+                        lights: ls,
+                        base,
+                        lin_peak,
+                    },
+                );
+            }
+            // The oracle at the default radius, where a super-sampled
+            // reference of the same S exists.
+            let oracle = if inp.reference_s == inp.s {
+                let truth = Image::read(&inp.reference)?;
+                let Baseline {
+                    reference, base, ..
+                } = &by_radius["0.6"];
+                let mut best = f64::INFINITY;
+                for over in ORACLE_OVER {
+                    let (img, _) = super::oracle_input(&noisy, &truth, over);
+                    let path = tmp.path().join("oracle.exr");
+                    img.write(&path)?;
+                    let out = run_filter(
+                        tmp.path(),
+                        &path,
+                        FilterParams::new(Method::Gauss, inp.s),
+                        "oracle-gauss",
+                    )?;
+                    best = best.min(rel_mse(&out, reference) / base);
+                }
+                Some(best)
+            } else {
+                None
+            };
+            prepared.push(Prepared {
+                input: inp,
+                by_radius,
+                oracle,
+            });
+        }
+    }
+    if prepared.is_empty() {
+        bail!("no super-sampled renders in {:?}", a.renders);
+    }
+    let mut all = settings(&a.grid);
+    all.extend(a.extra.iter().cloned());
+    all.push(old_defaults());
+    for q in Quality::ALL {
+        all.push(preset_setting(q));
+    }
+    // The same setting written twice runs once.
+    let mut seen = std::collections::HashSet::new();
+    all.retain(|s| {
+        let mut k = s.clone();
+        k.sort();
+        seen.insert(k)
+    });
+    let mut outcomes = Vec::new();
+    let bench_gauss = match &a.bench {
+        Some(b) => {
+            let mut v = Vec::new();
+            for _ in 0..a.bench_runs {
+                v.push(bench_seconds(
+                    b,
+                    tmp.path(),
+                    FilterParams::new(Method::Gauss, 3),
+                    a.threads,
+                )?);
+            }
+            Some(v)
+        }
+        None => None,
+    };
+    let mut gauss_runs = bench_gauss.clone().unwrap_or_default();
+    let n_all = all.len();
+    for (k, setting) in all.into_iter().enumerate() {
+        let mut factors = Vec::new();
+        let mut peaks = Vec::new();
+        for p in &prepared {
+            let params = params_for(&setting, p.input.s)?;
+            let key = format!("{}", params.radius);
+            let key = p
+                .by_radius
+                .keys()
+                .find(|r| r.parse::<f64>().ok() == Some(params.radius))
+                .cloned()
+                .with_context(|| format!("radius {key} not prepared"))?;
+            let Baseline {
+                reference,
+                lights: ls,
+                base,
+                lin_peak,
+            } = &p.by_radius[&key];
+            let out = run_filter(tmp.path(), &p.input.path, params, "ep")?;
+            factors.push(rel_mse(&out, reference) / base);
+            peaks.push(peak_ratio(&out, reference, ls) / lin_peak);
+        }
+        let error = (factors.iter().map(|f| f.ln()).sum::<f64>() / factors.len() as f64).exp();
+        let (mut seconds_per_mpx, mut x_gauss) = (None, None);
+        if let Some(b) = &a.bench {
+            let mut ep = Vec::new();
+            for _ in 0..a.bench_runs {
+                gauss_runs.push(bench_seconds(
+                    b,
+                    tmp.path(),
+                    FilterParams::new(Method::Gauss, 3),
+                    a.threads,
+                )?);
+                ep.push(bench_seconds(
+                    b,
+                    tmp.path(),
+                    params_for(&setting, 3)?,
+                    a.threads,
+                )?);
+            }
+            // Against the gauss runs beside these (the machine drifts).
+            let recent = gauss_runs[gauss_runs.len() - a.bench_runs..].to_vec();
+            let mpx = 6144.0 * 6144.0 / 1e6;
+            let e = median(ep);
+            seconds_per_mpx = Some(e / mpx);
+            x_gauss = Some(e / median(recent));
+        }
+        eprintln!(
+            "[{}/{n_all}] {}: error {error:.4}{}",
+            k + 1,
+            label(&setting),
+            x_gauss
+                .map(|x| format!(", {x:.3}x gauss"))
+                .unwrap_or_default()
+        );
+        outcomes.push(Outcome {
+            setting,
+            factors,
+            peaks,
+            error,
+            seconds_per_mpx,
+            x_gauss,
+        });
+    }
+    let md = markdown(&a, &prepared, &outcomes, &gauss_runs);
+    print!("{md}");
+    if a.write {
+        std::fs::create_dir_all(&a.out)?;
+        std::fs::write(a.out.join("pareto.md"), &md)?;
+        std::fs::write(a.out.join("pareto.csv"), csv(&prepared, &outcomes))?;
+        if a.bench.is_some() {
+            plot(&a.out.join("pareto.png"), &outcomes)?;
+        }
+        eprintln!("wrote {}", a.out.join("pareto.md").display());
+    }
+    Ok(())
+}
+
+/// Indices of the settings on the Pareto front (no other is both faster and
+/// better), by time then error; without times, by error alone.
+fn front(outcomes: &[Outcome]) -> Vec<usize> {
+    let mut idx: Vec<usize> = (0..outcomes.len()).collect();
+    let t = |i: usize| outcomes[i].seconds_per_mpx.unwrap_or(0.0);
+    idx.sort_by(|&a, &b| {
+        t(a).total_cmp(&t(b))
+            .then(outcomes[a].error.total_cmp(&outcomes[b].error))
+    });
+    let mut best = f64::INFINITY;
+    let mut out = Vec::new();
+    for i in idx {
+        if outcomes[i].error < best {
+            best = outcomes[i].error;
+            out.push(i);
+        }
+    }
+    out
+}
+
+fn find(outcomes: &[Outcome], s: &Setting) -> Option<usize> {
+    let key = |s: &Setting| {
+        let mut k = s.clone();
+        k.sort();
+        k
+    };
+    outcomes.iter().position(|o| key(&o.setting) == key(s))
+}
+
+fn markdown(a: &Args, prepared: &[Prepared], outcomes: &[Outcome], gauss: &[f64]) -> String {
+    let mut s = String::new();
+    let names: Vec<String> = prepared
+        .iter()
+        .map(|p| {
+            p.input
+                .name
+                .replace("_ss3x_768", "")
+                .replace("_ss4x_1024", " S=4")
+        })
+        .collect();
+    let _ = writeln!(
+        s,
+        "# ep-gauss: the speed/accuracy trade on real renders\n\nMade by `scripts/eval-renders --sweep` \
+         (`examples/eval_renders/sweep.rs` defines every figure) on {} super-sampled inputs from {}. \
+         **factor**: relMSE against the Gaussian of the reference over the relMSE the Gaussian of the \
+         same radius leaves (below 1: noise removed); **error**: the geometric mean of a setting's \
+         factors over every input; **worst vs old**: the largest ratio of its factor to the old \
+         defaults' on one input (above 1: that render got worse); **peak**: the worst light's brightest \
+         pixel over the linear filter's, the worst input (each input's cell: factor; peak). **s/Mpx**: seconds per input megapixel of \
+         ep-gauss on the 6144x6144 bench input ({} threads, median of {} runs interleaved with gauss), \
+         **x gauss**: the ratio of the medians.{}\n",
+        prepared.len(),
+        a.renders
+            .iter()
+            .map(|d| format!("`{}`", d.display()))
+            .collect::<Vec<_>>()
+            .join(", "),
+        a.threads,
+        a.bench_runs,
+        if gauss.is_empty() {
+            " No bench file was given: no times.".to_string()
+        } else {
+            format!(
+                " gauss: {:.4} s/Mpx (median of {}).",
+                median(gauss.to_vec()) / (6144.0 * 6144.0 / 1e6),
+                gauss.len()
+            )
+        }
+    );
+    let old = find(outcomes, &old_defaults());
+    let marks = |i: usize| -> String {
+        let mut m = Vec::new();
+        if Some(i) == old {
+            m.push("old defaults".to_string());
+        }
+        for q in Quality::ALL {
+            if find(outcomes, &preset_setting(q)) == Some(i) {
+                m.push(format!("**--quality {}**", q.name()));
+            }
+        }
+        m.join(", ")
+    };
+    let worst_vs_old = |o: &Outcome| -> f64 {
+        old.map_or(f64::NAN, |j| {
+            o.factors
+                .iter()
+                .zip(&outcomes[j].factors)
+                .map(|(a, b)| a / b)
+                .fold(0.0, f64::max)
+        })
+    };
+    let row = |i: usize, o: &Outcome| -> String {
+        format!(
+            "| {} | {} | {} | {:.4} | {:.3} | {:.2} | {} | {} |",
+            label(&o.setting),
+            o.seconds_per_mpx.map_or("–".into(), |t| format!("{t:.4}")),
+            o.x_gauss.map_or("–".into(), |x| format!("{x:.3}")),
+            o.error,
+            worst_vs_old(o),
+            o.peaks.iter().copied().fold(f64::INFINITY, f64::min),
+            o.factors
+                .iter()
+                .zip(&o.peaks)
+                .map(|(f, p)| format!("{f:.3}; {p:.2}"))
+                .collect::<Vec<_>>()
+                .join(" | "),
+            marks(i)
+        )
+    };
+    let head = format!(
+        "| setting | s/Mpx | x gauss | error | worst vs old | peak | {} | |\n|---|---|---|---|---|---|{}---|",
+        names.join(" | "),
+        "---|".repeat(names.len())
+    );
+    let _ = writeln!(s, "## The Pareto front\n\n{head}");
+    for i in front(outcomes) {
+        let _ = writeln!(s, "{}", row(i, &outcomes[i]));
+    }
+    let _ = writeln!(s, "\n## The old defaults and the presets\n\n{head}");
+    let mut shown: Vec<usize> = old.into_iter().collect();
+    for q in Quality::ALL {
+        shown.extend(find(outcomes, &preset_setting(q)));
+    }
+    for i in shown {
+        let _ = writeln!(s, "{}", row(i, &outcomes[i]));
+    }
+    let oracle: Vec<String> = prepared
+        .iter()
+        .map(|p| p.oracle.map_or("–".into(), |o| format!("{o:.3}")))
+        .collect();
+    let _ = writeln!(
+        s,
+        "| outlier-only oracle (radius 0.6; `docs/renders.md`) | | | | | | {} | |",
+        oracle.join(" | ")
+    );
+    let mut order: Vec<usize> = (0..outcomes.len()).collect();
+    order.sort_by(|&a, &b| outcomes[a].error.total_cmp(&outcomes[b].error));
+    let _ = writeln!(s, "\n## Every setting, by error\n\n{head}");
+    for i in order {
+        let _ = writeln!(s, "{}", row(i, &outcomes[i]));
+    }
+    s
+}
+
+fn csv(prepared: &[Prepared], outcomes: &[Outcome]) -> String {
+    let mut s = String::from("setting,seconds_per_mpx,x_gauss,error,min_peak");
+    for p in prepared {
+        let _ = write!(s, ",{}", p.input.name);
+    }
+    s.push('\n');
+    for o in outcomes {
+        let _ = write!(
+            s,
+            "{},{},{},{:.6},{:.4}",
+            label(&o.setting),
+            o.seconds_per_mpx
+                .map_or(String::new(), |t| format!("{t:.6}")),
+            o.x_gauss.map_or(String::new(), |t| format!("{t:.4}")),
+            o.error,
+            o.peaks.iter().copied().fold(f64::INFINITY, f64::min)
+        );
+        for f in &o.factors {
+            let _ = write!(s, ",{f:.6}");
+        }
+        s.push('\n');
+    }
+    s
+}
+
+fn plot(path: &Path, outcomes: &[Outcome]) -> Result<()> {
+    use plotters::prelude::*;
+    let pts: Vec<(f64, f64)> = outcomes
+        .iter()
+        .filter_map(|o| o.seconds_per_mpx.map(|t| (t, o.error)))
+        .collect();
+    if pts.is_empty() {
+        return Ok(());
+    }
+    let fold = |f: fn(&(f64, f64)) -> f64| {
+        pts.iter()
+            .map(f)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(v), b.max(v))
+            })
+    };
+    let (t0, t1) = fold(|p| p.0);
+    let (e0, e1) = fold(|p| p.1);
+    let (xa, xb) = (t0 - 0.05 * (t1 - t0), t1 + 0.05 * (t1 - t0));
+    let (ya, yb) = (e0 - 0.05 * (e1 - e0), e1 + 0.05 * (e1 - e0));
+    let (w, h) = (900usize, 620usize);
+    let (ml, mt, mb, mr) = (70u32, 40u32, 50u32, 30u32);
+    let mut buf = vec![255u8; w * h * 3];
+    let mut labels: Vec<Label> = Vec::new();
+    let (pw, ph) = ((w as u32 - ml - mr) as f64, (h as u32 - mt - mb) as f64);
+    let at = |t: f64, e: f64| {
+        (
+            ml as usize + ((t - xa) / (xb - xa) * pw) as usize,
+            mt as usize + ((1.0 - (e - ya) / (yb - ya)) * ph) as usize,
+        )
+    };
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w as u32, h as u32)).into_drawing_area();
+        let mut chart = ChartBuilder::on(&root)
+            .margin_left(ml)
+            .margin_top(mt)
+            .margin_bottom(mb)
+            .margin_right(mr)
+            .build_cartesian_2d(xa..xb, ya..yb)?;
+        let grey = RGBColor(225, 225, 225);
+        for k in 0..=4 {
+            let f = k as f64 / 4.0;
+            let (t, e) = (xa + f * (xb - xa), ya + f * (yb - ya));
+            chart.draw_series(LineSeries::new(vec![(t, ya), (t, yb)], grey))?;
+            chart.draw_series(LineSeries::new(vec![(xa, e), (xb, e)], grey))?;
+            let (x, _) = at(t, ya);
+            labels.push((
+                x.saturating_sub(20),
+                h - mb as usize + 8,
+                format!("{t:.4}"),
+                (0, 0, 0),
+            ));
+            let (_, y) = at(xa, e);
+            labels.push((4, y.saturating_sub(4), format!("{e:.3}"), (0, 0, 0)));
+        }
+        chart.draw_series(
+            pts.iter()
+                .map(|&p| Circle::new(p, 3, RGBColor(160, 160, 160).filled())),
+        )?;
+        let fr: Vec<(f64, f64)> = front(outcomes)
+            .into_iter()
+            .filter_map(|i| outcomes[i].seconds_per_mpx.map(|t| (t, outcomes[i].error)))
+            .collect();
+        chart.draw_series(LineSeries::new(fr.clone(), BLUE.stroke_width(2)))?;
+        chart.draw_series(fr.iter().map(|&p| Circle::new(p, 4, BLUE.filled())))?;
+        let mut mark = |s: &Setting, name: String, c: RGBColor| -> Result<()> {
+            if let Some(o) = find(outcomes, s).map(|i| &outcomes[i]) {
+                if let Some(t) = o.seconds_per_mpx {
+                    chart.draw_series(std::iter::once(Cross::new(
+                        (t, o.error),
+                        8,
+                        c.stroke_width(3),
+                    )))?;
+                    let (x, y) = at(t, o.error);
+                    labels.push((x + 10, y.saturating_sub(12), name, (c.0, c.1, c.2)));
+                }
+            }
+            Ok(())
+        };
+        mark(&old_defaults(), "old defaults".into(), RED)?;
+        for q in Quality::ALL {
+            mark(
+                &preset_setting(q),
+                format!("--quality {}", q.name()),
+                RGBColor(0, 130, 0),
+            )?;
+        }
+        root.present()?;
+    }
+    labels.push((
+        ml as usize,
+        12,
+        "ep-gauss on real renders: error (geometric mean of factors) against time".into(),
+        (0, 0, 0),
+    ));
+    labels.push((
+        ml as usize + 150,
+        h - 20,
+        "seconds per input megapixel, 6144x6144 S=3 bench".into(),
+        (0, 0, 0),
+    ));
+    labels.push((
+        w - 260,
+        mt as usize + 8,
+        "o setting   - Pareto front".into(),
+        (0, 0, 200),
+    ));
+    for (x, y, s, c) in labels {
+        canvas::text(&mut buf, w, x, y, &s, c);
+    }
+    canvas::save_png(path, &buf, w, h)
+}
