@@ -390,6 +390,7 @@ fn set(params: &mut FilterParams, key: &str, value: &str) -> Result<()> {
         "guard_confidence" => params.ep_box.guard_confidence = f()?,
         "support" => params.support = value.parse()?,
         "support_ratio" => params.support_ratio = f()?,
+        "support_group" => params.support_group = value.parse()?,
         "support_compact" => params.support_compact = value.parse()?,
         "support_over" => params.support_over = f()?,
         "support_level" => params.support_level = f()?,
