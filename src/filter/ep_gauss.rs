@@ -282,7 +282,8 @@ impl Folded {
 pub struct Choice {
     /// Index into the ladder (0 = base kernel).
     pub level: u16,
-    /// Relation 14 still failed at the cap.
+    /// Every width below the cap failed Relation 14: spread at the cap
+    /// (which is not evaluated; it may pass or fail).
     pub capped: bool,
     /// What the search cost: luminance values read plus quadrant entries
     /// weighed.
@@ -669,7 +670,10 @@ impl EpGauss {
                         cost: fold.finish() - cost0,
                     }
                 }
-                None if lo == last => {
+                // Every width below the cap failed: the cap it is, whether
+                // or not it passes (never evaluated: it is the widest, the
+                // costliest to read, and its answer changes nothing).
+                None if lo + 1 == last => {
                     return Choice {
                         level: last as u16,
                         capped: true,
@@ -678,7 +682,7 @@ impl EpGauss {
                 }
                 _ => {}
             }
-            let upper = hi.map_or(last, |h| h - 1);
+            let upper = hi.map_or(last - 1, |h| h - 1);
             let guess = if guesses >= MAX_GUESSES {
                 None
             } else {
@@ -775,6 +779,7 @@ pub struct Support {
     min: usize,
     ratio: f64,
     compact: usize,
+    group: usize,
     over: f64,
     level: f64,
     region: usize,
@@ -793,15 +798,17 @@ impl Support {
             min,
             ratio,
             compact,
+            group: 0,
             over: 0.0,
             level: 0.0,
             region: 0,
         }
     }
 
-    /// A bright sample is kept too when at least `region` of its 8
-    /// neighbours are above `level` times its pixel's base average (and
-    /// within `ratio` of it): grain inside a bright feature (a glossy
+    /// A bright sample at most `level` times its pixel's base average is
+    /// kept too when at least `region` of the 24 samples within
+    /// [`SUPPORT_REACH`] are above that average and above `1/level` of it:
+    /// grain inside a bright feature (a glossy
     /// highlight at a few samples per pixel), not a firefly on a dark
     /// ground (`region = 0`: off).
     pub fn with_region(mut self, region: usize, level: f64) -> Self {
@@ -820,9 +827,21 @@ impl Support {
         self
     }
 
+    /// A sample with fewer than `min` supporting neighbours is kept too
+    /// when its group holds at least `group` samples, itself included: the
+    /// samples joined to it through supporting neighbours (8-connected, each
+    /// failing the same test within `ratio` of it) within [`SUPPORT_REACH`].
+    /// A thin line or a lamp-shade rim partly covering its samples is hit
+    /// in runs, whose ends have one neighbour each; two fireflies that touch
+    /// are a group of two (`group = 0`: off).
+    pub fn with_group(mut self, group: usize) -> Self {
+        self.group = group;
+        self
+    }
+
     /// Super-sample rows either side the rule reads.
     pub fn reach(&self) -> usize {
-        if (self.compact > 0 && self.min > 1) || self.region > 0 {
+        if ((self.compact > 0 || self.group > 2) && self.min > 1) || self.region > 0 {
             SUPPORT_REACH
         } else {
             1
@@ -885,7 +904,13 @@ impl Support {
                 }
             }
         }
-        if n == 0 || self.compact == 0 || !(x0 > hi) {
+        if n == 0 || !(x0 > hi) {
+            return false;
+        }
+        if self.group > n + 1 && self.group_of(x0, hi, &neighbour) >= self.group {
+            return true;
+        }
+        if self.compact == 0 {
             return false;
         }
         if self.over > 0.0 && !(x0 >= self.over * background()) {
@@ -908,6 +933,52 @@ impl Support {
             }
         }
         true
+    }
+}
+
+impl Support {
+    /// The size of the group of a bright sample `x0` (above `hi`), up to
+    /// `self.group`: a flood through supporting samples (above `hi`, within
+    /// `ratio` of `x0`), 8-connected, within [`SUPPORT_REACH`] of it. No
+    /// allocation: the 5 x 5 window is a bit mask.
+    fn group_of(&self, x0: f64, hi: f64, neighbour: &impl Fn(i64, i64) -> Option<f64>) -> usize {
+        const SIDE: i64 = 2 * SUPPORT_REACH as i64 + 1;
+        let r = SUPPORT_REACH as i64;
+        let bit = |di: i64, dj: i64| 1u32 << ((dj + r) * SIDE + di + r);
+        let mut member = 0u32;
+        for dj in -r..=r {
+            for di in -r..=r {
+                if (di, dj) != (0, 0)
+                    && neighbour(di, dj).is_some_and(|v| v > hi && v * self.ratio >= x0)
+                {
+                    member |= bit(di, dj);
+                }
+            }
+        }
+        let mut seen = bit(0, 0);
+        let mut stack = [(0i64, 0i64); (SIDE * SIDE) as usize];
+        let mut top = 1;
+        let mut count = 1;
+        while top > 0 && count < self.group {
+            top -= 1;
+            let (ci, cj) = stack[top];
+            for dj in -1..=1 {
+                for di in -1..=1 {
+                    let (ni, nj) = (ci + di, cj + dj);
+                    if ni.abs() > r || nj.abs() > r {
+                        continue;
+                    }
+                    let b = bit(ni, nj);
+                    if member & b != 0 && seen & b == 0 {
+                        seen |= b;
+                        stack[top] = (ni, nj);
+                        top += 1;
+                        count += 1;
+                    }
+                }
+            }
+        }
+        count
     }
 }
 
@@ -1262,7 +1333,7 @@ mod tests {
                     |l: usize| relation14(m / direct_average(&ep, &f, x, y, l), ep.levels()[l].w0);
                 if c.capped {
                     assert_eq!(l, ep.levels().len() - 1);
-                    assert!(d_at(l) > 0.25);
+                    assert!(d_at(l - 1) > 0.25);
                 } else {
                     assert!(d_at(l) <= 0.25, "({x},{y}) {m}: D = {}", d_at(l));
                     assert!(d_at(l - 1) > 0.25, "({x},{y}) {m}: narrower passes");
@@ -1305,7 +1376,7 @@ mod tests {
                 |l: usize| relation14(mag / direct_average(&ep, &f, 60, 60, l), ep.levels()[l].w0);
             let l = c.level as usize;
             if c.capped {
-                assert!(d_at(l) > 0.25 && l == ep.levels().len() - 1);
+                assert!(d_at(l - 1) > 0.25 && l == ep.levels().len() - 1);
             } else {
                 assert!(d_at(l) <= 0.25, "mag {mag}: D = {}", d_at(l));
                 assert!(d_at(l - 1) > 0.25, "mag {mag}: a narrower width passes too");
@@ -1366,6 +1437,70 @@ mod tests {
             field(&[((1, 0), 0.2)]),
             || 1.0
         ));
+    }
+
+    #[test]
+    fn groups_compact_pairs_and_regions_keep_features_and_not_fireflies() {
+        let (hi, lo) = (10.0, f64::NEG_INFINITY);
+        let field = |hot: Vec<((i64, i64), f64)>| {
+            move |di: i64, dj: i64| -> Option<f64> {
+                Some(
+                    hot.iter()
+                        .find(|(o, _)| *o == (di, dj))
+                        .map_or(1.0, |(_, v)| *v),
+                )
+            }
+        };
+        let run = |n: i64| -> Vec<((i64, i64), f64)> { (1..n).map(|k| ((k, k), 900.0)).collect() };
+        // The end of a diagonal run: one neighbour, a group of the run's length.
+        let group = Support::new(2, 16.0, 0).with_group(3);
+        assert!(
+            !group.keeps(1000.0, 1.0, hi, lo, field(run(2)), || 1.0),
+            "a pair"
+        );
+        assert!(
+            group.keeps(1000.0, 1.0, hi, lo, field(run(3)), || 1.0),
+            "a run of 3"
+        );
+        let four = Support::new(2, 16.0, 0).with_group(4);
+        assert!(!four.keeps(1000.0, 1.0, hi, lo, field(run(3)), || 1.0));
+        // A run of 4 from its end reaches (3, 3): outside the 5 x 5.
+        assert!(!four.keeps(1000.0, 1.0, hi, lo, field(run(4)), || 1.0));
+        // A group joined through a bend counts; a sample 2 away with no
+        // link does not.
+        let bend = vec![((1, 0), 900.0), ((2, 1), 900.0), ((2, 2), 900.0)];
+        assert!(four.keeps(1000.0, 1.0, hi, lo, field(bend), || 1.0));
+        let apart = vec![((1, 0), 900.0), ((-2, -2), 900.0), ((2, -2), 900.0)];
+        assert!(!four.keeps(1000.0, 1.0, hi, lo, field(apart), || 1.0));
+        // Dimmer than 1/16 of it: not part of its group.
+        let dim = vec![((1, 1), 900.0), ((2, 2), 50.0)];
+        assert!(!group.keeps(1000.0, 1.0, hi, lo, field(dim), || 1.0));
+
+        // A compact pair: kept when few like it are about and it is far
+        // above the ring's background.
+        let compact = Support::new(2, 16.0, 2).with_over(150.0);
+        let pair = vec![((1, 0), 900.0)];
+        assert!(compact.keeps(1000.0, 1.0, hi, lo, field(pair.clone()), || 1.0));
+        assert!(!compact.keeps(1000.0, 1.0, hi, lo, field(pair.clone()), || 10.0));
+        let crowded = vec![((1, 0), 900.0), ((-2, 2), 700.0)];
+        assert!(!compact.keeps(1000.0, 1.0, hi, lo, field(crowded), || 1.0));
+
+        // A region: grain inside a bright feature (the sample at most 4x its
+        // pixel's average 20, samples about it above max(20, sample / 4)
+        // though below the bound 50, so none supports it).
+        let region = Support::new(2, 16.0, 0).with_region(8, 4.0);
+        let grain = |n: usize| -> Vec<((i64, i64), f64)> {
+            (-2i64..=2)
+                .flat_map(|dj| (-2i64..=2).map(move |di| (di, dj)))
+                .filter(|&o| o != (0, 0))
+                .take(n)
+                .map(|o| (o, 30.0))
+                .collect()
+        };
+        assert!(region.keeps(60.0, 20.0, 50.0, lo, field(grain(8)), || 1.0));
+        assert!(!region.keeps(60.0, 20.0, 50.0, lo, field(grain(7)), || 1.0));
+        // The same sample 100x its average: a firefly, whatever surrounds it.
+        assert!(!region.keeps(2000.0, 20.0, 50.0, lo, field(grain(24)), || 1.0));
     }
 
     #[test]

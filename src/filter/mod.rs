@@ -155,55 +155,54 @@ impl Quality {
     pub fn describe(self) -> String {
         let k = self.knobs();
         format!(
-            "--tolerance {} (at S = 3) --support {} --support-ratio {} --support-compact {} --support-over {} --support-region {} --support-level {} --radius {} --cutoff {}",
+            "--tolerance {} (at S = 3) --support {} --support-ratio {} --support-group {} --support-compact {} --support-over {} --support-region {} --support-level {} --radius {} --cutoff {} --max-radius {} --width-step {}",
             k.tolerance,
             k.support,
             k.support_ratio,
+            k.support_group,
             k.support_compact,
             k.support_over,
             k.support_region,
             k.support_level,
             k.radius,
-            k.cutoff
+            k.cutoff,
+            k.max_radius,
+            k.width_step
         )
     }
 
-    /// The preset's knobs: tolerance (at S = 3; scaled with S), support,
-    /// support ratio, compact pairs, base radius and cut-off.
+    /// The preset's knobs: tolerance (at S = 3; scaled with S), the
+    /// feature rules', base radius, cut-off and the width ladder's.
     pub fn knobs(self) -> Knobs {
         match self {
+            // The default with the cap at 8 px and a coarser ladder: the
+            // widest spreads, which cost the most, go (docs/pareto.md).
             Quality::Fast => Knobs {
-                tolerance: 0.25,
-                support: 1,
-                support_ratio: 16.0,
-                support_compact: 0,
-                support_over: 0.0,
-                support_region: 0,
-                support_level: 4.0,
-                radius: 0.6,
-                cutoff: 3.0,
+                max_radius: 8.0,
+                width_step: 0.2,
+                ..Quality::Default.knobs()
             },
+            // The knee of the front on the real renders (docs/pareto.md).
             Quality::Default => Knobs {
                 tolerance: 0.08,
                 support: 2,
                 support_ratio: 16.0,
+                support_group: 0,
                 support_compact: 2,
                 support_over: 150.0,
                 support_region: 8,
                 support_level: 4.0,
                 radius: 0.6,
                 cutoff: 3.0,
+                max_radius: 16.0,
+                width_step: 0.1,
             },
+            // The least error measured with every light kept: the cap at
+            // 32 px, a coarser ladder (docs/pareto.md).
             Quality::Best => Knobs {
-                tolerance: 0.25,
-                support: 1,
-                support_ratio: 16.0,
-                support_compact: 0,
-                support_over: 0.0,
-                support_region: 0,
-                support_level: 4.0,
-                radius: 0.6,
-                cutoff: 3.0,
+                max_radius: 32.0,
+                width_step: 0.2,
+                ..Quality::Default.knobs()
             },
         }
     }
@@ -218,6 +217,8 @@ pub struct Knobs {
     pub support: usize,
     /// [`FilterParams::support_ratio`].
     pub support_ratio: f64,
+    /// [`FilterParams::support_group`].
+    pub support_group: usize,
     /// [`FilterParams::support_compact`].
     pub support_compact: usize,
     /// [`FilterParams::support_over`].
@@ -230,6 +231,10 @@ pub struct Knobs {
     pub radius: f64,
     /// [`FilterParams::cutoff`].
     pub cutoff: f64,
+    /// [`FilterParams::max_radius`].
+    pub max_radius: f64,
+    /// [`FilterParams::width_step`].
+    pub width_step: f64,
 }
 
 /// The halo of a job from its settings alone (no kernels built): what the
@@ -303,6 +308,10 @@ pub struct FilterParams {
     pub support: usize,
     /// ep-gauss: neighbours support a sample when within this factor of it.
     pub support_ratio: f64,
+    /// ep-gauss: a sample with fewer than `support` supporting neighbours is
+    /// kept when its group (joined through supporting neighbours within 2
+    /// samples) holds at least this many ([`ep_gauss::Support`]; 0: off).
+    pub support_group: usize,
     /// ep-gauss: a sample with one supporting neighbour (fewer than
     /// `support`) is kept when at most this many samples around it fail the
     /// test: a compact pair ([`ep_gauss::Support`]; 0: off).
@@ -344,6 +353,7 @@ impl FilterParams {
                 ("width_step", json!(self.width_step)),
                 ("support", json!(self.support)),
                 ("support_ratio", json!(self.support_ratio)),
+                ("support_group", json!(self.support_group)),
                 ("support_compact", json!(self.support_compact)),
                 ("support_over", json!(self.support_over)),
                 ("support_region", json!(self.support_region)),
@@ -390,10 +400,9 @@ impl FilterParams {
         // ep-gauss at S = 1 reads ep-box's statistics for its carriers rule.
         let carriers = m == EpBox || (m == EpGauss && self.supersample == 1);
         match option.replace('-', "_").as_str() {
-            "tolerance" | "support" | "support_ratio" | "support_compact" | "support_over"
-            | "support_region" | "support_level" | "width_step" | "coarse_from" | "quality" => {
-                m == EpGauss
-            }
+            "tolerance" | "support" | "support_ratio" | "support_group" | "support_compact"
+            | "support_over" | "support_region" | "support_level" | "width_step"
+            | "coarse_from" | "quality" => m == EpGauss,
             "radius" | "cutoff" => matches!(m, EpGauss | Gauss | Clamp),
             "max_radius" => matches!(m, EpGauss | EpBox),
             "clamp" => m == Clamp,
@@ -421,12 +430,15 @@ impl FilterParams {
             k.support
         };
         self.support_ratio = k.support_ratio;
+        self.support_group = k.support_group;
         self.support_compact = k.support_compact;
         self.support_over = k.support_over;
         self.support_region = k.support_region;
         self.support_level = k.support_level;
         self.radius = k.radius;
         self.cutoff = k.cutoff;
+        self.max_radius = k.max_radius;
+        self.width_step = k.width_step;
         self
     }
 
@@ -438,12 +450,15 @@ impl FilterParams {
             ("tolerance", k.tolerance.to_string()),
             ("support", k.support.to_string()),
             ("support_ratio", k.support_ratio.to_string()),
+            ("support_group", k.support_group.to_string()),
             ("support_compact", k.support_compact.to_string()),
             ("support_over", k.support_over.to_string()),
             ("support_region", k.support_region.to_string()),
             ("support_level", k.support_level.to_string()),
             ("radius", k.radius.to_string()),
             ("cutoff", k.cutoff.to_string()),
+            ("max_radius", k.max_radius.to_string()),
+            ("width_step", k.width_step.to_string()),
         ]
     }
 
@@ -468,6 +483,7 @@ impl FilterParams {
             alpha: 0.25,
             support: 1,
             support_ratio: 16.0,
+            support_group: 0,
             support_compact: 0,
             support_over: 0.0,
             support_region: 0,
@@ -535,6 +551,12 @@ impl FilterParams {
             return bad(format!(
                 "--clamp must be a finite number >= 0, got {}",
                 self.clamp
+            ));
+        }
+        if self.support_group > 25 {
+            return bad(format!(
+                "--support-group must be 0..=25 samples (the 5 x 5 about a sample), got {}",
+                self.support_group
             ));
         }
         if self.support_compact > 25 {

@@ -186,7 +186,8 @@ pub struct SpreadStats {
     pub noisy: u64,
     /// Samples spread wider than the base kernel (m > 1).
     pub spread: u64,
-    /// Samples that still failed Relation 14 at the cap.
+    /// Samples spread at the cap because every narrower width failed
+    /// Relation 14 (the cap itself is not evaluated: it may pass or fail).
     pub capped: u64,
     /// Noisy samples kept with the base kernel as parts of a feature (the
     /// support rule).
@@ -355,7 +356,8 @@ impl SpreadStage {
             clamp: (params.method == Method::Clamp).then_some(params.clamp as f32),
             support: Support::new(params.support, params.support_ratio, params.support_compact)
                 .with_over(params.support_over)
-                .with_region(params.support_region, params.support_level),
+                .with_region(params.support_region, params.support_level)
+                .with_group(params.support_group),
             pixel_stats: stats
                 .filter(|_| params.method == Method::EpGauss && s == 1 && params.support > 0)
                 .map(|st| (st, Carriers::new(&params.ep_box))),

@@ -376,7 +376,42 @@ pub fn reference(img: &Img, s: usize, p: &FilterParams, lum: &[f64]) -> (Vec<f64
                         && around(2).into_iter().filter(|&v| same(v)).count()
                             < p.support_compact
                 };
-                let kept = p.support > 0 && (support >= p.support || region || compact);
+                // A group: the samples joined to it through supporting
+                // neighbours within 2 (a flood over the 5 x 5).
+                let group = p.support_group > 0 && support >= 1 && {
+                    let mut member = [[false; 5]; 5];
+                    for dj in -2i64..=2 {
+                        for di in -2i64..=2 {
+                            let (ni, nj) = (i as i64 + di, j as i64 + dj);
+                            member[(dj + 2) as usize][(di + 2) as usize] = (di, dj) != (0, 0)
+                                && ni >= 0
+                                && nj >= 0
+                                && (ni as usize) < img.w
+                                && (nj as usize) < img.h
+                                && same(lum_at(ni as usize, nj as usize));
+                        }
+                    }
+                    let mut seen = [[false; 5]; 5];
+                    seen[2][2] = true;
+                    let mut todo = vec![(2i64, 2i64)];
+                    let mut size = 1;
+                    while let Some((ci, cj)) = todo.pop() {
+                        for (di, dj) in (-1i64..=1).flat_map(|a| (-1i64..=1).map(move |b| (a, b))) {
+                            let (ni, nj) = (ci + di, cj + dj);
+                            if (0..5).contains(&ni)
+                                && (0..5).contains(&nj)
+                                && member[nj as usize][ni as usize]
+                                && !seen[nj as usize][ni as usize]
+                            {
+                                seen[nj as usize][ni as usize] = true;
+                                todo.push((ni, nj));
+                                size += 1;
+                            }
+                        }
+                    }
+                    size >= p.support_group
+                };
+                let kept = p.support > 0 && (support >= p.support || region || compact || group);
                 if x0 > xb && noisy(x0) && !kept {
                     rho = *ladder.last().unwrap();
                     for &r in &ladder[1..] {

@@ -7,6 +7,7 @@ mod common;
 mod corpus;
 mod damaged;
 mod data_safety;
+mod defaults;
 mod energy;
 mod ep_box;
 mod exr_io;

@@ -1,7 +1,8 @@
 //! The streaming engine against the reference filter of `common`.
 
 use crate::common::*;
-use epfilt::{Method, PipelineConfig};
+use epfilt::filter::Quality;
+use epfilt::{FilterParams, Method, PipelineConfig};
 
 /// The engine gathers the base kernel separably while the reference scatters
 /// every sample; both sum the same products in another order, so values agree
@@ -20,8 +21,24 @@ fn streaming_equals_the_reference_for_every_method() {
                 img.set(x, y, c, 2000.0);
             }
         }
-        for m in [Method::EpGauss, Method::Gauss, Method::Box] {
-            let p = params(m, s);
+        // A run of three along a diagonal (a thin line's hits): its ends have
+        // one neighbour each, the group rule keeps them.
+        for k in 0..3 {
+            for c in 0..3 {
+                img.set(w * s / 2 + k, h * s / 2 + k, c, 1500.0 + 100.0 * k as f32);
+            }
+        }
+        // Every preset and a group rule with neither compact nor region.
+        let mut settings: Vec<FilterParams> = Quality::ALL
+            .iter()
+            .map(|&q| params(Method::EpGauss, s).with_quality(q))
+            .collect();
+        let mut group = params(Method::EpGauss, s);
+        (group.support, group.support_group) = (2, 3);
+        (group.support_compact, group.support_region) = (0, 0);
+        settings.extend([group, params(Method::Gauss, s), params(Method::Box, s)]);
+        for p in settings {
+            let m = p.method;
             let cfg = PipelineConfig {
                 strip_rows: 7,
                 tile: 16,
@@ -37,7 +54,8 @@ fn streaming_equals_the_reference_for_every_method() {
             assert_eq!(
                 stats.ep_gauss().map_or(0, |g| g.spread) as usize,
                 spread,
-                "S={s} {m:?}: samples spread"
+                "S={s} {m:?} {:?}: samples spread",
+                p.quality
             );
             for (k, (&o, &r)) in out.data.iter().zip(&want).enumerate() {
                 let scale = r.abs().max(1e-3);

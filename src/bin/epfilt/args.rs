@@ -284,7 +284,8 @@ pub struct FilterArgs {
     #[arg(long, help_heading = "Method")]
     pub radius: Option<f64>,
     /// Largest Gaussian radius a noisy sample may get, in output pixels
-    /// (ep-box: the largest spread radius, in pixels) [default: 16; ep-box: 8].
+    /// (ep-box: the largest spread radius, in pixels) [default: ep-gauss: its
+    /// --quality's; ep-box: 8].
     #[arg(long, help_heading = "Method")]
     pub max_radius: Option<f64>,
     /// Kernel cut-off in radii [default: 3; ep-gauss: its --quality's].
@@ -324,6 +325,12 @@ pub struct FilterArgs {
     /// [default: --quality's].
     #[arg(long, help_heading = "ep-gauss")]
     pub support_ratio: Option<f64>,
+    /// A sample with fewer than --support supporting neighbours is kept when
+    /// its group (the samples joined to it through supporting neighbours,
+    /// within 2 super-samples) holds at least this many: the runs of hits
+    /// along a thin line or a rim (0 = off) [default: --quality's].
+    #[arg(long, help_heading = "ep-gauss")]
+    pub support_group: Option<usize>,
     /// A sample with one supporting neighbour (fewer than --support) is kept
     /// when at most this many super-samples within 2 of it fail the test: a
     /// compact pair, a bulb a fraction of a pixel wide (0 = off) [default:
@@ -348,9 +355,10 @@ pub struct FilterArgs {
     /// [default: --quality's].
     #[arg(long, help_heading = "ep-gauss")]
     pub support_level: Option<f64>,
-    /// Relative step of the ladder of widths the search picks from (its precision).
-    #[arg(long, default_value_t = 0.1, help_heading = "ep-gauss")]
-    pub width_step: f64,
+    /// Relative step of the ladder of widths the search picks from (its
+    /// precision) [default: --quality's].
+    #[arg(long, help_heading = "ep-gauss")]
+    pub width_step: Option<f64>,
     /// Spread widths of this radius (output pixels) and more on a 2x coarser
     /// grid, and from twice it on a 4x coarser grid, brought back with a tent
     /// per halving: a quarter (a sixteenth) of the taps, energy exact, no
@@ -505,6 +513,7 @@ fn quality_help() -> String {
 /// method may ignore), as clap names them.
 pub const METHOD_OPTIONS: &[&str] = &[
     "quality",
+    "support_group",
     "support_compact",
     "support_over",
     "support_region",

@@ -165,6 +165,9 @@ fn filter_job(
     if let Some(r) = a.support_ratio {
         params.support_ratio = r;
     }
+    if let Some(n) = a.support_group {
+        params.support_group = n;
+    }
     if let Some(n) = a.support_compact {
         params.support_compact = n;
     }
@@ -182,7 +185,9 @@ fn filter_job(
     if let Some(r) = a.max_radius {
         params.max_radius = r;
     }
-    params.width_step = a.width_step;
+    if let Some(w) = a.width_step {
+        params.width_step = w;
+    }
     params.coarse_from = a.coarse_from;
     if let Some(t) = a.tolerance {
         params.tolerance = t;
