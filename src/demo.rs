@@ -48,7 +48,7 @@ pub fn run(dir: &Path, w: usize, h: usize, log: &dyn Fn(&str)) -> Result<String>
          result (box: the truth; the Gaussians: `<scene>_truth_gauss.exr`, the expected samples through the \
          base Gaussian) and isolates the sampling noise left. rel. MSE = mean (a-b)^2/(b^2 + eps), \
          eps = (0.01 * mean |truth|)^2; PSNR after the display mapping of `epfilt preview`. *kept*: noisy \
-         samples ep-gauss keeps as parts of a feature (a noisy neighbour within 16x); the paper's rule \
+         samples ep-gauss keeps as parts of a feature (noisy neighbours, compact pairs, bright regions); the paper's rule \
          (`--guard none`) spreads them all.\n",
         dir = dir.display()
     ));

@@ -248,6 +248,16 @@ fn lights(r: &Image) -> Vec<Vec<(usize, usize)>> {
     out
 }
 
+/// A peak ratio as the tables print it: `–` where the reference has no
+/// light (the ratio over no lights is infinite).
+fn peak_text(p: f64) -> String {
+    if p.is_finite() {
+        format!("{p:.2}")
+    } else {
+        "–".into()
+    }
+}
+
 /// Smallest ratio over lights of the output's peak to the reference's.
 fn peak_ratio(out: &Image, r: &Image, lights: &[Vec<(usize, usize)>]) -> f64 {
     lights
@@ -739,7 +749,7 @@ fn markdown(rows: &[Row], oracles: &[Oracle], dir: &Path) -> String {
             rows.iter()
                 .find(|r| r.input == *i && r.method == m)
                 .map_or("–".to_string(), |r| {
-                    format!("{:.3}; {:.2}", r.factor, r.peak)
+                    format!("{:.3}; {}", r.factor, peak_text(r.peak))
                 })
         };
         let r0 = rows.iter().find(|r| r.input == *i).unwrap();
@@ -803,7 +813,7 @@ fn markdown(rows: &[Row], oracles: &[Oracle], dir: &Path) -> String {
     for r in rows {
         let _ = writeln!(
             s,
-            "| {} | {} | {:.3} | {:.4e} | {:.4} | {:.9} | {:.1e} | {:.1}% | {:.2} ({}) | {} | {:.3} |",
+            "| {} | {} | {:.3} | {:.4e} | {:.4} | {:.9} | {:.1e} | {:.1}% | {} ({}) | {} | {:.3} |",
             r.input,
             r.method,
             r.factor,
@@ -812,7 +822,7 @@ fn markdown(rows: &[Row], oracles: &[Oracle], dir: &Path) -> String {
             r.energy,
             r.ledger,
             100.0 * r.untouched,
-            r.peak,
+            peak_text(r.peak),
             r.lights,
             r.spread,
             r.seconds

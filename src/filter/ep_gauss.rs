@@ -101,8 +101,9 @@ fn dot4_f32(a: &[f64], b: &[f32]) -> f64 {
 }
 
 /// Radius of the average's support in units of `rho`, at most the kernel's
-/// cutoff: the disc of `AVG_CUTOFF rho` holds all but `e^-6.25 = 0.2%` of a
-/// 2-D Gaussian's weight, and reading it costs 0.54x the square of `3 rho`.
+/// cutoff: the disc of `AVG_CUTOFF rho` holds all but `e^-5.06 = 0.6%` of a
+/// 2-D Gaussian's weight, and reading it costs 0.44x the square of `3 rho`
+/// (0.81x the disc of `2.5 rho` it was before the second real-renders round).
 pub const AVG_CUTOFF: f64 = 2.25;
 
 /// The average's support radius for kernel cutoff `cutoff`, in `rho`.
@@ -578,7 +579,8 @@ impl EpGauss {
     }
 
     /// Whether a sample can fail the test by being too dark (`t_lo > 0`:
-    /// `tol < w0`, far below the default): otherwise only samples
+    /// `tol < w0`, 0.089 at the base width at S = 3, so below the old
+    /// default 0.25 and above the new 0.08): otherwise only samples
     /// brighter than the bound of [`EpGauss::bounds`] are noisy.
     pub fn low_outliers(&self) -> bool {
         self.t_lo > 0.0
