@@ -334,6 +334,28 @@ pub struct FilterParams {
     pub quality: Quality,
 }
 
+/// `Ok` when `v` is finite and at least `lo`, else the error that says
+/// `option` must be `what`.
+fn at_least(option: &str, v: f64, lo: f64, what: &str) -> Result<()> {
+    if v.is_finite() && v >= lo {
+        Ok(())
+    } else {
+        Err(Error::Config(format!("{option} must be {what}, got {v}")))
+    }
+}
+
+/// `Ok` when the count `n` is at most `hi`, else the error that says
+/// `option` must be `0..=hi` `unit`.
+fn at_most(option: &str, n: usize, hi: usize, unit: &str) -> Result<()> {
+    if n <= hi {
+        Ok(())
+    } else {
+        Err(Error::Config(format!(
+            "{option} must be 0..={hi} {unit}, got {n}"
+        )))
+    }
+}
+
 impl FilterParams {
     /// The settings this method uses, in a fixed order: what a file and a
     /// report say about how they were made.
@@ -547,60 +569,25 @@ impl FilterParams {
                 self.radius, self.max_radius
             ));
         }
-        if !(self.clamp.is_finite() && self.clamp >= 0.0) {
-            return bad(format!(
-                "--clamp must be a finite number >= 0, got {}",
-                self.clamp
-            ));
-        }
-        if self.support_group > 25 {
-            return bad(format!(
-                "--support-group must be 0..=25 samples (the 5 x 5 about a sample), got {}",
-                self.support_group
-            ));
-        }
-        if self.support_compact > 25 {
-            return bad(format!(
-                "--support-compact must be 0..=25 samples, got {}",
-                self.support_compact
-            ));
-        }
-        if self.support_region > 24 {
-            return bad(format!(
-                "--support-region must be 0..=24 samples, got {}",
-                self.support_region
-            ));
-        }
-        if !(self.support_over.is_finite() && self.support_over >= 0.0) {
-            return bad(format!(
-                "--support-over must be a number >= 0, got {}",
-                self.support_over
-            ));
-        }
-        if !(self.support_level.is_finite() && self.support_level >= 1.0) {
-            return bad(format!(
-                "--support-level must be a number >= 1, got {}",
-                self.support_level
-            ));
-        }
-        if self.support > 8 {
-            return bad(format!(
-                "--support must be 0..=8 neighbours, got {}",
-                self.support
-            ));
-        }
-        if !(self.support_ratio.is_finite() && self.support_ratio >= 1.0) {
-            return bad(format!(
-                "--support-ratio must be a number >= 1, got {}",
-                self.support_ratio
-            ));
-        }
-        if !(self.coarse_from.is_finite() && self.coarse_from >= 0.0) {
-            return bad(format!(
-                "--coarse-from must be a radius >= 0 output pixels (0: off), got {}",
-                self.coarse_from
-            ));
-        }
+        at_least("--clamp", self.clamp, 0.0, "a finite number >= 0")?;
+        at_most(
+            "--support-group",
+            self.support_group,
+            25,
+            "samples (the 5 x 5 about a sample)",
+        )?;
+        at_most("--support-compact", self.support_compact, 25, "samples")?;
+        at_most("--support-region", self.support_region, 24, "samples")?;
+        at_least("--support-over", self.support_over, 0.0, "a number >= 0")?;
+        at_least("--support-level", self.support_level, 1.0, "a number >= 1")?;
+        at_most("--support", self.support, 8, "neighbours")?;
+        at_least("--support-ratio", self.support_ratio, 1.0, "a number >= 1")?;
+        at_least(
+            "--coarse-from",
+            self.coarse_from,
+            0.0,
+            "a radius >= 0 output pixels (0: off)",
+        )?;
         if !(0.0..0.5).contains(&self.alpha) {
             return bad(format!("--alpha must be in 0..0.5, got {}", self.alpha));
         }
