@@ -8,6 +8,7 @@ use crate::filter::channels::{self, RuleOverride};
 use crate::filter::ep_box::{Spp, StatsLayout};
 use crate::filter::{FilterParams, Method};
 use crate::geometry::Grid;
+use crate::host::{cpu_seconds, default_max_memory, peak_rss_bytes};
 use crate::io::provenance::{self, Fingerprint};
 use crate::io::{
     find_stats, ExrInput, Format, OutputSettings, PartSelect, SppFrom, StatsRequest, ViewSelect,
@@ -15,7 +16,7 @@ use crate::io::{
 use crate::pipeline::edge::{Coverage, Cropped};
 use crate::pipeline::stream::MAX_CHANNELS;
 use crate::pipeline::{run, ChannelMode, Job, MethodStats, PipelineConfig, Progress};
-use crate::stats::{peak_rss_bytes, EpBoxReport, PartReport, Report, StatsReport};
+use crate::stats::{EpBoxReport, PartReport, Report, StatsReport};
 
 /// The ledger must balance to this relative error before rounding, or the
 /// output is not written. The pipeline's own bound is 1e-12 (each sample's
@@ -248,16 +249,6 @@ pub fn existing_output(job: &FilterJob) -> Result<Existing> {
     } else {
         Existing::Done
     })
-}
-
-/// Half the machine's memory (at least 1 GiB), or 8 GiB where it cannot be read.
-pub fn default_max_memory() -> u64 {
-    let total = std::fs::read_to_string("/proc/meminfo").ok().and_then(|m| {
-        m.lines()
-            .find(|l| l.starts_with("MemTotal:"))
-            .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
-    });
-    total.map_or(8 << 30, |kb| (kb * 1024 / 2).max(1 << 30))
 }
 
 /// Refuse an output that is the input, also through a symbolic or hard link.
@@ -589,7 +580,7 @@ fn filter_part(
     exclusive: bool,
     progress: Progress<'_>,
 ) -> Result<Report> {
-    let cpu_start = crate::stats::cpu_seconds().unwrap_or(0.0);
+    let cpu_start = cpu_seconds().unwrap_or(0.0);
     let view = match &job.view {
         Some(ViewSelect::Name(v)) => Some(v.as_str()),
         _ => None,
@@ -1110,7 +1101,7 @@ fn filter_part(
         window_bytes: stats.window_bytes(),
         windows: stats.windows.clone(),
         stage_seconds: stats.stages,
-        cpu_seconds: crate::stats::cpu_seconds().map(|c| c - cpu_start),
+        cpu_seconds: cpu_seconds().map(|c| c - cpu_start),
         version: env!("CARGO_PKG_VERSION").into(),
         settings: settings
             .into_iter()

@@ -40,6 +40,7 @@ pub mod demo;
 pub mod error;
 pub mod filter;
 pub mod geometry;
+pub mod host;
 pub mod io;
 pub mod job;
 pub mod merge;

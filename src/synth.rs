@@ -668,6 +668,6 @@ pub fn synth(job: &SynthJob, progress: &(dyn Fn(usize, usize) + Sync)) -> Result
         height,
         truth: job.truth.as_ref().map(|t| t.display().to_string()),
         seconds: start.elapsed().as_secs_f64(),
-        peak_rss_bytes: crate::stats::peak_rss_bytes(),
+        peak_rss_bytes: crate::host::peak_rss_bytes(),
     })
 }

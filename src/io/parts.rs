@@ -124,7 +124,7 @@ pub fn assemble(dest: &Path, sources: &[PartSource]) -> Result<u64> {
         }
         // What a decoder allocates per block comes from the header: bound it
         // before any is checked (as the reader does for the part it filters).
-        let limit = crate::job::default_max_memory();
+        let limit = crate::host::default_max_memory();
         if block_bytes(h) > limit {
             return Err(Error::InvalidFile {
                 path: src.path.clone(),

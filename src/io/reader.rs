@@ -767,7 +767,7 @@ impl ExrInput {
         // What a decoder allocates per block comes from the header: bound it
         // before any command reads pixels (filter checks its whole job
         // against --max-memory as well).
-        let limit = crate::job::default_max_memory();
+        let limit = crate::host::default_max_memory();
         if input.block_bytes() > limit {
             return Err(invalid(
                 path,
