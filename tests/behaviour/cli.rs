@@ -80,7 +80,7 @@ fn filter_writes_output_and_json_report() {
         .as_array()
         .unwrap()
         .iter()
-        .all(|e| e.as_f64().unwrap() <= 1e-12));
+        .all(|e| e.as_f64().unwrap() <= ENERGY_TOL));
     let o = epfilt(&["filter", &inp, out.to_str().unwrap(), "-s", "3", "-q"]);
     assert!(o.status.success() && o.stderr.is_empty());
 }
@@ -766,7 +766,6 @@ fn filter_at_edge(
 fn a_padded_edge_keeps_flat_fields_flat_and_energy_exact() {
     // Pixels of fewer samples: each kernel normalised over what exists.
     const FLAT_TOL: f32 = 1e-6; // f32 rounding of a divided sum near 1
-    const ENERGY_TOL: f64 = 1e-12;
     let dir = tmpdir();
     let d = dir.path();
     let opts = (

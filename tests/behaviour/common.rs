@@ -10,6 +10,11 @@ use epfilt::{filter_in_memory, FilterParams, Grid, Job, Method, PipelineConfig, 
 /// margin and still catches one lost sample in 1e12.
 pub const ENERGY_TOL: f64 = 1e-12;
 
+/// The methods of the Gaussian family's stage (`pipeline/spread.rs`), which
+/// most stream tests run: one list, so a method added there is tested
+/// everywhere at once.
+pub const GAUSSIAN_FAMILY: [Method; 3] = [Method::EpGauss, Method::Gauss, Method::Box];
+
 /// The method's counts of a run, by method (the run must be of it).
 pub trait Counts {
     /// ep-gauss's.

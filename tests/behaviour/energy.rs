@@ -7,10 +7,8 @@ use epfilt::{Method, PipelineConfig};
 /// corners (the bound; f32 output rounding alone is 6e-8).
 const FLAT_TOL: f64 = 1e-6;
 
-const METHODS: [Method; 3] = [Method::EpGauss, Method::Gauss, Method::Box];
-
 fn check_energy(img: &Img, s: usize, what: &str) {
-    for m in METHODS {
+    for m in GAUSSIAN_FAMILY {
         let (_, stats) = run(img, s, &params(m, s), &PipelineConfig::default());
         for l in &stats.ledger {
             assert!(
@@ -62,7 +60,7 @@ fn single_hot_sample_at_every_position_around_a_tile_corner() {
             for c in 0..3 {
                 img.set(i, j, c, 5e4);
             }
-            for m in METHODS {
+            for m in GAUSSIAN_FAMILY {
                 let cfg = PipelineConfig {
                     tile,
                     ..Default::default()
@@ -85,7 +83,7 @@ fn flat_field_stays_flat_up_to_borders_and_corners() {
     for s in [1, 2, 3, 4, 5] {
         for (w, h) in [(1, 1), (1, 7), (7, 1), (2, 3), (16, 11)] {
             let img = Img::new(w * s, h * s, 3, |_, _, c| [0.18, 1.0, 1234.5][c]);
-            for m in METHODS {
+            for m in GAUSSIAN_FAMILY {
                 let (out, _) = run(&img, s, &params(m, s), &PipelineConfig::default());
                 for y in 0..h {
                     for x in 0..w {

@@ -307,7 +307,12 @@ fn energy_is_exact_for_every_cut() {
         // Compensated sums and shares that sum to the excess within a few
         // ulps: 1e-12 relative is far above the ~1e-16 seen, far below a
         // lost or doubled pixel (1e-4 here).
-        assert!(l.rel_error <= 1e-12, "{}: {:e}", l.channel, l.rel_error);
+        assert!(
+            l.rel_error <= ENERGY_TOL,
+            "{}: {:e}",
+            l.channel,
+            l.rel_error
+        );
     }
     assert!(sa.eb().spread > 50);
     let (b, _) = same_for_every_cut(&img.data, &job(img.w, img.h, 16.0), &p);
@@ -422,7 +427,7 @@ fn a_cluster_without_converged_neighbours_resolves_over_passes() {
     let (out, s) = filter(&img, 16.0, &p, &cfg(256, 0, 1));
     assert_eq!((s.eb().unresolved, s.eb().passes), (1, 2));
     for l in &s.ledger {
-        assert!(l.rel_error <= 1e-12);
+        assert!(l.rel_error <= ENERGY_TOL);
     }
     // The centre's own value changes only by what neighbours spread onto it.
     assert!(out.at(10, 10, 0) >= img.at(10, 10, 0));
@@ -540,7 +545,7 @@ fn a_bright_region_of_noisy_pixels_keeps_its_edges_under_the_default_guard() {
         }
     }
     for l in &s.ledger {
-        assert!(l.rel_error <= 1e-12);
+        assert!(l.rel_error <= ENERGY_TOL);
     }
 }
 
@@ -592,7 +597,12 @@ fn energy_and_invariance(
 ) -> Result<(), TestCaseError> {
     let (a, sa) = filter(img, 16.0, p, &cfg(256, 0, 1));
     for l in &sa.ledger {
-        prop_assert!(l.rel_error <= 1e-12, "{}: {:e}", l.channel, l.rel_error);
+        prop_assert!(
+            l.rel_error <= ENERGY_TOL,
+            "{}: {:e}",
+            l.channel,
+            l.rel_error
+        );
     }
     prop_assert!(a.data.iter().all(|v| v.is_finite()));
     let (b, sb) = filter(img, 16.0, p, cut);
@@ -702,7 +712,7 @@ mod files {
             .as_array()
             .unwrap()
             .iter()
-            .all(|e| e.as_f64().unwrap() <= 1e-12));
+            .all(|e| e.as_f64().unwrap() <= crate::common::ENERGY_TOL));
         // The same with the channel and count named, and --spp overriding.
         let named = dir.path().join("named.exr");
         let o = epfilt(&[

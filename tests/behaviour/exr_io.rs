@@ -284,7 +284,7 @@ fn every_layout_and_codec_matches_the_in_memory_filter() {
             }
             let report = filter_file(&j, &|_, _| {}).expect(name);
             assert!(
-                report.energy_rel_error.iter().all(|e| *e <= 1e-12),
+                report.energy_rel_error.iter().all(|e| *e <= ENERGY_TOL),
                 "{name}"
             );
             let got = read_planar(&out);
@@ -744,7 +744,7 @@ fn pixel_type_same_keeps_each_channels_own_type() {
     .write()
     .to_file(&input)
     .expect("write mixed");
-    for m in [Method::EpGauss, Method::Gauss, Method::Box] {
+    for m in GAUSSIAN_FAMILY {
         let out = dir.path().join(format!("out-{}.exr", m.name()));
         let report = filter_file(&job(&input, &out, m, s), &|_, _| {}).expect("filter");
         let types: std::collections::BTreeMap<String, SampleType> =

@@ -4,10 +4,8 @@
 use crate::common::*;
 use epfilt::{filter_in_memory, Grid, Job, Method, PipelineConfig, Precision};
 
-const METHODS: [Method; 3] = [Method::EpGauss, Method::Gauss, Method::Box];
-
 fn all_methods_exact(img: &Img, s: usize, what: &str) -> Vec<Img> {
-    METHODS
+    GAUSSIAN_FAMILY
         .iter()
         .map(|&m| {
             let (out, stats) = run(img, s, &params(m, s), &PipelineConfig::default());
@@ -184,7 +182,7 @@ fn half_float_input_at_its_maximum() {
         true,
         exr::prelude::LineOrder::Increasing,
     );
-    for m in METHODS {
+    for m in GAUSSIAN_FAMILY {
         let out = dir.path().join(format!("{}.exr", m.name()));
         let report =
             epfilt::filter_file(&crate::exr_io::job(&input, &out, m, 3), &|_, _| {}).unwrap();

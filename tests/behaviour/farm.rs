@@ -148,7 +148,7 @@ fn the_slurm_array_script_filters_each_frame_once_and_a_rerun_redoes_only_what_i
             assert_eq!(f, previous_last + 1);
             previous_last = f;
         }
-        assert!(r["worst_ledger_error"].as_f64().unwrap() < 1e-12);
+        assert!(r["worst_ledger_error"].as_f64().unwrap() < ENERGY_TOL);
     }
     assert_eq!(owner.len() as i64, FRAMES);
     outputs_match_single_runs(&frames_dir, &out_dir, 1..=FRAMES);
