@@ -612,16 +612,10 @@ fn energy_and_invariance(
 }
 
 mod files {
-    use std::process::Command;
 
     use crate::exr_io::{tmpdir, write_named as write};
 
-    fn epfilt(args: &[&str]) -> std::process::Output {
-        Command::new(env!("CARGO_BIN_EXE_epfilt"))
-            .args(args)
-            .output()
-            .expect("run epfilt")
-    }
+    use crate::common::epfilt_run as epfilt;
 
     const RGBV: [&str; 6] = ["R", "G", "B", "variance.R", "variance.G", "variance.B"];
 

@@ -1,17 +1,10 @@
 //! `synth`, `compare` and `preview`: exact truth, determinism, formats.
 
-use std::process::Command;
-
 use crate::exr_io::{read_planar, tmpdir};
 use epfilt::synth::{synth, Sampling, Scene, SceneKind, SynthJob};
 use exr::prelude::Compression;
 
-fn epfilt(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_epfilt"))
-        .args(args)
-        .output()
-        .expect("run epfilt")
-}
+use crate::common::epfilt_run as epfilt;
 
 /// Over K seeds, the mean of each pixel's estimate is compared with its exact
 /// expected value using its exact variance (`Scene::pixel_moments`). Where a
