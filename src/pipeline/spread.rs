@@ -704,7 +704,7 @@ impl SpreadStage {
                     let mut any = false;
                     for bb in 0..s {
                         for &x0 in &lrows[bb * in_w + px * s..bb * in_w + (px + 1) * s] {
-                            any |= x0 > 0.0 && (x0 > hi || x0 < lo);
+                            any |= EpGauss::outside(x0, (hi, lo));
                         }
                     }
                     if any {
@@ -735,7 +735,7 @@ impl SpreadStage {
                 for &(px, xbar, hi, lo) in flagged.iter() {
                     for i in px * s..(px + 1) * s {
                         let x0 = lrow[i];
-                        if !(x0 > 0.0 && (x0 > hi || x0 < lo)) {
+                        if !EpGauss::outside(x0, (hi, lo)) {
                             continue;
                         }
                         let neighbour = |di: i64, dj: i64| {

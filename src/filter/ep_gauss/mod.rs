@@ -573,6 +573,14 @@ impl EpGauss {
         (xbar > 0.0 && xbar.is_finite()).then_some((self.t_hi * xbar, self.t_lo * xbar))
     }
 
+    /// Whether a sample of luminance `x0` lies outside the
+    /// [`EpGauss::bounds`] `(hi, lo)` of its pixel: noisy. Samples at or
+    /// below 0 never are (Relation 14 is not defined there).
+    #[inline]
+    pub fn outside(x0: f64, (hi, lo): (f64, f64)) -> bool {
+        x0 > 0.0 && (x0 > hi || x0 < lo)
+    }
+
     /// Only samples brighter than their neighbourhood can be noise: the
     /// dark side of Relation 14 (`t_lo`) is off.
     pub fn bright_only(mut self) -> Self {
@@ -1071,6 +1079,29 @@ mod tests {
             } else {
                 assert!(d_at(l) <= 0.25, "mag {mag}: D = {}", d_at(l));
                 assert!(d_at(l - 1) > 0.25, "mag {mag}: a narrower width passes too");
+            }
+        }
+    }
+
+    #[test]
+    fn outside_the_bounds_is_noisy_and_nonpositive_never_is() {
+        let ep = EpGauss::new(3, 0.6, 16.0, 3.0, 0.08, 0.1);
+        let (hi, lo) = ep.bounds(1.0).unwrap();
+        // At the default tolerance the dark side is live (`tol < w0`).
+        assert!(lo > 0.0 && hi > 1.0);
+        for (x0, noisy) in [
+            (hi * 1.001, true),
+            (hi, false),
+            (1.0, false),
+            (lo, false),
+            (lo * 0.999, true),
+            (0.0, false),
+            (-5.0, false),
+            (f64::NAN, false),
+        ] {
+            assert_eq!(EpGauss::outside(x0, (hi, lo)), noisy, "{x0}");
+            if x0 > 0.0 {
+                assert_eq!(ep.is_noisy(x0, 1.0), noisy, "{x0}");
             }
         }
     }
