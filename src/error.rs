@@ -58,6 +58,17 @@ pub enum Error {
         reason: String,
     },
 
+    /// A sample value the pipeline cannot handle, found before it knows
+    /// the file: which side it is on (the job names the file, as
+    /// [`Error::Value`]).
+    #[error("{reason}")]
+    StreamValue {
+        /// An input sample, or an output value.
+        side: Side,
+        /// What value, where.
+        reason: String,
+    },
+
     /// An operating-system error on a file.
     #[error("{path}: {source}")]
     Io {
@@ -150,4 +161,13 @@ pub fn one_line(e: &(dyn std::error::Error + 'static)) -> String {
         cause = c.source();
     }
     line.replace('\n', " ")
+}
+
+/// Which side of a run a value is on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Side {
+    /// A sample read from the input.
+    Input,
+    /// A value being written to the output.
+    Output,
 }

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Side};
 use crate::filter::channels::{self, RuleOverride};
 use crate::filter::ep_box::{Spp, StatsLayout};
 use crate::filter::{FilterParams, Method};
@@ -963,11 +963,10 @@ fn filter_part(
         }
     };
     let stats = result.map_err(|e| match e {
-        Error::Value { path, reason } if path.as_os_str().is_empty() => Error::Value {
-            path: if reason.starts_with("output") {
-                job.output.clone()
-            } else {
-                job.input.clone()
+        Error::StreamValue { side, reason } => Error::Value {
+            path: match side {
+                Side::Input => job.input.clone(),
+                Side::Output => job.output.clone(),
             },
             reason,
         },

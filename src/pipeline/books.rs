@@ -11,7 +11,7 @@ use super::ledger::{Ledger, Sums};
 use super::stream::OutRows;
 use super::window::RowWindow;
 use super::{NonFinite, Precision, Strip};
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Side};
 
 /// Names, ledger, digest and non-finite counts of one run.
 #[derive(Debug)]
@@ -197,8 +197,8 @@ fn ingest(
         match s {
             Ok(s) => total.merge(&s),
             Err((x, c)) => {
-                return Err(Error::Value {
-                    path: Default::default(),
+                return Err(Error::StreamValue {
+                    side: Side::Input,
                     reason: format!(
                         "non-finite input value at sample ({x}, {}) in channel {} \
                          (--nonfinite zero treats such samples as 0 and counts them)",
@@ -279,8 +279,8 @@ fn finish_rows(
                         } else {
                             round(val, p)
                         };
-                        let r = r.ok_or_else(|| Error::Value {
-                            path: Default::default(),
+                        let r = r.ok_or_else(|| Error::StreamValue {
+                            side: Side::Output,
                             reason: format!(
                                 "output value {val:e} at pixel ({x}, {y}) in channel {} does not fit in {}{}",
                                 names[c],

@@ -104,6 +104,34 @@ fn truncated_and_bit_flipped_files_never_panic() {
     }
 }
 
+/// A value the output cannot hold is the output's fault, and the error says
+/// so by naming the output file; a non-finite sample names the input (the
+/// pipeline says which side, the job which file).
+#[test]
+fn a_value_too_large_for_the_output_names_the_output() {
+    let dir = tmpdir();
+    let input = dir.path().join("bright.exr");
+    let mut img = Img::new(12, 9, 3, |_, _, _| 0.5);
+    img.set(4, 4, 0, 1e6); // above half's 65504 after any filter at S = 1
+    write_rgb(
+        &input,
+        &img,
+        Compression::ZIP16,
+        Blocks::ScanLines,
+        false,
+        LineOrder::Increasing,
+    );
+    let out = dir.path().join("half.exr");
+    let mut j = job(&input, &out, Method::Box, 1);
+    j.output_settings.precision = Some(epfilt::Precision::F16);
+    let err = filter_file(&j, &|_, _| {}).unwrap_err().to_string();
+    assert!(
+        err.starts_with(&out.display().to_string()) && err.contains("does not fit in f16"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}
+
 #[test]
 fn nonfinite_samples_are_refused_or_counted_as_zero() {
     use epfilt::pipeline::NonFinite;
