@@ -170,38 +170,54 @@ pub const CUTS: [(usize, usize, usize); 9] = [
 ];
 
 /// The one invariance tester: runs `data` (planar, as `job` says) with
-/// `params` through every cut of [`CUTS`] and demands one answer: the same
-/// output bits, the same digest of the unrounded output and the same ledger
-/// bits. Returns the first run's output and statistics.
-pub fn same_for_every_cut(data: &[f32], job: &Job, params: &FilterParams) -> (Vec<f32>, RunStats) {
+/// `params` through every cut of `cuts` (tile, strip rows, threads) and
+/// demands one answer: the same output bits, the same digest of the
+/// unrounded output, the same ledger bits and the same counts. Returns the
+/// first run's output and statistics, or what differed where (a `Result`, so
+/// a property test can report it as its failure).
+pub fn invariant(
+    data: &[f32],
+    job: &Job,
+    params: &FilterParams,
+    cuts: &[(usize, usize, usize)],
+) -> Result<(Vec<f32>, RunStats), String> {
     let mut first: Option<(Vec<f32>, RunStats)> = None;
-    for (tile, strip, threads) in CUTS {
+    for &(tile, strip, threads) in cuts {
         let (out, stats) = filter_in_memory(data.to_vec(), job, params, &cfg(tile, strip, threads))
-            .expect("filter");
-        match &first {
-            None => first = Some((out, stats)),
-            Some((o, s)) => {
-                let what = format!(
-                    "{} tile {tile} strip {strip} threads {threads}",
-                    params.method.name()
-                );
-                assert!(
-                    o.iter().zip(&out).all(|(a, b)| a.to_bits() == b.to_bits()),
-                    "{what}: output bits differ"
-                );
-                assert_eq!(s.digest, stats.digest, "{what}: digest");
-                let ledger = |s: &RunStats| -> Vec<(u64, u64)> {
-                    s.ledger
-                        .iter()
-                        .map(|l| (l.energy_out.to_bits(), l.energy_out_rounded.to_bits()))
-                        .collect()
-                };
-                assert_eq!(ledger(s), ledger(&stats), "{what}: ledger");
-                assert_eq!(s.method, stats.method, "{what}: counts");
-            }
+            .map_err(|e| format!("{} {tile}/{strip}/{threads}: {e}", params.method.name()))?;
+        let Some((o, s)) = &first else {
+            first = Some((out, stats));
+            continue;
+        };
+        let what = format!(
+            "{} tile {tile} strip {strip} threads {threads}",
+            params.method.name()
+        );
+        if !(o.len() == out.len() && o.iter().zip(&out).all(|(a, b)| a.to_bits() == b.to_bits())) {
+            return Err(format!("{what}: output bits differ"));
+        }
+        if s.digest != stats.digest {
+            return Err(format!(
+                "{what}: digest {:x} vs {:x}",
+                s.digest, stats.digest
+            ));
+        }
+        if ledger_bits(s) != ledger_bits(&stats) {
+            return Err(format!("{what}: ledger"));
+        }
+        if s.method != stats.method {
+            return Err(format!(
+                "{what}: counts {:?} vs {:?}",
+                s.method, stats.method
+            ));
         }
     }
-    first.expect("at least one cut")
+    first.ok_or_else(|| "no cut".to_string())
+}
+
+/// [`invariant`] over every cut of [`CUTS`], which must hold.
+pub fn same_for_every_cut(data: &[f32], job: &Job, params: &FilterParams) -> (Vec<f32>, RunStats) {
+    invariant(data, job, params, &CUTS).unwrap_or_else(|e| panic!("{e}"))
 }
 
 pub fn params(method: Method, s: usize) -> FilterParams {
@@ -535,7 +551,7 @@ pub fn ledger_bits(stats: &epfilt::RunStats) -> Vec<u64> {
     let mut v: Vec<u64> = stats
         .ledger
         .iter()
-        .map(|l| l.energy_out.to_bits())
+        .flat_map(|l| [l.energy_out.to_bits(), l.energy_out_rounded.to_bits()])
         .collect();
     v.push(stats.digest);
     v

@@ -571,7 +571,7 @@ proptest! {
         ][guard as usize];
         let mut p = params(guard, 0.01, radius);
         p.ep_box.passes = passes;
-        energy_and_invariance(&img, &p, &cfg(tile, strip, threads))?;
+        energy_and_invariance(&img, &p, (tile, strip, threads))?;
     }
 
     /// ep-gauss at S = 1 reads the same statistics (its carriers rule, whose
@@ -584,18 +584,20 @@ proptest! {
         let img = scene(w, h, count, seed);
         let mut p = FilterParams::new(Method::EpGauss, 1);
         p.max_radius = max_radius;
-        energy_and_invariance(&img, &p, &cfg(tile, strip, threads))?;
+        energy_and_invariance(&img, &p, (tile, strip, threads))?;
     }
 }
 
-/// At 16 samples per pixel: the ledger balances to 1e-12, every value is
-/// finite, and `cut` gives the bits (and digest) of one whole-image pass.
+/// At 16 samples per pixel: the ledger balances to [`ENERGY_TOL`], every
+/// value is finite, and `cut` (tile, strip rows, threads) gives the bits,
+/// digest, ledger and counts of one whole-image pass.
 fn energy_and_invariance(
     img: &Img,
     p: &FilterParams,
-    cut: &PipelineConfig,
+    cut: (usize, usize, usize),
 ) -> Result<(), TestCaseError> {
-    let (a, sa) = filter(img, 16.0, p, &cfg(256, 0, 1));
+    let (a, sa) = invariant(&img.data, &job(img.w, img.h, 16.0), p, &[(256, 0, 1), cut])
+        .map_err(TestCaseError::fail)?;
     for l in &sa.ledger {
         prop_assert!(
             l.rel_error <= ENERGY_TOL,
@@ -604,10 +606,7 @@ fn energy_and_invariance(
             l.rel_error
         );
     }
-    prop_assert!(a.data.iter().all(|v| v.is_finite()));
-    let (b, sb) = filter(img, 16.0, p, cut);
-    prop_assert_eq!(bits(&a), bits(&b));
-    prop_assert_eq!(sa.digest, sb.digest);
+    prop_assert!(a.iter().all(|v| v.is_finite()));
     Ok(())
 }
 

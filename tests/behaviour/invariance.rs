@@ -1,7 +1,7 @@
 //! Bit-identical output whatever the tile size, strip height and thread count.
 
 use crate::common::*;
-use epfilt::{filter_in_memory, Method, PipelineConfig};
+use epfilt::Method;
 use proptest::prelude::*;
 
 /// Every method, through every cut of `common::CUTS`: one answer.
@@ -88,14 +88,13 @@ proptest! {
         }
         for m in GAUSSIAN_FAMILY {
             let p = params(m, s);
-            let (a, stats) = run(&img, s, &p, &cfg(256, 96, 1));
+            let cuts = [(256, 96, 1), (tile, strip, threads)];
+            let (a, stats) = invariant(&img.data, &job_for(&img, s), &p, &cuts)
+                .map_err(TestCaseError::fail)?;
             for l in &stats.ledger {
                 prop_assert!(l.rel_error <= ENERGY_TOL, "{:?} {}: {:e}", m, l.channel, l.rel_error);
             }
-            prop_assert!(a.data.iter().all(|v| v.is_finite()));
-            let (b, stats_b) = run(&img, s, &p, &cfg(tile, strip, threads));
-            prop_assert_eq!(bits(&a), bits(&b));
-            prop_assert_eq!(ledger_bits(&stats), ledger_bits(&stats_b));
+            prop_assert!(a.iter().all(|v| v.is_finite()));
         }
     }
 
@@ -118,16 +117,13 @@ proptest! {
         job.padded_from = Some((w, h));
         for m in GAUSSIAN_FAMILY {
             let p = params(m, s);
-            let go = |c: &PipelineConfig| filter_in_memory(img.data.clone(), &job, &p, c).unwrap();
-            let (a, stats) = go(&cfg(256, 96, 1));
+            let cuts = [(256, 96, 1), (tile, strip, threads)];
+            let (a, stats) = invariant(&img.data, &job, &p, &cuts).map_err(TestCaseError::fail)?;
             prop_assert_eq!(a.len(), 3 * w.div_ceil(s) * h.div_ceil(s));
             for l in &stats.ledger {
                 prop_assert!(l.rel_error <= ENERGY_TOL, "{:?} {}: {:e}", m, l.channel, l.rel_error);
             }
             prop_assert!(a.iter().all(|v| v.is_finite()));
-            let (b, stats_b) = go(&cfg(tile, strip, threads));
-            prop_assert_eq!(a.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), b.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
-            prop_assert_eq!(ledger_bits(&stats), ledger_bits(&stats_b));
         }
     }
 }
