@@ -292,7 +292,7 @@ impl PixelTest {
 
     /// The decision: noise, unless the carriers guard finds the pixel
     /// reliable (carried by enough samples, or a compact feature of a few:
-    /// `compact` is whether [`counts_toward_cluster`] neighbours within
+    /// `compact` is whether [`cluster_count`] neighbours within
     /// [`CLUSTER_REACH`] are at most [`COMPACT_MAX`]).
     #[inline]
     pub fn is_noise(self, guard: Guard, compact: impl FnOnce() -> bool) -> bool {
@@ -300,12 +300,26 @@ impl PixelTest {
     }
 }
 
-/// Whether a pixel of luminance `y_other`, noisy by the paper's test or not,
-/// counts towards the cluster of a pixel of luminance `y` (the compact
-/// feature test): it does when noisy and at least `y / COMPACT_RATIO`.
-#[inline]
-pub fn counts_toward_cluster(noisy: bool, y_other: f64, y: f64) -> bool {
-    noisy && y_other >= y / COMPACT_RATIO
+/// The compact feature test's count: the pixels within [`CLUSTER_REACH`] of
+/// `(x, y)` in a `w` x `h` image (itself included, clipped to the image)
+/// whose luminance `lum` is at least `y0 / COMPACT_RATIO` and that `noisy`
+/// calls noise. ep-box asks its flags, ep-gauss at S = 1 Relation 14 (so
+/// `lum` is asked first: `noisy` may cost a base average). A compact feature
+/// has at most [`COMPACT_MAX`].
+pub fn cluster_count(
+    (x, y): (usize, usize),
+    (w, h): (usize, usize),
+    y0: f64,
+    lum: impl Fn(usize, usize) -> f64,
+    noisy: impl Fn(usize, usize) -> bool,
+) -> usize {
+    let mut n = 0;
+    for yy in y.saturating_sub(CLUSTER_REACH)..(y + CLUSTER_REACH + 1).min(h) {
+        for xx in x.saturating_sub(CLUSTER_REACH)..(x + CLUSTER_REACH + 1).min(w) {
+            n += usize::from(lum(xx, yy) >= y0 / COMPACT_RATIO && noisy(xx, yy));
+        }
+    }
+    n
 }
 
 /// A noisy pixel's excess after the guards.
@@ -610,6 +624,28 @@ pub fn trials_eq10(mean_se: f64, pilot_spp: f64, d: f64, ltvis: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn cluster_count_reads_the_5x5_clipped_and_asks_noise_only_above_the_ratio() {
+        use std::cell::Cell;
+        // A 6 x 5 image of luminance 1 with noisy pixels where x + y is even.
+        let asked = Cell::new(0);
+        let lum = |x: usize, y: usize| if (x, y) == (0, 0) { 0.01 } else { 1.0 };
+        let noisy = |x: usize, y: usize| {
+            asked.set(asked.get() + 1);
+            (x + y) % 2 == 0
+        };
+        // At (2, 2): 25 pixels, 13 with x + y even, one of them (0, 0) too
+        // dim to count.
+        assert_eq!(cluster_count((2, 2), (6, 5), 1.0, lum, noisy), 12);
+        // At the corner: the 3 x 3 inside the image, 5 even; (0, 0) is
+        // below 1/16 of y0 = 1 and is not asked.
+        asked.set(0);
+        assert_eq!(cluster_count((0, 0), (6, 5), 1.0, lum, noisy), 4);
+        assert_eq!(asked.get(), 8);
+        // A brighter centre: nothing within 1/16 of it.
+        assert_eq!(cluster_count((2, 2), (6, 5), 100.0, lum, noisy), 0);
+    }
 
     #[test]
     fn purgathofer_matches_the_papers_worked_figures() {

@@ -26,7 +26,7 @@ use super::window::RowWindow;
 use super::ChannelMode;
 use crate::error::{Error, Result};
 use crate::filter::ep_box::{
-    counts_toward_cluster, excess, EpBoxParams, Guard, PixelTest, Ring, Spp, StatsLayout, TFactor,
+    cluster_count, excess, EpBoxParams, Guard, PixelTest, Ring, Spp, StatsLayout, TFactor,
 };
 use crate::filter::ValidParams;
 use crate::geometry::Halo;
@@ -477,14 +477,13 @@ fn compact(
     w: usize,
     h: usize,
 ) -> bool {
-    let yc = ylum.get(y)[x];
-    let mut n = 0;
-    for yy in y.saturating_sub(CLUSTER_REACH)..(y + CLUSTER_REACH + 1).min(h) {
-        let (r, l) = (raw.get(yy), ylum.get(yy));
-        for xx in x.saturating_sub(CLUSTER_REACH)..(x + CLUSTER_REACH + 1).min(w) {
-            n += usize::from(counts_toward_cluster(r[xx] & RAW_NOISY != 0, l[xx], yc));
-        }
-    }
+    let n = cluster_count(
+        (x, y),
+        (w, h),
+        ylum.get(y)[x],
+        |xx, yy| ylum.get(yy)[xx],
+        |xx, yy| raw.get(yy)[xx] & RAW_NOISY != 0,
+    );
     n <= COMPACT_MAX
 }
 

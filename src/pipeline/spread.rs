@@ -33,8 +33,8 @@ use rayon::prelude::*;
 use super::stream::{MethodStats, Stage, WindowUse};
 use super::window::RowWindow;
 use super::ChannelMode;
-use crate::filter::ep_box::{StatsLayout, COMPACT_RATIO};
-use crate::filter::ep_gauss::{Carriers, EpGauss, Folded, LumRows, Support, COMPACT_REACH};
+use crate::filter::ep_box::{cluster_count, StatsLayout};
+use crate::filter::ep_gauss::{Carriers, EpGauss, Folded, LumRows, Support};
 use crate::filter::kernel::{ColumnTaps, Kernel1d, TentTaps};
 use crate::filter::{Method, ValidParams};
 use crate::geometry::{mirror, Grid, Halo};
@@ -778,24 +778,19 @@ impl SpreadStage {
                             let row = input.get(j);
                             let (n, se2) = st.pixel(lum, x0, |c| row[c * in_w + i] as f64);
                             let hot = || {
-                                let r = COMPACT_REACH as i64;
-                                let mut count = 0;
-                                for yy in (y as i64 - r).max(0)..=(y as i64 + r).min(h as i64 - 1) {
-                                    let lrow = view.row(yy);
-                                    for xx in px.saturating_sub(COMPACT_REACH)
-                                        ..=(px + COMPACT_REACH).min(w - 1)
-                                    {
-                                        let v = lrow[pad + xx] as f64;
-                                        if v < x0 / COMPACT_RATIO {
-                                            continue;
-                                        }
-                                        let xb = ep.xbar0(view, xx, yy);
-                                        count += usize::from(
-                                            ep.bounds(xb).is_some_and(|(hi, _)| v > hi),
+                                cluster_count(
+                                    (px, y),
+                                    (w, h),
+                                    x0,
+                                    |xx, yy| view.row(yy as i64)[pad + xx] as f64,
+                                    |xx, yy| {
+                                        let (v, xb) = (
+                                            view.row(yy as i64)[pad + xx] as f64,
+                                            ep.xbar0(view, xx, yy as i64),
                                         );
-                                    }
-                                }
-                                count
+                                        ep.bounds(xb).is_some_and(|(hi, _)| v > hi)
+                                    },
+                                )
                             };
                             if carriers.keeps(x0, se2, n, hot) {
                                 kept += 1;
