@@ -1,6 +1,15 @@
 //! The foils' rules: what the energy-losing filters the paper argues against
-//! do with a pixel's samples (Lee & Redner's alpha-trimmed mean, the median;
-//! the clamp is one `min` in the Gaussian stage).
+//! do with a pixel's samples (Lee & Redner's alpha-trimmed mean, the median,
+//! the clamp).
+
+/// The clamp foil: colour samples above `limit` are cut to it (`f32::min`:
+/// a NaN would become the limit, but non-finite input is refused or zeroed
+/// before any stage sees it). The ledger has counted the input before, so
+/// the loss shows.
+#[inline]
+pub fn clamp_samples(samples: &mut [f32], limit: f32) {
+    samples.iter_mut().for_each(|v| *v = v.min(limit));
+}
 
 /// What is kept of the sorted values.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -28,6 +37,13 @@ impl Trim {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_clamp_cuts_what_is_above_its_limit_only() {
+        let mut v = [0.5, 10.0, 1e30, -3.0, f32::INFINITY, f32::NAN];
+        clamp_samples(&mut v, 10.0);
+        assert_eq!(v, [0.5, 10.0, 10.0, -3.0, 10.0, 10.0]);
+    }
 
     #[test]
     fn trims() {

@@ -404,7 +404,7 @@ impl Stage for SpreadStage {
         for row in input.range_mut(a, b) {
             for (c, ch) in row.chunks_mut(in_w).enumerate() {
                 if self.lum[c] != 0.0 {
-                    ch.iter_mut().for_each(|v| *v = v.min(limit));
+                    crate::filter::foils::clamp_samples(ch, limit);
                 }
             }
         }
