@@ -304,9 +304,49 @@ pub fn rule_for(
     given.map_or_else(|| default_rule(name, uint), |o| o.rule)
 }
 
+/// What the stage does with one channel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ChannelMode {
+    /// The base filter, and noisy samples spread (the beauty's colour, and
+    /// additive layers with the beauty's kernels).
+    Spread,
+    /// The base filter only (alpha, averaged data).
+    Base,
+    /// The centre sample of each pixel (ids; averaged data at S = 1, which
+    /// is then copied bit for bit). Not energy: out of the ledger's check.
+    Nearest,
+}
+
+impl ChannelMode {
+    /// The mode of a channel with luminance weight `lum` and carried by
+    /// `rule` (`None`: the beauty's own channel) at super-sampling `s`.
+    pub fn of(lum: f64, rule: Option<ChannelRule>, s: usize) -> Self {
+        match rule {
+            None if lum != 0.0 => ChannelMode::Spread,
+            None => ChannelMode::Base,
+            Some(ChannelRule::Additive) => ChannelMode::Spread,
+            Some(ChannelRule::Average | ChannelRule::Drop) if s > 1 => ChannelMode::Base,
+            Some(_) => ChannelMode::Nearest,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn each_rule_has_its_stage_mode() {
+        use ChannelMode::*;
+        assert_eq!(ChannelMode::of(0.2126, None, 3), Spread); // beauty colour
+        assert_eq!(ChannelMode::of(0.0, None, 3), Base); // alpha
+        assert_eq!(ChannelMode::of(0.0, Some(ChannelRule::Additive), 3), Spread);
+        assert_eq!(ChannelMode::of(0.0, Some(ChannelRule::Average), 3), Base);
+        // At S = 1 averaged data is copied bit for bit: the centre sample.
+        assert_eq!(ChannelMode::of(0.0, Some(ChannelRule::Average), 1), Nearest);
+        assert_eq!(ChannelMode::of(0.0, Some(ChannelRule::Drop), 2), Base);
+        assert_eq!(ChannelMode::of(0.0, Some(ChannelRule::Nearest), 4), Nearest);
+    }
 
     #[test]
     fn views_by_openexr_convention() {

@@ -139,32 +139,7 @@ impl Default for PipelineConfig {
     }
 }
 
-/// What the stage does with one channel.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ChannelMode {
-    /// The base filter, and noisy samples spread (the beauty's colour, and
-    /// additive layers with the beauty's kernels).
-    Spread,
-    /// The base filter only (alpha, averaged data).
-    Base,
-    /// The centre sample of each pixel (ids; averaged data at S = 1, which
-    /// is then copied bit for bit). Not energy: out of the ledger's check.
-    Nearest,
-}
-
-impl ChannelMode {
-    /// The mode of a channel with luminance weight `lum` and carried by
-    /// `rule` (`None`: the beauty's own channel) at super-sampling `s`.
-    pub fn of(lum: f64, rule: Option<ChannelRule>, s: usize) -> Self {
-        match rule {
-            None if lum != 0.0 => ChannelMode::Spread,
-            None => ChannelMode::Base,
-            Some(ChannelRule::Additive) => ChannelMode::Spread,
-            Some(ChannelRule::Average | ChannelRule::Drop) if s > 1 => ChannelMode::Base,
-            Some(_) => ChannelMode::Nearest,
-        }
-    }
-}
+pub use crate::filter::channels::ChannelMode;
 
 /// What one job filters: the grid and its channels.
 #[derive(Clone, Debug)]
