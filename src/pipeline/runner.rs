@@ -1,0 +1,207 @@
+//! The run: the thread pool, the reader and writer threads around the
+//! skeleton, and ep-box's first pass (the mean luminance).
+
+use super::*;
+
+/// Progress callback: (output rows done, output rows in all).
+pub type Progress<'a> = &'a (dyn Fn(usize, usize) + Sync);
+
+/// Build the thread pool that every stage shares.
+pub fn thread_pool(threads: usize) -> Result<rayon::ThreadPool> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .thread_name(|i| format!("epfilt-{i}"))
+        .build()
+        .map_err(|e| Error::Config(format!("cannot start {threads} threads: {e}")))
+}
+
+/// Run `job` from `source` to `sink`, rounding to the sink's precision.
+pub fn run<S: Source, K: Sink>(
+    source: S,
+    sink: K,
+    job: &Job,
+    params: &FilterParams,
+    cfg: &PipelineConfig,
+    progress: Progress<'_>,
+) -> Result<RunStats> {
+    let params = params.validated()?;
+    let pool = thread_pool(cfg.threads)?;
+    let start = Instant::now();
+    let mut streamer = Streamer::new(job, &params, cfg, sink.precisions(job.channels.len()))?;
+    let real = job.padded_from.unwrap_or((job.grid.in_w, job.grid.in_h));
+    let source = edge::Padded::new(
+        source,
+        real,
+        (job.grid.in_w, job.grid.in_h),
+        job.strip_channels(),
+    );
+    let total = job.grid.out_h();
+    let cancelled = || {
+        cfg.cancel
+            .as_ref()
+            .is_some_and(|c| c.load(Ordering::Relaxed))
+    };
+    let (strip_tx, strip_rx) = crossbeam_channel::bounded::<Result<Strip>>(2);
+    let (row_tx, row_rx) = crossbeam_channel::bounded::<OutRows>(2);
+    let strip_rows = match cfg.strip_rows {
+        0 => auto_strip_rows(job.grid.in_w, job.strip_channels()),
+        n => n,
+    };
+    let pool = &pool;
+    let mut stages = StageSeconds::default();
+
+    let result = std::thread::scope(|scope| -> Result<()> {
+        let reader = scope.spawn(move || -> f64 {
+            let mut source = source;
+            let mut busy = 0.0;
+            loop {
+                let t = Instant::now();
+                let next = pool.install(|| source.next_strip(strip_rows));
+                busy += t.elapsed().as_secs_f64();
+                let stop = !matches!(next, Ok(Some(_)));
+                let msg = match next {
+                    Ok(Some(s)) => Ok(s),
+                    Ok(None) => break,
+                    Err(e) => Err(e),
+                };
+                if strip_tx.send(msg).is_err() || stop {
+                    break;
+                }
+            }
+            busy
+        });
+        let writer = scope.spawn(move || -> (Result<()>, f64) {
+            let mut sink = sink;
+            let mut written = 0;
+            let mut busy = 0.0;
+            for rows in row_rx.iter() {
+                let t = Instant::now();
+                let r = pool.install(|| sink.write_rows(rows.y0, rows.rows, &rows.data));
+                busy += t.elapsed().as_secs_f64();
+                if let Err(e) = r {
+                    return (Err(e), busy);
+                }
+                written += rows.rows;
+            }
+            // Finish only a complete image: when the filter stopped early its
+            // error is the one reported, and the sink is dropped unfinished
+            // (an EXR output then removes its temporary file).
+            let t = Instant::now();
+            let r = if written == total {
+                pool.install(|| sink.finish())
+            } else {
+                Ok(())
+            };
+            (r, busy + t.elapsed().as_secs_f64())
+        });
+        let mut filter_result = Ok(());
+        let mut writer_failed = false;
+        loop {
+            let t = Instant::now();
+            let Ok(strip) = strip_rx.recv() else { break };
+            stages.filter_waiting_for_input += t.elapsed().as_secs_f64();
+            if cancelled() {
+                filter_result = Err(Error::Interrupted);
+                break;
+            }
+            let t = Instant::now();
+            let pushed = strip.and_then(|s| pool.install(|| streamer.push(s)));
+            stages.filter += t.elapsed().as_secs_f64();
+            match pushed {
+                Ok(Some(rows)) => {
+                    progress(rows.y0 + rows.rows, total);
+                    let t = Instant::now();
+                    let sent = row_tx.send(rows);
+                    stages.filter_waiting_for_output += t.elapsed().as_secs_f64();
+                    if sent.is_err() {
+                        writer_failed = true; // its error is reported below
+                        break;
+                    }
+                }
+                Ok(None) => {}
+                Err(e) => {
+                    filter_result = Err(e);
+                    break;
+                }
+            }
+        }
+        drop(strip_rx);
+        if filter_result.is_ok() && !writer_failed && streamer.rows_out() != total {
+            filter_result = Err(Error::Internal(format!(
+                "the source ended after {} of {} output rows",
+                streamer.rows_out(),
+                total
+            )));
+        }
+        drop(row_tx);
+        stages.read = reader.join().unwrap_or(0.0);
+        // A panic on the writer thread is a bug: report it first, never
+        // behind another error.
+        match writer.join() {
+            Ok((write_result, busy)) => {
+                stages.write = busy;
+                filter_result.and(write_result)
+            }
+            Err(_) => Err(Error::Internal(
+                "the writer thread panicked (please report this file)".into(),
+            )),
+        }
+    });
+    result?;
+    let s2 = (job.grid.s * job.grid.s) as f64;
+    let books = streamer.books();
+    Ok(RunStats {
+        method: streamer.stats(),
+        ledger: books.ledger().balance(books.names(), s2),
+        seconds: start.elapsed().as_secs_f64(),
+        stages,
+        halo: streamer.halo(),
+        windows: streamer.windows(),
+        digest: books.digest(),
+        nonfinite_zeroed: books.nonfinite_zeroed().to_vec(),
+        first_nonfinite: books.first_nonfinite(),
+    })
+}
+
+/// The mean luminance of a source's filtered channels (the first pass of
+/// `ep-box`, for `L_ave` of Eq. 9), summed exactly (compensated) in row order.
+pub fn mean_luminance<S: Source>(mut source: S, job: &Job, strip_rows: usize) -> Result<f64> {
+    let w = job.grid.in_w;
+    let nall = job.strip_channels();
+    let strip_rows = match strip_rows {
+        0 => auto_strip_rows(w, nall),
+        n => n,
+    };
+    let mut total = ledger::CompensatedSum::default();
+    let mut count = 0usize;
+    while let Some(strip) = source.next_strip(strip_rows)? {
+        let sums: Vec<ledger::CompensatedSum> = strip
+            .data
+            .par_chunks(nall * w)
+            .map(|row| {
+                let mut s = ledger::CompensatedSum::default();
+                for x in 0..w {
+                    let mut y = 0.0;
+                    for (c, &l) in job.luminance.iter().enumerate() {
+                        let v = row[c * w + x] as f64;
+                        // Non-finite samples are the filter's to report.
+                        if v.is_finite() {
+                            y += l * v;
+                        }
+                    }
+                    s.add(y);
+                }
+                s
+            })
+            .collect();
+        for s in &sums {
+            total.merge(s);
+        }
+        count += strip.rows * w;
+    }
+    Ok(if count == 0 {
+        0.0
+    } else {
+        total.value() / count as f64
+    })
+}
