@@ -16,7 +16,7 @@ use crate::io::{
 use crate::pipeline::edge::{Coverage, Cropped};
 use crate::pipeline::stream::MAX_CHANNELS;
 use crate::pipeline::{run, ChannelMode, Job, MethodStats, PipelineConfig, Progress};
-use crate::stats::{EpBoxReport, PartReport, Report, StatsReport};
+use crate::report::{EpBoxReport, PartReport, Report, StatsReport};
 
 /// The ledger must balance to this relative error before rounding, or the
 /// output is not written. The pipeline's own bound is 1e-12 (each sample's
@@ -951,7 +951,7 @@ fn filter_part(
                 progress,
             );
             let out_e: Vec<f64> = sink.sums().iter().map(|v| v * s2).collect();
-            band_sums = Some(crate::stats::BandReport {
+            band_sums = Some(crate::report::BandReport {
                 index: plan.k,
                 count: plan.n,
                 rows: (plan.a, plan.b),

@@ -27,7 +27,7 @@
 //!
 //! Modules: [`geometry`] (grid, reflection, halo), [`filter`] (kernels and the
 //! noise rule), [`pipeline`] (windows, tiles, ledger, scheduling), [`io`] (EXR
-//! in and out), [`stats`] (reports), [`synth`] (scenes with exact truth),
+//! in and out), [`report`] (the summary and `--report`), [`synth`] (scenes with exact truth),
 //! [`compare`], [`preview`] (display mapping, PNG), [`demo`].
 #![deny(missing_docs)]
 #![deny(unsafe_code)]
@@ -47,8 +47,8 @@ pub mod merge;
 pub mod pipeline;
 pub mod plan;
 pub mod preview;
+pub mod report;
 pub mod sequence;
-pub mod stats;
 pub mod synth;
 
 pub use error::{Error, Result};

@@ -16,7 +16,7 @@ use serde::Serialize;
 use crate::error::{Error, Result};
 use crate::job::{existing_output, filter_file, Existing, FilterJob};
 use crate::pipeline::Progress;
-use crate::stats::Report;
+use crate::report::Report;
 
 /// The most frames one spec may name: a typo such as `1-1000000000` is an
 /// error, not a billion-entry list.

@@ -431,7 +431,7 @@ impl Ctx {
         method: Method,
         s: usize,
         tag: &str,
-    ) -> Result<(Image, epfilt::stats::Report)> {
+    ) -> Result<(Image, epfilt::report::Report)> {
         let mut params = FilterParams::new(method, s);
         for (k, v) in &self.sets {
             set(&mut params, k, v)?;

@@ -7,7 +7,7 @@
 //!   `t_{1-α/2, n-1}` for the confidence `α`.
 //! * **Excess**: `L_excess = Y_u - mean(neighbours) - D * L_tvis`, the mean
 //!   taken over the reference values of the 8-neighbours that count as
-//!   converged in this pass ([`Pass`]). A positive excess leaves the pixel and
+//!   converged in this pass. A positive excess leaves the pixel and
 //!   is shared equally by the `ceil(L_excess / L_tvis)` in-image pixels
 //!   nearest to it, in [`Ring`] order (the pixel itself first), each channel in
 //!   proportion to the pixel's own values (its colour is kept).

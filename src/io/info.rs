@@ -1,6 +1,6 @@
 //! `epfilt info`: what an EXR file (or a Radiance picture) holds, as text or
 //! JSON ([`FileInfo`]), and every header attribute as stored
-//! ([`FileInfo::attributes`], as `oiiotool --info -v` lists them).
+//! ([`PartInfo::attributes`], as `oiiotool --info -v` lists them).
 
 use std::collections::BTreeMap;
 use std::fmt::Write;

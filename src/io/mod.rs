@@ -7,12 +7,12 @@
 //!   decoder allocates them;
 //! * [`destination`]: output paths checked (links written through, `-` for
 //!   standard output, devices refused) and written through temporary files;
-//! * [`format`]: which format an output is written in (its extension, or
+//! * [`format`](mod@format): which format an output is written in (its extension, or
 //!   `--format`), never by accident; [`stdin`]: `-` as an input;
 //! * [`provenance`]: the fingerprint of input and settings every output
 //!   records, the band attributes, and the check that an existing output is
 //!   complete; [`views`]: multi-view files, and `--view all`'s output;
-//! * [`info`]: what a file holds, as text or JSON, and its raw attributes;
+//! * [`info`](mod@info): what a file holds, as text or JSON, and its raw attributes;
 //! * [`writer`]: a [`crate::pipeline::Sink`] that builds scan-line blocks,
 //!   compresses them in parallel and writes them with the chunk writer into a
 //!   temporary file in the destination directory.

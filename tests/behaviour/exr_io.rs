@@ -761,7 +761,7 @@ fn pixel_type_same_keeps_each_channels_own_type() {
 
 /// "After rounding" in the ledger is the sum of what the file holds, for
 /// each of its R, G, B channels.
-fn ledger_holds_the_file(report: &epfilt::stats::Report, out: &Path, s: usize, what: &str) {
+fn ledger_holds_the_file(report: &epfilt::report::Report, out: &Path, s: usize, what: &str) {
     let stored = read_planar(out);
     for (c, name) in ["R", "G", "B"].iter().enumerate() {
         let k = report.channels.iter().position(|n| n == name).unwrap();
