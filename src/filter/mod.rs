@@ -317,12 +317,13 @@ pub struct FilterParams {
     /// test: a compact pair ([`ep_gauss::Support`]; 0: off).
     pub support_compact: usize,
     /// ep-gauss: a compact pair is kept only when its sample is at least this
-    /// many times the mean box luminance of the eight pixels about its own
+    /// many times the median box luminance of the eight pixels about its own
     /// (0: any).
     pub support_over: f64,
-    /// ep-gauss: a bright sample is kept when at least this many of its
-    /// neighbours are above `support_level` times its pixel's base average
-    /// (grain inside a bright feature; 0: off).
+    /// ep-gauss: a bright sample at most `support_level` times its pixel's
+    /// base average is kept when at least this many of the 24 samples within
+    /// 2 are above that average and above `1/support_level` of it (grain
+    /// inside a bright feature; 0: off).
     pub support_region: usize,
     /// See `support_region`.
     pub support_level: f64,
