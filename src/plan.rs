@@ -19,8 +19,8 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::filter::ep_box::{self, se2, EpBoxParams, VarianceKind};
-use crate::io::{find_stats, ExrInput, PartSelect, SppFrom, StatsRequest};
+use crate::filter::ep_box::{self, se2, EpBoxParams, Spp, VarianceKind};
+use crate::io::{find_stats, ExrInput, PartSelect, StatsRequest};
 use crate::pipeline::ledger::CompensatedSum;
 use crate::pipeline::Source;
 
@@ -136,32 +136,16 @@ pub fn plan_file(
     params.validate()?;
     let mut input = ExrInput::open_layer(path, part, layer)?;
     let found = find_stats(path, input.header(), req)?;
-    let mut aux = found.variance.clone();
-    aux.extend(found.mean_y.clone());
-    if let SppFrom::Channel(c) = &found.spp {
-        aux.push(c.clone());
-    }
-    input.add_aux_channels(&aux)?;
+    let layout = found.attach(&mut input, path)?;
     let (w, h) = input.size();
     let lum = input.luminance();
     let nch = lum.len();
     let aux = input.aux_channels();
-    let at = |name: &str| nch + aux.iter().position(|a| a == name).unwrap_or(0);
-    let var_idx: Vec<usize> = found.variance.iter().map(|v| at(v)).collect();
-    if var_idx.len() == 3 && lum.iter().filter(|&&l| l > 0.0).count() != 3 {
-        return Err(Error::Channels {
-            path: path.into(),
-            reason: "three variance channels need an R, G, B image".into(),
-        });
-    }
-    let mean_idx = found.mean_y.as_deref().map(at);
-    let spp_idx = match &found.spp {
-        SppFrom::Channel(c) => Some(at(c)),
-        SppFrom::Fixed(..) => None,
-    };
-    let fixed_n = match &found.spp {
-        SppFrom::Fixed(n, _) => *n,
-        SppFrom::Channel(_) => f64::NAN,
+    let var_idx = layout.variance.clone();
+    let mean_idx = layout.mean_y;
+    let (spp_idx, fixed_n) = match layout.spp {
+        Spp::Channel(c) => (Some(c), f64::NAN),
+        Spp::Fixed(n) => (None, n),
     };
     let nall = nch + aux.len();
     let t = ep_box::TFactor::new(params.confidence);

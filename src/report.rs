@@ -2,7 +2,11 @@
 
 use serde::Serialize;
 
-use crate::pipeline::{ChannelLedger, StageSeconds, WindowUse};
+use crate::filter::{FilterParams, Method};
+use crate::host::{cpu_seconds, peak_rss_bytes};
+use crate::io::StatsChannels;
+use crate::job::{FilterPlan, Outcome};
+use crate::pipeline::{ChannelLedger, MethodStats, RunStats, StageSeconds, WindowUse};
 
 /// Summary of one filtering run (the `--report` JSON).
 #[derive(Clone, Debug, Serialize)]
@@ -203,6 +207,38 @@ pub struct EpBoxReport {
     pub passes_used: u64,
 }
 
+impl EpBoxReport {
+    /// What ep-box used (`params`, its statistics `found`, the first pass's
+    /// mean) and what its run `stats` counted.
+    fn of(
+        params: &FilterParams,
+        found: &StatsChannels,
+        l_ave: Option<f64>,
+        stats: &RunStats,
+    ) -> Self {
+        let ep = &params.ep_box;
+        let eb = stats.ep_box().unwrap_or_default();
+        EpBoxReport {
+            l_ave,
+            l_tvis: ep.ltvis.unwrap_or(f64::NAN),
+            d: ep.d,
+            nmid: ep.nmid,
+            confidence: ep.confidence,
+            guard: ep.guard.name().into(),
+            variance_channels: found.variance.clone(),
+            variance_kind: found.kind.name().into(),
+            spp_from: found.spp_from(),
+            guard_confidence: ep.guard_confidence,
+            reliable: eb.reliable,
+            guarded: eb.guarded,
+            trimmed: eb.trimmed,
+            unresolved: eb.unresolved,
+            passes_allowed: ep.passes,
+            passes_used: eb.passes,
+        }
+    }
+}
+
 impl Report {
     /// Add the run of another view of the same image (`--view all`): its
     /// channels, their ledger and rules, its counts, time and warnings join
@@ -236,6 +272,105 @@ impl Report {
         self.peak_rss_bytes = self.peak_rss_bytes.max(other.peak_rss_bytes);
         self.warnings.extend(other.warnings);
         self.settings.insert("view".into(), "all".into());
+    }
+
+    /// The report of a run: what its plan settled and what the run did.
+    pub fn of(plan: &FilterPlan<'_>, outcome: &Outcome) -> Report {
+        let (job, params, stats) = (plan.job, &plan.params, &outcome.stats);
+        let g = &plan.geometry;
+        let s = job.params.supersample;
+        let threads = match job.pipeline.threads {
+            0 => rayon::current_num_threads(),
+            n => n,
+        };
+        // The method's own counts: ep-gauss in super-samples, ep-box in pixels.
+        let counts = match stats.method {
+            MethodStats::EpGauss(g) => (g.noisy, g.spread, g.capped, g.kept),
+            MethodStats::EpBox(b) => (b.noisy, b.spread, b.capped, 0),
+            MethodStats::Plain => (0, 0, 0, 0),
+        };
+        let pipe_job = &plan.pipe_job;
+        let channel_rules = (plan.channels.iter())
+            .zip(plan.input.channel_rules())
+            .zip(&pipe_job.luminance)
+            .map(|((c, r), &l)| {
+                let name = match r {
+                    Some(r) => r.name(),
+                    None if l != 0.0 => "colour",
+                    None => "alpha",
+                };
+                (c.clone(), name.to_string())
+            })
+            .collect();
+        let mut report = Report {
+            input: job.input.display().to_string(),
+            output: job.output.display().to_string(),
+            method: job.params.method.name().into(),
+            supersample: s,
+            supersample_assumed: job.supersample_assumed,
+            width: g.read_w,
+            height: g.read_h,
+            out_width: g.w / s,
+            out_height: g.h / s,
+            channel_rules,
+            channels: plan.channels.clone(),
+            dropped_channels: plan.input.dropped_channels().to_vec(),
+            tolerance: job.params.tolerance,
+            radius: job.params.radius,
+            max_radius: job.params.max_radius,
+            seconds: stats.seconds,
+            megapixels_per_second: (g.w * g.h) as f64 / stats.seconds.max(1e-9) / 1e6,
+            samples_noisy: counts.0,
+            samples_spread: counts.1,
+            samples_capped: counts.2,
+            samples_kept: counts.3,
+            search_cost: stats.ep_gauss().map_or(0, |g| g.search_cost),
+            spread_taps: stats.ep_gauss().map_or(0, |g| g.spread_taps),
+            energy_in: vec![],
+            energy_out: vec![],
+            energy_rel_error: vec![],
+            energy_out_rounded: vec![],
+            energy_rel_error_rounded: vec![],
+            digest: format!("{:016x}", stats.digest),
+            tile: job.pipeline.tile,
+            strip_rows: match job.pipeline.strip_rows {
+                0 => crate::pipeline::auto_strip_rows(g.w, pipe_job.strip_channels()),
+                n => n,
+            },
+            threads,
+            peak_rss_bytes: peak_rss_bytes(),
+            nonfinite_zeroed: stats.nonfinite_zeroed.clone(),
+            first_nonfinite: stats.first_nonfinite.map(|(x, y, c)| {
+                let name = pipe_job.channels.iter().chain(&pipe_job.aux).nth(c);
+                (x, y, name.cloned().unwrap_or_default())
+            }),
+            stats_channels: pipe_job.aux.clone(),
+            carriers_rule: (plan.found.as_ref())
+                .filter(|_| params.method == Method::EpGauss)
+                .map(|f| StatsReport {
+                    variance_channels: f.variance.clone(),
+                    variance_kind: f.kind.name().into(),
+                    spp_from: f.spp_from(),
+                }),
+            ep_box: (plan.found.as_ref())
+                .filter(|_| params.method == Method::EpBox)
+                .map(|f| EpBoxReport::of(params, f, outcome.l_ave, stats)),
+            window_bytes: stats.window_bytes(),
+            windows: stats.windows.clone(),
+            stage_seconds: stats.stages,
+            cpu_seconds: cpu_seconds().map(|c| c - plan.cpu_start),
+            version: env!("CARGO_PKG_VERSION").into(),
+            settings: (outcome.settings.iter())
+                .map(|(k, v)| (k.to_string(), v.clone()))
+                .collect(),
+            compression: outcome.compression.clone(),
+            energy_on_disk_decoded: outcome.lossy,
+            warnings: plan.warnings.clone(),
+            band: outcome.band.clone(),
+            parts: Vec::new(),
+        };
+        report.set_ledger(&outcome.ledger);
+        report
     }
 
     /// Fill the ledger fields from per-channel ledger lines.

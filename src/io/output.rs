@@ -3,12 +3,110 @@
 
 use std::path::Path;
 
+use exr::math::Vec2;
+use exr::meta::attribute::IntegerBounds;
 use exr::meta::header::Header;
 
 use super::rgbe::RgbeOutput;
-use super::{ExrOutput, OutputSettings};
+use super::{ExrInput, ExrOutput, OutputSettings};
 use crate::error::{Error, Result};
 use crate::pipeline::{Precision, Sink};
+
+/// What an output will be, settled before a pixel is read: the input's
+/// header with the window the run writes, each channel's sample type, how many
+/// channels are the filtered colour, and a Radiance input's header lines.
+#[derive(Clone, Debug)]
+pub struct OutputLayout {
+    header: Header,
+    types: Vec<Precision>,
+    beauty: usize,
+    rgbe_lines: Vec<String>,
+}
+
+impl OutputLayout {
+    /// The layout of an output of `input`'s `channels` (the filtered colour
+    /// first, those without a carry rule) written with `settings`.
+    pub fn of(input: &ExrInput, channels: &[String], settings: &OutputSettings) -> Self {
+        let beauty = input
+            .channel_rules()
+            .iter()
+            .take_while(|r| r.is_none())
+            .count();
+        let header = input.header().clone();
+        OutputLayout {
+            types: super::writer::output_types(settings, &header, channels, beauty),
+            header,
+            beauty,
+            rgbe_lines: input.rgbe().map(|r| r.lines.clone()).unwrap_or_default(),
+        }
+    }
+
+    /// Each channel's sample type in the output.
+    pub fn types(&self) -> &[Precision] {
+        &self.types
+    }
+
+    /// The data window cropped to `w x h` samples from its origin; a
+    /// display window that was the data window follows it.
+    pub fn crop(&mut self, w: usize, h: usize) {
+        let origin = self.header.own_attributes.layer_position;
+        let old = IntegerBounds::new(origin, self.header.layer_size);
+        self.header.layer_size = Vec2(w, h);
+        if self.header.shared_attributes.display_window == old {
+            self.header.shared_attributes.display_window =
+                IntegerBounds::new(origin, self.header.layer_size);
+        }
+    }
+
+    /// Only the sample rows `rows` of the data window (a band's file).
+    pub fn rows(&mut self, rows: std::ops::Range<usize>) {
+        self.header.layer_size.1 = rows.len();
+        self.header.own_attributes.layer_position.1 += rows.start as i32;
+    }
+
+    /// Rows of one block of the compression an EXR at `dest` written with
+    /// `settings` would have, and its name: the bands of `--band` end on
+    /// them. A lossy compression is refused (a band's ledger must be exact).
+    pub fn band_unit(&self, dest: &Path, settings: &OutputSettings) -> Result<(usize, String)> {
+        let (compression, _) = super::writer::choose_compression(
+            dest,
+            self.header.compression,
+            settings,
+            &self.types,
+        )?;
+        if self.types.iter().any(|&t| super::is_lossy(compression, t)) {
+            return Err(Error::Config(format!(
+                "--band needs a lossless output compression, not {}",
+                super::compression_name(compression)
+            )));
+        }
+        Ok((
+            compression.scan_lines_per_block(),
+            super::compression_name(compression),
+        ))
+    }
+
+    /// Start the output at `dest` (see [`Output::create`]).
+    pub fn create(
+        &self,
+        dest: &Path,
+        rgbe: bool,
+        s: usize,
+        channels: &[String],
+        settings: &OutputSettings,
+    ) -> Result<Output> {
+        Output::create(
+            dest,
+            rgbe,
+            &self.header,
+            s,
+            channels,
+            self.beauty,
+            settings,
+            &self.rgbe_lines,
+        )
+    }
+}
 
 /// An output file being written.
 pub enum Output {

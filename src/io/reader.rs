@@ -885,6 +885,19 @@ impl ExrInput {
         (s.0, s.1)
     }
 
+    /// Where the data window starts (its top-left sample).
+    pub fn origin(&self) -> (i32, i32) {
+        let o = self.header().own_attributes.layer_position;
+        (o.0, o.1)
+    }
+
+    /// Whether the channel `name` holds unsigned integers (ids).
+    pub fn is_uint(&self, name: &str) -> bool {
+        self.header().channels.list.iter().any(|c| {
+            c.name.to_string() == name && c.sample_type == exr::meta::attribute::SampleType::U32
+        })
+    }
+
     /// Bytes of one decompressed block of this file (all channels), as the
     /// header claims: what a decoder allocates for it.
     pub fn block_bytes(&self) -> u64 {

@@ -20,7 +20,8 @@ use exr::meta::attribute::AttributeValue;
 use exr::meta::header::Header;
 
 use crate::error::{Error, Result};
-use crate::filter::ep_box::VarianceKind;
+use crate::filter::ep_box::{Spp, StatsLayout, VarianceKind};
+use crate::io::ExrInput;
 
 /// What the user asked for (every field optional).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -207,6 +208,49 @@ fn spp_attribute(header: &Header) -> Option<(f64, String)> {
         .collect();
     found.sort_by(|a, b| a.0.cmp(&b.0));
     found.into_iter().next().map(|(k, n)| (n, k))
+}
+
+impl StatsChannels {
+    /// Read these channels after `input`'s filtered ones (`path` names it in
+    /// messages) and say where they are in a strip's channel list: the
+    /// statistics step of `epfilt filter` and `epfilt plan`.
+    pub fn attach(&self, input: &mut ExrInput, path: &Path) -> Result<StatsLayout> {
+        let mut aux = self.variance.clone();
+        aux.extend(self.mean_y.clone());
+        if let SppFrom::Channel(c) = &self.spp {
+            aux.push(c.clone());
+        }
+        input.add_aux_channels(&aux)?;
+        let nch = input.channels().len();
+        if self.variance.len() == 3 && input.luminance().iter().filter(|&&l| l > 0.0).count() != 3 {
+            return Err(Error::Channels {
+                path: path.to_path_buf(),
+                reason: format!(
+                    "three variance channels ({}) need an R, G, B image; name a luminance variance with --variance-channel",
+                    self.variance.join(", ")
+                ),
+            });
+        }
+        let aux = input.aux_channels();
+        let at = |name: &str| nch + aux.iter().position(|a| a == name).unwrap_or(0);
+        Ok(StatsLayout {
+            variance: self.variance.iter().map(|v| at(v)).collect(),
+            kind: self.kind,
+            mean_y: self.mean_y.as_deref().map(at),
+            spp: match &self.spp {
+                SppFrom::Fixed(n, _) => Spp::Fixed(*n),
+                SppFrom::Channel(c) => Spp::Channel(at(c)),
+            },
+        })
+    }
+
+    /// Where the sample count came from, for reports.
+    pub fn spp_from(&self) -> String {
+        match &self.spp {
+            SppFrom::Fixed(n, from) => format!("{n} ({from})"),
+            SppFrom::Channel(c) => format!("channel {c}"),
+        }
+    }
 }
 
 /// Find the statistics channels of `header` (of `path`, for messages).

@@ -1,0 +1,636 @@
+//! A filtering job from file to file: validate everything first, stream, check
+//! the ledger, and only then put the output in place.
+
+mod plan;
+mod run;
+
+use std::path::{Path, PathBuf};
+
+pub use plan::FilterPlan;
+pub use run::Outcome;
+
+use crate::error::{Error, Result};
+use crate::filter::channels::{self, RuleOverride};
+use crate::filter::FilterParams;
+use crate::io::provenance::{self, Fingerprint};
+use crate::io::{ExrInput, Format, OutputSettings, PartSelect, StatsRequest, ViewSelect};
+use crate::pipeline::{PipelineConfig, Progress};
+use crate::report::{PartReport, Report};
+
+/// The ledger must balance to this relative error before rounding, or the
+/// output is not written. The pipeline's own bound is 1e-12 (each sample's
+/// weights sum to one within a few ulps, sums are compensated); 1e-9 leaves a
+/// wide margin and still catches any lost or doubled sample.
+pub const LEDGER_LIMIT: f64 = 1e-9;
+
+/// Everything a file-to-file run needs.
+#[derive(Clone, Debug)]
+pub struct FilterJob {
+    /// Input file.
+    pub input: PathBuf,
+    /// Output file.
+    pub output: PathBuf,
+    /// Filter settings.
+    pub params: FilterParams,
+    /// How the work is cut (does not change the result).
+    pub pipeline: PipelineConfig,
+    /// Output file settings.
+    pub output_settings: OutputSettings,
+    /// Part of a multi-part input.
+    pub part: Option<PartSelect>,
+    /// Layer whose colour channels are filtered (see [`ExrInput::open_layer`]).
+    pub layer: Option<String>,
+    /// Refuse a job whose estimated memory exceeds this many bytes
+    /// ([`crate::pipeline::estimate_bytes`]); `None`: [`default_max_memory`].
+    pub max_memory: Option<u64>,
+    /// Where `ep-box` finds its statistics (found by name when empty).
+    pub stats: StatsRequest,
+    /// What to do with an input whose size is not a multiple of S.
+    pub edge: Edge,
+    /// `params.supersample` is a default, not the user's choice: the summary
+    /// says what was assumed, and a size that does not fit says how to fix it.
+    pub supersample_assumed: bool,
+    /// Only band `K` of `N` (1-based) of the output rows, for `merge`.
+    pub band: Option<(usize, usize)>,
+    /// `--channel-rule`s for the channels beside the beauty (the last that
+    /// matches wins; the rest get [`channels::default_rule`]).
+    pub channel_rules: Vec<RuleOverride>,
+    /// `--format`: the output's format where its name does not say (`-`, a
+    /// name without an image extension). `None`: by the extension, and for
+    /// `-` the input's ([`crate::io::format::output_format`]).
+    pub format: Option<Format>,
+    /// `--view`: the view of a multi-view file to filter, or every view
+    /// (each as an image of its own, into one output); `None`: the default
+    /// view, the others left out with a warning.
+    pub view: Option<ViewSelect>,
+}
+
+/// An input whose width or height is not a multiple of the super-sampling
+/// factor S.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Edge {
+    /// Refuse it, naming the options (the default).
+    #[default]
+    Exact,
+    /// Drop the last `w % S` columns and `h % S` rows of samples (the last
+    /// partial output column and row); the ledger counts what was kept.
+    Crop,
+    /// Keep them: the last output column and row are made of fewer samples,
+    /// each pixel's kernel normalised over what exists; energy exact
+    /// ([`crate::pipeline::edge`]).
+    Pad,
+}
+
+impl Edge {
+    /// `crop` or `pad`.
+    pub fn parse(s: &str) -> Result<Edge> {
+        match s {
+            "crop" => Ok(Edge::Crop),
+            "pad" => Ok(Edge::Pad),
+            other => Err(Error::Config(format!(
+                "--edge must be crop or pad, not {other:?}"
+            ))),
+        }
+    }
+}
+
+impl FilterJob {
+    /// `input` to `output` with `params`, and defaults for the rest: automatic
+    /// strips and threads, output samples of the input's type compressed like
+    /// the input, part 0 of a
+    /// single-part file, [`default_max_memory`].
+    pub fn new(
+        input: impl Into<PathBuf>,
+        output: impl Into<PathBuf>,
+        params: FilterParams,
+    ) -> Self {
+        FilterJob {
+            input: input.into(),
+            output: output.into(),
+            params,
+            pipeline: PipelineConfig::default(),
+            output_settings: OutputSettings {
+                compression: None,
+                precision: None,
+                allow_lossy: false,
+                provenance: None,
+                extra: Vec::new(),
+            },
+            part: None,
+            layer: None,
+            max_memory: None,
+            stats: StatsRequest::default(),
+            edge: Edge::Exact,
+            supersample_assumed: false,
+            band: None,
+            channel_rules: Vec::new(),
+            format: None,
+            view: None,
+        }
+    }
+
+    /// The format the output is written in: its extension's, or `format`,
+    /// or for `-` the input's; refused when the name says something filter
+    /// cannot write ([`crate::io::format::output_format`]).
+    pub fn output_format(&self) -> Result<Format> {
+        if let Some(f) = self.format.filter(|_| self.output.as_os_str() != "-") {
+            // Already resolved, or given: the name must agree.
+            return crate::io::format::output_format(&self.output, Some(f), None, WRITES, "filter");
+        }
+        let input = match self.format {
+            Some(_) => None,
+            None if self.output.as_os_str() == "-" => Some(crate::io::input_format(&self.input)?),
+            None => None,
+        };
+        crate::io::format::output_format(&self.output, self.format, input, WRITES, "filter")
+    }
+}
+
+/// What `filter` writes.
+pub const WRITES: &[Format] = &[Format::Exr, Format::Rgbe];
+
+impl FilterJob {
+    /// Every setting that decides the output's bytes, as text: the
+    /// method's settings, the output's format, compression and sample types,
+    /// the channels, parts, views and edge chosen, and epfilt's version; not
+    /// the threads, tiles, strips or memory limit, which do not change a
+    /// byte, nor the band (a band's bytes are the whole run's).
+    pub fn settings_text(&self) -> Result<String> {
+        let method: Vec<String> = self
+            .params
+            .settings()
+            .iter()
+            .map(|(k, v)| format!("{k}={v}"))
+            .collect();
+        let o = &self.output_settings;
+        let rules: Vec<String> = self
+            .channel_rules
+            .iter()
+            .map(|r| format!("{}={}", r.pattern(), r.rule.name()))
+            .collect();
+        Ok(format!(
+            "epfilt {}; {}; format={}; compression={}; pixel_type={:?}; allow_lossy={}; part={:?}; layer={:?}; view={:?}; channel_rules={}; edge={:?}; nonfinite={:?}; stats={:?}",
+            env!("CARGO_PKG_VERSION"),
+            method.join(" "),
+            self.output_format()?.name(),
+            o.compression.map_or("input".into(), crate::io::compression_name),
+            o.precision,
+            o.allow_lossy,
+            self.part,
+            self.layer,
+            self.view,
+            rules.join(";"),
+            self.edge,
+            self.pipeline.nonfinite,
+            self.stats,
+        ))
+    }
+
+    /// What this job's output records of its input and settings.
+    pub fn fingerprint(&self) -> Result<Fingerprint> {
+        Fingerprint::of(&self.input, &self.settings_text()?)
+    }
+
+    /// The band label an output of this job carries (`None` without a band;
+    /// it is checked against the band's file by [`existing_output`]).
+    fn band_text(&self) -> Option<String> {
+        self.band.map(|(k, n)| format!("{k}/{n}"))
+    }
+}
+
+/// What `--skip-existing` finds at a job's output.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Existing {
+    /// Nothing there.
+    Missing,
+    /// A complete output of this input and these settings: done.
+    Done,
+    /// Something that is not: it is redone, for this reason.
+    Redo(String),
+}
+
+/// Whether `job`'s output already exists as a complete output of its input
+/// and settings: readable, whole (every block present), made by epfilt from
+/// the same input with the same settings ([`provenance`]), and the same band
+/// or none.
+pub fn existing_output(job: &FilterJob) -> Result<Existing> {
+    let out = &job.output;
+    if out.as_os_str() == "-" {
+        return Ok(Existing::Missing);
+    }
+    match std::fs::metadata(out) {
+        Err(_) => return Ok(Existing::Missing),
+        Ok(m) if !m.is_file() => return Ok(Existing::Missing), // refused later
+        Ok(m) if m.len() == 0 => return Ok(Existing::Redo("it is empty".into())),
+        Ok(_) => {}
+    }
+    let recorded = match provenance::recorded(out) {
+        Ok(r) => r,
+        Err(why) => return Ok(Existing::Redo(format!("it is not a whole image ({why})"))),
+    };
+    let Some(found) = recorded.fingerprint else {
+        return Ok(Existing::Redo("it was not written by epfilt".into()));
+    };
+    let want = job.fingerprint()?;
+    let recorded_band = recorded
+        .band
+        .as_deref()
+        .map(|b| b.split_whitespace().next().unwrap_or(b).to_string());
+    Ok(if found.input != want.input {
+        Existing::Redo("it was made from another input".into())
+    } else if found.settings != want.settings {
+        Existing::Redo("it was made with other settings".into())
+    } else if recorded_band != job.band_text() {
+        Existing::Redo(match recorded.band {
+            Some(b) => format!("it is band {b}, not the whole image"),
+            None => "it is the whole image, not this band".into(),
+        })
+    } else {
+        Existing::Done
+    })
+}
+
+/// Refuse an output that is the input, also through a symbolic or hard link.
+pub fn check_not_same_file(input: &Path, output: &Path) -> Result<()> {
+    let same = match (std::fs::metadata(input), std::fs::metadata(output)) {
+        (Ok(a), Ok(b)) => {
+            #[cfg(unix)]
+            {
+                use std::os::unix::fs::MetadataExt;
+                a.dev() == b.dev() && a.ino() == b.ino()
+            }
+            #[cfg(not(unix))]
+            {
+                let _ = (a, b);
+                std::fs::canonicalize(input).ok() == std::fs::canonicalize(output).ok()
+            }
+        }
+        _ => false,
+    };
+    if same {
+        return Err(Error::Config(format!(
+            "the output {} is the input file; choose another output path",
+            output.display()
+        )));
+    }
+    Ok(())
+}
+
+/// Run `job`, reporting progress as (output rows done, output rows).
+///
+/// A multi-part input: the part chosen with `--part` is filtered and, at
+/// S = 1 into an EXR without `--band`, every other part is copied bit for bit
+/// beside it (parts of deep data are left out); at S > 1 the others cannot
+/// stay (OpenEXR requires one display window in every part) and are left
+/// out with a warning. `--part all` filters every part with the same
+/// settings into one multi-part output.
+pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
+    job.params.validate()?;
+    check_not_same_file(&job.input, &job.output)?;
+    let job = &FilterJob {
+        format: Some(job.output_format()?),
+        ..job.clone()
+    };
+    let fingerprint = &job.fingerprint()?;
+    let to_rgbe = job.format == Some(Format::Rgbe);
+    let parts = crate::io::parts::list(&job.input)?;
+    if parts.len() < 2 {
+        return filter_views(job, fingerprint, progress);
+    }
+    if job.view == Some(ViewSelect::All) {
+        return Err(Error::Config(format!(
+            "{}: --view all filters the views of one image; with a multi-part file, choose one part with --part",
+            job.input.display()
+        )));
+    }
+    let filter_part =
+        |job: &FilterJob, progress: Progress<'_>| filter_part(job, fingerprint, false, progress);
+    let chosen: Vec<usize> = match &job.part {
+        None => return filter_part(job, progress), // its error lists the parts
+        Some(PartSelect::All) => {
+            if job.band.is_some() || to_rgbe {
+                return Err(Error::Config(format!(
+                    "{}: --part all writes a multi-part EXR: not with --band or a Radiance output; filter one part at a time with --part",
+                    job.input.display()
+                )));
+            }
+            parts.iter().filter(|p| !p.deep).map(|p| p.index).collect()
+        }
+        Some(PartSelect::Index(i)) => vec![*i],
+        Some(PartSelect::Name(n)) => match parts.iter().find(|p| &p.name == n) {
+            Some(p) => vec![p.index],
+            None => return filter_part(job, progress), // its error names the parts
+        },
+    };
+    if chosen.iter().any(|&i| i >= parts.len()) || chosen.is_empty() {
+        return filter_part(job, progress); // its error says what is wrong
+    }
+    let all = matches!(job.part, Some(PartSelect::All));
+    if all || (job.params.supersample == 1 && job.band.is_none() && !to_rgbe) {
+        filter_and_assemble(job, fingerprint, &parts, &chosen, progress)
+    } else {
+        filter_one_part_of_many(job, fingerprint, &parts, chosen[0], to_rgbe, progress)
+    }
+}
+
+/// The views of a single-part input: the one chosen (or the default), or
+/// with `--view all` each view filtered as an image of its own and the
+/// results put together into one output.
+fn filter_views(
+    job: &FilterJob,
+    fingerprint: &Fingerprint,
+    progress: Progress<'_>,
+) -> Result<Report> {
+    if job.view != Some(ViewSelect::All) {
+        return filter_part(job, fingerprint, false, progress);
+    }
+    let views = crate::io::views::of(&job.input, job.part.as_ref())?;
+    if views.len() < 2 {
+        let mut one = job.clone();
+        one.view = None;
+        let mut report = filter_part(&one, fingerprint, false, progress)?;
+        report.warnings.push(format!(
+            "{}: --view all: the file has no other view to filter",
+            job.input.display()
+        ));
+        return Ok(report);
+    }
+    let refuse = |why: &str| {
+        Err(Error::Config(format!(
+            "{}: --view all writes every view into one EXR: {why}",
+            job.output.display()
+        )))
+    };
+    if job.format == Some(Format::Rgbe) {
+        return refuse("a Radiance picture holds one view");
+    }
+    if job.band.is_some() {
+        return refuse("not with --band; filter one view at a time with --view NAME");
+    }
+    if job.output_settings.allow_lossy {
+        return refuse("a lossy compression would round each view twice; choose a lossless one");
+    }
+    let dir = crate::io::destination::Destination::resolve(&job.output)?
+        .named()
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
+    let tmp = tempfile::Builder::new()
+        .prefix(".epfilt-views-")
+        .tempdir_in(&dir)
+        .map_err(|e| Error::io(&dir, e))?;
+    let mut reports = Vec::new();
+    let mut sources = Vec::new();
+    for (i, v) in views.iter().enumerate() {
+        let mut sub = job.clone();
+        sub.view = Some(ViewSelect::Name(v.clone()));
+        sub.output = tmp.path().join(format!("view{i}.exr"));
+        sub.format = Some(Format::Exr);
+        let mut r = filter_part(&sub, fingerprint, true, progress)?;
+        let own = sub.output.display().to_string();
+        let named = format!("{} (view {v:?})", job.output.display());
+        for w in r.warnings.iter_mut() {
+            *w = w.replace(&own, &named);
+        }
+        sources.push((sub.output.clone(), (i > 0).then(|| v.clone())));
+        reports.push(r);
+    }
+    crate::io::views::assemble(&sources, &job.output, &views, &fingerprint.text())?;
+    let mut report = reports.remove(0);
+    report.output = job.output.display().to_string();
+    for r in reports {
+        report.add_view(r);
+    }
+    Ok(report)
+}
+
+/// One part of a multi-part input filtered alone: the others are named in a
+/// warning and the report as left out, with why.
+fn filter_one_part_of_many(
+    job: &FilterJob,
+    fingerprint: &Fingerprint,
+    parts: &[crate::io::parts::PartInfo],
+    chosen: usize,
+    to_rgbe: bool,
+    progress: Progress<'_>,
+) -> Result<Report> {
+    let mut report = filter_part(job, fingerprint, false, progress)?;
+    let why = if to_rgbe {
+        "a Radiance picture has one part".to_string()
+    } else if job.band.is_some() {
+        "a --band file holds one part".to_string()
+    } else {
+        format!(
+            "at S = {} their display windows would differ from the filtered part's, which OpenEXR does not allow; --part all filters every part",
+            job.params.supersample
+        )
+    };
+    let left: Vec<String> = parts
+        .iter()
+        .filter(|p| p.index != chosen)
+        .map(|p| format!("{:?}", p.name))
+        .collect();
+    report.warnings.push(format!(
+        "{}: the other parts ({}) are not in the output: {why}",
+        job.input.display(),
+        left.join(", ")
+    ));
+    report.parts = parts
+        .iter()
+        .map(|p| PartReport {
+            index: p.index,
+            name: p.name.clone(),
+            action: if p.index == chosen {
+                "filtered"
+            } else {
+                "left out"
+            }
+            .into(),
+            why: (p.index != chosen).then(|| why.clone()),
+            report: None,
+        })
+        .collect();
+    Ok(report)
+}
+
+/// Filter the `chosen` parts of a multi-part input, each into a file of its
+/// own beside the output, then assemble the output from them and the input's
+/// other parts (copied), in the input's order.
+fn filter_and_assemble(
+    job: &FilterJob,
+    fingerprint: &Fingerprint,
+    parts: &[crate::io::parts::PartInfo],
+    chosen: &[usize],
+    progress: Progress<'_>,
+) -> Result<Report> {
+    let all = matches!(job.part, Some(PartSelect::All));
+    let name_of = |i: usize| parts[i].name.clone();
+    let dir = crate::io::destination::Destination::resolve(&job.output)?
+        .named()
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
+    let tmp = tempfile::Builder::new()
+        .prefix(".epfilt-parts-")
+        .tempdir_in(&dir)
+        .map_err(|e| Error::io(&dir, e))?;
+    let mut reports: Vec<Option<Report>> = vec![None; parts.len()];
+    let mut sources = Vec::new();
+    let mut entries = Vec::new();
+    let mut warnings = Vec::new();
+    for p in parts {
+        // --part all: a part with nothing to filter (no colour channels, or
+        // a layout epfilt does not filter) is copied at S = 1, else left out.
+        let mut unfilterable = None;
+        if all && !p.deep {
+            let sel = PartSelect::Index(p.index);
+            if let Err(Error::Unsupported { reason, .. }) =
+                ExrInput::open_layer(&job.input, Some(&sel), job.layer.as_deref())
+            {
+                unfilterable = Some(reason);
+            }
+        }
+        let filter_it = chosen.contains(&p.index) && unfilterable.is_none();
+        let left_out = if filter_it {
+            None
+        } else if p.deep {
+            Some("deep data cannot be written".to_string())
+        } else {
+            unfilterable
+                .as_ref()
+                .filter(|_| job.params.supersample > 1)
+                .map(|reason| {
+                    format!(
+                        "it cannot be filtered ({reason}), and at S = {} a copy's display window would differ from the filtered parts'",
+                        job.params.supersample
+                    )
+                })
+        };
+        if let Some(why) = left_out {
+            warnings.push(format!(
+                "{}: part {:?} is left out: {why}",
+                job.input.display(),
+                p.name
+            ));
+            entries.push((p.index, "left out", Some(why)));
+            continue;
+        }
+        if filter_it {
+            let mut sub = job.clone();
+            sub.part = Some(PartSelect::Index(p.index));
+            sub.output = tmp.path().join(format!("part{}.exr", p.index));
+            let mut r = filter_part(&sub, fingerprint, false, progress)?;
+            // What it says of its file, it says of its part of the output.
+            let own = sub.output.display().to_string();
+            let named = format!("{} (part {:?})", job.output.display(), p.name);
+            for w in r.warnings.iter_mut() {
+                *w = w.replace(&own, &named);
+            }
+            warnings.extend(r.warnings.iter().cloned());
+            r.output = job.output.display().to_string();
+            sources.push(crate::io::parts::PartSource {
+                path: sub.output.clone(),
+                part: 0,
+                name: name_of(p.index),
+            });
+            reports[p.index] = Some(r);
+            entries.push((p.index, "filtered", None));
+        } else {
+            sources.push(crate::io::parts::PartSource {
+                path: job.input.clone(),
+                part: p.index,
+                name: name_of(p.index),
+            });
+            entries.push((p.index, "copied", None));
+        }
+    }
+    // The report's own fields are the first filtered part's.
+    let Some(first) = reports.iter().position(Option::is_some) else {
+        return Err(Error::Unsupported {
+            path: job.input.clone(),
+            reason: "no part of this file has colour channels to filter".into(),
+        });
+    };
+    crate::io::parts::assemble(&job.output, &sources)?;
+    let part_reports: Vec<PartReport> = entries
+        .into_iter()
+        .map(|(i, action, why)| PartReport {
+            index: i,
+            name: name_of(i),
+            action: action.into(),
+            why,
+            report: reports[i].clone().map(Box::new),
+        })
+        .collect();
+    let mut report = reports[first]
+        .take()
+        .ok_or_else(|| Error::Internal("a multi-part run filtered no part".into()))?;
+    report.warnings = warnings;
+    report.parts = part_reports;
+    Ok(report)
+}
+
+/// Filter one part of the input (the only one, or `job.part`) into
+/// `job.output`, which records `fingerprint`. `exclusive`: one view of
+/// `--view all`, which carries nothing of the others.
+fn filter_part(
+    job: &FilterJob,
+    fingerprint: &Fingerprint,
+    exclusive: bool,
+    progress: Progress<'_>,
+) -> Result<Report> {
+    FilterPlan::build(job, fingerprint, exclusive)?.run(progress)
+}
+
+/// What the output leaves out of the input's channels, said as a warning
+/// (even under `-q`): other views, and what a Radiance picture cannot hold.
+/// Channels the user dropped with `--channel-rule` are not repeated back.
+pub(crate) fn dropped_warnings(
+    job: &FilterJob,
+    input: &ExrInput,
+    scope: &channels::ViewScope,
+    to_rgbe: bool,
+) -> Vec<String> {
+    let asked = |name: &str| job.channel_rules.iter().any(|r| r.matches(name));
+    let dropped: Vec<&String> = input
+        .dropped_channels()
+        .iter()
+        .filter(|n| !asked(n) || scope.excludes(n))
+        .collect();
+    let mut warnings = Vec::new();
+    let (mut views, rest): (Vec<&String>, Vec<&String>) =
+        dropped.into_iter().partition(|n| scope.excludes(n));
+    if scope.exclusive {
+        // One view of --view all: the others are filtered by their own runs.
+        views.clear();
+    }
+    if !views.is_empty() {
+        let mut names: Vec<&str> = views
+            .iter()
+            .filter_map(|n| scope.view_of(n).and_then(|v| scope.views.get(v)))
+            .map(String::as_str)
+            .collect();
+        names.dedup();
+        let list: Vec<&str> = views.iter().map(|s| s.as_str()).collect();
+        warnings.push(format!(
+            "{}: view(s) {} left out of the output ({}): --view NAME filters another view, --view all every view",
+            job.input.display(),
+            names.join(", "),
+            list.join(", ")
+        ));
+    }
+    if !rest.is_empty() {
+        let list: Vec<&str> = rest.iter().map(|s| s.as_str()).collect();
+        let why = if to_rgbe {
+            "a Radiance picture holds R, G, B only; write an EXR to keep them"
+        } else {
+            "no rule carries them"
+        };
+        warnings.push(format!(
+            "{}: channel(s) {} left out of the output: {why}",
+            job.input.display(),
+            list.join(", ")
+        ));
+    }
+    warnings
+}

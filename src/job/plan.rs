@@ -1,0 +1,374 @@
+//! Build: a [`FilterJob`] (the raw request) becomes a [`FilterPlan`], with
+//! the input open and its channels, statistics, geometry, output and memory
+//! settled, without a pixel read. [`FilterPlan::run`] (in `run.rs`) then
+//! does the work.
+
+use crate::error::{Error, Result};
+use crate::filter::channels::{self, ChannelRule};
+use crate::filter::{FilterParams, Method};
+use crate::geometry::Grid;
+use crate::host::{cpu_seconds, default_max_memory};
+use crate::io::output::OutputLayout;
+use crate::io::provenance::Fingerprint;
+use crate::io::{find_stats, ExrInput, Format, StatsChannels, StatsRequest, ViewSelect};
+use crate::pipeline::stream::MAX_CHANNELS;
+use crate::pipeline::{ChannelMode, Job};
+
+use super::{Edge, FilterJob};
+
+/// A run settled: everything checked that can be checked before the stream.
+pub struct FilterPlan<'a> {
+    pub(crate) job: &'a FilterJob,
+    pub(crate) fingerprint: &'a Fingerprint,
+    pub(crate) input: ExrInput,
+    /// The job's settings (ep-box's `L_tvis` is settled by the first pass).
+    pub(crate) params: FilterParams,
+    pub(crate) to_rgbe: bool,
+    /// The statistics channels found (ep-box; ep-gauss at S = 1).
+    pub(crate) found: Option<StatsChannels>,
+    pub(crate) geometry: Geometry,
+    /// The pipeline's channel layout.
+    pub(crate) pipe_job: Job,
+    pub(crate) channels: Vec<String>,
+    pub(crate) layout: OutputLayout,
+    pub(crate) band: Option<BandPlan>,
+    pub(crate) warnings: Vec<String>,
+    /// The process's CPU time when the build began.
+    pub(crate) cpu_start: f64,
+}
+
+/// Which samples of the input are filtered.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Geometry {
+    /// Samples per row of the file.
+    pub full_w: usize,
+    /// Samples the filter works on (cropped, or padded to a multiple of S).
+    pub w: usize,
+    pub h: usize,
+    /// Samples read per row and rows (the crop, or every sample with padding).
+    pub read_w: usize,
+    pub read_h: usize,
+    /// `--edge pad`: the real size of the padded grid.
+    pub padded_from: Option<(usize, usize)>,
+}
+
+/// Where a band's rows are.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct BandPlan {
+    pub k: usize,
+    pub n: usize,
+    /// Output rows of the band.
+    pub a: usize,
+    pub b: usize,
+    /// Output rows of the window its run reads.
+    pub wa: usize,
+    pub wb: usize,
+    pub out_h: usize,
+}
+
+impl BandPlan {
+    pub fn label(&self, s: usize) -> String {
+        format!(
+            "{}/{} rows {}-{} of {} S={s}",
+            self.k, self.n, self.a, self.b, self.out_h
+        )
+    }
+}
+
+impl<'a> FilterPlan<'a> {
+    /// Open `job`'s input (the part, layer and view it names) and settle the
+    /// run. `exclusive`: one view of `--view all`, which carries nothing of
+    /// the others; `fingerprint` goes into the output.
+    pub fn build(
+        job: &'a FilterJob,
+        fingerprint: &'a Fingerprint,
+        exclusive: bool,
+    ) -> Result<Self> {
+        let cpu_start = cpu_seconds().unwrap_or(0.0);
+        let view = match &job.view {
+            Some(ViewSelect::Name(v)) => Some(v.as_str()),
+            _ => None,
+        };
+        let mut input =
+            ExrInput::open_view(&job.input, job.part.as_ref(), job.layer.as_deref(), view)?;
+        let to_rgbe = job.output_format()? == Format::Rgbe;
+        let scope = crate::io::reader::view_scope(&job.input, input.header(), view, exclusive)?;
+        let carried = carry(job, &mut input, &scope, to_rgbe)?;
+        let found = statistics(job, &mut input)?;
+        let mut warnings = super::dropped_warnings(job, &input, &scope, to_rgbe);
+        let geometry = geometry(job, &input, &mut warnings)?;
+        let channels = input.channels();
+        let pipe_job = pipeline_job(job, &input, &geometry, found.as_ref().map(|f| &f.1))?;
+        check_memory(job, &input, &pipe_job, carried)?;
+        let mut layout = OutputLayout::of(&input, &channels, &job.output_settings);
+        if geometry.w != geometry.full_w || geometry.h != input.size().1 {
+            layout.crop(geometry.w, geometry.h);
+        }
+        let s = job.params.supersample;
+        let band = match job.band {
+            None => None,
+            Some((k, n)) => {
+                let plan = plan_band(job, &layout, geometry.h / s, k, n)?;
+                layout.rows(plan.a * s..plan.b * s);
+                Some(plan)
+            }
+        };
+        Ok(FilterPlan {
+            job,
+            fingerprint,
+            input,
+            params: job.params.clone(),
+            to_rgbe,
+            found: found.map(|f| f.0),
+            geometry,
+            pipe_job,
+            channels,
+            layout,
+            band,
+            warnings,
+            cpu_start,
+        })
+    }
+}
+
+/// Give every channel beside the beauty its carry rule (none into a Radiance
+/// picture, which holds R, G, B only); ids (unsigned integers) only take the
+/// nearest sample. Returns how many are carried.
+fn carry(
+    job: &FilterJob,
+    input: &mut ExrInput,
+    scope: &channels::ViewScope,
+    to_rgbe: bool,
+) -> Result<usize> {
+    let carried = if to_rgbe {
+        Vec::new()
+    } else {
+        input.carry_channels(|name, uint| channels::rule_for(name, uint, &job.channel_rules, scope))
+    };
+    for (name, rule) in &carried {
+        if input.is_uint(name) && *rule != ChannelRule::Nearest {
+            return Err(Error::Config(format!(
+                "{}: --channel-rule: {name} holds unsigned integers (ids): nearest or drop, not {}",
+                job.input.display(),
+                rule.name()
+            )));
+        }
+    }
+    let nfiltered = input.channels().len();
+    if nfiltered > MAX_CHANNELS {
+        return Err(Error::Channels {
+            path: job.input.clone(),
+            reason: format!(
+                "{nfiltered} channels to filter and carry, at most {MAX_CHANNELS}: drop some with --channel-rule 'PATTERN=drop' (carried: {})",
+                carried.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>().join(", ")
+            ),
+        });
+    }
+    Ok(carried.len())
+}
+
+/// The statistics step: ep-box needs them; ep-gauss at S = 1 reads them
+/// when the file has them (the carriers rule), and must find them when asked.
+fn statistics(
+    job: &FilterJob,
+    input: &mut ExrInput,
+) -> Result<Option<(StatsChannels, crate::filter::ep_box::StatsLayout)>> {
+    let params = &job.params;
+    let asked = job.stats != StatsRequest::default();
+    let ep_gauss_px = params.method == Method::EpGauss && params.supersample == 1;
+    if !(params.method == Method::EpBox || (ep_gauss_px && params.support > 0)) {
+        return Ok(None);
+    }
+    match find_stats(&job.input, input.header(), &job.stats) {
+        Ok(found) => {
+            let layout = found.attach(input, &job.input)?;
+            Ok(Some((found, layout)))
+        }
+        Err(_) if params.method == Method::EpGauss && !asked => Ok(None),
+        Err(e) => Err(e),
+    }
+}
+
+/// The samples filtered: the whole data window when its size is a multiple
+/// of S, else cropped or padded as `--edge` says (with a warning), or refused.
+fn geometry(job: &FilterJob, input: &ExrInput, warnings: &mut Vec<String>) -> Result<Geometry> {
+    let s = job.params.supersample;
+    let (w, h) = input.size();
+    let origin = input.origin();
+    if w < s || h < s {
+        return Err(Error::Config(format!(
+            "{}: --supersample {s} is larger than the image ({w}x{h})",
+            job.input.display()
+        )));
+    }
+    if origin.0.rem_euclid(s as i32) != 0 || origin.1.rem_euclid(s as i32) != 0 {
+        return Err(Error::Config(format!(
+            "{}: the data window starts at ({}, {}), not on a multiple of --supersample {s}",
+            job.input.display(),
+            origin.0,
+            origin.1
+        )));
+    }
+    let whole = Geometry {
+        full_w: w,
+        w,
+        h,
+        read_w: w,
+        read_h: h,
+        padded_from: None,
+    };
+    if w % s == 0 && h % s == 0 {
+        return Ok(whole);
+    }
+    let (cw, ch) = (w - w % s, h - h % s);
+    match job.edge {
+        Edge::Crop => {
+            warnings.push(format!(
+                "{}: {w}x{h} samples is not a multiple of S={s}: cropped to {cw}x{ch} (--edge crop dropped the last {} sample column(s) and {} row(s))",
+                job.input.display(),
+                w - cw,
+                h - ch
+            ));
+            Ok(Geometry {
+                w: cw,
+                h: ch,
+                read_w: cw,
+                read_h: ch,
+                ..whole
+            })
+        }
+        Edge::Pad => {
+            warnings.push(format!(
+                "{}: {w}x{h} samples is not a multiple of S={s}: padded (--edge pad): the last output column is made of {} and the last row of {} of {s} sample columns / rows, each normalised over what exists",
+                job.input.display(),
+                if w % s == 0 { s } else { w % s },
+                if h % s == 0 { s } else { h % s },
+            ));
+            Ok(Geometry {
+                w: w.div_ceil(s) * s,
+                h: h.div_ceil(s) * s,
+                padded_from: Some((w, h)),
+                ..whole
+            })
+        }
+        Edge::Exact => {
+            let hint = if job.supersample_assumed {
+                " If it is at pixel resolution, give --supersample 1."
+            } else {
+                ""
+            };
+            Err(Error::Config(format!(
+                "{}: {w}x{h} samples is not a multiple of --supersample {s}{}: give --edge crop to drop the last partial output column and row ({}x{} pixels), or --edge pad to keep them as pixels of fewer samples ({}x{}).{hint}",
+                job.input.display(),
+                if job.supersample_assumed { " (assumed: no --supersample given)" } else { "" },
+                cw / s,
+                ch / s,
+                w.div_ceil(s),
+                h.div_ceil(s)
+            )))
+        }
+    }
+}
+
+/// The pipeline's channel layout: the grid, the channels, their luminance
+/// weights and rules, the statistics; `--edge pad` refuses the nearest rule.
+fn pipeline_job(
+    job: &FilterJob,
+    input: &ExrInput,
+    g: &Geometry,
+    stats: Option<&crate::filter::ep_box::StatsLayout>,
+) -> Result<Job> {
+    let channels = input.channels();
+    let grid = Grid {
+        in_w: g.w,
+        in_h: g.h,
+        s: job.params.supersample,
+    };
+    let mut pipe_job =
+        Job::new(grid, channels.clone(), input.luminance()).with_rules(&input.channel_rules());
+    if g.padded_from.is_some() && pipe_job.modes.contains(&ChannelMode::Nearest) {
+        let nearest: Vec<&str> = channels
+            .iter()
+            .zip(&pipe_job.modes)
+            .filter(|(_, m)| **m == ChannelMode::Nearest)
+            .map(|(n, _)| n.as_str())
+            .collect();
+        return Err(Error::Config(format!(
+            "{}: --edge pad makes pixels of fewer samples, which have no centre sample for the nearest rule of {}: give --edge crop, or --channel-rule 'PATTERN=drop' or '=average'",
+            job.input.display(),
+            nearest.join(", ")
+        )));
+    }
+    pipe_job.padded_from = g.padded_from;
+    if let Some(layout) = stats {
+        pipe_job.stats = Some(layout.clone());
+        pipe_job.aux = input.aux_channels();
+    }
+    Ok(pipe_job)
+}
+
+/// Refuse a run that would need more memory than `--max-memory` allows.
+fn check_memory(job: &FilterJob, input: &ExrInput, pipe_job: &Job, carried: usize) -> Result<()> {
+    let need =
+        crate::pipeline::estimate_bytes(pipe_job, &job.params, &job.pipeline, input.block_bytes());
+    let limit = job.max_memory.unwrap_or_else(default_max_memory);
+    if need <= limit {
+        return Ok(());
+    }
+    let hint = if carried == 0 {
+        String::new()
+    } else {
+        format!(
+            "; {carried} of its {} channels are carried beside the beauty, and --channel-rule 'PATTERN=drop' leaves some out",
+            pipe_job.channels.len()
+        )
+    };
+    let (w, h) = (pipe_job.grid.in_w, pipe_job.grid.in_h);
+    Err(Error::Config(format!(
+        "{}: filtering this {w}x{h} image needs about {} MiB, more than the {} MiB allowed (--max-memory){hint}",
+        job.input.display(),
+        need >> 20,
+        limit >> 20
+    )))
+}
+
+/// `--band K/N`: output rows `a..b`, from the input rows of a window that
+/// reaches the halo's margin beyond them; bands end on the output's blocks.
+fn plan_band(
+    job: &FilterJob,
+    layout: &OutputLayout,
+    out_h: usize,
+    k: usize,
+    n: usize,
+) -> Result<BandPlan> {
+    if n == 0 || k == 0 || k > n {
+        return Err(Error::Config(format!(
+            "--band {k}/{n}: the band must be 1 to N of N"
+        )));
+    }
+    if job.output_format()? == Format::Rgbe {
+        return Err(Error::Config(format!(
+            "{}: --band writes EXR bands; `epfilt merge` puts them together",
+            job.output.display()
+        )));
+    }
+    let (unit, compression) = layout.band_unit(&job.output, &job.output_settings)?;
+    let (a, b) = crate::pipeline::band::band_rows(out_h, unit, k - 1, n).ok_or_else(|| {
+        Error::Config(format!(
+            "--band {k}/{n} is empty: the output's {out_h} rows make {} blocks of {unit} rows ({compression}); use at most that many bands",
+            out_h.div_ceil(unit),
+        ))
+    })?;
+    let m = crate::pipeline::band::margin(&job.params);
+    Ok(BandPlan {
+        k,
+        n,
+        a,
+        b,
+        // A multiple of 4, so the window's 2x and 4x coarse grids
+        // (--coarse-from) are the whole image's.
+        wa: a.saturating_sub(m) & !3,
+        wb: (b + m).min(out_h),
+        out_h,
+    })
+}
