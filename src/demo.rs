@@ -7,7 +7,7 @@
 use std::path::Path;
 use std::time::Instant;
 
-use exr::prelude::Compression;
+use crate::io::Compression;
 
 use crate::compare::compare_files;
 use crate::error::{Error, Result};

@@ -3,22 +3,14 @@
 //! boundaries), so it runs at the speed of the disk and gives the file a run
 //! over the whole image gives. The bands' ledgers add up to the image's.
 
-use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use exr::block::chunk::{Chunk, CompressedBlock};
-use exr::block::writer::ChunksWriter;
-use exr::meta::attribute::Text;
-use exr::meta::header::Header;
-use exr::meta::{BlockDescription, MetaData};
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::io::provenance::{
-    parse_band_ledger, Fingerprint, BAND as BAND_ATTRIBUTE, BAND_LEDGER as BAND_LEDGER_ATTRIBUTE,
-    FINGERPRINT,
-};
+use crate::io::bands::BandFile;
+use crate::io::provenance::Fingerprint;
 use crate::pipeline::ledger::CompensatedSum;
 
 /// What `merge` did.
@@ -68,88 +60,10 @@ impl MergeReport {
     }
 }
 
-/// One band file.
-struct Band {
-    path: PathBuf,
-    header: Header,
-    k: usize,
-    n: usize,
-    rows: (usize, usize),
-    of: usize,
-    s: usize,
-    ledger: Vec<(String, f64, f64)>,
-    fingerprint: Option<Fingerprint>,
-}
-
-use crate::io::reader::text_attribute;
-
-fn not_a_band(path: &Path, why: impl Into<String>) -> Error {
-    Error::InvalidFile {
-        path: path.into(),
-        reason: format!("not a band of `epfilt filter --band`: {}", why.into()),
-    }
-}
-
-fn read_band(path: &Path) -> Result<Band> {
-    let meta =
-        MetaData::read_from_file(path, false).map_err(|e| Error::from_exr(path, e, "header"))?;
-    if meta.headers.len() != 1 {
-        return Err(not_a_band(path, "several parts"));
-    }
-    let header = meta.headers[0].clone();
-    if header.blocks != BlockDescription::ScanLines || header.deep {
-        return Err(not_a_band(path, "not scan lines"));
-    }
-    let label = text_attribute(&header, BAND_ATTRIBUTE)
-        .ok_or_else(|| not_a_band(path, format!("no {BAND_ATTRIBUTE} attribute")))?;
-    // "K/N rows A-B of H S=s"
-    let bad = || not_a_band(path, format!("{BAND_ATTRIBUTE} {label:?}"));
-    let t: Vec<&str> = label.split_whitespace().collect();
-    let [kn, "rows", ab, "of", of, s] = t.as_slice() else {
-        return Err(bad());
-    };
-    let (k, n) = kn.split_once('/').ok_or_else(bad)?;
-    let (a, b) = ab.split_once('-').ok_or_else(bad)?;
-    let num = |v: &str| v.parse::<usize>().map_err(|_| bad());
-    let s = num(s.strip_prefix("S=").ok_or_else(bad)?)?;
-    let ledger = text_attribute(&header, BAND_LEDGER_ATTRIBUTE)
-        .and_then(|t| parse_band_ledger(&t))
-        .ok_or_else(|| not_a_band(path, format!("no readable {BAND_LEDGER_ATTRIBUTE}")))?;
-    let band = Band {
-        path: path.into(),
-        k: num(k)?,
-        n: num(n)?,
-        rows: (num(a)?, num(b)?),
-        of: num(of)?,
-        s,
-        ledger,
-        fingerprint: text_attribute(&header, FINGERPRINT).and_then(|t| Fingerprint::parse(&t)),
-        header,
-    };
-    if band.rows.1 - band.rows.0 != band.header.layer_size.1 {
-        return Err(bad());
-    }
-    Ok(band)
-}
-
-/// The header every band shares: its own without the band attributes and
-/// with the whole image's data window.
-fn whole_header(b: &Band) -> Header {
-    let mut h = b.header.clone();
-    h.own_attributes.other.remove(&Text::from(BAND_ATTRIBUTE));
-    h.own_attributes
-        .other
-        .remove(&Text::from(BAND_LEDGER_ATTRIBUTE));
-    h.own_attributes.layer_position.1 -= b.rows.0 as i32;
-    h.layer_size.1 = b.of;
-    h.chunk_count = exr::meta::compute_chunk_count(h.compression, h.layer_size, h.blocks);
-    h
-}
-
 /// Refuse bands that are not of one run: each records the fingerprint of
 /// its input and of its settings ([`crate::io::provenance`]); the value most
 /// bands share is the run's, and a band that differs is named.
-fn same_run(bands: &[Band]) -> Result<()> {
+fn same_run(bands: &[BandFile]) -> Result<()> {
     let fingerprints: Vec<Option<&Fingerprint>> =
         bands.iter().map(|b| b.fingerprint.as_ref()).collect();
     if fingerprints.iter().all(Option::is_none) {
@@ -218,13 +132,12 @@ pub fn merge(
     }
     let mut bands = parts
         .iter()
-        .map(|p| read_band(p))
+        .map(|p| BandFile::read(p))
         .collect::<Result<Vec<_>>>()?;
     same_run(&bands)?;
     bands.sort_by_key(|b| b.k);
     let first = &bands[0];
     let n = first.n;
-    let reference = whole_header(first);
     let mut next = 0;
     for (i, b) in bands.iter().enumerate() {
         if b.n != n || b.of != first.of || b.s != first.s {
@@ -249,7 +162,7 @@ pub fn merge(
                 next
             )));
         }
-        if whole_header(b) != reference {
+        if !b.same_layout(first) {
             return Err(Error::Config(format!(
                 "{} was not made by the same command as {} (its header differs: method, settings, channels or compression)",
                 b.path.display(),
@@ -265,55 +178,8 @@ pub fn merge(
             first.of
         )));
     }
-    let lines = reference.compression.scan_lines_per_block();
-    let y0 = reference.own_attributes.layer_position.1;
     let staged = crate::io::Staged::new(output, ".exr.tmp")?;
-    let file = staged
-        .file()
-        .try_clone()
-        .map_err(|e| Error::io(staged.path(), e))?;
-    let mut copied = 0u64;
-    let headers: exr::prelude::SmallVec<[Header; 3]> =
-        exr::prelude::SmallVec::from_vec(vec![reference.clone()]);
-    let written = exr::block::write(
-        BufWriter::with_capacity(1 << 20, file),
-        headers,
-        false,
-        |_meta, writer| {
-            for b in &bands {
-                let f = std::fs::File::open(&b.path)?;
-                let reader = exr::block::read(std::io::BufReader::new(f), false)?;
-                // One chunk at a time, in the file's (increasing) order:
-                // memory stays one block whatever the image.
-                let mut last = None;
-                for chunk in reader.all_chunks(false)? {
-                    let chunk: Chunk = chunk?;
-                    let CompressedBlock::ScanLine(block) = &chunk.compressed_block else {
-                        return Err(exr::error::Error::Invalid(
-                            "a band holds scan lines only".into(),
-                        ));
-                    };
-                    let y = block.y_coordinate;
-                    if last.is_some_and(|l| y <= l) || y < y0 {
-                        return Err(exr::error::Error::Invalid(
-                            "band blocks out of order".into(),
-                        ));
-                    }
-                    last = Some(y);
-                    let index = (y - y0) as usize / lines;
-                    copied += block.compressed_pixels_le.len() as u64;
-                    writer.write_chunk(index, chunk)?;
-                }
-            }
-            Ok(())
-        },
-    );
-    written.map_err(|e| Error::from_exr(output, e, "merging"))?;
-    crate::io::writer::sort_header_attributes(staged.file(), None).map_err(|e| Error::Output {
-        path: output.into(),
-        reason: format!("putting the header in order: {e}"),
-    })?;
-    staged.file().sync_all().ok();
+    let copied = crate::io::bands::write_merged(&bands, output, &staged)?;
     // The ledger: the bands' shares added up.
     let names: Vec<String> = first.ledger.iter().map(|l| l.0.clone()).collect();
     let mut inn = vec![CompensatedSum::default(); names.len()];
@@ -341,8 +207,8 @@ pub fn merge(
     Ok(MergeReport {
         output: output.display().to_string(),
         bands: n,
-        width: reference.layer_size.0,
-        height: reference.layer_size.1,
+        width: first.width(),
+        height: first.of,
         channels: names,
         energy_in,
         energy_out,

@@ -28,7 +28,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use exr::prelude::Compression;
+use crate::io::Compression;
 use rayon::prelude::*;
 use serde::Serialize;
 

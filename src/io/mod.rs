@@ -17,6 +17,7 @@
 //!   compresses them in parallel and writes them with the chunk writer into a
 //!   temporary file in the destination directory.
 
+pub mod bands;
 pub mod chunk_sizes;
 pub mod destination;
 pub mod format;
@@ -34,6 +35,8 @@ pub mod writer;
 pub mod zip;
 
 pub use destination::{write_file, Destination, Staged};
+/// The codecs an EXR output can be written with.
+pub use exr::prelude::Compression;
 pub use format::Format;
 pub use info::info;
 pub use reader::{ExrInput, PartSelect, Selection, ViewSelect};
@@ -41,7 +44,6 @@ pub use variance::{find_stats, SppFrom, StatsChannels, StatsRequest};
 pub use writer::{ExrOutput, OutputSettings};
 
 use exr::meta::attribute::Chromaticities;
-use exr::prelude::Compression;
 
 /// The format of an input file by its first bytes (`-`: standard input).
 pub fn input_format(path: &std::path::Path) -> crate::Result<Format> {
