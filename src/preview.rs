@@ -65,19 +65,15 @@ pub fn average_luminance(path: &Path) -> Result<f64> {
 
 fn luminance_of(input: &ExrInput) -> Result<f64> {
     let (w, h) = input.size();
-    let lum = input.luminance();
-    let nch = lum.len();
+    let lum = crate::filter::luminance::Luminance::new(&input.luminance());
+    let nch = lum.weights().len();
     let mut src = input.source();
     let mut sum = CompensatedSum::default();
+    let mut y = vec![0.0; w];
     while let Some(strip) = src.next_strip(64)? {
-        for r in 0..strip.rows {
-            for (c, &lw) in lum.iter().enumerate() {
-                if lw != 0.0 {
-                    for &v in &strip.data[(r * nch + c) * w..][..w] {
-                        sum.add(lw * v as f64);
-                    }
-                }
-            }
+        for row in strip.data.chunks_exact(nch * w).take(strip.rows) {
+            lum.row_into(row, w, &mut y);
+            y.iter().for_each(|&v| sum.add(v));
         }
     }
     Ok(sum.value() / (w * h).max(1) as f64)

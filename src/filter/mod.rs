@@ -17,6 +17,7 @@ pub mod ep_box;
 pub mod ep_gauss;
 pub mod foils;
 pub mod kernel;
+pub mod luminance;
 
 use crate::error::{Error, Result};
 

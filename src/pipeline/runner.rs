@@ -172,6 +172,7 @@ pub fn mean_luminance<S: Source>(mut source: S, job: &Job, strip_rows: usize) ->
         0 => auto_strip_rows(w, nall),
         n => n,
     };
+    let luminance = &crate::filter::luminance::Luminance::new(&job.luminance);
     let mut total = ledger::CompensatedSum::default();
     let mut count = 0usize;
     while let Some(strip) = source.next_strip(strip_rows)? {
@@ -181,15 +182,8 @@ pub fn mean_luminance<S: Source>(mut source: S, job: &Job, strip_rows: usize) ->
             .map(|row| {
                 let mut s = ledger::CompensatedSum::default();
                 for x in 0..w {
-                    let mut y = 0.0;
-                    for (c, &l) in job.luminance.iter().enumerate() {
-                        let v = row[c * w + x] as f64;
-                        // Non-finite samples are the filter's to report.
-                        if v.is_finite() {
-                            y += l * v;
-                        }
-                    }
-                    s.add(y);
+                    // Non-finite samples are the filter's to report.
+                    s.add(luminance.of_finite(|c| row[c * w + x] as f64));
                 }
                 s
             })

@@ -36,6 +36,7 @@ use super::ChannelMode;
 use crate::filter::ep_box::{cluster_count, StatsLayout};
 use crate::filter::ep_gauss::{Carriers, EpGauss, Folded, LumRows, Support};
 use crate::filter::kernel::{ColumnTaps, Kernel1d, TentTaps};
+use crate::filter::luminance::Luminance;
 use crate::filter::{Method, ValidParams};
 use crate::geometry::{mirror, Grid, Halo};
 
@@ -212,7 +213,7 @@ pub struct SpreadStage {
     h: usize,
     nch: usize,
     inv_s2: f64,
-    lum: Vec<f64>,
+    lum: Luminance,
     modes: Vec<ChannelMode>,
     base: Kernel1d,
     cols: ColumnTaps,
@@ -334,7 +335,7 @@ impl SpreadStage {
             h,
             nch,
             inv_s2: 1.0 / (s * s) as f64,
-            lum,
+            lum: Luminance::new(&lum),
             modes,
             base,
             cols,
@@ -403,7 +404,7 @@ impl Stage for SpreadStage {
         let in_w = self.grid.in_w;
         for row in input.range_mut(a, b) {
             for (c, ch) in row.chunks_mut(in_w).enumerate() {
-                if self.lum[c] != 0.0 {
+                if self.lum.weights()[c] != 0.0 {
                     crate::filter::foils::clamp_samples(ch, limit);
                 }
             }
@@ -575,7 +576,7 @@ impl SpreadStage {
     }
 
     fn make_ybox(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
-        let (s, w, pad, in_w, nch) = (self.grid.s, self.w, self.pad, self.grid.in_w, self.nch);
+        let (s, w, pad, in_w) = (self.grid.s, self.w, self.pad, self.grid.in_w);
         let inv = self.inv_s2;
         for _ in a..b {
             self.ybox.push_stale(0.0); // every value is written below
@@ -591,15 +592,7 @@ impl SpreadStage {
                 core.clear();
                 core.resize(w, 0.0);
                 for j in y * s..(y + 1) * s {
-                    let r = input.get(j);
-                    for c in 0..nch {
-                        let lw = lum[c];
-                        if lw == 0.0 {
-                            continue;
-                        }
-                        let ch = &r[c * in_w..(c + 1) * in_w];
-                        box_add(core, ch, s, lw);
-                    }
+                    lum.box_row_add(input.get(j), in_w, s, core);
                 }
                 core.iter_mut().for_each(|v| *v *= inv);
                 // --edge pad: a partial pixel's mean is over its real samples.
@@ -629,7 +622,6 @@ impl SpreadStage {
         }
         let ep = self.ep.as_ref();
         let yview = YView::new(&self.ybox, h);
-        let lum_channels: &Vec<usize> = &(0..nch).filter(|&c| self.lum[c] != 0.0).collect();
         let yview = &yview;
         let lum = &self.lum;
         let modes = &self.modes;
@@ -658,40 +650,13 @@ impl SpreadStage {
             };
             let view = yview;
             ep.xbar0_row_into(view, y as i64, w, xbars, xh);
-            let luma = |row: &[f32], i: usize| {
-                let mut x = 0.0;
-                for &c in lum_channels {
-                    x += lum[c] * row[c * in_w + i] as f64;
-                }
-                x
-            };
+            let luma = |row: &[f32], i: usize| lum.of(|c| row[c * in_w + i] as f64);
             // The luminance of the pixel row's samples, a row at a time
             // (the same sum, in the same order, as `luma`).
             lrows.clear();
             lrows.resize(s * in_w, 0.0f64);
             for (bb, lrow) in lrows.chunks_exact_mut(in_w).enumerate() {
-                let row = input.get(y * s + bb);
-                let ch = |c: usize| &row[c * in_w..(c + 1) * in_w];
-                // Channels of weight 0 (alpha, carried data that may
-                // be infinite) do not enter it. Three (colour): one pass.
-                if let [c0, c1, c2] = lum_channels[..] {
-                    let (l0, l1, l2) = (lum[c0], lum[c1], lum[c2]);
-                    let rows = ch(c0).iter().zip(ch(c1)).zip(ch(c2));
-                    for (l, ((&v0, &v1), &v2)) in lrow.iter_mut().zip(rows) {
-                        let mut x = 0.0;
-                        x += l0 * v0 as f64;
-                        x += l1 * v1 as f64;
-                        x += l2 * v2 as f64;
-                        *l = x;
-                    }
-                    continue;
-                }
-                for &c in lum_channels {
-                    let lw = lum[c];
-                    for (l, &v) in lrow.iter_mut().zip(ch(c)) {
-                        *l += lw * v as f64;
-                    }
-                }
+                lum.row_into(input.get(y * s + bb), in_w, lrow);
             }
             // Which pixels hold a noisy sample: one branch-free test of
             // all their samples first (most hold none).
@@ -776,7 +741,8 @@ impl SpreadStage {
                         if let Some((st, carriers)) = pixel_stats.filter(|_| x0 > hi) {
                             // S = 1: the sample is pixel (i, j) = (px, y).
                             let row = input.get(j);
-                            let (n, se2) = st.pixel(lum, x0, |c| row[c * in_w + i] as f64);
+                            let (n, se2) =
+                                st.pixel(lum.weights(), x0, |c| row[c * in_w + i] as f64);
                             let hot = || {
                                 cluster_count(
                                     (px, y),
@@ -1133,40 +1099,6 @@ fn row_max(out: &mut [f64], ch: &[f64], s: usize) {
                 for &v in v {
                     *o = if v > *o { v } else { *o };
                 }
-            }
-        }
-    }
-}
-
-/// `out[px] += lw * (sum of ch[px * s .. (px + 1) * s])`, the sum taken
-/// left to right in f64: the same arithmetic for every `s`, with the common
-/// factors in loops of their own, which the compiler unrolls (the box
-/// luminance took 0.07 s of a 6144x6144 run at S = 3 with a loop of
-/// variable length, 0.03-0.04 s so).
-#[inline]
-fn box_add(out: &mut [f64], ch: &[f32], s: usize, lw: f64) {
-    #[inline(always)]
-    fn fixed<const S: usize>(out: &mut [f64], ch: &[f32], lw: f64) {
-        for (o, v) in out.iter_mut().zip(ch.chunks_exact(S)) {
-            let mut acc = 0.0;
-            for &v in v {
-                acc += v as f64;
-            }
-            *o += lw * acc;
-        }
-    }
-    match s {
-        1 => fixed::<1>(out, ch, lw),
-        2 => fixed::<2>(out, ch, lw),
-        3 => fixed::<3>(out, ch, lw),
-        4 => fixed::<4>(out, ch, lw),
-        _ => {
-            for (o, v) in out.iter_mut().zip(ch.chunks_exact(s)) {
-                let mut acc = 0.0;
-                for &v in v {
-                    acc += v as f64;
-                }
-                *o += lw * acc;
             }
         }
     }
