@@ -26,8 +26,10 @@ use super::window::RowWindow;
 use super::ChannelMode;
 use crate::error::{Error, Result};
 use crate::filter::ep_box::{
-    cluster_count, excess, EpBoxParams, Guard, PixelTest, Ring, Spp, StatsLayout, TFactor,
+    cluster_count, colour_fraction, excess, passes::chebyshev_passes, receivers, EpBoxParams,
+    Guard, PixelTest, Ring, Spp, StatsLayout, TFactor,
 };
+use crate::filter::luminance::Luminance;
 use crate::filter::ValidParams;
 use crate::geometry::Halo;
 
@@ -267,6 +269,7 @@ impl ExcessStage {
     fn statistics(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
         let (w, nch) = (self.w, self.nch);
         let (lum, stats, dl) = (&self.lum, &self.stats, self.dl);
+        let luminance = &Luminance::new(&lum[..nch.min(lum.len())]);
         let (t, tg) = (&self.t, &self.tg);
         let ys = self.ylum.range_mut(a, b);
         let cs = self.cap.range_mut(a, b);
@@ -280,12 +283,7 @@ impl ExcessStage {
                 let row = input.get(a + k);
                 let ch = |c: usize, x: usize| row[c * w + x] as f64;
                 for x in 0..w {
-                    let mut y = 0.0;
-                    for (c, &l) in lum.iter().enumerate().take(nch) {
-                        if l != 0.0 {
-                            y += l * ch(c, x);
-                        }
-                    }
+                    let y = luminance.of(|c| ch(c, x));
                     yrow[x] = y;
                     let (n, se2) = stats.pixel(lum, y, |c| ch(c, x));
                     let test = PixelTest::new(y, se2, n, t.get(n), dl, params);
@@ -454,8 +452,6 @@ struct Band<'a> {
     ring: &'a Ring,
 }
 
-const UNSET: u8 = u8::MAX;
-
 /// Raw flags: noisy by the paper's test (`t S_p > D L_tvis`) ...
 const RAW_NOISY: u8 = 1;
 /// ... its mean carried by enough samples to be reliable ...
@@ -490,6 +486,21 @@ fn compact(
 pub use crate::filter::ep_box::{CLUSTER_REACH, COMPACT_MAX, GUARD_REACH};
 
 impl Band<'_> {
+    /// The brightest converged pixel within [`GUARD_REACH`] of band row `r`
+    /// (of `bh` from image row `ba`), column `x`: the `range` guard's bound.
+    fn brightest_converged(&self, ba: usize, bh: usize, r: usize, x: usize) -> f64 {
+        let mut max = f64::NEG_INFINITY;
+        for rr in r.saturating_sub(GUARD_REACH)..(r + GUARD_REACH + 1).min(bh) {
+            let (fl, yl) = (self.noisy.get(ba + rr), self.ylum.get(ba + rr));
+            for xx in x.saturating_sub(GUARD_REACH)..(x + GUARD_REACH + 1).min(self.w) {
+                if fl[xx] == 0 {
+                    max = max.max(yl[xx]);
+                }
+            }
+        }
+        max
+    }
+
     /// Treat rows `c0..c0 + kept.len()`: the passes over the band of rows
     /// `c0 - passes .. c1 + passes`, which holds everything those rows'
     /// decisions read (see `filter::ep_box`).
@@ -512,125 +523,68 @@ impl Band<'_> {
                 *d = v as f64;
             }
         }
-        let mut dist = vec![0u8; bh * w];
-        let mut refv = vec![0.0f64; bh * w];
-        let mut pending: Vec<u32> = Vec::new();
-        for r in 0..bh {
-            let (fl, yl) = (self.noisy.get(ba + r), self.ylum.get(ba + r));
-            refv[r * w..(r + 1) * w].copy_from_slice(yl);
-            for x in 0..w {
-                if fl[x] != 0 {
-                    dist[r * w + x] = UNSET;
-                    pending.push((r * w + x) as u32);
-                }
-            }
-        }
         let in_target = |r: usize| (c0..c1).contains(&(ba + r));
-        counters.noisy = pending
-            .iter()
-            .filter(|&&i| in_target(i as usize / w))
-            .count() as u64;
+        counters.noisy = (c0..c1)
+            .map(|y| self.noisy.get(y)[..w].iter().filter(|&&f| f != 0).count() as u64)
+            .sum();
         let (mut sources, mut shares) = (Vec::new(), Vec::new());
-        let mut next = Vec::with_capacity(pending.len());
-        for k in 1..=self.passes.min(UNSET as usize - 1) as u8 {
-            if pending.is_empty() {
-                break;
+        let settle = |r: usize, x: usize, k: u8, mean: f64| -> f64 {
+            let y = self.ylum.get(ba + r)[x];
+            let target = in_target(r);
+            if target {
+                counters.passes = counters.passes.max(k as u64);
             }
-            next.clear();
-            for &i in &pending {
-                let i = i as usize;
-                let (r, x) = (i / w, i % w);
-                let (mut count, mut sum) = (0u32, 0.0f64);
-                for dy in -1i64..=1 {
-                    let rr = r as i64 + dy;
-                    if rr < 0 || rr >= bh as i64 {
-                        continue;
-                    }
-                    for dx in -1i64..=1 {
-                        let xx = x as i64 + dx;
-                        if (dx == 0 && dy == 0) || xx < 0 || xx >= w as i64 {
-                            continue;
-                        }
-                        let j = rr as usize * w + xx as usize;
-                        if dist[j] < k {
-                            count += 1;
-                            sum += refv[j];
-                        }
-                    }
-                }
-                if count == 0 {
-                    next.push(i as u32);
-                    continue;
-                }
-                dist[i] = k;
-                let y = self.ylum.get(ba + r)[x];
-                let mean = sum / count as f64;
-                let target = in_target(r);
-                if target {
-                    counters.passes = counters.passes.max(k as u64);
-                }
-                let e = excess(
-                    y,
-                    mean,
-                    self.dl,
-                    self.ltvis,
-                    self.guard,
-                    || {
-                        // The brightest converged input within GUARD_REACH.
-                        let mut max = f64::NEG_INFINITY;
-                        for rr in r.saturating_sub(GUARD_REACH)..(r + GUARD_REACH + 1).min(bh) {
-                            let (fl, yl) = (self.noisy.get(ba + rr), self.ylum.get(ba + rr));
-                            for xx in x.saturating_sub(GUARD_REACH)..(x + GUARD_REACH + 1).min(w) {
-                                if fl[xx] == 0 {
-                                    max = max.max(yl[xx]);
-                                }
-                            }
-                        }
-                        max
-                    },
-                    self.cap.get(ba + r)[x],
-                );
-                if target {
-                    counters.guarded += u64::from(e.guarded);
-                    counters.trimmed += u64::from(e.trimmed);
-                }
-                let excess = e.value;
-                if excess == 0.0 {
-                    continue;
-                }
-                let wanted = (excess / self.ltvis).ceil();
-                refv[i] = y - excess;
-                if !target {
-                    continue;
-                }
-                let f = excess / y;
-                let yy = ba + r;
-                let wanted = wanted.min(self.ring.offsets().len() as f64 + 1.0) as usize;
-                let (m, found) = self.ring.prefix(x, yy, w, h, wanted);
-                counters.spread += 1;
-                counters.capped += u64::from(found < wanted);
-                let row = &mut kept[yy - c0];
-                let off = shares.len();
-                for c in 0..nch {
-                    let mut share = 0.0;
-                    if self.modes[c] == ChannelMode::Spread {
-                        let v = &mut row[c * w + x];
-                        let removed = *v * f;
-                        *v -= removed;
-                        share = removed / found as f64;
-                    }
-                    shares.push(share);
-                }
-                sources.push(Source {
-                    x: x as u32,
-                    y: yy as u32,
-                    m: m as u32,
-                    off,
-                });
+            let e = excess(
+                y,
+                mean,
+                self.dl,
+                self.ltvis,
+                self.guard,
+                || self.brightest_converged(ba, bh, r, x),
+                self.cap.get(ba + r)[x],
+            );
+            if target {
+                counters.guarded += u64::from(e.guarded);
+                counters.trimmed += u64::from(e.trimmed);
             }
-            std::mem::swap(&mut pending, &mut next);
-        }
-        counters.unresolved = pending
+            let excess = e.value;
+            if excess == 0.0 || !target {
+                return excess;
+            }
+            let yy = ba + r;
+            let wanted = receivers(excess, self.ltvis, self.ring.offsets().len());
+            let (m, found) = self.ring.prefix(x, yy, w, h, wanted);
+            counters.spread += 1;
+            counters.capped += u64::from(found < wanted);
+            let off = shares.len();
+            let row = &mut kept[yy - c0];
+            let f = colour_fraction(excess, y);
+            for c in 0..nch {
+                let mut share = 0.0;
+                if self.modes[c] == ChannelMode::Spread {
+                    let v = &mut row[c * w + x];
+                    let removed = *v * f;
+                    *v -= removed;
+                    share = removed / found as f64;
+                }
+                shares.push(share);
+            }
+            sources.push(Source {
+                x: x as u32,
+                y: yy as u32,
+                m: m as u32,
+                off,
+            });
+            excess
+        };
+        let unresolved = chebyshev_passes(
+            (w, bh),
+            |r| self.noisy.get(ba + r),
+            |r| self.ylum.get(ba + r),
+            self.passes,
+            settle,
+        );
+        counters.unresolved = unresolved
             .iter()
             .filter(|&&i| in_target(i as usize / w))
             .count() as u64;

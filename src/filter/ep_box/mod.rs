@@ -24,6 +24,8 @@
 //! further than `passes` from every converged pixel is left as it is
 //! (counted as unresolved).
 
+pub mod passes;
+
 use statrs::distribution::{ContinuousCDF, StudentsT};
 
 use crate::error::{Error, Result};
@@ -367,6 +369,21 @@ pub fn excess(
         e.value = 0.0;
     }
     e
+}
+
+/// How many pixels share an excess: `ceil(excess / L_tvis)` (each takes at
+/// most one visibility step), at most the ring's `ring_len` offsets and the
+/// pixel itself.
+#[inline]
+pub fn receivers(excess: f64, ltvis: f64, ring_len: usize) -> usize {
+    (excess / ltvis).ceil().min(ring_len as f64 + 1.0) as usize
+}
+
+/// The share of each channel of a pixel of luminance `y` that leaves it with
+/// an excess: the same for every channel, so the pixel keeps its colour.
+#[inline]
+pub fn colour_fraction(excess: f64, y: f64) -> f64 {
+    excess / y
 }
 
 /// Student-t factors `t_{(1+α)/2, n-1}` by sample count, tabled once.
