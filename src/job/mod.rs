@@ -41,7 +41,7 @@ pub struct FilterJob {
     /// Layer whose colour channels are filtered (see [`ExrInput::open_layer`]).
     pub layer: Option<String>,
     /// Refuse a job whose estimated memory exceeds this many bytes
-    /// ([`crate::pipeline::estimate_bytes`]); `None`: [`default_max_memory`].
+    /// ([`crate::pipeline::estimate_bytes`]); `None`: [`crate::host::default_max_memory`].
     pub max_memory: Option<u64>,
     /// Where `ep-box` finds its statistics (found by name when empty).
     pub stats: StatsRequest,
@@ -98,7 +98,7 @@ impl FilterJob {
     /// `input` to `output` with `params`, and defaults for the rest: automatic
     /// strips and threads, output samples of the input's type compressed like
     /// the input, part 0 of a
-    /// single-part file, [`default_max_memory`].
+    /// single-part file, [`crate::host::default_max_memory`].
     pub fn new(
         input: impl Into<PathBuf>,
         output: impl Into<PathBuf>,
