@@ -1,0 +1,359 @@
+//! Classification (the second cursor): which samples of a pixel row are
+//! noise (the base test, the feature rules), set aside with their values,
+//! and the horizontal gather pass of the base kernel with them taken out.
+
+use rayon::prelude::*;
+
+use super::*;
+
+/// The 5th smallest of eight values (their upper median): what three
+/// outliers on either side cannot move past the others. NaN sorts last.
+fn ring_median(ring: &mut [f64; 8]) -> f64 {
+    ring.sort_unstable_by(f64::total_cmp);
+    ring[4]
+}
+
+/// One classification task's scratch, reused from pixel row to pixel row.
+#[derive(Default)]
+struct FindScratch {
+    /// The pixel row's super-sample luminance, `S` sample rows.
+    lrows: Vec<f64>,
+    /// Its pixels that hold a noisy sample: column, xbar and bounds.
+    flagged: Vec<(usize, f64, f64, f64)>,
+    /// Each pixel's brightest sample.
+    pmax: Vec<f64>,
+    /// The base width's averages, and their horizontal pass.
+    xbars: Vec<f64>,
+    xh: Vec<f64>,
+}
+
+/// A pixel row's noisy samples (row-major), their values (`nch` each) and
+/// how many noisy samples were kept as features.
+type Found = (Vec<Noisy>, Vec<f32>, u64);
+
+/// What classification reads, shared by its tasks.
+#[derive(Clone, Copy)]
+struct FindCtx<'a> {
+    s: usize,
+    w: usize,
+    in_w: usize,
+    in_h: usize,
+    h: usize,
+    nch: usize,
+    pad: usize,
+    ep: Option<&'a EpGauss>,
+    view: &'a YView<'a>,
+    lum: &'a Luminance,
+    modes: &'a [ChannelMode],
+    cols: &'a ColumnTaps,
+    support: Support,
+    pixel_stats: Option<&'a (StatsLayout, Carriers)>,
+    input: &'a RowWindow<f32>,
+}
+
+impl FindCtx<'_> {
+    /// Phase 1, reading the input as it came (neighbour rows included):
+    /// which samples of pixel row `y` are noise, and which of those are kept
+    /// as features. The row's noisy samples in row-major order, their values
+    /// (`nch` each, in the same order) and how many were kept.
+    fn find(&self, sc: &mut FindScratch, y: usize) -> Found {
+        let FindCtx {
+            s,
+            w,
+            in_w,
+            in_h,
+            nch,
+            ep,
+            view: yview,
+            lum,
+            support,
+            input,
+            ..
+        } = *self;
+        let FindScratch {
+            lrows,
+            flagged,
+            pmax,
+            xbars,
+            xh,
+        } = sc;
+        let mut found = Vec::new();
+        let mut vals = Vec::new();
+        let mut kept = 0u64;
+        let Some(ep) = ep else {
+            return (found, vals, kept);
+        };
+        let view = yview;
+        ep.xbar0_row_into(view, y as i64, w, xbars, xh);
+        let luma = |row: &[f32], i: usize| lum.of(|c| row[c * in_w + i] as f64);
+        // The luminance of the pixel row's samples, a row at a time
+        // (the same sum, in the same order, as `luma`).
+        lrows.clear();
+        lrows.resize(s * in_w, 0.0f64);
+        for (bb, lrow) in lrows.chunks_exact_mut(in_w).enumerate() {
+            lum.row_into(input.get(y * s + bb), in_w, lrow);
+        }
+        // Which pixels hold a noisy sample: one branch-free test of
+        // all their samples first (most hold none).
+        flagged.clear();
+        if ep.low_outliers() {
+            for (px, &xbar) in xbars.iter().enumerate() {
+                let Some((hi, lo)) = ep.bounds(xbar) else {
+                    continue;
+                };
+                let mut any = false;
+                for bb in 0..s {
+                    for &x0 in &lrows[bb * in_w + px * s..bb * in_w + (px + 1) * s] {
+                        any |= EpGauss::outside(x0, (hi, lo));
+                    }
+                }
+                if any {
+                    flagged.push((px, xbar, hi, lo));
+                }
+            }
+        } else {
+            // Only bright samples can fail (`lo <= 0`): a pixel
+            // holds one iff its brightest sample is above `hi`.
+            pmax.clear();
+            pmax.resize(w, f64::NEG_INFINITY);
+            for lrow in lrows.chunks_exact(in_w) {
+                row_max(pmax, lrow, s);
+            }
+            for (px, (&xbar, &m)) in xbars.iter().zip(pmax.iter()).enumerate() {
+                let Some((hi, lo)) = ep.bounds(xbar) else {
+                    continue;
+                };
+                if m > hi {
+                    flagged.push((px, xbar, hi, lo));
+                }
+            }
+        }
+        // Row-major order: by input row, then column.
+        for bb in 0..s {
+            let j = y * s + bb;
+            let lrow = &lrows[bb * in_w..(bb + 1) * in_w];
+            for &(px, xbar, hi, lo) in flagged.iter() {
+                for i in px * s..(px + 1) * s {
+                    let x0 = lrow[i];
+                    if !EpGauss::outside(x0, (hi, lo)) {
+                        continue;
+                    }
+                    let neighbour = |di: i64, dj: i64| {
+                        let (ni, nj) = (i as i64 + di, j as i64 + dj);
+                        if !(ni >= 0 && nj >= 0 && (ni as usize) < in_w && (nj as usize) < in_h) {
+                            return None;
+                        }
+                        let (ni, nj) = (ni as usize, nj as usize);
+                        // This pixel row's samples are in `lrows`.
+                        Some(match nj.checked_sub(y * s).filter(|&b| b < s) {
+                            Some(b) => lrows[b * in_w + ni],
+                            None => luma(input.get(nj), ni),
+                        })
+                    };
+                    let background = || self.background(px, y);
+                    if support.keeps(x0, xbar, hi, lo, neighbour, background) {
+                        kept += 1;
+                        continue;
+                    }
+                    if x0 > hi && self.carried(ep, x0, (i, j), px) {
+                        kept += 1;
+                        continue;
+                    }
+                    let row = input.get(j);
+                    vals.extend((0..nch).map(|c| row[c * in_w + i]));
+                    found.push(Noisy {
+                        i: i as u32,
+                        j: j as u32,
+                        x0,
+                        xbar0: xbar,
+                        level: 0,
+                        capped: false,
+                    });
+                }
+            }
+        }
+        (found, vals, kept)
+    }
+
+    /// The box luminance of the eight pixels about pixel `(px, y)`
+    /// (mirrored at the borders), its median: up to three of them may hold
+    /// the feature itself.
+    fn background(&self, px: usize, y: usize) -> f64 {
+        let mut ring = [0.0f64; 8];
+        let mut k = 0;
+        for dy in -1i64..=1 {
+            let row = self.view.row(y as i64 + dy);
+            for dx in -1i64..=1 {
+                if dx != 0 || dy != 0 {
+                    ring[k] = row[(self.pad as i64 + px as i64 + dx) as usize] as f64;
+                    k += 1;
+                }
+            }
+        }
+        ring_median(&mut ring)
+    }
+
+    /// S = 1 with per-pixel statistics: whether the carriers rule keeps the
+    /// bright sample `x0` at input `(i, j)`, pixel column `px` (the sample is
+    /// the pixel).
+    fn carried(&self, ep: &EpGauss, x0: f64, (i, j): (usize, usize), px: usize) -> bool {
+        let Some((st, carriers)) = self.pixel_stats else {
+            return false;
+        };
+        let (view, pad, in_w, y) = (self.view, self.pad, self.in_w, j);
+        let row = self.input.get(j);
+        let (n, se2) = st.pixel(self.lum.weights(), x0, |c| row[c * in_w + i] as f64);
+        let hot = || {
+            cluster_count(
+                (px, y),
+                (self.w, self.h),
+                x0,
+                |xx, yy| view.row(yy as i64)[pad + xx] as f64,
+                |xx, yy| {
+                    let (v, xb) = (
+                        view.row(yy as i64)[pad + xx] as f64,
+                        ep.xbar0(view, xx, yy as i64),
+                    );
+                    ep.bounds(xb).is_some_and(|(hi, _)| v > hi)
+                },
+            )
+        };
+        carriers.keeps(x0, se2, n, hot)
+    }
+
+    /// Phase 2: the horizontal pass of the base kernel over the `S` sample
+    /// rows of pixel row `y` into `hs`, the spread samples `list` taken out
+    /// (zeroed in a copy of their row, `scratch`).
+    fn pass(&self, scratch: &mut Vec<f32>, y: usize, hs: &mut [&mut [f64]], list: &[Noisy]) {
+        let FindCtx {
+            s,
+            w,
+            in_w,
+            nch,
+            modes,
+            cols,
+            input,
+            ..
+        } = *self;
+        for (bb, hrow) in hs.iter_mut().enumerate() {
+            let j = y * s + bb;
+            let mut row = input.get(j);
+            let first = list.partition_point(|n| (n.j as usize) < j);
+            let last = list.partition_point(|n| (n.j as usize) <= j);
+            if first < last {
+                scratch.clear();
+                scratch.extend_from_slice(row);
+                for n in &list[first..last] {
+                    // Coverage (alpha) and averaged data are not
+                    // spread: they keep the base kernel.
+                    for c in (0..nch).filter(|&c| modes[c] == ChannelMode::Spread) {
+                        scratch[c * in_w + n.i as usize] = 0.0;
+                    }
+                }
+                row = scratch.as_slice();
+            }
+            for c in 0..nch {
+                let src = &row[c * in_w..(c + 1) * in_w];
+                let dst = &mut hrow[c * w..(c + 1) * w];
+                if modes[c] == ChannelMode::Nearest {
+                    // The centre sample, as it is.
+                    for (x, d) in dst.iter_mut().enumerate() {
+                        *d = src[x * s + (s - 1) / 2] as f64;
+                    }
+                    continue;
+                }
+                for (x, d) in dst.iter_mut().enumerate() {
+                    let (start, taps) = cols.taps(x);
+                    // -0.0 is the additive identity: a sum of -0.0
+                    // samples stays -0.0 (an input -0.0 survives).
+                    let mut acc = -0.0;
+                    for (t, &v) in taps.iter().zip(&src[start..start + taps.len()]) {
+                        acc += t * v as f64;
+                    }
+                    *d = acc;
+                }
+            }
+        }
+    }
+}
+
+impl SpreadStage {
+    pub(super) fn classify(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
+        let s = self.grid.s;
+        for _ in a * s..b * s {
+            self.hpass.push_stale(0.0); // every value is written below
+        }
+        let yview = YView::new(&self.ybox, self.h);
+        let ctx = FindCtx {
+            s,
+            w: self.w,
+            in_w: self.grid.in_w,
+            in_h: self.grid.in_h,
+            h: self.h,
+            nch: self.nch,
+            pad: self.pad,
+            ep: self.ep.as_ref(),
+            view: &yview,
+            lum: &self.lum,
+            modes: &self.modes,
+            cols: &self.cols,
+            support: self.support,
+            pixel_stats: self.pixel_stats.as_ref(),
+            input,
+        };
+        // Both phases row by row in one task: the pass reads the rows the
+        // search for noise has just read.
+        let mut hrows = self.hpass.range_mut(a * s, b * s);
+        let found: Vec<Found> = hrows
+            .par_chunks_mut(s)
+            .enumerate()
+            .map_init(
+                <(FindScratch, Vec<f32>)>::default,
+                |(scratch, copy), (k, hs)| {
+                    let y = a + k;
+                    let f = ctx.find(scratch, y);
+                    ctx.pass(copy, y, hs, &f.0);
+                    f
+                },
+            )
+            .collect();
+        for (list, vals, kept) in found {
+            // Kept samples failed the test too; the spread ones are counted
+            // when they are spread.
+            self.stats.noisy += kept;
+            self.stats.kept += kept;
+            self.pending.extend(list);
+            self.pending_v.extend(vals);
+        }
+    }
+}
+
+/// `out[px] = max(out[px], ch[px * s .. (px + 1) * s])`, with the common
+/// factors in loops of their own, as in [`box_add`]. A comparison, not
+/// `f64::max` (whose NaN rule costs a branch per value): the same result
+/// while `out` holds no NaN (it starts at -inf), and a NaN value is passed
+/// over by both.
+#[inline]
+fn row_max(out: &mut [f64], ch: &[f64], s: usize) {
+    #[inline(always)]
+    fn fixed<const S: usize>(out: &mut [f64], ch: &[f64]) {
+        for (o, v) in out.iter_mut().zip(ch.chunks_exact(S)) {
+            for &v in v {
+                *o = if v > *o { v } else { *o };
+            }
+        }
+    }
+    match s {
+        1 => fixed::<1>(out, ch),
+        2 => fixed::<2>(out, ch),
+        3 => fixed::<3>(out, ch),
+        4 => fixed::<4>(out, ch),
+        _ => {
+            for (o, v) in out.iter_mut().zip(ch.chunks_exact(s)) {
+                for &v in v {
+                    *o = if v > *o { v } else { *o };
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,340 @@
+//! Spreading (the third cursor): the width search of a batch of noisy
+//! samples, their kernels placed (read in place, or reflected into an
+//! arena), and the scatter into tile accumulators that own output columns,
+//! at full resolution or on the 2x and 4x coarse grids.
+
+use rayon::prelude::*;
+
+use super::*;
+
+/// Where the weights of one axis of a spread are.
+#[derive(Clone, Copy, Debug)]
+enum Weights {
+    /// Reflected at an edge: at this offset in the chunk's arena.
+    Arena(usize),
+    /// Inside the image: a row of the level's kernel as it is (level,
+    /// phase), read in place instead of copied.
+    Kernel(u16, u16),
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Spread {
+    xs: usize,
+    xl: usize,
+    ys: usize,
+    yl: usize,
+    wx: Weights,
+    wy: Weights,
+    /// Where its value in each channel is, in the chunk's values.
+    voff: usize,
+}
+
+impl Spread {
+    fn new(
+        (xs, xl, wx): (usize, usize, Weights),
+        (ys, yl, wy): (usize, usize, Weights),
+        voff: usize,
+    ) -> Self {
+        Spread {
+            xs,
+            xl,
+            ys,
+            yl,
+            wx,
+            wy,
+            voff,
+        }
+    }
+}
+
+impl SpreadStage {
+    /// The width search of the first `split` pending samples, one sample
+    /// per task (each is independent of the rest).
+    fn search_widths(&mut self, split: usize) {
+        let Some(ep) = self.ep.as_ref() else { return };
+        let s = self.grid.s;
+        let batch = &mut self.pending[..split];
+        let view = YView::new(&self.ybox, self.h);
+        let cost: u64 = batch
+            .par_iter_mut()
+            .map_init(Folded::default, |fold, n| {
+                let c = ep.search_in(
+                    &view,
+                    n.i as usize / s,
+                    n.j as usize / s,
+                    n.x0,
+                    n.xbar0,
+                    fold,
+                );
+                n.level = c.level;
+                n.capped = c.capped;
+                c.cost
+            })
+            .sum();
+        self.stats.search_cost += cost;
+    }
+
+    /// Spread the pending samples of pixel rows before `target`: their
+    /// widths, their kernels placed in chunks of [`SPREAD_CHUNK`], and the
+    /// scatter into the accumulators, in the pending (row-major) order.
+    pub(super) fn spread(&mut self, target: usize) {
+        let (s, w, h, nch) = (self.grid.s, self.w, self.h, self.nch);
+        let split = self
+            .pending
+            .partition_point(|n| (n.j as usize) / s < target);
+        self.search_widths(split);
+        let Some(ep) = self.ep.as_ref() else { return };
+        // Accumulator rows down to the widest reach of this batch.
+        let need = (target + self.halo.spread_reach).min(h);
+        grow_filled(&mut self.acc, need, -0.0);
+        // Coarse rows reaching fine rows below `need` (and a spare).
+        let (ncw, nch_rows) = (w.div_ceil(2), h.div_ceil(2));
+        grow_filled(&mut self.cacc, (need.div_ceil(2) + 1).min(nch_rows), 0.0);
+        // 4x row K reaches fine rows 4K - 3 ..= 4K + 6.
+        let (ncw4, nch_rows4) = (w.div_ceil(4), h.div_ceil(4));
+        grow_filled(&mut self.cacc4, (need.div_ceil(4) + 1).min(nch_rows4), 0.0);
+        let mut cspreads = Vec::new();
+        let mut cspreads4 = Vec::new();
+        // Spread in chunks of the (row-major) batch: the folded weights of one
+        // chunk at a time bound the arena, and the order of contributions to
+        // every pixel stays the batch order.
+        let mut spreads = Vec::with_capacity(SPREAD_CHUNK.min(split));
+        let mut tmp = Vec::new();
+        for c0 in (0..split).step_by(SPREAD_CHUNK) {
+            // Reflect each sample's kernel once, in order.
+            self.arena.clear();
+            self.carena.clear();
+            self.carena4.clear();
+            self.vals.clear();
+            spreads.clear();
+            cspreads.clear();
+            cspreads4.clear();
+            let c1 = (c0 + SPREAD_CHUNK).min(split);
+            for (n, x) in self.pending[c0..c1]
+                .iter()
+                .zip(self.pending_v[c0 * nch..c1 * nch].chunks_exact(nch))
+            {
+                self.stats.noisy += 1;
+                self.stats.spread += (n.level > 0) as u64;
+                self.stats.capped += n.capped as u64;
+                let level = &ep.levels()[n.level as usize];
+                let (i, j) = (n.i as usize, n.j as usize);
+                let voff = self.vals.len();
+                self.vals.extend(x.iter().zip(&self.modes).map(|(&x, &m)| {
+                    if m == ChannelMode::Spread {
+                        x as f64 * self.inv_s2
+                    } else {
+                        0.0
+                    }
+                }));
+                // Wide kernels on a coarse grid, the others at full
+                // resolution; each list keeps the batch order. Kernels inside
+                // the image are read in place, the others reflected into the
+                // arena.
+                let lv = n.level;
+                let (sp, list) = match &level.coarse {
+                    Some(c) => {
+                        self.stats.coarse += 1;
+                        let four = c.factor == 4;
+                        self.stats.coarse4 += u64::from(four);
+                        let (arena, cells, list) = if four {
+                            (&mut self.carena4, (ncw4, nch_rows4), &mut cspreads4)
+                        } else {
+                            (&mut self.carena, (ncw, nch_rows), &mut cspreads)
+                        };
+                        let mut axis = |q: usize, n: usize| {
+                            let (a, p) = (q % s, q / s);
+                            let inside = c.interior(a, p, n);
+                            place(&c.kernel, inside, lv, arena, &mut tmp, |t| {
+                                c.fold(a, p, n, t)
+                            })
+                        };
+                        let (x, y) = (axis(i, cells.0), axis(j, cells.1));
+                        (Spread::new(x, y, voff), list)
+                    }
+                    None => {
+                        let k = &level.kernel;
+                        let arena = &mut self.arena;
+                        let mut axis = |q: usize, n: usize| {
+                            let (a, p) = (q % s, q / s);
+                            let inside = k.interior(p, n).map(|st| (a, st));
+                            place(k, inside, lv, arena, &mut tmp, |t| k.fold(a, p, n, t))
+                        };
+                        let (x, y) = (axis(i, w), axis(j, h));
+                        (Spread::new(x, y, voff), &mut spreads)
+                    }
+                };
+                self.stats.spread_taps += (sp.xl * sp.yl) as u64;
+                list.push(sp);
+            }
+            if !spreads.is_empty() {
+                let rows = |l: u16, ph: u16| ep.levels()[l as usize].kernel.row(ph as usize);
+                scatter(
+                    &mut self.acc,
+                    (&self.arena, &rows),
+                    &self.vals,
+                    &spreads,
+                    w,
+                    nch,
+                    self.tile,
+                );
+            }
+            let rows = |l: u16, ph: u16| {
+                ep.levels()[l as usize]
+                    .coarse
+                    .as_ref()
+                    .map_or(&[][..], |c| c.kernel.row(ph as usize))
+            };
+            if !cspreads.is_empty() {
+                self.coarse_used = true;
+                let tile = (self.tile / 2).max(1);
+                scatter(
+                    &mut self.cacc,
+                    (&self.carena, &rows),
+                    &self.vals,
+                    &cspreads,
+                    ncw,
+                    nch,
+                    tile,
+                );
+            }
+            if !cspreads4.is_empty() {
+                // Through the 2x grid: its rows carry the 4x share.
+                self.coarse_used = true;
+                self.coarse4_used = true;
+                let tile = (self.tile / 4).max(1);
+                scatter(
+                    &mut self.cacc4,
+                    (&self.carena4, &rows),
+                    &self.vals,
+                    &cspreads4,
+                    ncw4,
+                    nch,
+                    tile,
+                );
+            }
+        }
+        self.pending.drain(..split);
+        self.pending_v.drain(..split * nch);
+    }
+}
+
+/// Rows of `win` up to `end` (absolute), the new ones filled with `fill`
+/// in parallel (an accumulator row of 2048 pixels and 3 channels is 48 KiB:
+/// filled one after another, they were a serial stretch of every strip).
+fn grow_filled(win: &mut RowWindow<f64>, end: usize, fill: f64) {
+    let from = win.end();
+    if end <= from {
+        return;
+    }
+    for _ in from..end {
+        win.push_stale(fill);
+    }
+    win.range_mut(from, end)
+        .into_par_iter()
+        .for_each(|r| r.fill(fill));
+}
+
+/// One axis of a sample's spread: its first target, its length and where
+/// its weights are. `inside` (phase, first target) when the kernel's row
+/// lands whole inside the image, read in place; otherwise `fold` reflects
+/// it into `tmp` and it is appended to `arena`.
+fn place(
+    kernel: &Kernel1d,
+    inside: Option<(usize, usize)>,
+    level: u16,
+    arena: &mut Vec<f64>,
+    tmp: &mut Vec<f64>,
+    fold: impl FnOnce(&mut Vec<f64>) -> usize,
+) -> (usize, usize, Weights) {
+    match inside {
+        Some((phase, start)) => (
+            start,
+            kernel.row(phase).len(),
+            Weights::Kernel(level, phase as u16),
+        ),
+        None => {
+            let start = fold(tmp);
+            let off = arena.len();
+            arena.extend_from_slice(tmp);
+            (start, tmp.len(), Weights::Arena(off))
+        }
+    }
+}
+
+/// Add `spreads` (in order) into the accumulator, one task per tile of
+/// columns: each pixel receives its contributions in the given order.
+fn scatter<'k>(
+    acc: &mut RowWindow<f64>,
+    (arena, rows): (&[f64], &(dyn Fn(u16, u16) -> &'k [f64] + Sync)),
+    vals: &[f64],
+    spreads: &[Spread],
+    w: usize,
+    nch: usize,
+    tile: usize,
+) {
+    let (first, end) = (acc.first(), acc.end());
+    let ntiles = w.div_ceil(tile);
+    // Planar rows [c][x]: tile t owns columns t*tile.. of every channel of
+    // every row; its slices are listed row by row, channel by channel.
+    let mut tiles: Vec<Vec<&mut [f64]>> = (0..ntiles)
+        .map(|_| Vec::with_capacity((end - first) * nch))
+        .collect();
+    for row in acc.range_mut(first, end) {
+        for ch in row.chunks_mut(w) {
+            for (t, part) in ch.chunks_mut(tile).enumerate() {
+                tiles[t].push(part);
+            }
+        }
+    }
+    tiles
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(t, mut parts)| {
+            let x0 = t * tile;
+            let x1 = (x0 + tile).min(w);
+            for sp in spreads {
+                let (cx0, cx1) = (sp.xs.max(x0), (sp.xs + sp.xl).min(x1));
+                if cx0 >= cx1 {
+                    continue;
+                }
+                let weights = |at: Weights, len: usize| match at {
+                    Weights::Arena(off) => &arena[off..off + len],
+                    Weights::Kernel(l, ph) => rows(l, ph),
+                };
+                let wx = &weights(sp.wx, sp.xl)[cx0 - sp.xs..cx1 - sp.xs];
+                let wy = weights(sp.wy, sp.yl);
+                let v = &vals[sp.voff..sp.voff + nch];
+                // Colour without alpha, the common case: the three channels in
+                // one loop (each value gets the same products in the same
+                // order as channel by channel).
+                let rgb = nch >= 3
+                    && v[..3].iter().all(|&v| v != 0.0)
+                    && v[3..].iter().all(|&v| v == 0.0);
+                for (dy, &wyv) in wy.iter().enumerate() {
+                    let r = sp.ys + dy - first;
+                    if rgb {
+                        let (k0, k1, k2) = (v[0] * wyv, v[1] * wyv, v[2] * wyv);
+                        if let [a, b, c, ..] = &mut parts[r * nch..(r + 1) * nch] {
+                            let span = cx0 - x0..cx1 - x0;
+                            let (a, b, c) =
+                                (&mut a[span.clone()], &mut b[span.clone()], &mut c[span]);
+                            for (((a, b), c), &wv) in a.iter_mut().zip(b).zip(c).zip(wx) {
+                                *a += k0 * wv;
+                                *b += k1 * wv;
+                                *c += k2 * wv;
+                            }
+                        }
+                        continue;
+                    }
+                    for c in (0..nch).filter(|&c| v[c] != 0.0) {
+                        let coef = v[c] * wyv;
+                        let dst = &mut parts[r * nch + c][cx0 - x0..cx1 - x0];
+                        for (d, &wv) in dst.iter_mut().zip(wx) {
+                            *d += coef * wv;
+                        }
+                    }
+                }
+            }
+        });
+}
