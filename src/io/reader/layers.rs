@@ -1,0 +1,224 @@
+//! Which channels of an EXR are read: views, layers, the beauty's colour
+//! channels and their luminance weights, and what is left out.
+
+use super::*;
+
+/// The views of a multi-view file (`multiView`), the default first; empty
+/// for a file without views.
+pub(crate) fn views(header: &Header) -> Vec<String> {
+    header
+        .own_attributes
+        .multi_view_names
+        .iter()
+        .flatten()
+        .map(|t| t.to_string())
+        .collect()
+}
+
+/// Which view of a multi-view file to filter (`--view`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum ViewSelect {
+    /// One view, by name.
+    Name(String),
+    /// Every view, each filtered as its own image, into one output.
+    All,
+}
+
+impl ViewSelect {
+    /// Parse `--view`: `all`, or a view's name.
+    pub fn parse(s: &str) -> Self {
+        match s {
+            "all" => ViewSelect::All,
+            name => ViewSelect::Name(name.to_string()),
+        }
+    }
+}
+
+/// The view a run of `header`'s part writes: `view` by name, or the
+/// default; an unknown name is refused with the file's views.
+pub fn view_scope(
+    path: &Path,
+    header: &Header,
+    view: Option<&str>,
+    exclusive: bool,
+) -> Result<crate::filter::channels::ViewScope> {
+    let views = views(header);
+    let this = match view {
+        None => 0,
+        Some(v) => views.iter().position(|n| n == v).ok_or_else(|| {
+            Error::Config(format!(
+                "{}: --view {v:?}: {}",
+                path.display(),
+                if views.is_empty() {
+                    "the file has no views (no multiView attribute)".to_string()
+                } else {
+                    format!("its views are {}", views.join(", "))
+                }
+            ))
+        })?,
+    };
+    Ok(crate::filter::channels::ViewScope {
+        views,
+        this,
+        exclusive,
+    })
+}
+
+pub(crate) fn base_name(name: &str) -> &str {
+    name.rsplit('.').next().unwrap_or(name)
+}
+
+/// Layer names (last dot-component, any case) that renderers give the beauty
+/// image: Blender's `ViewLayer.Combined`, `beauty`/`RGBA` (Arnold, Houdini),
+/// RenderMan's `Ci`, and the generic ones.
+pub(super) const BEAUTY_LAYERS: &[&str] = &[
+    "combined",
+    "beauty",
+    "rgba",
+    "rgb",
+    "ci",
+    "color",
+    "colour",
+    "composite",
+    "image",
+];
+
+/// The colour channels of `layer` ("" or ending in '.'): R, G, B (+ A), or
+/// Y (+ A); `None` when it has neither.
+pub(super) fn layer_colour(names: &[String], layer: &str) -> Option<Vec<&'static str>> {
+    let has = |c: &str| names.iter().any(|n| *n == format!("{layer}{c}"));
+    // In a named layer, Y beside an X is a vector's component (normals
+    // `N.X N.Y N.Z`, motion `vel.X vel.Y`), not a luminance.
+    let vector = !layer.is_empty() && has("X");
+    let mut wanted = if has("R") && has("G") && has("B") {
+        vec!["R", "G", "B"]
+    } else if has("Y") && !vector {
+        vec!["Y"]
+    } else {
+        return None;
+    };
+    if has("A") {
+        wanted.push("A");
+    }
+    Some(wanted)
+}
+
+/// The channels to filter: R, G, B (+ A), or Y (+ A) of one layer, and the
+/// rest (dropped, and listed). The layer is `layer` when given; otherwise the
+/// unlayered channels, else a layer with a beauty name ([`BEAUTY_LAYERS`]),
+/// else the only layer with colour; several candidates and no beauty is an
+/// error that lists them (filtering an AOV by mistake would be silent).
+pub(crate) fn choose_channels(
+    path: &Path,
+    header: &Header,
+    layer: Option<&str>,
+) -> Result<(Vec<Selected>, Vec<String>)> {
+    let names: Vec<String> = header
+        .channels
+        .list
+        .iter()
+        .map(|c| c.name.to_string())
+        .collect();
+    let mut layers: Vec<String> = vec![String::new()];
+    for n in &names {
+        if let Some((l, _)) = n.rsplit_once('.') {
+            let l = format!("{l}.");
+            if !layers.contains(&l) {
+                layers.push(l);
+            }
+        }
+    }
+    let coloured: Vec<(&String, Vec<&str>)> = layers
+        .iter()
+        .filter_map(|l| layer_colour(&names, l).map(|c| (l, c)))
+        .collect();
+    if coloured.is_empty() {
+        return Err(unsupported(
+            path,
+            format!(
+                "no colour channels to filter (need R,G,B or Y; the file has: {})",
+                names.join(", ")
+            ),
+        ));
+    }
+    let shown = |l: &str| {
+        if l.is_empty() {
+            "(unlayered)".to_string()
+        } else {
+            l.trim_end_matches('.').to_string()
+        }
+    };
+    let list = || {
+        coloured
+            .iter()
+            .map(|(l, _)| shown(l))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let chosen = if let Some(want) = layer {
+        let want = want.trim_end_matches('.');
+        let key = if want.is_empty() {
+            String::new()
+        } else {
+            format!("{want}.")
+        };
+        match coloured.iter().find(|(l, _)| **l == key) {
+            Some(c) => c,
+            None => {
+                return Err(Error::Config(format!(
+                    "{}: --layer {want:?} has no R,G,B or Y channels (layers with colour: {})",
+                    path.display(),
+                    list()
+                )))
+            }
+        }
+    } else {
+        let beauty = |l: &str| {
+            let last = l.trim_end_matches('.').rsplit('.').next().unwrap_or("");
+            BEAUTY_LAYERS.iter().any(|b| last.eq_ignore_ascii_case(b))
+        };
+        match coloured
+            .iter()
+            .find(|(l, _)| l.is_empty())
+            .or_else(|| coloured.iter().find(|(l, _)| beauty(l)))
+        {
+            Some(c) => c,
+            None => match coloured.as_slice() {
+                [only] => only,
+                _ => {
+                    return Err(Error::Config(format!(
+                        "{}: several layers have colour and none is named as the beauty ({}): choose one with --layer NAME",
+                        path.display(),
+                        list()
+                    )))
+                }
+            },
+        }
+    };
+    let (layer, wanted) = chosen;
+    if wanted[0] == "Y" {
+        let has = |c: &str| names.iter().any(|n| *n == format!("{layer}{c}"));
+        if has("RY") && has("BY") {
+            return Err(unsupported(
+                path,
+                "luminance/chroma (Y, RY, BY) images are not supported",
+            ));
+        }
+    }
+    let selected: Vec<Selected> = wanted
+        .iter()
+        .map(|c| {
+            let name = format!("{layer}{c}");
+            Selected {
+                index: names.iter().position(|x| *x == name).unwrap_or(0),
+                name,
+            }
+        })
+        .collect();
+    let dropped = names
+        .iter()
+        .filter(|n| !selected.iter().any(|s| &s.name == *n))
+        .cloned()
+        .collect();
+    Ok((selected, dropped))
+}

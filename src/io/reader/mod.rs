@@ -1,0 +1,877 @@
+//! Reading an EXR as a stream of planar f32 rows.
+//!
+//! The headers and offset tables are parsed from the memory map with the `exr`
+//! crate's meta-data API; then each block row (a scan-line block, or one row of
+//! tiles of the full-resolution level) is read chunk by chunk from its offset,
+//! checked against where it should be, and decompressed in parallel on the
+//! shared pool. Blocks are visited in increasing y whatever the file's line
+//! order. Consumed byte ranges are released from the page cache.
+
+use std::path::{Path, PathBuf};
+
+use exr::block::chunk::{Chunk, CompressedBlock, TileCoordinates};
+use exr::block::UncompressedBlock;
+use exr::io::{PeekRead, Tracking};
+use exr::meta::attribute::SampleType;
+use exr::meta::header::Header;
+use exr::meta::{magic_number, MetaData, Requirements};
+use exr::prelude::Compression;
+use rayon::prelude::*;
+
+mod blocks;
+mod layers;
+mod source;
+
+pub use blocks::*;
+pub use layers::*;
+pub use source::*;
+
+use super::mapped::MappedFile;
+use crate::error::{Error, Result};
+use crate::filter::channels::ChannelRule;
+use crate::pipeline::{Source, Strip};
+
+thread_local! {
+    /// Set while a codec decodes a block on this thread.
+    static IN_DECODER: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Keep the default panic message quiet for panics inside a codec: the
+/// reader turns them into one clear error line (damaged B44 data, for one,
+/// makes the `exr` crate's decoder panic). Other panics print as before. For
+/// programs (the `epfilt` binary calls it once at start-up).
+pub fn quiet_decoder_panics() {
+    let previous = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        if !IN_DECODER.with(|f| f.get()) {
+            previous(info);
+        }
+    }));
+}
+
+/// Which part of a multi-part file to read.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum PartSelect {
+    /// By index (0-based).
+    Index(usize),
+    /// By the part's `name` attribute.
+    Name(String),
+    /// Every part (`filter --part all`: each filtered into one multi-part
+    /// output); a single-part file's only part.
+    All,
+}
+
+impl PartSelect {
+    /// Parse `--part`: a number is an index, `all` every part, anything else
+    /// a name.
+    pub fn parse(s: &str) -> Self {
+        if s == "all" {
+            return PartSelect::All;
+        }
+        s.parse()
+            .map(PartSelect::Index)
+            .unwrap_or_else(|_| PartSelect::Name(s.to_string()))
+    }
+}
+
+/// Which image of a file a command reads (`--part`, `--layer`).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Selection {
+    /// The part of a multi-part file.
+    pub part: Option<PartSelect>,
+    /// The layer whose R, G, B (or Y) channels are the image.
+    pub layer: Option<String>,
+}
+
+impl Selection {
+    /// Open `path` as selected ([`ExrInput::open_layer`]).
+    pub fn open(&self, path: &Path) -> Result<ExrInput> {
+        ExrInput::open_layer(path, self.part.as_ref(), self.layer.as_deref())
+    }
+}
+
+#[derive(Clone, Debug)]
+struct BlockRow {
+    y0: usize,
+    y1: usize,
+    /// (offset, expected tile coordinates) of each chunk, left to right.
+    chunks: Vec<(usize, TileCoordinates)>,
+}
+
+#[derive(Clone, Debug)]
+pub(crate) struct Selected {
+    pub(crate) name: String,
+    /// Index in the header's channel list.
+    index: usize,
+}
+
+/// An opened input file: headers parsed and checked, channels chosen.
+#[derive(Debug)]
+pub struct ExrInput {
+    path: PathBuf,
+    map: MappedFile,
+    meta: MetaData,
+    part: usize,
+    selected: Vec<Selected>,
+    rows: Vec<BlockRow>,
+    dropped: Vec<String>,
+    /// The last `aux` selected channels are statistics (read, not filtered).
+    aux: usize,
+    /// Selected channels after the beauty's, before the statistics: carried
+    /// by their [`ChannelRule`]s ([`ExrInput::carry_channels`]).
+    carried: Vec<ChannelRule>,
+    /// A Radiance picture's header: the file is RGBE / XYZE, and `meta` a
+    /// header made to describe it (three f32 channels, no blocks).
+    rgbe: Option<super::rgbe::RgbeHeader>,
+}
+
+/// The index of the part `part` names in `meta` (the only one when none is
+/// named), or an error that lists the parts.
+fn choose_part(path: &Path, meta: &MetaData, part: Option<&PartSelect>) -> Result<usize> {
+    Ok(match (part, meta.headers.len()) {
+        (Some(PartSelect::Index(i)), n) if *i < n => *i,
+        (Some(PartSelect::All), 1) => 0,
+        (Some(PartSelect::All), n) => {
+            return Err(Error::Config(format!(
+                "{}: --part all: this command reads one of the file's {n} parts; choose one with --part NAME|INDEX",
+                path.display()
+            )))
+        }
+        (Some(PartSelect::Index(i)), n) => {
+            return Err(Error::Config(format!(
+                "{}: --part {i} but the file has {n} part(s)",
+                path.display()
+            )))
+        }
+        (Some(PartSelect::Name(name)), _) => meta
+            .headers
+            .iter()
+            .position(|h| &part_name(h) == name)
+            .ok_or_else(|| {
+                let names: Vec<String> = meta.headers.iter().map(part_name).collect();
+                Error::Config(format!(
+                    "{}: no part named {name:?} (parts: {})",
+                    path.display(),
+                    names.join(", ")
+                ))
+            })?,
+        (None, 1) => 0,
+        (None, n) => {
+            let names: Vec<String> = meta
+                .headers
+                .iter()
+                .enumerate()
+                .map(|(i, h)| format!("{i}:{:?}", part_name(h)))
+                .collect();
+            return Err(unsupported(
+                path,
+                format!(
+                    "multi-part file with {n} parts ({}): choose one with --part NAME|INDEX, or filter every part with --part all",
+                    names.join(", ")
+                ),
+            ));
+        }
+    })
+}
+
+/// Refuse what epfilt does not filter: deep data, subsampled channels and
+/// the HTJ2K codecs.
+fn check_filterable(path: &Path, header: &Header) -> Result<()> {
+    if header.deep {
+        return Err(unsupported(
+            path,
+            "deep data (deepscanline/deeptile) cannot be filtered",
+        ));
+    }
+    if let Some(c) = header
+        .channels
+        .list
+        .iter()
+        .find(|c| c.sampling.0 != 1 || c.sampling.1 != 1)
+    {
+        return Err(unsupported(
+            path,
+            format!(
+                "channel {} is subsampled {}x{} (luminance/chroma images are not supported)",
+                c.name, c.sampling.0, c.sampling.1
+            ),
+        ));
+    }
+    if matches!(
+        header.compression,
+        Compression::HTJ2K32 | Compression::HTJ2K256
+    ) {
+        return Err(unsupported(
+            path,
+            format!("{:?} compression", header.compression),
+        ));
+    }
+    Ok(())
+}
+
+/// The level-0 block rows of `header` in increasing y, each chunk's offset
+/// (from `table`) checked to lie in the pixel data (`chunks_start..len`), and
+/// the rows checked to cover the data window.
+fn block_rows(
+    path: &Path,
+    header: &Header,
+    table: &[u64],
+    chunks_start: usize,
+    len: usize,
+) -> Result<Vec<BlockRow>> {
+    // Level-0 block rows in increasing y, with checked offsets.
+    let mut rows: Vec<BlockRow> = Vec::new();
+    for (index, tile) in header.blocks_increasing_y_order().enumerate() {
+        if tile.location.level_index != exr::math::Vec2(0, 0) {
+            continue;
+        }
+        let bounds = header
+            .get_absolute_block_pixel_coordinates(tile.location)
+            .map_err(|e| Error::from_exr(path, e, "block layout"))?;
+        let offset = *table
+            .get(index)
+            .ok_or_else(|| invalid(path, "offset table is shorter than the image"))?;
+        let offset = usize::try_from(offset).unwrap_or(usize::MAX);
+        if offset < chunks_start || offset >= len {
+            return Err(invalid(
+                path,
+                format!(
+                    "offset table entry {index} points to byte {offset}, outside the pixel data"
+                ),
+            ));
+        }
+        let y0 = bounds.position.1.max(0) as usize;
+        let y1 = y0 + bounds.size.1;
+        match rows.last_mut() {
+            Some(r) if r.y0 == y0 => r.chunks.push((offset, tile.location)),
+            _ => rows.push(BlockRow {
+                y0,
+                y1,
+                chunks: vec![(offset, tile.location)],
+            }),
+        }
+    }
+    if rows.last().map(|r| r.y1) != Some(header.layer_size.1) {
+        return Err(invalid(
+            path,
+            "the block layout does not cover the data window",
+        ));
+    }
+    Ok(rows)
+}
+
+impl ExrInput {
+    /// Open and check `path`; `part` chooses a part of a multi-part file.
+    /// The colour layer is chosen as [`ExrInput::open_layer`] does without one.
+    pub fn open(path: &Path, part: Option<&PartSelect>) -> Result<Self> {
+        Self::open_layer(path, part, None)
+    }
+
+    /// Open and check `path`; `part` chooses a part of a multi-part file and
+    /// `layer` the layer whose R, G, B (or Y) channels are filtered (e.g.
+    /// `ViewLayer.Combined`; by default the unlayered channels, else a layer
+    /// named as the beauty, else the only layer with colour).
+    pub fn open_layer(path: &Path, part: Option<&PartSelect>, layer: Option<&str>) -> Result<Self> {
+        Self::open_view(path, part, layer, None)
+    }
+
+    /// [`ExrInput::open_layer`] of one view of a multi-view file: its
+    /// colour channels are `layer.view.R` (`view.R` without a layer; the
+    /// default view's are named as without views).
+    pub fn open_view(
+        path: &Path,
+        part: Option<&PartSelect>,
+        layer: Option<&str>,
+        view: Option<&str>,
+    ) -> Result<Self> {
+        let map = MappedFile::open(path)?;
+        if super::rgbe::is_rgbe(map.bytes()) {
+            if let Some(v) = view {
+                return Err(Error::Config(format!(
+                    "{}: a Radiance picture has no views (--view {v:?})",
+                    path.display()
+                )));
+            }
+            return Self::open_rgbe(path, map, part, layer);
+        }
+        let bytes = map.bytes();
+        let mut read = PeekRead::new(Tracking::new(bytes));
+        let meta = parse_headers_from(path, &mut read)?;
+
+        // Choose the part before reading offset tables (their size is checked).
+        let part = choose_part(path, &meta, part)?;
+        // Offset tables: their total size must fit in the file.
+        let (tables, chunks_start) = read_tables(path, bytes, &mut read, &meta)?;
+        let header = &meta.headers[part];
+        check_filterable(path, header)?;
+        let scope = view_scope(path, header, view, false)?;
+        let view_layer = match (scope.name(), layer) {
+            (Some(v), l) if scope.this > 0 => Some(match l {
+                Some(l) => format!("{}.{v}", l.trim_end_matches('.')),
+                None => v.to_string(),
+            }),
+            _ => layer.map(str::to_string),
+        };
+        let (selected, dropped) = choose_channels(path, header, view_layer.as_deref())?;
+
+        let rows = block_rows(path, header, &tables[part], chunks_start, bytes.len())?;
+        let input = ExrInput {
+            path: path.into(),
+            map,
+            meta,
+            part,
+            selected,
+            rows,
+            dropped,
+            aux: 0,
+            carried: Vec::new(),
+            rgbe: None,
+        };
+        // What a decoder allocates per block comes from the header: bound it
+        // before any command reads pixels (filter checks its whole job
+        // against --max-memory as well).
+        let limit = crate::host::default_max_memory();
+        if input.block_bytes() > limit {
+            return Err(invalid(
+                path,
+                format!(
+                    "one block of this file claims {} MiB decoded, more than the {} MiB a block may take",
+                    input.block_bytes() >> 20,
+                    limit >> 20
+                ),
+            ));
+        }
+        Ok(input)
+    }
+
+    /// A Radiance picture, described as a single-part file of three f32
+    /// channels (R, G, B, or X, Y, Z for XYZE) with the picture's primaries.
+    fn open_rgbe(
+        path: &Path,
+        map: MappedFile,
+        part: Option<&PartSelect>,
+        layer: Option<&str>,
+    ) -> Result<Self> {
+        use exr::math::Vec2;
+        use exr::meta::attribute::{ChannelDescription, ChannelList, Chromaticities, Text};
+        if matches!(part, Some(PartSelect::Index(i)) if *i != 0)
+            || matches!(part, Some(PartSelect::Name(_)))
+        {
+            return Err(Error::Config(format!(
+                "{}: a Radiance picture has one part (--part 0)",
+                path.display()
+            )));
+        }
+        if let Some(l) = layer {
+            return Err(Error::Config(format!(
+                "{}: a Radiance picture has no layers (--layer {l:?})",
+                path.display()
+            )));
+        }
+        let rh = super::rgbe::parse_header(path, map.bytes())?;
+        let names: [&str; 3] = if rh.xyze {
+            ["X", "Y", "Z"]
+        } else {
+            ["R", "G", "B"]
+        };
+        let mut sorted = names;
+        sorted.sort_unstable();
+        let list: exr::prelude::SmallVec<[ChannelDescription; 5]> = sorted
+            .iter()
+            .map(|n| ChannelDescription::new(Text::from(*n), SampleType::F32, false))
+            .collect();
+        let mut header = Header::new(Text::from(""), Vec2(rh.w, rh.h), list).with_encoding(
+            Compression::ZIP16,
+            exr::meta::BlockDescription::ScanLines,
+            exr::meta::attribute::LineOrder::Increasing,
+        );
+        header.channels = ChannelList::new(header.channels.list.clone());
+        header.own_attributes.layer_name = None;
+        if let Some(p) = rh.primaries {
+            let v = |i: usize| Vec2(p[i] as f32, p[i + 1] as f32);
+            header.shared_attributes.chromaticities = Some(Chromaticities {
+                red: v(0),
+                green: v(2),
+                blue: v(4),
+                white: v(6),
+            });
+        }
+        let selected = names
+            .iter()
+            .map(|n| Selected {
+                name: n.to_string(),
+                index: sorted.iter().position(|s| s == n).unwrap_or(0),
+            })
+            .collect();
+        let meta = MetaData {
+            requirements: Requirements {
+                file_format_version: 2,
+                is_single_layer_and_tiled: false,
+                has_long_names: false,
+                has_deep_data: false,
+                has_multiple_layers: false,
+            },
+            headers: exr::prelude::SmallVec::from_vec(vec![header]),
+        };
+        Ok(ExrInput {
+            path: path.into(),
+            map,
+            meta,
+            part: 0,
+            selected,
+            rows: Vec::new(),
+            dropped: Vec::new(),
+            aux: 0,
+            carried: Vec::new(),
+            rgbe: Some(rh),
+        })
+    }
+
+    /// The Radiance header of an RGBE / XYZE input.
+    pub fn rgbe(&self) -> Option<&super::rgbe::RgbeHeader> {
+        self.rgbe.as_ref()
+    }
+
+    /// The file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The chosen part's header.
+    pub fn header(&self) -> &Header {
+        &self.meta.headers[self.part]
+    }
+
+    /// Width and height of the data window.
+    pub fn size(&self) -> (usize, usize) {
+        let s = self.header().layer_size;
+        (s.0, s.1)
+    }
+
+    /// Where the data window starts (its top-left sample).
+    pub fn origin(&self) -> (i32, i32) {
+        let o = self.header().own_attributes.layer_position;
+        (o.0, o.1)
+    }
+
+    /// Whether the channel `name` holds unsigned integers (ids).
+    pub fn is_uint(&self, name: &str) -> bool {
+        self.header().channels.list.iter().any(|c| {
+            c.name.to_string() == name && c.sample_type == exr::meta::attribute::SampleType::U32
+        })
+    }
+
+    /// Bytes of one decompressed block of this file (all channels), as the
+    /// header claims: what a decoder allocates for it.
+    pub fn block_bytes(&self) -> u64 {
+        block_bytes(self.header())
+    }
+
+    /// Names of the channels that will be filtered, in strip order.
+    pub fn channels(&self) -> Vec<String> {
+        let n = self.selected.len() - self.aux;
+        self.selected[..n].iter().map(|s| s.name.clone()).collect()
+    }
+
+    /// Names of the statistics channels read after the filtered ones.
+    pub fn aux_channels(&self) -> Vec<String> {
+        let n = self.selected.len() - self.aux;
+        self.selected[n..].iter().map(|s| s.name.clone()).collect()
+    }
+
+    /// Every channel name of the chosen part, in header order.
+    pub fn all_channels(&self) -> Vec<String> {
+        self.header()
+            .channels
+            .list
+            .iter()
+            .map(|c| c.name.to_string())
+            .collect()
+    }
+
+    /// Also read `names` (after the filtered channels, in this order), as
+    /// statistics: they are not filtered and not written.
+    pub fn add_aux_channels(&mut self, names: &[String]) -> Result<()> {
+        let all = self.all_channels();
+        for name in names {
+            let index = all.iter().position(|n| n == name).ok_or_else(|| {
+                unsupported(
+                    &self.path,
+                    format!("no channel {name:?} (the file has: {})", all.join(", ")),
+                )
+            })?;
+            // A colour channel may serve as a statistic too (read twice).
+            let colour = self.selected.len() - self.aux;
+            if self.selected[colour..].iter().any(|s| s.index == index) {
+                continue;
+            }
+            self.selected.push(Selected {
+                name: name.clone(),
+                index,
+            });
+            self.aux += 1;
+            self.dropped.retain(|d| d != name);
+        }
+        Ok(())
+    }
+
+    /// Carry the channels beside the beauty's: each gets `rule(name, uint)`;
+    /// those it drops stay dropped. Returns the carried channels and their
+    /// rules. Call before [`ExrInput::add_aux_channels`].
+    pub fn carry_channels(
+        &mut self,
+        rule: impl Fn(&str, bool) -> ChannelRule,
+    ) -> Vec<(String, ChannelRule)> {
+        assert_eq!(self.aux, 0, "carry channels before the statistics");
+        let header = self.header();
+        let mut carried = Vec::new();
+        let mut added = Vec::new();
+        for (index, ch) in header.channels.list.iter().enumerate() {
+            let name = ch.name.to_string();
+            if self.selected.iter().any(|s| s.index == index) {
+                continue;
+            }
+            let uint = ch.sample_type == SampleType::U32;
+            let r = rule(&name, uint);
+            if r == ChannelRule::Drop {
+                continue;
+            }
+            added.push(Selected {
+                name: name.clone(),
+                index,
+            });
+            carried.push((name, r));
+        }
+        self.dropped
+            .retain(|d| !carried.iter().any(|(n, _)| n == d));
+        self.selected.extend(added);
+        self.carried = carried.iter().map(|(_, r)| *r).collect();
+        carried
+    }
+
+    /// The rule of each filtered channel, in strip order: `None` for the
+    /// beauty's own.
+    pub fn channel_rules(&self) -> Vec<Option<ChannelRule>> {
+        let n = self.selected.len() - self.aux - self.carried.len();
+        (0..n)
+            .map(|_| None)
+            .chain(self.carried.iter().map(|&r| Some(r)))
+            .collect()
+    }
+
+    /// Channels of the file that are not filtered (and not written).
+    pub fn dropped_channels(&self) -> &[String] {
+        &self.dropped
+    }
+
+    /// Luminance weight of each filtered channel.
+    pub fn luminance(&self) -> Vec<f64> {
+        let rgb = super::luminance_weights(self.header().shared_attributes.chromaticities.as_ref());
+        let beauty = self.selected.len() - self.aux - self.carried.len();
+        self.selected[..self.selected.len() - self.aux]
+            .iter()
+            .enumerate()
+            .map(|(i, s)| if i >= beauty { "" } else { base_name(&s.name) })
+            .map(|b| match b {
+                "R" => rgb[0],
+                "G" => rgb[1],
+                "B" => rgb[2],
+                "Y" => 1.0,
+                _ => 0.0,
+            })
+            .collect()
+    }
+
+    /// A source of rows from the block that holds row `y` on (rows above it
+    /// are not decoded; a Radiance picture is read from the top, its
+    /// scanlines having no index).
+    pub fn source_from(&self, y: usize) -> InputSource<'_> {
+        let mut src = self.source();
+        if let InputSource::Exr(e) = &mut src {
+            let first = self.rows.iter().position(|r| r.y1 > y);
+            e.next_row = first.unwrap_or(self.rows.len());
+            e.buf_y0 = first.map_or(self.size().1, |i| self.rows[i].y0);
+        }
+        src
+    }
+
+    /// A source of rows over this file.
+    pub fn source(&self) -> InputSource<'_> {
+        if let Some(rh) = &self.rgbe {
+            return InputSource::Rgbe(super::rgbe::RgbeSource::new(
+                &self.path,
+                self.map.bytes(),
+                rh.clone(),
+            ));
+        }
+        let (w, _) = self.size();
+        InputSource::Exr(ExrSource {
+            input: self,
+            next_row: 0,
+            buf: Vec::new(),
+            head: 0,
+            buf_y0: 0,
+            row_len: self.selected.len() * w,
+            released: None,
+        })
+    }
+
+    /// Decode the tiles of one block row, each into its own buffer.
+    fn decode_row(&self, row: &BlockRow) -> Result<Vec<Decoded>> {
+        row.chunks
+            .par_iter()
+            .map(|&(offset, expected)| {
+                let mut rows = Vec::new();
+                let Landed { x0, width, bytes } =
+                    self.decode_chunk(offset, expected, row.y1 - row.y0, Place::Own(&mut rows))?;
+                Ok(Decoded {
+                    x0,
+                    width,
+                    rows,
+                    bytes,
+                })
+            })
+            .collect()
+    }
+
+    /// Read, check and decompress one chunk of `lines` lines into `place`.
+    /// Returns (first column, width, consumed byte range).
+    fn decode_chunk(
+        &self,
+        offset: usize,
+        expected: TileCoordinates,
+        lines: usize,
+        place: Place<'_>,
+    ) -> Result<Landed> {
+        let path = &self.path;
+        let header = self.header();
+        let (chunk, end) = read_chunk(
+            path,
+            self.map.bytes(),
+            &self.meta,
+            self.part,
+            offset,
+            expected,
+        )?;
+        let block = decode_checked(path, &self.meta, offset, &chunk)?;
+        let (bw, bh) = (block.index.pixel_size.0, block.index.pixel_size.1);
+        let channels = &header.channels.list;
+        let line_bytes: usize = channels.iter().map(|c| bw * bytes_of(c.sample_type)).sum();
+        if block.data.len() != line_bytes * bh || bh != lines {
+            return Err(invalid(
+                path,
+                format!("block at byte {offset} decodes to the wrong size"),
+            ));
+        }
+        let mut ch_off = Vec::with_capacity(channels.len());
+        let mut acc = 0;
+        for c in channels.iter() {
+            ch_off.push(acc);
+            acc += bw * bytes_of(c.sample_type);
+        }
+        let n = self.selected.len();
+        let x0 = block.index.pixel_position.0;
+        let (dst, stride, at): (&mut [f32], usize, usize) = match place {
+            Place::InPlace { dst, width } if x0 + bw <= width => (dst, width, x0),
+            Place::InPlace { .. } => {
+                return Err(invalid(
+                    path,
+                    format!("block at byte {offset} lies outside the data window"),
+                ))
+            }
+            Place::Own(v) => {
+                v.clear();
+                v.resize(bh * n * bw, 0.0);
+                (v.as_mut_slice(), bw, 0)
+            }
+        };
+        for line in 0..bh {
+            for (k, sel) in self.selected.iter().enumerate() {
+                let t = channels[sel.index].sample_type;
+                let from = line * line_bytes + ch_off[sel.index];
+                block.read(t, from, &mut dst[(line * n + k) * stride + at..][..bw]).map_err(|v| {
+                    unsupported(
+                        path,
+                        format!(
+                            "uint channel {} holds {v}, above 2^24: f32 cannot carry such ids exactly; drop it with --channel-rule '{}=drop'",
+                            sel.name, sel.name
+                        ),
+                    )
+                })?;
+            }
+        }
+        Ok(Landed {
+            x0,
+            width: bw,
+            bytes: (offset, end),
+        })
+    }
+}
+
+/// Where a decoded chunk landed: first column, width, bytes of the file.
+struct Landed {
+    x0: usize,
+    width: usize,
+    bytes: (usize, usize),
+}
+
+/// Where a decoded block goes.
+enum Place<'a> {
+    /// Into rows of `width` columns, at the block's own columns.
+    InPlace { dst: &'a mut [f32], width: usize },
+    /// Into its own buffer, exactly the block's size.
+    Own(&'a mut Vec<f32>),
+}
+
+/// One decompressed block: its first column, width, planar rows
+/// `[line][channel][x]` and the byte range it came from.
+struct Decoded {
+    x0: usize,
+    width: usize,
+    rows: Vec<f32>,
+    bytes: (usize, usize),
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn names(v: &[&str]) -> Vec<String> {
+        v.iter().map(|s| s.to_string()).collect()
+    }
+
+    /// `exr`'s own reading of a chunk, with the checks `read_chunk` makes:
+    /// what the borrowed reader must agree with.
+    fn exr_read_chunk(
+        bytes: &[u8],
+        meta: &MetaData,
+        part: usize,
+        offset: usize,
+        expected: TileCoordinates,
+    ) -> Option<(Chunk, usize)> {
+        let mut slice = bytes.get(offset..)?;
+        let chunk = Chunk::read(&mut slice, meta).ok()?;
+        let end = bytes.len() - slice.len();
+        let found = meta.headers[chunk.layer_index]
+            .get_block_data_indices(&chunk.compressed_block)
+            .ok()?;
+        (chunk.layer_index == part && found == expected).then_some((chunk, end))
+    }
+
+    /// What a flat chunk holds (`Chunk` has no `PartialEq`).
+    fn key(c: &Chunk) -> (usize, Option<i32>, Option<TileCoordinates>, &[u8]) {
+        match &c.compressed_block {
+            CompressedBlock::ScanLine(b) => (
+                c.layer_index,
+                Some(b.y_coordinate),
+                None,
+                &b.compressed_pixels_le,
+            ),
+            CompressedBlock::Tile(t) => (
+                c.layer_index,
+                None,
+                Some(t.coordinates),
+                &t.compressed_pixels_le,
+            ),
+            _ => unreachable!("deep parts are skipped"),
+        }
+    }
+
+    #[test]
+    fn borrowed_chunks_are_the_chunks_exr_reads() {
+        // Every block of every flat part of the repository's files, damaged
+        // ones included, and every block's leader cut short or with a
+        // corrupted size: the same chunk and end, or an error for both.
+        let mut files = Vec::new();
+        let mut dirs = vec![std::path::PathBuf::from("tests/data/exr")];
+        while let Some(d) = dirs.pop() {
+            for e in std::fs::read_dir(&d).unwrap().flatten() {
+                let p = e.path();
+                if p.is_dir() {
+                    dirs.push(p);
+                } else if p.extension().is_some_and(|x| x == "exr") || d.ends_with("Damaged") {
+                    files.push(p);
+                }
+            }
+        }
+        files.sort();
+        let (mut blocks, mut agreed_errors) = (0, 0);
+        for path in &files {
+            let bytes = std::fs::read(path).unwrap();
+            let Ok((meta, tables, _)) = parse_meta(path, &bytes) else {
+                continue;
+            };
+            for (part, header) in meta.headers.iter().enumerate() {
+                if header.deep {
+                    continue;
+                }
+                for (index, tile) in header.blocks_increasing_y_order().enumerate() {
+                    let Some(&offset) = tables[part].get(index) else {
+                        continue;
+                    };
+                    let offset = offset as usize;
+                    let mut variants = vec![bytes.clone()];
+                    // Cut inside the leader and inside the data.
+                    for cut in [offset + 2, offset + 6, offset + 9, offset + 40] {
+                        if cut < bytes.len() {
+                            variants.push(bytes[..cut].to_vec());
+                        }
+                    }
+                    // A size field of -1 and of i32::MAX where a scan-line
+                    // block (4 bytes on) or a tile (16 bytes on) keeps it.
+                    let skip = if meta.requirements.is_multilayer() {
+                        4
+                    } else {
+                        0
+                    };
+                    for field in [4, 16] {
+                        for v in [-1i32, i32::MAX] {
+                            let at = offset + skip + field;
+                            if at + 4 <= bytes.len() {
+                                let mut b = bytes.clone();
+                                b[at..at + 4].copy_from_slice(&v.to_le_bytes());
+                                variants.push(b);
+                            }
+                        }
+                    }
+                    for b in &variants {
+                        let ours = read_chunk(path, b, &meta, part, offset, tile.location).ok();
+                        let theirs = exr_read_chunk(b, &meta, part, offset, tile.location);
+                        match (ours, theirs) {
+                            (Some((c, end)), Some((d, e))) => {
+                                assert!(
+                                    key(&c.to_chunk()) == key(&d) && end == e,
+                                    "{path:?} block {index}"
+                                );
+                                blocks += 1;
+                            }
+                            (None, None) => agreed_errors += 1,
+                            (o, t) => panic!(
+                                "{path:?} part {part} block {index}: ours {}, exr's {}",
+                                o.is_some(),
+                                t.is_some()
+                            ),
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            blocks > 1000 && agreed_errors > 1000,
+            "{blocks} {agreed_errors}"
+        );
+    }
+
+    #[test]
+    fn a_vector_layer_is_not_a_luminance() {
+        let n = names(&[
+            "Y", "N.X", "N.Y", "N.Z", "vel.X", "vel.Y", "grey.Y", "grey.A",
+        ]);
+        assert_eq!(layer_colour(&n, ""), Some(vec!["Y"]));
+        assert_eq!(layer_colour(&n, "N."), None);
+        assert_eq!(layer_colour(&n, "vel."), None);
+        assert_eq!(layer_colour(&n, "grey."), Some(vec!["Y", "A"]));
+        // Unlayered X, Y, Z (a Radiance XYZE picture's) keep their Y.
+        assert_eq!(layer_colour(&names(&["X", "Y", "Z"]), ""), Some(vec!["Y"]));
+    }
+}
