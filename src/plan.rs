@@ -19,7 +19,8 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::filter::ep_box::{self, se2, EpBoxParams, Spp, VarianceKind};
+use crate::filter::ep_box::{self, EpBoxParams, StatsLayout, VarianceKind};
+use crate::filter::luminance::Luminance;
 use crate::io::{find_stats, ExrInput, PartSelect, StatsRequest};
 use crate::pipeline::ledger::CompensatedSum;
 use crate::pipeline::Source;
@@ -139,27 +140,9 @@ pub fn plan_file(
     let layout = found.attach(&mut input, path)?;
     let (w, h) = input.size();
     let lum = input.luminance();
-    let nch = lum.len();
     let aux = input.aux_channels();
-    let var_idx = layout.variance.clone();
-    let mean_idx = layout.mean_y;
-    let (spp_idx, fixed_n) = match layout.spp {
-        Spp::Channel(c) => (Some(c), f64::NAN),
-        Spp::Fixed(n) => (None, n),
-    };
-    let nall = nch + aux.len();
     let t = ep_box::TFactor::new(params.confidence);
     let kind = found.kind;
-    #[derive(Default, Clone)]
-    struct Acc {
-        se: CompensatedSum,
-        sd: CompensatedSum,
-        n: CompensatedSum,
-        tested: usize,
-        max: f64,
-        pixels: usize,
-        noisy: usize,
-    }
     // Pass 1: L_ave (the noise test of pass 2 needs L_tvis).
     let mut job = crate::pipeline::Job::new(
         crate::geometry::Grid {
@@ -182,74 +165,8 @@ pub fn plan_file(
         });
     }
     let dl = params.d * l_tvis;
-    let mut total = Acc {
-        max: f64::NEG_INFINITY,
-        ..Default::default()
-    };
-    let mut source = input.source();
-    let strip_rows = crate::pipeline::auto_strip_rows(w, nall);
-    while let Some(strip) = source.next_strip(strip_rows)? {
-        let parts: Vec<Result<Acc>> = strip
-            .data
-            .par_chunks(nall * w)
-            .enumerate()
-            .map(|(r, row)| {
-                let mut a = Acc {
-                    max: f64::NEG_INFINITY,
-                    ..Default::default()
-                };
-                let ch = |c: usize, x: usize| row[c * w + x] as f64;
-                for x in 0..w {
-                    let mut y = 0.0;
-                    for (c, &l) in lum.iter().enumerate() {
-                        y += l * ch(c, x);
-                    }
-                    let mut var = [0.0; 3];
-                    for (v, &i) in var.iter_mut().zip(&var_idx) {
-                        *v = ch(i, x);
-                    }
-                    let n = spp_idx.map_or(fixed_n, |i| ch(i, x));
-                    if !(y.is_finite() && var.iter().all(|v| v.is_finite()) && n.is_finite()) {
-                        return Err(Error::Value {
-                            path: path.into(),
-                            reason: format!(
-                                "non-finite value at pixel ({x}, {}) in the pilot",
-                                strip.y0 + r
-                            ),
-                        });
-                    }
-                    a.max = a.max.max(y);
-                    a.pixels += 1;
-                    if n >= 2.0 {
-                        let mean_y = mean_idx.map_or(y, |i| ch(i, x));
-                        let weights = if var_idx.len() == 3 {
-                            &lum[..3]
-                        } else {
-                            &lum[..1]
-                        };
-                        let s2 = se2(kind, &var[..var_idx.len()], weights, mean_y, n);
-                        let se = s2.sqrt();
-                        a.se.add(se);
-                        a.sd.add(se * n.sqrt());
-                        a.n.add(n);
-                        a.tested += 1;
-                        a.noisy += usize::from(t.get(n) * se > dl);
-                    }
-                }
-                Ok(a)
-            })
-            .collect();
-        for p in parts {
-            let p = p?;
-            total.se.merge(&p.se);
-            total.sd.merge(&p.sd);
-            total.n.merge(&p.n);
-            total.tested += p.tested;
-            total.pixels += p.pixels;
-            total.max = total.max.max(p.max);
-            total.noisy += p.noisy;
-        }
-    }
+    let luminance = Luminance::new(&lum);
+    let total = pilot_statistics(&input, path, &layout, &luminance, &t, dl)?;
     if total.tested == 0 {
         return Err(Error::Value {
             path: path.into(),
@@ -293,4 +210,88 @@ pub fn plan_file(
         }
         .into(),
     })
+}
+
+/// What the second pass over the pilot sums: standard errors, single-sample
+/// deviations and counts of the pixels with 2 samples or more, the brightest
+/// pixel, and the pixels the noise test calls noisy.
+#[derive(Default, Clone)]
+struct Acc {
+    se: CompensatedSum,
+    sd: CompensatedSum,
+    n: CompensatedSum,
+    tested: usize,
+    max: f64,
+    pixels: usize,
+    noisy: usize,
+}
+
+/// The second pass over the pilot at `path`: each pixel's luminance (`lum`),
+/// statistics (`layout`) and noise test (`t S_p > dl`).
+fn pilot_statistics(
+    input: &ExrInput,
+    path: &Path,
+    layout: &StatsLayout,
+    lum: &Luminance,
+    t: &ep_box::TFactor,
+    dl: f64,
+) -> Result<Acc> {
+    let (w, _) = input.size();
+    let nall = input.channels().len() + input.aux_channels().len();
+    let mut total = Acc {
+        max: f64::NEG_INFINITY,
+        ..Default::default()
+    };
+    let mut source = input.source();
+    let strip_rows = crate::pipeline::auto_strip_rows(w, nall);
+    while let Some(strip) = source.next_strip(strip_rows)? {
+        let parts: Vec<Result<Acc>> = strip
+            .data
+            .par_chunks(nall * w)
+            .enumerate()
+            .map(|(r, row)| {
+                let mut a = Acc {
+                    max: f64::NEG_INFINITY,
+                    ..Default::default()
+                };
+                let ch = |c: usize, x: usize| row[c * w + x] as f64;
+                for x in 0..w {
+                    let y = lum.of(|c| ch(c, x));
+                    let (n, s2) = layout.pixel(lum.weights(), y, |c| ch(c, x));
+                    let var_finite = layout.variance.iter().all(|&i| ch(i, x).is_finite());
+                    if !(y.is_finite() && var_finite && n.is_finite()) {
+                        return Err(Error::Value {
+                            path: path.into(),
+                            reason: format!(
+                                "non-finite value at pixel ({x}, {}) in the pilot",
+                                strip.y0 + r
+                            ),
+                        });
+                    }
+                    a.max = a.max.max(y);
+                    a.pixels += 1;
+                    if n >= 2.0 {
+                        let se = s2.sqrt();
+                        a.se.add(se);
+                        a.sd.add(se * n.sqrt());
+                        a.n.add(n);
+                        a.tested += 1;
+                        a.noisy += usize::from(t.get(n) * se > dl);
+                    }
+                }
+                Ok(a)
+            })
+            .collect();
+        for p in parts {
+            let p = p?;
+            total.se.merge(&p.se);
+            total.sd.merge(&p.sd);
+            total.n.merge(&p.n);
+            total.tested += p.tested;
+            total.pixels += p.pixels;
+            total.max = total.max.max(p.max);
+            total.noisy += p.noisy;
+        }
+    }
+    Ok(total)
 }
