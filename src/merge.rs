@@ -182,16 +182,16 @@ pub fn merge(
     let copied = crate::io::bands::write_merged(&bands, output, &staged)?;
     // The ledger: the bands' shares added up.
     let names: Vec<String> = first.ledger.iter().map(|l| l.0.clone()).collect();
-    let mut inn = vec![CompensatedSum::default(); names.len()];
-    let mut out = vec![CompensatedSum::default(); names.len()];
+    let mut sum_in = vec![CompensatedSum::default(); names.len()];
+    let mut sum_out = vec![CompensatedSum::default(); names.len()];
     for b in &bands {
         for (c, (_, i, o)) in b.ledger.iter().enumerate().take(names.len()) {
-            inn[c].add(*i);
-            out[c].add(*o);
+            sum_in[c].add(*i);
+            sum_out[c].add(*o);
         }
     }
-    let energy_in: Vec<f64> = inn.iter().map(|s| s.value()).collect();
-    let energy_out: Vec<f64> = out.iter().map(|s| s.value()).collect();
+    let energy_in: Vec<f64> = sum_in.iter().map(|s| s.value()).collect();
+    let energy_out: Vec<f64> = sum_out.iter().map(|s| s.value()).collect();
     let energy_rel_error = energy_in
         .iter()
         .zip(&energy_out)

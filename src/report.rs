@@ -6,7 +6,7 @@ use crate::filter::{FilterParams, Method};
 use crate::host::{cpu_seconds, peak_rss_bytes};
 use crate::io::StatsChannels;
 use crate::job::{FilterPlan, Outcome};
-use crate::pipeline::{ChannelLedger, MethodStats, RunStats, StageSeconds, WindowUse};
+use crate::pipeline::{ChannelLedger, MethodCounts, RunStats, StageSeconds, WindowUse};
 
 /// Summary of one filtering run (the `--report` JSON).
 #[derive(Clone, Debug, Serialize)]
@@ -285,9 +285,9 @@ impl Report {
         };
         // The method's own counts: ep-gauss in super-samples, ep-box in pixels.
         let counts = match stats.method {
-            MethodStats::EpGauss(g) => (g.noisy, g.spread, g.capped, g.kept),
-            MethodStats::EpBox(b) => (b.noisy, b.spread, b.capped, 0),
-            MethodStats::Plain => (0, 0, 0, 0),
+            MethodCounts::EpGauss(g) => (g.noisy, g.spread, g.capped, g.kept),
+            MethodCounts::EpBox(b) => (b.noisy, b.spread, b.capped, 0),
+            MethodCounts::Plain => (0, 0, 0, 0),
         };
         let pipe_job = &plan.pipe_job;
         let channel_rules = (plan.channels.iter())

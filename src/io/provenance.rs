@@ -172,13 +172,13 @@ fn one_line(e: &Error) -> String {
 
 /// The text of [`BAND_LEDGER`] (zeros where no sums are given yet: the
 /// header is written with it and filled in, same length, at the end).
-pub fn band_ledger_text(names: &[String], inn: &[f64], out: &[f64]) -> String {
+pub fn band_ledger_text(names: &[String], energy_in: &[f64], energy_out: &[f64]) -> String {
     names
         .iter()
         .enumerate()
         .map(|(c, n)| {
-            let i = inn.get(c).copied().unwrap_or(0.0);
-            let o = out.get(c).copied().unwrap_or(0.0);
+            let i = energy_in.get(c).copied().unwrap_or(0.0);
+            let o = energy_out.get(c).copied().unwrap_or(0.0);
             format!("{n}:{:016x}:{:016x};", i.to_bits(), o.to_bits())
         })
         .collect()

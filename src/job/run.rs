@@ -246,11 +246,11 @@ impl FilterPlan<'_> {
         let names = self.channels.clone();
         let s2 = (s * s) as f64;
         let hook: FinishHook<&mut Output> = Box::new(move |out, sums_out| {
-            let inn = crate::pipeline::band::values(&hook_in);
+            let energy_in_owned = crate::pipeline::band::values(&hook_in);
             let out_e: Vec<f64> = sums_out.iter().map(|v| v * s2).collect();
             out.fill_attribute(
                 provenance::BAND_LEDGER,
-                provenance::band_ledger_text(&names, &inn, &out_e),
+                provenance::band_ledger_text(&names, &energy_in_owned, &out_e),
             );
         });
         let mut sink = BandSink::new(

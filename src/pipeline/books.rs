@@ -82,11 +82,11 @@ impl Books {
         Ok(())
     }
 
-    /// Output rows `a..b` of `based + acc` (or `based`), `w` wide, rounded to
+    /// Output rows `a..b` of `base_rows + acc` (or `base_rows`), `w` wide, rounded to
     /// `precision`; the ledger and digest take them in row order.
     pub fn finish(
         &mut self,
-        based: &RowWindow<f64>,
+        base_rows: &RowWindow<f64>,
         acc: Option<&RowWindow<f64>>,
         a: usize,
         b: usize,
@@ -94,7 +94,7 @@ impl Books {
         precision: &[Precision],
     ) -> Result<OutRows> {
         let (out, raw, rounded, digests) = finish_rows(
-            based,
+            base_rows,
             acc,
             (a, b, w),
             &self.names,
@@ -219,15 +219,15 @@ fn channel_name(names: &[String], c: usize) -> String {
         .unwrap_or_else(|| format!("#{c} (statistics)"))
 }
 
-/// Output rows `a..b`: `based + acc` (or `based`), rounded to `precision`,
+/// Output rows `a..b`: `base_rows + acc` (or `base_rows`), rounded to `precision`,
 /// with their raw and rounded sums and each row's digest of its unrounded
 /// values (fold them in row order: the result does not depend on batching).
 ///
 /// With a [`Coverage`] (`--edge pad`), each value is divided by its pixel's
 /// coverage before rounding, and both sums weigh values by it: the raw sum
-/// is that of `based + acc`, as without padding.
+/// is that of `base_rows + acc`, as without padding.
 fn finish_rows(
-    based: &RowWindow<f64>,
+    base_rows: &RowWindow<f64>,
     acc: Option<&RowWindow<f64>>,
     (a, b, w): (usize, usize, usize),
     names: &[String],
@@ -248,7 +248,7 @@ fn finish_rows(
                 let mut rounded = Sums::new(nch);
                 let mut digest = FNV_OFFSET;
                 for c in 0..nch {
-                    let base_row = &based.get(y)[c * w..(c + 1) * w];
+                    let base_row = &base_rows.get(y)[c * w..(c + 1) * w];
                     match acc {
                         Some(acc) => {
                             let n = &acc.get(y)[c * w..(c + 1) * w];

@@ -21,7 +21,7 @@
 
 use rayon::prelude::*;
 
-use super::stream::{MethodStats, Stage, WindowUse};
+use super::stream::{MethodCounts, Stage, WindowUse};
 use super::window::RowWindow;
 use super::ChannelMode;
 use crate::error::{Error, Result};
@@ -51,7 +51,7 @@ struct Source {
 
 /// What ep-box counted, in pixels.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
-pub struct ExcessStats {
+pub struct ExcessCounts {
     /// Pixels the noise test (and guards' carriers rule) calls noisy.
     pub noisy: u64,
     /// Noisy pixels whose excess was spread.
@@ -101,7 +101,7 @@ pub struct ExcessStage {
     kept: RowWindow<f64>,
     acc: RowWindow<f64>,
     treat_done: usize,
-    counters: ExcessStats,
+    counters: ExcessCounts,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -179,7 +179,7 @@ impl ExcessStage {
             kept: RowWindow::new(nch * w),
             acc: RowWindow::new(nch * w),
             treat_done: 0,
-            counters: ExcessStats::default(),
+            counters: ExcessCounts::default(),
         })
     }
 
@@ -227,8 +227,8 @@ impl Stage for ExcessStage {
         self.acc.evict_below(y);
     }
 
-    fn stats(&self) -> MethodStats {
-        MethodStats::EpBox(self.counters)
+    fn counts(&self) -> MethodCounts {
+        MethodCounts::EpBox(self.counters)
     }
 
     fn windows(&self) -> Vec<WindowUse> {
@@ -402,7 +402,7 @@ impl ExcessStage {
             chunks.push((y, rows.by_ref().take(n).collect()));
             y += n;
         }
-        let results: Vec<(Vec<Source>, Vec<f64>, ExcessStats)> = chunks
+        let results: Vec<(Vec<Source>, Vec<f64>, ExcessCounts)> = chunks
             .into_par_iter()
             .map(|(c0, rows)| ctx.treat_rows(c0, rows))
             .collect();
@@ -508,14 +508,14 @@ impl Band<'_> {
         &self,
         c0: usize,
         mut kept: Vec<&mut [f64]>,
-    ) -> (Vec<Source>, Vec<f64>, ExcessStats) {
+    ) -> (Vec<Source>, Vec<f64>, ExcessCounts) {
         let (w, h, nch) = (self.w, self.h, self.nch);
         let c1 = c0 + kept.len();
         let margin = self.passes + GUARD_REACH;
         let ba = c0.saturating_sub(margin);
         let bb = (c1 + margin).min(h);
         let bh = bb - ba;
-        let mut counters = ExcessStats::default();
+        let mut counters = ExcessCounts::default();
         // Originals first: kept values start as the input.
         for (k, row) in kept.iter_mut().enumerate() {
             let src = self.input.get(c0 + k);

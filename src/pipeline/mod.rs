@@ -44,10 +44,10 @@ use crate::filter::channels::ChannelRule;
 use crate::filter::ep_box::StatsLayout;
 use crate::filter::{FilterParams, Method};
 use crate::geometry::{Grid, Halo};
-pub use excess::ExcessStats;
+pub use excess::ExcessCounts;
 pub use ledger::{ChannelLedger, Ledger};
-pub use spread::SpreadStats;
-pub use stream::{MethodStats, OutRows, Stage, Streamer, WindowUse};
+pub use spread::SpreadCounts;
+pub use stream::{MethodCounts, OutRows, Stage, Streamer, WindowUse};
 
 pub use estimate::{auto_strip_rows, estimate_bytes, STRIP_BYTES};
 pub use memory::{filter_in_memory, MemorySink, MemorySource};
@@ -238,7 +238,7 @@ pub struct StageSeconds {
 #[derive(Clone, Debug)]
 pub struct RunStats {
     /// What the method counted.
-    pub method: MethodStats,
+    pub method: MethodCounts,
     /// Per-channel ledger.
     pub ledger: Vec<ChannelLedger>,
     /// Wall time in seconds.
@@ -259,17 +259,17 @@ pub struct RunStats {
 
 impl RunStats {
     /// ep-gauss's counts, if the run was ep-gauss.
-    pub fn ep_gauss(&self) -> Option<SpreadStats> {
+    pub fn ep_gauss(&self) -> Option<SpreadCounts> {
         match self.method {
-            MethodStats::EpGauss(s) => Some(s),
+            MethodCounts::EpGauss(s) => Some(s),
             _ => None,
         }
     }
 
     /// ep-box's counts, if the run was ep-box.
-    pub fn ep_box(&self) -> Option<ExcessStats> {
+    pub fn ep_box(&self) -> Option<ExcessCounts> {
         match self.method {
-            MethodStats::EpBox(s) => Some(s),
+            MethodCounts::EpBox(s) => Some(s),
             _ => None,
         }
     }

@@ -8,7 +8,7 @@
 
 use rayon::prelude::*;
 
-use super::stream::{MethodStats, Stage, WindowUse};
+use super::stream::{MethodCounts, Stage, WindowUse};
 use super::window::RowWindow;
 use super::ChannelMode;
 use crate::filter::{Method, ValidParams};
@@ -128,8 +128,8 @@ impl Stage for OrderStage {
         self.out.evict_below(y);
     }
 
-    fn stats(&self) -> MethodStats {
-        MethodStats::Plain
+    fn counts(&self) -> MethodCounts {
+        MethodCounts::Plain
     }
 
     fn windows(&self) -> Vec<WindowUse> {

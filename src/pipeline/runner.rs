@@ -151,7 +151,7 @@ pub fn run<S: Source, K: Sink>(
     let s2 = (job.grid.s * job.grid.s) as f64;
     let books = streamer.books();
     Ok(RunStats {
-        method: streamer.stats(),
+        method: streamer.counts(),
         ledger: books.ledger().balance(books.names(), s2),
         seconds: start.elapsed().as_secs_f64(),
         stages,

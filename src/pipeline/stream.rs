@@ -19,9 +19,9 @@
 
 use super::books::Books;
 use super::edge::Coverage;
-use super::excess::{ExcessStage, ExcessStats};
+use super::excess::{ExcessCounts, ExcessStage};
 use super::order::OrderStage;
-use super::spread::{SpreadStage, SpreadStats};
+use super::spread::{GaussianStage, SpreadCounts};
 use super::window::RowWindow;
 use super::{Job, PipelineConfig, Precision, Strip};
 use crate::error::{Error, Result};
@@ -58,11 +58,11 @@ pub struct WindowUse {
 
 /// What a method counted; each method its own type.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
-pub enum MethodStats {
+pub enum MethodCounts {
     /// ep-gauss (§5.2): super-samples.
-    EpGauss(SpreadStats),
+    EpGauss(SpreadCounts),
     /// ep-box (§5.1): pixels.
-    EpBox(ExcessStats),
+    EpBox(ExcessCounts),
     /// The linear filters and the foils count nothing.
     Plain,
 }
@@ -86,7 +86,7 @@ pub trait Stage: Send {
     /// Output rows below `y` are written: release them.
     fn release(&mut self, y: usize);
     /// What the stage counted.
-    fn stats(&self) -> MethodStats;
+    fn counts(&self) -> MethodCounts;
     /// The windows it holds (the input window is the skeleton's).
     fn windows(&self) -> Vec<WindowUse>;
 }
@@ -220,7 +220,7 @@ impl Streamer {
                         "ep-gauss at S = 1 reads one or three variance channels and a sample count of at least 2".into(),
                     ));
                 }
-                let mut stage = SpreadStage::new(
+                let mut stage = GaussianStage::new(
                     grid,
                     job.luminance.clone(),
                     job.modes.clone(),
@@ -291,8 +291,8 @@ impl Streamer {
     }
 
     /// What the method counted.
-    pub fn stats(&self) -> MethodStats {
-        self.stage.stats()
+    pub fn counts(&self) -> MethodCounts {
+        self.stage.counts()
     }
 
     /// Names, ledger, digest and non-finite counts.

@@ -18,16 +18,16 @@ pub const GAUSSIAN_FAMILY: [Method; 3] = [Method::EpGauss, Method::Gauss, Method
 /// The method's counts of a run, by method (the run must be of it).
 pub trait Counts {
     /// ep-gauss's.
-    fn eg(&self) -> epfilt::pipeline::SpreadStats;
+    fn eg(&self) -> epfilt::pipeline::SpreadCounts;
     /// ep-box's.
-    fn eb(&self) -> epfilt::pipeline::ExcessStats;
+    fn eb(&self) -> epfilt::pipeline::ExcessCounts;
 }
 
 impl Counts for RunStats {
-    fn eg(&self) -> epfilt::pipeline::SpreadStats {
+    fn eg(&self) -> epfilt::pipeline::SpreadCounts {
         self.ep_gauss().expect("an ep-gauss run")
     }
-    fn eb(&self) -> epfilt::pipeline::ExcessStats {
+    fn eb(&self) -> epfilt::pipeline::ExcessCounts {
         self.ep_box().expect("an ep-box run")
     }
 }

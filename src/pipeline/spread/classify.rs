@@ -24,7 +24,7 @@ struct FindScratch {
     pmax: Vec<f64>,
     /// The base width's averages, and their horizontal pass.
     xbars: Vec<f64>,
-    xh: Vec<f64>,
+    xbar_h: Vec<f64>,
 }
 
 /// A pixel row's noisy samples (row-major), their values (`nch` each) and
@@ -75,7 +75,7 @@ impl FindCtx<'_> {
             flagged,
             pmax,
             xbars,
-            xh,
+            xbar_h,
         } = sc;
         let mut found = Vec::new();
         let mut vals = Vec::new();
@@ -84,7 +84,7 @@ impl FindCtx<'_> {
             return (found, vals, kept);
         };
         let view = yview;
-        ep.xbar0_row_into(view, y as i64, w, xbars, xh);
+        ep.xbar0_row_into(view, y as i64, w, xbars, xbar_h);
         let luma = |row: &[f32], i: usize| lum.of(|c| row[c * in_w + i] as f64);
         // The luminance of the pixel row's samples, a row at a time
         // (the same sum, in the same order, as `luma`).
@@ -277,7 +277,7 @@ impl FindCtx<'_> {
     }
 }
 
-impl SpreadStage {
+impl GaussianStage {
     pub(super) fn classify(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
         let s = self.grid.s;
         for _ in a * s..b * s {
@@ -320,8 +320,8 @@ impl SpreadStage {
         for (list, vals, kept) in found {
             // Kept samples failed the test too; the spread ones are counted
             // when they are spread.
-            self.stats.noisy += kept;
-            self.stats.kept += kept;
+            self.counts.noisy += kept;
+            self.counts.kept += kept;
             self.pending.extend(list);
             self.pending_v.extend(vals);
         }

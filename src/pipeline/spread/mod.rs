@@ -33,7 +33,7 @@ mod scatter;
 
 use rayon::prelude::*;
 
-use super::stream::{MethodStats, Stage, WindowUse};
+use super::stream::{MethodCounts, Stage, WindowUse};
 use super::window::RowWindow;
 use super::ChannelMode;
 use crate::filter::ep_box::{cluster_count, StatsLayout};
@@ -68,7 +68,7 @@ mod tests {
                     in_h: 20 * s,
                     s,
                 };
-                let e = SpreadStage::new(
+                let e = GaussianStage::new(
                     grid,
                     vec![1.0],
                     vec![ChannelMode::Spread],
@@ -124,7 +124,7 @@ impl LumRows for YView<'_> {
 
 /// What ep-gauss counted, in super-samples.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
-pub struct SpreadStats {
+pub struct SpreadCounts {
     /// Samples that failed Relation 14 at the base width.
     pub noisy: u64,
     /// Samples spread wider than the base kernel (m > 1).
@@ -148,8 +148,36 @@ pub struct SpreadStats {
     pub coarse4: u64,
 }
 
+/// A coarse grid of the spread (`--coarse-from`): its accumulator (`[c][X]`
+/// rows of cells `factor` times coarser than the grid it feeds), its rows
+/// upsampled across to that grid (`[c][x]`), the tent's taps, the arena of
+/// its reflected kernels, and whether anything was spread on it.
+struct CoarseGrid {
+    acc: RowWindow<f64>,
+    up: RowWindow<f64>,
+    tent_x: TentTaps,
+    tent_y: TentTaps,
+    arena: Vec<f64>,
+    used: bool,
+}
+
+impl CoarseGrid {
+    /// A grid `factor` times coarser than the `(w, h)` one it feeds
+    /// (taps only when it is `on`).
+    fn new(nch: usize, (w, h): (usize, usize), factor: usize, on: bool) -> Self {
+        CoarseGrid {
+            acc: RowWindow::new(nch * w.div_ceil(factor)),
+            up: RowWindow::new(nch * w),
+            tent_x: TentTaps::new(if on { w } else { 0 }),
+            tent_y: TentTaps::new(if on { h } else { 0 }),
+            arena: Vec::new(),
+            used: false,
+        }
+    }
+}
+
 /// The Gaussian family's state between strips.
-pub struct SpreadStage {
+pub struct GaussianStage {
     grid: Grid,
     w: usize,
     h: usize,
@@ -165,7 +193,7 @@ pub struct SpreadStage {
     tile: usize,
     ybox: RowWindow<f32>,
     hpass: RowWindow<f64>,
-    based: RowWindow<f64>,
+    base_rows: RowWindow<f64>,
     acc: RowWindow<f64>,
     pending: Vec<Noisy>,
     /// The pending samples' values, `nch` each, in the same order.
@@ -174,9 +202,9 @@ pub struct SpreadStage {
     /// spread).
     vals: Vec<f64>,
     arena: Vec<f64>,
-    cls_done: usize,
+    classified: usize,
     spread_done: usize,
-    stats: SpreadStats,
+    counts: SpreadCounts,
     clamp: Option<f32>,
     support: Support,
     /// ep-gauss at S = 1 on a file with per-pixel statistics: where they
@@ -185,31 +213,16 @@ pub struct SpreadStage {
     /// `--edge pad`: real samples per output column and row (S where the
     /// pixel is whole), so that `Ybox` is the mean of what exists.
     real_counts: Option<(Vec<usize>, Vec<usize>)>,
-    /// The coarse grid (`--coarse-from`): its accumulator (`[c][X]` rows of
-    /// `ceil(w / 2)` cells), its rows upsampled across (`[c][x]`), the tent's
-    /// taps, its arena, whether anything was spread on it, and the output
-    /// rows it has been added to.
-    cacc: RowWindow<f64>,
-    hup: RowWindow<f64>,
-    tent_x: TentTaps,
-    tent_y: TentTaps,
-    carena: Vec<f64>,
-    coarse_used: bool,
+    /// The 2x coarse grid (`--coarse-from`), whose rows are upsampled into
+    /// the accumulator's, and the output rows it has been added to.
+    c2: CoarseGrid,
     up_done: usize,
-    /// The 4x grid: its accumulator (`[c][X]` rows of `ceil(w / 4)` cells),
-    /// its rows upsampled across to the 2x grid (`[c][x]` of `ceil(w / 2)`),
-    /// the tent's taps from it to the 2x grid, its arena and whether
-    /// anything was spread on it. Its share enters a 2x row once, just
-    /// before that row is upsampled.
-    cacc4: RowWindow<f64>,
-    hup4: RowWindow<f64>,
-    tent4_x: TentTaps,
-    tent4_y: TentTaps,
-    carena4: Vec<f64>,
-    coarse4_used: bool,
+    /// The 4x grid, whose rows are upsampled into the 2x grid's: its share
+    /// enters a 2x row once, just before that row is upsampled.
+    c4: CoarseGrid,
 }
 
-impl SpreadStage {
+impl GaussianStage {
     /// Build the stage: kernels, taps and halo are settled here, once. The
     /// skeleton has checked the grid, the channels and the tile.
     /// `stats` (ep-gauss at S = 1 only; indices into the input rows'
@@ -271,7 +284,7 @@ impl SpreadStage {
         };
         let pad = ep.as_ref().map_or(0, |e| e.pad());
         let cols = ColumnTaps::new(&base, w, grid.in_w);
-        SpreadStage {
+        GaussianStage {
             grid,
             w,
             h,
@@ -287,15 +300,15 @@ impl SpreadStage {
             tile,
             ybox: RowWindow::new(w + 2 * pad),
             hpass: RowWindow::new(nch * w),
-            based: RowWindow::new(nch * w),
+            base_rows: RowWindow::new(nch * w),
             acc: RowWindow::new(nch * w),
             pending: Vec::new(),
             pending_v: Vec::new(),
             vals: Vec::new(),
             arena: Vec::new(),
-            cls_done: 0,
+            classified: 0,
             spread_done: 0,
-            stats: SpreadStats::default(),
+            counts: SpreadCounts::default(),
             clamp: (params.method == Method::Clamp).then_some(params.clamp as f32),
             support: Support::new(params.support, params.support_ratio, params.support_compact)
                 .with_over(params.support_over)
@@ -305,19 +318,9 @@ impl SpreadStage {
                 .filter(|_| params.method == Method::EpGauss && s == 1 && params.support > 0)
                 .map(|st| (st, Carriers::new(&params.ep_box))),
             real_counts: None,
-            cacc: RowWindow::new(nch * w.div_ceil(2)),
-            hup: RowWindow::new(nch * w),
-            tent_x: TentTaps::new(if coarse { w } else { 0 }),
-            tent_y: TentTaps::new(if coarse { h } else { 0 }),
-            carena: Vec::new(),
-            coarse_used: false,
+            c2: CoarseGrid::new(nch, (w, h), 2, coarse),
             up_done: 0,
-            cacc4: RowWindow::new(nch * w.div_ceil(4)),
-            hup4: RowWindow::new(nch * w.div_ceil(2)),
-            tent4_x: TentTaps::new(if coarse4 { w.div_ceil(2) } else { 0 }),
-            tent4_y: TentTaps::new(if coarse4 { h.div_ceil(2) } else { 0 }),
-            carena4: Vec::new(),
-            coarse4_used: false,
+            c4: CoarseGrid::new(nch, (w.div_ceil(2), h.div_ceil(2)), 2, coarse4),
         }
     }
 
@@ -334,7 +337,7 @@ impl SpreadStage {
     }
 }
 
-impl Stage for SpreadStage {
+impl Stage for GaussianStage {
     fn halo(&self) -> Halo {
         self.halo
     }
@@ -360,30 +363,30 @@ impl Stage for SpreadStage {
     fn input_needed(&self) -> usize {
         // Classification of the next row reads the input rows just above it
         // (the support rule's reach).
-        (self.cls_done * self.grid.s).saturating_sub(self.support.reach())
+        (self.classified * self.grid.s).saturating_sub(self.support.reach())
     }
 
     fn output(&self) -> (&RowWindow<f64>, Option<&RowWindow<f64>>) {
-        (&self.based, self.ep.as_ref().map(|_| &self.acc))
+        (&self.base_rows, self.ep.as_ref().map(|_| &self.acc))
     }
 
     fn release(&mut self, y: usize) {
-        self.based.evict_below(y);
+        self.base_rows.evict_below(y);
         self.acc.evict_below(y);
         // Coarse row C reaches fine rows 2C - 1 ..= 2C + 2.
         let c = y.saturating_sub(2) / 2;
-        self.cacc.evict_below(c);
-        self.hup.evict_below(c);
+        self.c2.acc.evict_below(c);
+        self.c2.up.evict_below(c);
         // And 4x row K reaches 2x rows 2K - 1 ..= 2K + 2.
         let k = c.saturating_sub(2) / 2;
-        self.cacc4.evict_below(k);
-        self.hup4.evict_below(k);
+        self.c4.acc.evict_below(k);
+        self.c4.up.evict_below(k);
     }
 
-    fn stats(&self) -> MethodStats {
+    fn counts(&self) -> MethodCounts {
         match self.ep {
-            Some(_) => MethodStats::EpGauss(self.stats),
-            None => MethodStats::Plain,
+            Some(_) => MethodCounts::EpGauss(self.counts),
+            None => MethodCounts::Plain,
         }
     }
 
@@ -402,7 +405,7 @@ impl Stage for SpreadStage {
             },
             WindowUse {
                 name: "base rows",
-                rows: self.based.high_water(),
+                rows: self.base_rows.high_water(),
                 row_bytes: nch * w * 8,
             },
             WindowUse {
@@ -412,29 +415,29 @@ impl Stage for SpreadStage {
             },
             WindowUse {
                 name: "coarse accumulator",
-                rows: self.cacc.high_water(),
+                rows: self.c2.acc.high_water(),
                 row_bytes: nch * w.div_ceil(2) * 8,
             },
             WindowUse {
                 name: "coarse rows upsampled",
-                rows: self.hup.high_water(),
+                rows: self.c2.up.high_water(),
                 row_bytes: nch * w * 8,
             },
             WindowUse {
                 name: "4x accumulator",
-                rows: self.cacc4.high_water(),
+                rows: self.c4.acc.high_water(),
                 row_bytes: nch * w.div_ceil(4) * 8,
             },
             WindowUse {
                 name: "4x rows upsampled",
-                rows: self.hup4.high_water(),
+                rows: self.c4.up.high_water(),
                 row_bytes: nch * w.div_ceil(2) * 8,
             },
         ]
     }
 }
 
-impl SpreadStage {
+impl GaussianStage {
     /// Advance every cursor as far as `rows_in` input rows allow; returns
     /// the end of the final output rows.
     fn run(&mut self, input: &RowWindow<f32>, rows_in: usize) -> usize {
@@ -460,16 +463,17 @@ impl SpreadStage {
         } else {
             yb.saturating_sub(self.halo.xbar_reach.max(1))
         };
-        if cls_target > self.cls_done {
-            self.classify(input, self.cls_done, cls_target);
-            self.cls_done = cls_target;
+        if cls_target > self.classified {
+            self.classify(input, self.classified, cls_target);
+            self.classified = cls_target;
         }
         // 3. spreading
         if self.ep.is_some() {
             let sp_target = if all_in {
-                self.cls_done
+                self.classified
             } else {
-                self.cls_done.min(yb.saturating_sub(self.halo.search_reach))
+                self.classified
+                    .min(yb.saturating_sub(self.halo.search_reach))
             };
             if sp_target > self.spread_done {
                 self.spread(sp_target);
@@ -480,13 +484,13 @@ impl SpreadStage {
         // classified; the short-lived horizontal-pass rows go, the (S times
         // fewer) base rows wait for the spreading.
         let h = self.h;
-        let base_target = if self.cls_done == h {
+        let base_target = if self.classified == h {
             h
         } else {
-            self.cls_done.saturating_sub(self.halo.base_reach)
+            self.classified.saturating_sub(self.halo.base_reach)
         };
-        if base_target > self.based.end() {
-            self.make_base_rows(self.based.end(), base_target);
+        if base_target > self.base_rows.end() {
+            self.make_base_rows(self.base_rows.end(), base_target);
             self.hpass
                 .evict_below(base_target.saturating_sub(self.halo.base_reach) * s);
         }
@@ -497,17 +501,17 @@ impl SpreadStage {
             }
             _ => h,
         };
-        let out_target = self.based.end().min(by_spread);
+        let out_target = self.base_rows.end().min(by_spread);
         // The coarse grid's share of final rows (none before it was used:
         // no coarse spread reaches a row that was final before it).
         if out_target > self.up_done {
-            if self.coarse_used {
+            if self.c2.used {
                 self.upsample(self.up_done, out_target);
             }
             self.up_done = out_target;
         }
         let keep = if self.ep.is_some() {
-            self.cls_done
+            self.classified
                 .saturating_sub(self.halo.xbar_reach)
                 .min(self.spread_done.saturating_sub(self.halo.search_reach))
         } else {
@@ -564,12 +568,12 @@ impl SpreadStage {
     /// rows it feeds reach).
     fn upsample(&mut self, a: usize, b: usize) {
         let (w, ncw) = (self.w, self.w.div_ceil(2));
-        let four = self.coarse4_used;
-        let (cacc4, hup4) = (&mut self.cacc4, &mut self.hup4);
-        let tents4 = (&self.tent4_x, &self.tent4_y);
+        let four = self.c4.used;
+        let (cacc4, hup4) = (&mut self.c4.acc, &mut self.c4.up);
+        let tents4 = (&self.c4.tent_x, &self.c4.tent_y);
         tent_up(
-            (&mut self.cacc, &mut self.hup),
-            (&self.tent_x, &self.tent_y),
+            (&mut self.c2.acc, &mut self.c2.up),
+            (&self.c2.tent_x, &self.c2.tent_y),
             w,
             &mut self.acc,
             (a, b),
@@ -591,13 +595,13 @@ impl SpreadStage {
     fn make_base_rows(&mut self, a: usize, b: usize) {
         let (w, h, nch, in_h) = (self.w, self.h, self.nch, self.grid.in_h);
         for _ in a..b {
-            self.based.push_stale(0.0); // every value is written below
+            self.base_rows.push_stale(0.0); // every value is written below
         }
         let base = &self.base;
         let hpass = &self.hpass;
         let inv = self.inv_s2;
         let (modes, s) = (&self.modes, self.grid.s);
-        let mut rows = self.based.range_mut(a, b);
+        let mut rows = self.base_rows.range_mut(a, b);
         rows.par_iter_mut()
             .enumerate()
             .for_each_init(Vec::new, |taps, (k, row)| {

@@ -47,7 +47,7 @@ impl Spread {
     }
 }
 
-impl SpreadStage {
+impl GaussianStage {
     /// The width search of the first `split` pending samples, one sample
     /// per task (each is independent of the rest).
     fn search_widths(&mut self, split: usize) {
@@ -71,7 +71,7 @@ impl SpreadStage {
                 c.cost
             })
             .sum();
-        self.stats.search_cost += cost;
+        self.counts.search_cost += cost;
     }
 
     /// Spread the pending samples of pixel rows before `target`: their
@@ -88,11 +88,19 @@ impl SpreadStage {
         let need = (target + self.halo.spread_reach).min(h);
         grow_filled(&mut self.acc, need, -0.0);
         // Coarse rows reaching fine rows below `need` (and a spare).
-        let (ncw, nch_rows) = (w.div_ceil(2), h.div_ceil(2));
-        grow_filled(&mut self.cacc, (need.div_ceil(2) + 1).min(nch_rows), 0.0);
+        let (ncw, coarse_rows) = (w.div_ceil(2), h.div_ceil(2));
+        grow_filled(
+            &mut self.c2.acc,
+            (need.div_ceil(2) + 1).min(coarse_rows),
+            0.0,
+        );
         // 4x row K reaches fine rows 4K - 3 ..= 4K + 6.
-        let (ncw4, nch_rows4) = (w.div_ceil(4), h.div_ceil(4));
-        grow_filled(&mut self.cacc4, (need.div_ceil(4) + 1).min(nch_rows4), 0.0);
+        let (ncw4, coarse_rows4) = (w.div_ceil(4), h.div_ceil(4));
+        grow_filled(
+            &mut self.c4.acc,
+            (need.div_ceil(4) + 1).min(coarse_rows4),
+            0.0,
+        );
         let mut cspreads = Vec::new();
         let mut cspreads4 = Vec::new();
         // Spread in chunks of the (row-major) batch: the folded weights of one
@@ -103,8 +111,8 @@ impl SpreadStage {
         for c0 in (0..split).step_by(SPREAD_CHUNK) {
             // Reflect each sample's kernel once, in order.
             self.arena.clear();
-            self.carena.clear();
-            self.carena4.clear();
+            self.c2.arena.clear();
+            self.c4.arena.clear();
             self.vals.clear();
             spreads.clear();
             cspreads.clear();
@@ -114,9 +122,9 @@ impl SpreadStage {
                 .iter()
                 .zip(self.pending_v[c0 * nch..c1 * nch].chunks_exact(nch))
             {
-                self.stats.noisy += 1;
-                self.stats.spread += (n.level > 0) as u64;
-                self.stats.capped += n.capped as u64;
+                self.counts.noisy += 1;
+                self.counts.spread += (n.level > 0) as u64;
+                self.counts.capped += n.capped as u64;
                 let level = &ep.levels()[n.level as usize];
                 let (i, j) = (n.i as usize, n.j as usize);
                 let voff = self.vals.len();
@@ -134,13 +142,13 @@ impl SpreadStage {
                 let lv = n.level;
                 let (sp, list) = match &level.coarse {
                     Some(c) => {
-                        self.stats.coarse += 1;
+                        self.counts.coarse += 1;
                         let four = c.factor == 4;
-                        self.stats.coarse4 += u64::from(four);
+                        self.counts.coarse4 += u64::from(four);
                         let (arena, cells, list) = if four {
-                            (&mut self.carena4, (ncw4, nch_rows4), &mut cspreads4)
+                            (&mut self.c4.arena, (ncw4, coarse_rows4), &mut cspreads4)
                         } else {
-                            (&mut self.carena, (ncw, nch_rows), &mut cspreads)
+                            (&mut self.c2.arena, (ncw, coarse_rows), &mut cspreads)
                         };
                         let mut axis = |q: usize, n: usize| {
                             let (a, p) = (q % s, q / s);
@@ -164,7 +172,7 @@ impl SpreadStage {
                         (Spread::new(x, y, voff), &mut spreads)
                     }
                 };
-                self.stats.spread_taps += (sp.xl * sp.yl) as u64;
+                self.counts.spread_taps += (sp.xl * sp.yl) as u64;
                 list.push(sp);
             }
             if !spreads.is_empty() {
@@ -186,11 +194,11 @@ impl SpreadStage {
                     .map_or(&[][..], |c| c.kernel.row(ph as usize))
             };
             if !cspreads.is_empty() {
-                self.coarse_used = true;
+                self.c2.used = true;
                 let tile = (self.tile / 2).max(1);
                 scatter(
-                    &mut self.cacc,
-                    (&self.carena, &rows),
+                    &mut self.c2.acc,
+                    (&self.c2.arena, &rows),
                     &self.vals,
                     &cspreads,
                     ncw,
@@ -200,12 +208,12 @@ impl SpreadStage {
             }
             if !cspreads4.is_empty() {
                 // Through the 2x grid: its rows carry the 4x share.
-                self.coarse_used = true;
-                self.coarse4_used = true;
+                self.c2.used = true;
+                self.c4.used = true;
                 let tile = (self.tile / 4).max(1);
                 scatter(
-                    &mut self.cacc4,
-                    (&self.carena4, &rows),
+                    &mut self.c4.acc,
+                    (&self.c4.arena, &rows),
                     &self.vals,
                     &cspreads4,
                     ncw4,
