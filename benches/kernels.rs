@@ -6,7 +6,7 @@
 use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use epfilt::filter::ep_box::{Ring, Spp, StatsLayout, VarianceKind};
 use epfilt::filter::ep_gauss::{EpGauss, Folded, LumImage};
-use epfilt::{filter_in_memory, FilterParams, Grid, Job, Method, PipelineConfig};
+use epfilt::{filter_in_memory, FilterParams, Grid, Method, PipelineConfig, StripLayout};
 
 type Field = LumImage;
 
@@ -105,7 +105,7 @@ fn engine(c: &mut Criterion) {
             }
         }
     }
-    let job = Job::new(
+    let job = StripLayout::new(
         Grid {
             in_w: w,
             in_h: h,
@@ -174,7 +174,7 @@ fn ep_box_engine(c: &mut Criterion) {
         }
         img.extend(row);
     }
-    let mut job = Job::new(
+    let mut job = StripLayout::new(
         Grid {
             in_w: w,
             in_h: h,

@@ -12,12 +12,12 @@
 //! bit-identical for any tile size, strip height and thread count.
 //!
 //! ```
-//! use epfilt::{filter_in_memory, FilterParams, Grid, Job, Method, PipelineConfig};
+//! use epfilt::{filter_in_memory, FilterParams, Grid, StripLayout, Method, PipelineConfig};
 //!
 //! // A 6x6 grey image, super-sampled 3x3, with one firefly.
 //! let mut img = vec![1.0f32; 36];
 //! img[14] = 1000.0;
-//! let job = Job::new(Grid { in_w: 6, in_h: 6, s: 3 }, vec!["Y".into()], vec![1.0]);
+//! let job = StripLayout::new(Grid { in_w: 6, in_h: 6, s: 3 }, vec!["Y".into()], vec![1.0]);
 //! let params = FilterParams::new(Method::EpGauss, 3);
 //! let (out, stats) = filter_in_memory(img, &job, &params, &PipelineConfig::default()).unwrap();
 //! assert_eq!(out.len(), 4);
@@ -55,4 +55,4 @@ pub use error::{Error, Result};
 pub use filter::{FilterParams, Method};
 pub use geometry::Grid;
 pub use job::{filter_file, FilterJob};
-pub use pipeline::{filter_in_memory, Job, PipelineConfig, Precision, RunStats};
+pub use pipeline::{filter_in_memory, PipelineConfig, Precision, RunStats, StripLayout};

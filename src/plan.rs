@@ -144,7 +144,7 @@ pub fn plan_file(
     let t = ep_box::TFactor::new(params.confidence);
     let kind = found.kind;
     // Pass 1: L_ave (the noise test of pass 2 needs L_tvis).
-    let mut job = crate::pipeline::Job::new(
+    let mut job = crate::pipeline::StripLayout::new(
         crate::geometry::Grid {
             in_w: w,
             in_h: h,

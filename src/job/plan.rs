@@ -12,7 +12,7 @@ use crate::io::output::OutputLayout;
 use crate::io::provenance::Fingerprint;
 use crate::io::{find_stats, ExrInput, Format, StatsChannels, StatsRequest, ViewSelect};
 use crate::pipeline::stream::MAX_CHANNELS;
-use crate::pipeline::{ChannelMode, Job};
+use crate::pipeline::{ChannelMode, StripLayout};
 
 use super::{Edge, FilterJob};
 
@@ -28,7 +28,7 @@ pub struct FilterPlan<'a> {
     pub(crate) found: Option<StatsChannels>,
     pub(crate) geometry: Geometry,
     /// The pipeline's channel layout.
-    pub(crate) pipe_job: Job,
+    pub(crate) pipe_job: StripLayout,
     pub(crate) channels: Vec<String>,
     pub(crate) layout: OutputLayout,
     pub(crate) band: Option<BandPlan>,
@@ -277,15 +277,15 @@ fn pipeline_job(
     input: &ExrInput,
     g: &Geometry,
     stats: Option<&crate::filter::ep_box::StatsLayout>,
-) -> Result<Job> {
+) -> Result<StripLayout> {
     let channels = input.channels();
     let grid = Grid {
         in_w: g.w,
         in_h: g.h,
         s: job.params.supersample,
     };
-    let mut pipe_job =
-        Job::new(grid, channels.clone(), input.luminance()).with_rules(&input.channel_rules());
+    let mut pipe_job = StripLayout::new(grid, channels.clone(), input.luminance())
+        .with_rules(&input.channel_rules());
     if g.padded_from.is_some() && pipe_job.modes.contains(&ChannelMode::Nearest) {
         let nearest: Vec<&str> = channels
             .iter()
@@ -308,7 +308,12 @@ fn pipeline_job(
 }
 
 /// Refuse a run that would need more memory than `--max-memory` allows.
-fn check_memory(job: &FilterJob, input: &ExrInput, pipe_job: &Job, carried: usize) -> Result<()> {
+fn check_memory(
+    job: &FilterJob,
+    input: &ExrInput,
+    pipe_job: &StripLayout,
+    carried: usize,
+) -> Result<()> {
     let need =
         crate::pipeline::estimate_bytes(pipe_job, &job.params, &job.pipeline, input.block_bytes());
     let limit = job.max_memory.unwrap_or_else(default_max_memory);

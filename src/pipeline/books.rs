@@ -23,7 +23,7 @@ pub struct Books {
     zeroed: Vec<u64>,
     first_nonfinite: Option<(usize, usize, usize)>,
     coverage: Option<Coverage>,
-    /// Channels of data, not light ([`super::Job::data`]).
+    /// Channels of data, not light ([`super::StripLayout::data`]).
     data: Vec<bool>,
 }
 

@@ -21,7 +21,7 @@ pub fn auto_strip_rows(in_w: usize, channels: usize) -> usize {
 /// is allocated, so a header claiming an absurd size gives an error instead of
 /// an allocation failure (which would abort the process).
 pub fn estimate_bytes(
-    job: &Job,
+    job: &StripLayout,
     params: &FilterParams,
     cfg: &PipelineConfig,
     block_bytes: u64,
@@ -67,7 +67,12 @@ pub fn estimate_bytes(
         .saturating_add(out_row.saturating_mul(16 * 4))
 }
 
-fn estimate_box_bytes(job: &Job, cfg: &PipelineConfig, block_bytes: u64, halo: Halo) -> u64 {
+fn estimate_box_bytes(
+    job: &StripLayout,
+    cfg: &PipelineConfig,
+    block_bytes: u64,
+    halo: Halo,
+) -> u64 {
     let w = job.grid.in_w as u64;
     let (nch, nall) = (job.channels.len() as u64, job.strip_channels() as u64);
     let strip = match cfg.strip_rows {

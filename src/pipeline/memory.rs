@@ -93,7 +93,7 @@ impl<K: Sink> Sink for &mut K {
 /// the demo and small jobs. Returns the output image and the statistics.
 pub fn filter_in_memory(
     data: Vec<f32>,
-    job: &Job,
+    job: &StripLayout,
     params: &FilterParams,
     cfg: &PipelineConfig,
 ) -> Result<(Vec<f32>, RunStats)> {

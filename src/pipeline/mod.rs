@@ -151,16 +151,18 @@ impl Default for PipelineConfig {
 
 pub use crate::filter::channels::ChannelMode;
 
-/// What one job filters: the grid and its channels.
+/// What the pipeline moves: the grid of samples, the channels of each strip
+/// row (the filtered ones, then the statistics read beside them), their
+/// luminance weights and rules, and the per-pixel statistics' places.
 #[derive(Clone, Debug)]
-pub struct Job {
+pub struct StripLayout {
     /// Sizes.
     pub grid: Grid,
     /// Channel names, in the order of the strips.
     pub channels: Vec<String>,
     /// Luminance weight of each channel (0 for alpha and carried channels).
     pub luminance: Vec<f64>,
-    /// What the stage does with each channel ([`Job::new`]: spread where
+    /// What the stage does with each channel ([`StripLayout::new`]: spread where
     /// the luminance weight is not 0, else the base filter).
     pub modes: Vec<ChannelMode>,
     /// Channels of data, not light (carried `average` and `nearest`: depth,
@@ -178,7 +180,7 @@ pub struct Job {
     pub padded_from: Option<(usize, usize)>,
 }
 
-impl Job {
+impl StripLayout {
     /// A job over `channels` with no statistics channels.
     pub fn new(grid: Grid, channels: Vec<String>, luminance: Vec<f64>) -> Self {
         let modes = luminance
@@ -186,7 +188,7 @@ impl Job {
             .map(|&l| ChannelMode::of(l, None, grid.s))
             .collect();
         let data = vec![false; channels.len()];
-        Job {
+        StripLayout {
             grid,
             channels,
             luminance,

@@ -19,7 +19,7 @@ pub fn thread_pool(threads: usize) -> Result<rayon::ThreadPool> {
 pub fn run<S: Source, K: Sink>(
     source: S,
     sink: K,
-    job: &Job,
+    job: &StripLayout,
     params: &FilterParams,
     cfg: &PipelineConfig,
     progress: Progress<'_>,
@@ -165,7 +165,11 @@ pub fn run<S: Source, K: Sink>(
 
 /// The mean luminance of a source's filtered channels (the first pass of
 /// `ep-box`, for `L_ave` of Eq. 9), summed exactly (compensated) in row order.
-pub fn mean_luminance<S: Source>(mut source: S, job: &Job, strip_rows: usize) -> Result<f64> {
+pub fn mean_luminance<S: Source>(
+    mut source: S,
+    job: &StripLayout,
+    strip_rows: usize,
+) -> Result<f64> {
     let w = job.grid.in_w;
     let nall = job.strip_channels();
     let strip_rows = match strip_rows {

@@ -23,7 +23,7 @@ use super::excess::{ExcessCounts, ExcessStage};
 use super::order::OrderStage;
 use super::spread::{GaussianStage, SpreadCounts};
 use super::window::RowWindow;
-use super::{Job, PipelineConfig, Precision, Strip};
+use super::{PipelineConfig, Precision, Strip, StripLayout};
 use crate::error::{Error, Result};
 use crate::filter::ep_box::{Spp, StatsLayout};
 use crate::filter::{Method, ValidParams};
@@ -109,7 +109,7 @@ impl Streamer {
     /// The skeleton and stage of `job` with `params` (validated), writing at
     /// `precision`.
     pub fn new(
-        job: &Job,
+        job: &StripLayout,
         params: &ValidParams,
         cfg: &PipelineConfig,
         precision: Vec<Precision>,
@@ -333,7 +333,7 @@ mod tests {
                     in_h: 20 * s,
                     s,
                 };
-                let mut job = Job::new(grid, vec!["Y".into()], vec![1.0]);
+                let mut job = StripLayout::new(grid, vec!["Y".into()], vec![1.0]);
                 if m == Method::EpBox {
                     job.aux = vec!["var".into()];
                     job.stats = Some(StatsLayout {

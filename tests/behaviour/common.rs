@@ -3,7 +3,7 @@
 #![allow(dead_code)]
 
 use epfilt::filter::ep_gauss::{relation14, EpGauss};
-use epfilt::{filter_in_memory, FilterParams, Grid, Job, Method, PipelineConfig, RunStats};
+use epfilt::{filter_in_memory, FilterParams, Grid, Method, PipelineConfig, RunStats, StripLayout};
 
 /// Relative energy error allowed before rounding. Each sample's weights sum
 /// to one within ~1e-16 and every sum is compensated: 1e-12 leaves a wide
@@ -76,8 +76,8 @@ impl Img {
     }
 }
 
-pub fn rgb_job(w: usize, h: usize, s: usize) -> Job {
-    Job::new(
+pub fn rgb_job(w: usize, h: usize, s: usize) -> StripLayout {
+    StripLayout::new(
         Grid {
             in_w: w,
             in_h: h,
@@ -90,7 +90,7 @@ pub fn rgb_job(w: usize, h: usize, s: usize) -> Job {
 
 /// An RGB render at pixel resolution with per-colour sample variances
 /// (`variance.R/G/B` after the colour) from `spp` samples: the job of ep-box.
-pub fn rgb_variance_job(w: usize, h: usize, spp: f64) -> Job {
+pub fn rgb_variance_job(w: usize, h: usize, spp: f64) -> StripLayout {
     let mut j = rgb_job(w, h, 1);
     j.aux = vec![
         "variance.R".into(),
@@ -106,10 +106,10 @@ pub fn rgb_variance_job(w: usize, h: usize, spp: f64) -> Job {
     j
 }
 
-pub fn job_for(img: &Img, s: usize) -> Job {
+pub fn job_for(img: &Img, s: usize) -> StripLayout {
     match img.nch {
         3 => rgb_job(img.w, img.h, s),
-        4 => Job::new(
+        4 => StripLayout::new(
             Grid {
                 in_w: img.w,
                 in_h: img.h,
@@ -118,7 +118,7 @@ pub fn job_for(img: &Img, s: usize) -> Job {
             vec!["R".into(), "G".into(), "B".into(), "A".into()],
             vec![0.2126, 0.7152, 0.0722, 0.0],
         ),
-        _ => Job::new(
+        _ => StripLayout::new(
             Grid {
                 in_w: img.w,
                 in_h: img.h,
@@ -177,7 +177,7 @@ pub const CUTS: [(usize, usize, usize); 9] = [
 /// a property test can report it as its failure).
 pub fn invariant(
     data: &[f32],
-    job: &Job,
+    job: &StripLayout,
     params: &FilterParams,
     cuts: &[(usize, usize, usize)],
 ) -> Result<(Vec<f32>, RunStats), String> {
@@ -216,7 +216,11 @@ pub fn invariant(
 }
 
 /// [`invariant`] over every cut of [`CUTS`], which must hold.
-pub fn same_for_every_cut(data: &[f32], job: &Job, params: &FilterParams) -> (Vec<f32>, RunStats) {
+pub fn same_for_every_cut(
+    data: &[f32],
+    job: &StripLayout,
+    params: &FilterParams,
+) -> (Vec<f32>, RunStats) {
     invariant(data, job, params, &CUTS).unwrap_or_else(|e| panic!("{e}"))
 }
 

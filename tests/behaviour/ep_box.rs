@@ -3,7 +3,7 @@
 #![allow(clippy::needless_range_loop)] // pixel loops read clearer with indices
 
 use epfilt::filter::ep_box::{se2, Guard, Ring, Spp, TFactor, VarianceKind};
-use epfilt::{filter_in_memory, FilterParams, Job, Method, PipelineConfig, RunStats};
+use epfilt::{filter_in_memory, FilterParams, Method, PipelineConfig, RunStats, StripLayout};
 use proptest::prelude::*;
 
 use crate::common::*;
@@ -15,7 +15,7 @@ fn rgbv(w: usize, h: usize) -> Img {
     Img::new(w, h, 6, |_, _, c| if c < 3 { 1.0 } else { 0.0 })
 }
 
-fn job(w: usize, h: usize, spp: f64) -> Job {
+fn job(w: usize, h: usize, spp: f64) -> StripLayout {
     rgb_variance_job(w, h, spp)
 }
 

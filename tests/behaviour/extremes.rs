@@ -2,7 +2,7 @@
 //! case with its assertion.
 
 use crate::common::*;
-use epfilt::{filter_in_memory, Grid, Job, Method, PipelineConfig, Precision};
+use epfilt::{filter_in_memory, Grid, Method, PipelineConfig, Precision, StripLayout};
 
 fn all_methods_exact(img: &Img, s: usize, what: &str) -> Vec<Img> {
     GAUSSIAN_FAMILY
@@ -59,7 +59,7 @@ fn values_near_f32_max_accumulate_without_overflow_or_are_refused_on_output() {
     all_methods_exact(&img, 3, "f32::MAX firefly");
     // S = 1 box of f32::MAX is f32::MAX itself; in f16 it cannot be held: refused.
     let img = Img::new(3, 3, 1, |_, _, _| f32::MAX);
-    let job = Job::new(
+    let job = StripLayout::new(
         Grid {
             in_w: 3,
             in_h: 3,
@@ -105,7 +105,7 @@ fn one_by_one_one_by_n_n_by_one_and_narrower_than_the_kernel() {
 #[test]
 fn supersample_larger_than_the_image_is_refused() {
     let img = Img::new(2, 5, 1, |_, _, _| 1.0);
-    let job = Job::new(
+    let job = StripLayout::new(
         Grid {
             in_w: 2,
             in_h: 5,

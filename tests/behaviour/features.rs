@@ -5,7 +5,7 @@
 
 use epfilt::filter::ep_box::Guard;
 use epfilt::synth::{Scene, SceneKind, BULBS, LINE};
-use epfilt::{filter_in_memory, FilterParams, Job, Method, PipelineConfig};
+use epfilt::{filter_in_memory, FilterParams, Method, PipelineConfig, StripLayout};
 
 use crate::common::*;
 
@@ -196,7 +196,7 @@ fn moved_at(out: &Img, input: &Img, spp: usize) -> Vec<(String, f64)> {
         .collect()
 }
 
-fn box_job(n: f64) -> Job {
+fn box_job(n: f64) -> StripLayout {
     rgb_variance_job(W, H, n)
 }
 
