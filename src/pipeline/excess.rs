@@ -21,7 +21,8 @@
 
 use rayon::prelude::*;
 
-use super::stream::{MethodCounts, Stage, WindowUse};
+use super::counts::{ExcessCounts, MethodCounts};
+use super::stage::{Stage, WindowUse};
 use super::window::RowWindow;
 use super::ChannelMode;
 use crate::error::{Error, Result};
@@ -47,29 +48,6 @@ struct Source {
     /// Where what each in-image pixel of the walk receives is, per channel
     /// (`nch` values in the shares).
     off: usize,
-}
-
-/// What ep-box counted, in pixels.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
-pub struct ExcessCounts {
-    /// Pixels the noise test (and guards' carriers rule) calls noisy.
-    pub noisy: u64,
-    /// Noisy pixels whose excess was spread.
-    pub spread: u64,
-    /// Spread pixels whose excess did not fit under `L_tvis` per pixel within
-    /// the radius.
-    pub capped: u64,
-    /// Pixels noisy by the paper's test whose mean rests on enough samples to
-    /// be reliable (the `carriers` guard): not treated as noise.
-    pub reliable: u64,
-    /// Noisy pixels the `range` guard left alone.
-    pub guarded: u64,
-    /// Pixels whose excess the `stderr` guard cut to what noise can explain.
-    pub trimmed: u64,
-    /// Noisy pixels with no converged pixel within the passes' reach.
-    pub unresolved: u64,
-    /// The most passes any pixel needed.
-    pub passes: u64,
 }
 
 /// The `ep-box` filter state between strips.
@@ -608,18 +586,8 @@ fn scatter_ring(
     if sources.is_empty() {
         return;
     }
-    let (first, end) = (acc.first(), acc.end());
-    let ntiles = w.div_ceil(tile);
-    let mut tiles: Vec<Vec<&mut [f64]>> = (0..ntiles)
-        .map(|_| Vec::with_capacity((end - first) * nch))
-        .collect();
-    for row in acc.range_mut(first, end) {
-        for ch in row.chunks_mut(w) {
-            for (t, part) in ch.chunks_mut(tile).enumerate() {
-                tiles[t].push(part);
-            }
-        }
-    }
+    let first = acc.first();
+    let tiles = super::tiles::column_tiles(acc, w, nch, tile);
     let offsets = ring.offsets();
     tiles
         .into_par_iter()

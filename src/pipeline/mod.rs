@@ -1,5 +1,5 @@
 //! The streaming pipeline: a reader stage, the filter (one skeleton,
-//! [`stream::Streamer`], around each method's [`stream::Stage`]), a writer
+//! [`stream::Streamer`], around each method's [`stage::Stage`]), a writer
 //! stage, joined by bounded channels and sharing one rayon pool.
 //!
 //! ```text
@@ -22,6 +22,7 @@
 
 pub mod band;
 pub mod books;
+pub mod counts;
 pub mod edge;
 mod estimate;
 pub mod excess;
@@ -30,7 +31,10 @@ mod memory;
 pub mod order;
 mod runner;
 pub mod spread;
+pub mod stage;
+mod stages;
 pub mod stream;
+pub mod tiles;
 pub mod window;
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -44,10 +48,10 @@ use crate::filter::channels::ChannelRule;
 use crate::filter::ep_box::StatsLayout;
 use crate::filter::{FilterParams, Method};
 use crate::geometry::{Grid, Halo};
-pub use excess::ExcessCounts;
+pub use counts::{ExcessCounts, MethodCounts, SpreadCounts};
 pub use ledger::{ChannelLedger, Ledger};
-pub use spread::SpreadCounts;
-pub use stream::{MethodCounts, OutRows, Stage, Streamer, WindowUse};
+pub use stage::{Stage, WindowUse};
+pub use stream::{OutRows, Streamer};
 
 pub use estimate::{auto_strip_rows, estimate_bytes, STRIP_BYTES};
 pub use memory::{filter_in_memory, MemorySink, MemorySource};

@@ -8,7 +8,8 @@
 
 use rayon::prelude::*;
 
-use super::stream::{MethodCounts, Stage, WindowUse};
+use super::counts::MethodCounts;
+use super::stage::{Stage, WindowUse};
 use super::window::RowWindow;
 use super::ChannelMode;
 use crate::filter::{Method, ValidParams};

@@ -18,14 +18,12 @@
 //! batching (each checks its own "rows final" condition).
 
 use super::books::Books;
+use super::counts::MethodCounts;
 use super::edge::Coverage;
-use super::excess::{ExcessCounts, ExcessStage};
-use super::order::OrderStage;
-use super::spread::{GaussianStage, SpreadCounts};
+use super::stage::{Stage, WindowUse};
 use super::window::RowWindow;
 use super::{PipelineConfig, Precision, Strip, StripLayout};
 use crate::error::{Error, Result};
-use crate::filter::ep_box::{Spp, StatsLayout};
 use crate::filter::{Method, ValidParams};
 use crate::geometry::{Grid, Halo};
 
@@ -42,53 +40,6 @@ pub struct OutRows {
     pub rows: usize,
     /// Values, already rounded to the output precision.
     pub data: Vec<f32>,
-}
-
-/// A window a stage holds: its name, the most rows it held and the bytes of
-/// one row (for the report's memory figures).
-#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
-pub struct WindowUse {
-    /// What it holds.
-    pub name: &'static str,
-    /// Most rows held at once.
-    pub rows: usize,
-    /// Bytes per row.
-    pub row_bytes: usize,
-}
-
-/// What a method counted; each method its own type.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
-pub enum MethodCounts {
-    /// ep-gauss (§5.2): super-samples.
-    EpGauss(SpreadCounts),
-    /// ep-box (§5.1): pixels.
-    EpBox(ExcessCounts),
-    /// The linear filters and the foils count nothing.
-    Plain,
-}
-
-/// A method's work on the rows, behind the skeleton.
-pub trait Stage: Send {
-    /// Rows the method reaches beyond the row it works on.
-    fn halo(&self) -> Halo;
-    /// Input rows `a..b` have just entered `input` (the books have taken
-    /// them). A stage may alter them (the clamp foil cuts them) and compute
-    /// what it keeps per input row.
-    fn arrive(&mut self, input: &mut RowWindow<f32>, a: usize, b: usize);
-    /// Go as far as `rows_in` input rows allow (`all_in`: the image is
-    /// complete); returns the end of the output rows that are now final.
-    fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> usize;
-    /// The first input row the stage will still read.
-    fn input_needed(&self) -> usize;
-    /// The unrounded values of final output rows: a base window and an
-    /// accumulator added to it.
-    fn output(&self) -> (&RowWindow<f64>, Option<&RowWindow<f64>>);
-    /// Output rows below `y` are written: release them.
-    fn release(&mut self, y: usize);
-    /// What the stage counted.
-    fn counts(&self) -> MethodCounts;
-    /// The windows it holds (the input window is the skeleton's).
-    fn windows(&self) -> Vec<WindowUse>;
 }
 
 /// The skeleton: input window, cursors, books, precision, and one stage.
@@ -108,6 +59,8 @@ pub struct Streamer {
 impl Streamer {
     /// The skeleton and stage of `job` with `params` (validated), writing at
     /// `precision`.
+    /// (Long: the checks of the layout and of `--edge pad` before anything is
+    /// allocated, each with its own message.)
     pub fn new(
         job: &StripLayout,
         params: &ValidParams,
@@ -177,63 +130,7 @@ impl Streamer {
                 Some(Coverage::of(params, grid, (rw, rh)))
             }
         };
-        let stage: Box<dyn Stage> = match params.method {
-            Method::EpBox => {
-                let stats = job.stats.clone().ok_or_else(|| {
-                    Error::Config("ep-box needs per-pixel variance channels".into())
-                })?;
-                let ltvis = params.ep_box.ltvis.ok_or_else(|| {
-                    Error::Config(
-                        "ep-box needs L_tvis: measure L_ave first (mean_luminance)".into(),
-                    )
-                })?;
-                Box::new(ExcessStage::new(
-                    grid.in_w,
-                    grid.in_h,
-                    nch,
-                    job.luminance.clone(),
-                    job.modes.clone(),
-                    job.aux.len(),
-                    stats,
-                    params,
-                    ltvis,
-                    cfg.tile,
-                )?)
-            }
-            Method::Median | Method::AlphaTrim => {
-                Box::new(OrderStage::new(grid, job.modes.clone(), params))
-            }
-            _ => {
-                let nall = job.strip_channels();
-                let stats_ok = |st: &StatsLayout| {
-                    let ok = |i: usize| i >= nch && i < nall;
-                    (st.variance.len() == 1 || (st.variance.len() == 3 && nch >= 3))
-                        && st.variance.iter().all(|&i| ok(i))
-                        && st.mean_y.is_none_or(ok)
-                        && match st.spp {
-                            Spp::Channel(i) => ok(i),
-                            Spp::Fixed(n) => n.is_finite() && n >= 2.0,
-                        }
-                };
-                if job.stats.as_ref().is_some_and(|st| !stats_ok(st)) {
-                    return Err(Error::Config(
-                        "ep-gauss at S = 1 reads one or three variance channels and a sample count of at least 2".into(),
-                    ));
-                }
-                let mut stage = GaussianStage::new(
-                    grid,
-                    job.luminance.clone(),
-                    job.modes.clone(),
-                    params,
-                    cfg.tile,
-                    job.stats.clone(),
-                );
-                if let Some(real) = job.padded_from {
-                    stage.set_real_size(real);
-                }
-                Box::new(stage)
-            }
-        };
+        let stage = super::stages::make(job, params, cfg.tile)?;
         let nall = job.strip_channels();
         let mut books = Books::new(job.channels.clone(), nall);
         books.set_nonfinite(cfg.nonfinite);

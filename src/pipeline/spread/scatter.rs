@@ -77,6 +77,8 @@ impl GaussianStage {
     /// Spread the pending samples of pixel rows before `target`: their
     /// widths, their kernels placed in chunks of [`SPREAD_CHUNK`], and the
     /// scatter into the accumulators, in the pending (row-major) order.
+    /// (Long: one chunk loop places each kernel at one of three resolutions;
+    /// the three lists share the chunk's arena and values.)
     pub(super) fn spread(&mut self, target: usize) {
         let (s, w, h, nch) = (self.grid.s, self.w, self.h, self.nch);
         let split = self
@@ -281,20 +283,8 @@ fn scatter<'k>(
     nch: usize,
     tile: usize,
 ) {
-    let (first, end) = (acc.first(), acc.end());
-    let ntiles = w.div_ceil(tile);
-    // Planar rows [c][x]: tile t owns columns t*tile.. of every channel of
-    // every row; its slices are listed row by row, channel by channel.
-    let mut tiles: Vec<Vec<&mut [f64]>> = (0..ntiles)
-        .map(|_| Vec::with_capacity((end - first) * nch))
-        .collect();
-    for row in acc.range_mut(first, end) {
-        for ch in row.chunks_mut(w) {
-            for (t, part) in ch.chunks_mut(tile).enumerate() {
-                tiles[t].push(part);
-            }
-        }
-    }
+    let first = acc.first();
+    let tiles = crate::pipeline::tiles::column_tiles(acc, w, nch, tile);
     tiles
         .into_par_iter()
         .enumerate()

@@ -1,0 +1,61 @@
+//! What each method counts, for the report: its own type per method.
+
+/// What ep-gauss counted, in super-samples.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct SpreadCounts {
+    /// Samples that failed Relation 14 at the base width.
+    pub noisy: u64,
+    /// Samples spread wider than the base kernel (m > 1).
+    pub spread: u64,
+    /// Samples spread at the cap because every narrower width failed
+    /// Relation 14 (the cap itself is not evaluated: it may pass or fail).
+    pub capped: u64,
+    /// Noisy samples kept with the base kernel as parts of a feature (the
+    /// support rule).
+    pub kept: u64,
+    /// The width search's work: the luminance values the widths it tried
+    /// need (each counted once; it reads a few ahead) plus (folded) average
+    /// weights applied.
+    pub search_cost: u64,
+    /// Weights the spreading wrote, per channel (the reflected kernels'
+    /// areas, on the coarse grid for the coarse ones).
+    pub spread_taps: u64,
+    /// Samples spread on a coarser grid (`--coarse-from`), 2x or 4x.
+    pub coarse: u64,
+    /// Of those, the samples spread on the 4x coarser grid.
+    pub coarse4: u64,
+}
+
+/// What ep-box counted, in pixels.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct ExcessCounts {
+    /// Pixels the noise test (and guards' carriers rule) calls noisy.
+    pub noisy: u64,
+    /// Noisy pixels whose excess was spread.
+    pub spread: u64,
+    /// Spread pixels whose excess did not fit under `L_tvis` per pixel within
+    /// the radius.
+    pub capped: u64,
+    /// Pixels noisy by the paper's test whose mean rests on enough samples to
+    /// be reliable (the `carriers` guard): not treated as noise.
+    pub reliable: u64,
+    /// Noisy pixels the `range` guard left alone.
+    pub guarded: u64,
+    /// Pixels whose excess the `stderr` guard cut to what noise can explain.
+    pub trimmed: u64,
+    /// Noisy pixels with no converged pixel within the passes' reach.
+    pub unresolved: u64,
+    /// The most passes any pixel needed.
+    pub passes: u64,
+}
+
+/// What a method counted; each method its own type.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub enum MethodCounts {
+    /// ep-gauss (§5.2): super-samples.
+    EpGauss(SpreadCounts),
+    /// ep-box (§5.1): pixels.
+    EpBox(ExcessCounts),
+    /// The linear filters and the foils count nothing.
+    Plain,
+}

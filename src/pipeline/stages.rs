@@ -1,0 +1,73 @@
+//! The stage factory: each method's stage, built with the checks it needs,
+//! behind the [`Stage`] contract the skeleton ([`super::stream`]) runs.
+
+use super::excess::ExcessStage;
+use super::order::OrderStage;
+use super::spread::GaussianStage;
+use super::stage::Stage;
+use super::StripLayout;
+use crate::error::{Error, Result};
+use crate::filter::ep_box::{Spp, StatsLayout};
+use crate::filter::{Method, ValidParams};
+
+/// The stage of `params.method` for strips laid out as `job`, its
+/// accumulators cut in column tiles of `tile`.
+pub fn make(job: &StripLayout, params: &ValidParams, tile: usize) -> Result<Box<dyn Stage>> {
+    let (grid, nch) = (job.grid, job.channels.len());
+    Ok(match params.method {
+        Method::EpBox => {
+            let stats = job
+                .stats
+                .clone()
+                .ok_or_else(|| Error::Config("ep-box needs per-pixel variance channels".into()))?;
+            let ltvis = params.ep_box.ltvis.ok_or_else(|| {
+                Error::Config("ep-box needs L_tvis: measure L_ave first (mean_luminance)".into())
+            })?;
+            Box::new(ExcessStage::new(
+                grid.in_w,
+                grid.in_h,
+                nch,
+                job.luminance.clone(),
+                job.modes.clone(),
+                job.aux.len(),
+                stats,
+                params,
+                ltvis,
+                tile,
+            )?)
+        }
+        Method::Median | Method::AlphaTrim => {
+            Box::new(OrderStage::new(grid, job.modes.clone(), params))
+        }
+        _ => {
+            let nall = job.strip_channels();
+            let stats_ok = |st: &StatsLayout| {
+                let ok = |i: usize| i >= nch && i < nall;
+                (st.variance.len() == 1 || (st.variance.len() == 3 && nch >= 3))
+                    && st.variance.iter().all(|&i| ok(i))
+                    && st.mean_y.is_none_or(ok)
+                    && match st.spp {
+                        Spp::Channel(i) => ok(i),
+                        Spp::Fixed(n) => n.is_finite() && n >= 2.0,
+                    }
+            };
+            if job.stats.as_ref().is_some_and(|st| !stats_ok(st)) {
+                return Err(Error::Config(
+                    "ep-gauss at S = 1 reads one or three variance channels and a sample count of at least 2".into(),
+                ));
+            }
+            let mut stage = GaussianStage::new(
+                grid,
+                job.luminance.clone(),
+                job.modes.clone(),
+                params,
+                tile,
+                job.stats.clone(),
+            );
+            if let Some(real) = job.padded_from {
+                stage.set_real_size(real);
+            }
+            Box::new(stage)
+        }
+    })
+}
