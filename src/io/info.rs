@@ -480,6 +480,7 @@ fn cstr(bytes: &[u8], at: &mut usize) -> Option<String> {
 }
 
 /// An attribute's value in words, by its type (OpenEXR's file layout).
+/// (Long: one arm per attribute type of the file layout: a table, not logic.)
 fn attribute_text(ty: &str, v: &[u8]) -> String {
     let i32s = |n: usize| -> Option<Vec<i32>> {
         (v.len() >= 4 * n).then(|| {

@@ -89,6 +89,8 @@ const CHECK_BYTES: u64 = 64 << 20;
 /// Write `dest` (through a temporary file beside it) as a multi-part file
 /// of `sources`, in that order, each part's chunks copied. Returns the
 /// compressed bytes copied.
+/// (Long: headers, offset tables and chunks go through one call of the `exr`
+/// crate's block writer, whose closure holds the state the steps share.)
 pub fn assemble(dest: &Path, sources: &[PartSource]) -> Result<u64> {
     let mut opened: Vec<Opened> = Vec::new();
     let mut which = Vec::with_capacity(sources.len());

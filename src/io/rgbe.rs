@@ -22,6 +22,11 @@
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
+use exr::math::Vec2;
+use exr::meta::attribute::{ChannelDescription, ChannelList, Chromaticities, SampleType, Text};
+use exr::meta::header::Header;
+use exr::prelude::Compression;
+
 use crate::error::{Error, Result};
 use crate::pipeline::{Precision, Sink, Source, Strip};
 
@@ -73,6 +78,43 @@ pub struct RgbeHeader {
     pub epfilt: Vec<(String, String)>,
     /// Byte offset of the first scanline.
     pub data: usize,
+}
+
+impl RgbeHeader {
+    /// The picture described as an OpenEXR header (one part of three f32
+    /// channels, R, G, B or X, Y, Z, with its primaries), what the rest of
+    /// epfilt reads; with the channels in the picture's order and in the
+    /// header's (sorted) order.
+    pub(crate) fn exr_header(&self) -> (Header, [&'static str; 3], [&'static str; 3]) {
+        let names: [&'static str; 3] = if self.xyze {
+            ["X", "Y", "Z"]
+        } else {
+            ["R", "G", "B"]
+        };
+        let mut sorted = names;
+        sorted.sort_unstable();
+        let list: exr::prelude::SmallVec<[ChannelDescription; 5]> = sorted
+            .iter()
+            .map(|n| ChannelDescription::new(Text::from(*n), SampleType::F32, false))
+            .collect();
+        let mut header = Header::new(Text::from(""), Vec2(self.w, self.h), list).with_encoding(
+            Compression::ZIP16,
+            exr::meta::BlockDescription::ScanLines,
+            exr::meta::attribute::LineOrder::Increasing,
+        );
+        header.channels = ChannelList::new(header.channels.list.clone());
+        header.own_attributes.layer_name = None;
+        if let Some(p) = self.primaries {
+            let v = |i: usize| Vec2(p[i] as f32, p[i + 1] as f32);
+            header.shared_attributes.chromaticities = Some(Chromaticities {
+                red: v(0),
+                green: v(2),
+                blue: v(4),
+                white: v(6),
+            });
+        }
+        (header, names, sorted)
+    }
 }
 
 fn invalid(path: &Path, reason: impl Into<String>) -> Error {

@@ -352,8 +352,6 @@ impl ExrInput {
         part: Option<&PartSelect>,
         layer: Option<&str>,
     ) -> Result<Self> {
-        use exr::math::Vec2;
-        use exr::meta::attribute::{ChannelDescription, ChannelList, Chromaticities, Text};
         if matches!(part, Some(PartSelect::Index(i)) if *i != 0)
             || matches!(part, Some(PartSelect::Name(_)))
         {
@@ -369,33 +367,7 @@ impl ExrInput {
             )));
         }
         let rh = super::rgbe::parse_header(path, map.bytes())?;
-        let names: [&str; 3] = if rh.xyze {
-            ["X", "Y", "Z"]
-        } else {
-            ["R", "G", "B"]
-        };
-        let mut sorted = names;
-        sorted.sort_unstable();
-        let list: exr::prelude::SmallVec<[ChannelDescription; 5]> = sorted
-            .iter()
-            .map(|n| ChannelDescription::new(Text::from(*n), SampleType::F32, false))
-            .collect();
-        let mut header = Header::new(Text::from(""), Vec2(rh.w, rh.h), list).with_encoding(
-            Compression::ZIP16,
-            exr::meta::BlockDescription::ScanLines,
-            exr::meta::attribute::LineOrder::Increasing,
-        );
-        header.channels = ChannelList::new(header.channels.list.clone());
-        header.own_attributes.layer_name = None;
-        if let Some(p) = rh.primaries {
-            let v = |i: usize| Vec2(p[i] as f32, p[i + 1] as f32);
-            header.shared_attributes.chromaticities = Some(Chromaticities {
-                red: v(0),
-                green: v(2),
-                blue: v(4),
-                white: v(6),
-            });
-        }
+        let (header, names, sorted) = rh.exr_header();
         let selected = names
             .iter()
             .map(|n| Selected {

@@ -39,6 +39,9 @@ impl Source for InputSource<'_> {
 }
 
 impl Source for ExrSource<'_> {
+    /// (Long: the read-ahead loop: what to decode, decoding in parallel, rows
+    /// handed over in order, pages released; the steps share the source's
+    /// cursors.)
     fn next_strip(&mut self, max_rows: usize) -> Result<Option<Strip>> {
         let (w, h) = self.input.size();
         let nch = self.input.selected.len();
