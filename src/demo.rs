@@ -57,6 +57,8 @@ pub fn run(dir: &Path, w: usize, h: usize, log: &dyn Fn(&str)) -> Result<String>
 }
 
 /// One scene: render, filter with every method, score, montage.
+/// (Long: each method's run and scores are a row of one table, written in
+/// one place so that the columns stay in step.)
 fn scene_table(
     dir: &Path,
     kind: SceneKind,

@@ -428,6 +428,7 @@ impl Report {
     }
 
     /// This run's (or part's) summary.
+    /// (Long: a line per fact, in the order they print.)
     fn own_summary(&self) -> String {
         let mut s = format!(
             "{} -> {}: {} S={}{} {}x{} -> {}x{}\n  {:.2} s, {:.1} Mpx/s; noisy {} spread {} capped {}{}\n",

@@ -16,6 +16,8 @@ pub fn thread_pool(threads: usize) -> Result<rayon::ThreadPool> {
 }
 
 /// Run `job` from `source` to `sink`, rounding to the sink's precision.
+/// (Long: the reader and writer threads and the filter loop live in one
+/// thread scope, tied by its channels; apart, each would need them passed.)
 pub fn run<S: Source, K: Sink>(
     source: S,
     sink: K,

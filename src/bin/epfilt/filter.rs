@@ -123,6 +123,8 @@ fn one_file(a: &FilterArgs, job: FilterJob) -> Result<(), Exit> {
 
 /// The filter job the arguments describe (every check that needs no file);
 /// options the method does not read are warned about.
+/// (Long: one field of `FilterJob` per option group, in `--help` order; in
+/// pieces it would be the same list, harder to check against the options.)
 fn filter_job(
     a: &FilterArgs,
     band: Option<(usize, usize)>,
@@ -264,6 +266,8 @@ fn filter_job(
 
 /// A frame sequence, or this task's share of it: each frame as `filter`
 /// would do it, a line per frame, a summary, and exit 1 when any failed.
+/// (Long: it reads as the command runs: frames, task, each frame, summary,
+/// exit status; each step is a few lines.)
 fn sequence(
     a: &FilterArgs,
     template: FilterJob,
