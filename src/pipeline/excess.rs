@@ -587,32 +587,27 @@ fn scatter_ring(
         return;
     }
     let first = acc.first();
-    let tiles = super::tiles::column_tiles(acc, w, nch, tile);
     let offsets = ring.offsets();
-    tiles
-        .into_par_iter()
-        .enumerate()
-        .for_each(|(t, mut parts)| {
-            let x0 = t * tile;
-            let x1 = (x0 + tile).min(w);
-            for s in sources {
-                let (sx, sy, m) = (s.x as usize, s.y as usize, s.m as usize);
-                let rx = ring.reach_x(m);
-                if sx + rx < x0 || sx >= x1 + rx {
+    crate::pipeline::tiles::for_each_tile(acc, w, nch, tile, |cols, parts| {
+        let (x0, x1) = (cols.start, cols.end);
+        for s in sources {
+            let (sx, sy, m) = (s.x as usize, s.y as usize, s.m as usize);
+            let rx = ring.reach_x(m);
+            if sx + rx < x0 || sx >= x1 + rx {
+                continue;
+            }
+            for &(dx, dy) in &offsets[..m] {
+                let tx = sx as i64 + dx as i64;
+                let ty = sy as i64 + dy as i64;
+                if tx < x0 as i64 || tx >= x1 as i64 || ty < 0 || ty >= h as i64 {
                     continue;
                 }
-                for &(dx, dy) in &offsets[..m] {
-                    let tx = sx as i64 + dx as i64;
-                    let ty = sy as i64 + dy as i64;
-                    if tx < x0 as i64 || tx >= x1 as i64 || ty < 0 || ty >= h as i64 {
-                        continue;
-                    }
-                    let r = ty as usize - first;
-                    // Channels that are not spread keep their bits.
-                    for c in (0..nch).filter(|&c| modes[c] == ChannelMode::Spread) {
-                        parts[r * nch + c][tx as usize - x0] += shares[s.off + c];
-                    }
+                let r = ty as usize - first;
+                // Channels that are not spread keep their bits.
+                for c in (0..nch).filter(|&c| modes[c] == ChannelMode::Spread) {
+                    parts[r * nch + c][tx as usize - x0] += shares[s.off + c];
                 }
             }
-        });
+        }
+    });
 }

@@ -284,55 +284,48 @@ fn scatter<'k>(
     tile: usize,
 ) {
     let first = acc.first();
-    let tiles = crate::pipeline::tiles::column_tiles(acc, w, nch, tile);
-    tiles
-        .into_par_iter()
-        .enumerate()
-        .for_each(|(t, mut parts)| {
-            let x0 = t * tile;
-            let x1 = (x0 + tile).min(w);
-            for sp in spreads {
-                let (cx0, cx1) = (sp.xs.max(x0), (sp.xs + sp.xl).min(x1));
-                if cx0 >= cx1 {
+    crate::pipeline::tiles::for_each_tile(acc, w, nch, tile, |cols, parts| {
+        let (x0, x1) = (cols.start, cols.end);
+        for sp in spreads {
+            let (cx0, cx1) = (sp.xs.max(x0), (sp.xs + sp.xl).min(x1));
+            if cx0 >= cx1 {
+                continue;
+            }
+            let weights = |at: Weights, len: usize| match at {
+                Weights::Arena(off) => &arena[off..off + len],
+                Weights::Kernel(l, ph) => rows(l, ph),
+            };
+            let wx = &weights(sp.wx, sp.xl)[cx0 - sp.xs..cx1 - sp.xs];
+            let wy = weights(sp.wy, sp.yl);
+            let v = &vals[sp.voff..sp.voff + nch];
+            // Colour without alpha, the common case: the three channels in
+            // one loop (each value gets the same products in the same
+            // order as channel by channel).
+            let rgb =
+                nch >= 3 && v[..3].iter().all(|&v| v != 0.0) && v[3..].iter().all(|&v| v == 0.0);
+            for (dy, &wyv) in wy.iter().enumerate() {
+                let r = sp.ys + dy - first;
+                if rgb {
+                    let (k0, k1, k2) = (v[0] * wyv, v[1] * wyv, v[2] * wyv);
+                    if let [a, b, c, ..] = &mut parts[r * nch..(r + 1) * nch] {
+                        let span = cx0 - x0..cx1 - x0;
+                        let (a, b, c) = (&mut a[span.clone()], &mut b[span.clone()], &mut c[span]);
+                        for (((a, b), c), &wv) in a.iter_mut().zip(b).zip(c).zip(wx) {
+                            *a += k0 * wv;
+                            *b += k1 * wv;
+                            *c += k2 * wv;
+                        }
+                    }
                     continue;
                 }
-                let weights = |at: Weights, len: usize| match at {
-                    Weights::Arena(off) => &arena[off..off + len],
-                    Weights::Kernel(l, ph) => rows(l, ph),
-                };
-                let wx = &weights(sp.wx, sp.xl)[cx0 - sp.xs..cx1 - sp.xs];
-                let wy = weights(sp.wy, sp.yl);
-                let v = &vals[sp.voff..sp.voff + nch];
-                // Colour without alpha, the common case: the three channels in
-                // one loop (each value gets the same products in the same
-                // order as channel by channel).
-                let rgb = nch >= 3
-                    && v[..3].iter().all(|&v| v != 0.0)
-                    && v[3..].iter().all(|&v| v == 0.0);
-                for (dy, &wyv) in wy.iter().enumerate() {
-                    let r = sp.ys + dy - first;
-                    if rgb {
-                        let (k0, k1, k2) = (v[0] * wyv, v[1] * wyv, v[2] * wyv);
-                        if let [a, b, c, ..] = &mut parts[r * nch..(r + 1) * nch] {
-                            let span = cx0 - x0..cx1 - x0;
-                            let (a, b, c) =
-                                (&mut a[span.clone()], &mut b[span.clone()], &mut c[span]);
-                            for (((a, b), c), &wv) in a.iter_mut().zip(b).zip(c).zip(wx) {
-                                *a += k0 * wv;
-                                *b += k1 * wv;
-                                *c += k2 * wv;
-                            }
-                        }
-                        continue;
-                    }
-                    for c in (0..nch).filter(|&c| v[c] != 0.0) {
-                        let coef = v[c] * wyv;
-                        let dst = &mut parts[r * nch + c][cx0 - x0..cx1 - x0];
-                        for (d, &wv) in dst.iter_mut().zip(wx) {
-                            *d += coef * wv;
-                        }
+                for c in (0..nch).filter(|&c| v[c] != 0.0) {
+                    let coef = v[c] * wyv;
+                    let dst = &mut parts[r * nch + c][cx0 - x0..cx1 - x0];
+                    for (d, &wv) in dst.iter_mut().zip(wx) {
+                        *d += coef * wv;
                     }
                 }
             }
-        });
+        }
+    });
 }
