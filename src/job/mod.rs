@@ -370,15 +370,7 @@ fn filter_views(
     if job.output_settings.allow_lossy {
         return refuse("a lossy compression would round each view twice; choose a lossless one");
     }
-    let dir = crate::io::destination::Destination::resolve(&job.output)?
-        .named()
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
-    let tmp = tempfile::Builder::new()
-        .prefix(".epfilt-views-")
-        .tempdir_in(&dir)
-        .map_err(|e| Error::io(&dir, e))?;
+    let tmp = temp_dir_beside(&job.output, ".epfilt-views-")?;
     let mut reports = Vec::new();
     let mut sources = Vec::new();
     for (i, v) in views.iter().enumerate() {
@@ -402,6 +394,20 @@ fn filter_views(
         report.add_view(r);
     }
     Ok(report)
+}
+
+/// A temporary folder beside what `output` names (where the files it is
+/// put together from can be renamed or copied cheaply), removed when dropped.
+fn temp_dir_beside(output: &Path, prefix: &str) -> Result<tempfile::TempDir> {
+    let dir = crate::io::destination::Destination::resolve(output)?
+        .named()
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
+    tempfile::Builder::new()
+        .prefix(prefix)
+        .tempdir_in(&dir)
+        .map_err(|e| Error::io(&dir, e))
 }
 
 /// One part of a multi-part input filtered alone: the others are named in a
@@ -465,15 +471,7 @@ fn filter_and_assemble(
 ) -> Result<Report> {
     let all = matches!(job.part, Some(PartSelect::All));
     let name_of = |i: usize| parts[i].name.clone();
-    let dir = crate::io::destination::Destination::resolve(&job.output)?
-        .named()
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
-    let tmp = tempfile::Builder::new()
-        .prefix(".epfilt-parts-")
-        .tempdir_in(&dir)
-        .map_err(|e| Error::io(&dir, e))?;
+    let tmp = temp_dir_beside(&job.output, ".epfilt-parts-")?;
     let mut reports: Vec<Option<Report>> = vec![None; parts.len()];
     let mut sources = Vec::new();
     let mut entries = Vec::new();
