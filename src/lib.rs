@@ -50,6 +50,7 @@ pub mod preview;
 pub mod report;
 pub mod sequence;
 pub mod synth;
+pub mod trace;
 
 pub use error::{Error, Result};
 pub use filter::{FilterParams, Method};

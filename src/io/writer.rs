@@ -611,9 +611,11 @@ impl ExrOutput {
         let order = &self.order;
         let pending = &self.pending;
         let types = &self.types;
+        let region = crate::trace::region("compress");
         let chunks: Vec<Result<(usize, Chunk)>> = (0..full)
             .into_par_iter()
             .map(|b| {
+                let _task = region.task("compress");
                 let r0 = b * lines;
                 let r1 = ((b + 1) * lines).min(rows);
                 let mut data = Vec::with_capacity((r1 - r0) * row_len * 4);

@@ -174,10 +174,12 @@ fn ingest(
         }
     }
     // Ledger of the input, row by row in parallel, merged in order.
+    let region = crate::trace::region("ledger in");
     let sums: Vec<std::result::Result<Sums, (usize, usize)>> = strip
         .data
         .par_chunks(row_len)
         .map(|row| {
+            let _task = region.task("ledger in");
             let mut s = Sums::new(nch);
             for c in (0..nall).filter(|&c| !is_data(c)) {
                 let ch = &row[c * in_w..(c + 1) * in_w];
@@ -237,12 +239,14 @@ fn finish_rows(
 ) -> Result<(OutRows, Sums, Sums, Vec<u64>)> {
     let nch = names.len();
     let mut data = vec![0.0f32; (b - a) * nch * w];
+    let region = crate::trace::region("finish rows");
     let sums: Vec<Result<(Sums, Sums, u64)>> = data
         .par_chunks_mut(nch * w)
         .enumerate()
         .map_init(
             || (vec![0.0f64; w], vec![0.0f64; w]),
             |(tmp, weighted), (k, out)| {
+                let _task = region.task("finish rows");
                 let y = a + k;
                 let mut raw = Sums::new(nch);
                 let mut rounded = Sums::new(nch);

@@ -253,11 +253,13 @@ impl ExcessStage {
         let cs = self.cap.range_mut(a, b);
         let fs = self.raw.range_mut(a, b);
         let params = &self.params;
+        let region = crate::trace::region("ep-box statistics");
         ys.into_par_iter()
             .zip(cs)
             .zip(fs)
             .enumerate()
             .for_each(|(k, ((yrow, crow), frow))| {
+                let _task = region.task("ep-box statistics");
                 let row = input.get(a + k);
                 let ch = |c: usize, x: usize| row[c * w + x] as f64;
                 for x in 0..w {
@@ -285,10 +287,12 @@ impl ExcessStage {
         let (raw, ylum) = (&self.raw, &self.ylum);
         let guard = self.params.guard;
         let rows = self.noisy.range_mut(a, b);
+        let region = crate::trace::region("ep-box decide");
         let reliable: u64 = rows
             .into_par_iter()
             .enumerate()
             .map(|(k, frow)| {
+                let _task = region.task("ep-box decide");
                 let y = a + k;
                 let mut reliable = 0;
                 let r = raw.get(y);
@@ -380,9 +384,13 @@ impl ExcessStage {
             chunks.push((y, rows.by_ref().take(n).collect()));
             y += n;
         }
+        let region = crate::trace::region("ep-box passes");
         let results: Vec<(Vec<Source>, Vec<f64>, ExcessCounts)> = chunks
             .into_par_iter()
-            .map(|(c0, rows)| ctx.treat_rows(c0, rows))
+            .map(|(c0, rows)| {
+                let _task = region.task("ep-box passes");
+                ctx.treat_rows(c0, rows)
+            })
             .collect();
         let (mut sources, mut shares) = (Vec::new(), Vec::new());
         for (s, sh, c) in results {

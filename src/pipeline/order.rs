@@ -80,9 +80,11 @@ impl Stage for OrderStage {
         let (w, h, nch, trim) = (self.w, self.h, self.nch, self.trim);
         let modes = &self.modes;
         let rows = self.out.range_mut(a, b);
+        let region = crate::trace::region("order");
         rows.into_par_iter()
             .enumerate()
             .for_each_init(Vec::new, |vals, (k, row)| {
+                let _task = region.task("order");
                 let y = a + k;
                 for c in 0..nch {
                     if modes[c] == ChannelMode::Nearest {

@@ -16,8 +16,8 @@ pub fn thread_pool(threads: usize) -> Result<rayon::ThreadPool> {
 }
 
 /// Run `job` from `source` to `sink`, rounding to the sink's precision.
-/// (Long: the reader and writer threads and the filter loop live in one
-/// thread scope, tied by its channels; apart, each would need them passed.)
+/// The reader and writer run on threads of their own (`read_strips`,
+/// `write_rows`), the filter on this one, tied by two bounded channels.
 pub fn run<S: Source, K: Sink>(
     source: S,
     sink: K,
@@ -44,7 +44,7 @@ pub fn run<S: Source, K: Sink>(
             .is_some_and(|c| c.load(Ordering::Relaxed))
     };
     let (strip_tx, strip_rx) = crossbeam_channel::bounded::<Result<Strip>>(2);
-    let (row_tx, row_rx) = crossbeam_channel::bounded::<OutRows>(2);
+    let (row_tx, row_rx) = crossbeam_channel::bounded::<(usize, OutRows)>(2);
     let strip_rows = match cfg.strip_rows {
         0 => auto_strip_rows(job.grid.in_w, job.strip_channels()),
         n => n,
@@ -53,52 +53,11 @@ pub fn run<S: Source, K: Sink>(
     let mut stages = StageSeconds::default();
 
     let result = std::thread::scope(|scope| -> Result<()> {
-        let reader = scope.spawn(move || -> f64 {
-            let mut source = source;
-            let mut busy = 0.0;
-            loop {
-                let t = Instant::now();
-                let next = pool.install(|| source.next_strip(strip_rows));
-                busy += t.elapsed().as_secs_f64();
-                let stop = !matches!(next, Ok(Some(_)));
-                let msg = match next {
-                    Ok(Some(s)) => Ok(s),
-                    Ok(None) => break,
-                    Err(e) => Err(e),
-                };
-                if strip_tx.send(msg).is_err() || stop {
-                    break;
-                }
-            }
-            busy
-        });
-        let writer = scope.spawn(move || -> (Result<()>, f64) {
-            let mut sink = sink;
-            let mut written = 0;
-            let mut busy = 0.0;
-            for rows in row_rx.iter() {
-                let t = Instant::now();
-                let r = pool.install(|| sink.write_rows(rows.y0, rows.rows, &rows.data));
-                busy += t.elapsed().as_secs_f64();
-                if let Err(e) = r {
-                    return (Err(e), busy);
-                }
-                written += rows.rows;
-            }
-            // Finish only a complete image: when the filter stopped early its
-            // error is the one reported, and the sink is dropped unfinished
-            // (an EXR output then removes its temporary file).
-            let t = Instant::now();
-            let r = if written == total {
-                pool.install(|| sink.finish())
-            } else {
-                Ok(())
-            };
-            (r, busy + t.elapsed().as_secs_f64())
-        });
+        let reader = scope.spawn(move || read_strips(source, pool, strip_rows, strip_tx));
+        let writer = scope.spawn(move || write_rows(sink, pool, total, row_rx));
         let mut filter_result = Ok(());
         let mut writer_failed = false;
-        loop {
+        for k in 0.. {
             let t = Instant::now();
             let Ok(strip) = strip_rx.recv() else { break };
             stages.filter_waiting_for_input += t.elapsed().as_secs_f64();
@@ -107,13 +66,18 @@ pub fn run<S: Source, K: Sink>(
                 break;
             }
             let t = Instant::now();
-            let pushed = strip.and_then(|s| pool.install(|| streamer.push(s)));
+            let pushed = strip.and_then(|s| {
+                pool.install(|| {
+                    let _segment = crate::trace::segment("filter", k, &[]);
+                    streamer.push(s)
+                })
+            });
             stages.filter += t.elapsed().as_secs_f64();
             match pushed {
                 Ok(Some(rows)) => {
                     progress(rows.y0 + rows.rows, total);
                     let t = Instant::now();
-                    let sent = row_tx.send(rows);
+                    let sent = row_tx.send((k, rows));
                     stages.filter_waiting_for_output += t.elapsed().as_secs_f64();
                     if sent.is_err() {
                         writer_failed = true; // its error is reported below
@@ -163,6 +127,75 @@ pub fn run<S: Source, K: Sink>(
         nonfinite_zeroed: books.nonfinite_zeroed().to_vec(),
         first_nonfinite: books.first_nonfinite(),
     })
+}
+
+/// The reader thread: strips of `strip_rows` from `source` into `tx` (an
+/// error ends them); returns its busy seconds.
+fn read_strips<S: Source>(
+    mut source: S,
+    pool: &rayon::ThreadPool,
+    strip_rows: usize,
+    tx: crossbeam_channel::Sender<Result<Strip>>,
+) -> f64 {
+    let mut busy = 0.0;
+    for k in 0.. {
+        let t = Instant::now();
+        let next = pool.install(|| {
+            let _segment = crate::trace::segment("read", k, &[]);
+            source.next_strip(strip_rows)
+        });
+        busy += t.elapsed().as_secs_f64();
+        let stop = !matches!(next, Ok(Some(_)));
+        let msg = match next {
+            Ok(Some(s)) => Ok(s),
+            Ok(None) => break,
+            Err(e) => Err(e),
+        };
+        if tx.send(msg).is_err() || stop {
+            break;
+        }
+    }
+    busy
+}
+
+/// The writer thread: the rows from `rx` (each with the strip that finished
+/// them) into `sink`, finished once all `total` rows are in; its result and
+/// busy seconds.
+fn write_rows<K: Sink>(
+    mut sink: K,
+    pool: &rayon::ThreadPool,
+    total: usize,
+    rx: crossbeam_channel::Receiver<(usize, OutRows)>,
+) -> (Result<()>, f64) {
+    let mut written = 0;
+    let mut busy = 0.0;
+    let mut last = 0;
+    for (k, rows) in rx.iter() {
+        let t = Instant::now();
+        last = k;
+        let r = pool.install(|| {
+            let _segment = crate::trace::segment("write", k, &[]);
+            sink.write_rows(rows.y0, rows.rows, &rows.data)
+        });
+        busy += t.elapsed().as_secs_f64();
+        if let Err(e) = r {
+            return (Err(e), busy);
+        }
+        written += rows.rows;
+    }
+    // Finish only a complete image: when the filter stopped early its error
+    // is the one reported, and the sink is dropped unfinished (an EXR output
+    // then removes its temporary file).
+    let t = Instant::now();
+    let r = if written == total {
+        pool.install(|| {
+            let _segment = crate::trace::segment("write", last, &[]);
+            sink.finish()
+        })
+    } else {
+        Ok(())
+    };
+    (r, busy + t.elapsed().as_secs_f64())
 }
 
 /// The mean luminance of a source's filtered channels (the first pass of

@@ -15,10 +15,14 @@ pub fn for_each_tile(
     tile: usize,
     f: impl Fn(std::ops::Range<usize>, &mut [&mut [f64]]) + Sync,
 ) {
+    let region = crate::trace::region("scatter");
     column_tiles(acc, w, nch, tile)
         .into_par_iter()
         .enumerate()
-        .for_each(|(t, mut parts)| f(t * tile..((t + 1) * tile).min(w), &mut parts));
+        .for_each(|(t, mut parts)| {
+            let _task = region.task("scatter");
+            f(t * tile..((t + 1) * tile).min(w), &mut parts)
+        });
 }
 
 /// The rows of `acc` (planar `[c][x]`, `w` columns per channel) cut into

@@ -21,3 +21,4 @@ mod reference;
 mod rgbe;
 mod robust;
 mod synth;
+mod trace;

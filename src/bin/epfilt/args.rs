@@ -80,6 +80,18 @@ pub enum Command {
         #[arg(long, short = 'q')]
         quiet: bool,
     },
+    /// Predict a run on more cores from its `filter --trace` file: work T1,
+    /// span T∞, and the wall time and speed-up on each number of cores.
+    ScalingModel {
+        /// The trace (`filter --trace FILE`).
+        trace: PathBuf,
+        /// Numbers of cores to predict.
+        #[arg(long, value_delimiter = ',', default_value = "1,2,4,8,16,32,64")]
+        cores: Vec<usize>,
+        /// Print JSON: {"work_s", "span_s", "predicted_s": {"1": .., ...}, ...}.
+        #[arg(long)]
+        json: bool,
+    },
     /// Plan a render from a pilot with variance (§5.1, Eqs. 8-10): L_tvis, the
     /// mean standard error, and the samples per pixel needed for ±D.
     Plan(Box<PlanArgs>),
@@ -431,6 +443,11 @@ pub struct FilterArgs {
     /// Write the summary as JSON to this file (- for standard output).
     #[arg(long, help_heading = "Output")]
     pub report: Option<PathBuf>,
+    /// Record every unit of work of the run (reads, filter tasks, writes)
+    /// as Chrome trace-event JSON in this file (Perfetto, chrome://tracing);
+    /// `epfilt scaling-model FILE` predicts the run on more cores.
+    #[arg(long, help_heading = "Output")]
+    pub trace: Option<PathBuf>,
     /// No progress bar and no summary (warnings about data are still printed).
     #[arg(long, short = 'q', help_heading = "Output")]
     pub quiet: bool,

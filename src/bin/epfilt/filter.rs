@@ -77,7 +77,7 @@ fn one_file(a: &FilterArgs, job: FilterJob) -> Result<(), Exit> {
     // The output's name and folder, and the report's, now: not after a long run.
     epfilt::io::Destination::resolve(&a.output).map_err(fail)?;
     job.output_format().map_err(fail)?;
-    if let Some(path) = &a.report {
+    for path in a.report.iter().chain(&a.trace) {
         epfilt::io::Destination::resolve(path).map_err(fail)?;
     }
     if a.skip_existing {
@@ -104,11 +104,16 @@ fn one_file(a: &FilterArgs, job: FilterJob) -> Result<(), Exit> {
             b.set_position(done as u64);
         }
     };
+    let session = a.trace.as_ref().map(|_| epfilt::trace::start());
     let report = epfilt::filter_file(&job, &progress);
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
+    let events = session.map(|s| s.finish());
     let report = report.map_err(fail)?;
+    if let (Some(path), Some(events)) = (&a.trace, &events) {
+        epfilt::trace::write(path, events).map_err(fail)?;
+    }
     for w in &report.warnings {
         warn(w);
     }

@@ -94,6 +94,16 @@ fn dispatch(cli: Cli, matches: &clap::ArgMatches, cancel: Arc<AtomicBool>) -> Re
                 emit(&plan.table())
             }
         }
+        Command::ScalingModel { trace, cores, json } => {
+            let events = epfilt::trace::read(&trace).map_err(fail)?;
+            let model = epfilt::trace::model::Model::from_events(&events).map_err(fail)?;
+            let p = epfilt::trace::model::Prediction::of(&model, &cores);
+            if json {
+                emit(&(serde_json::to_string_pretty(&p).map_err(fail)? + "\n"))
+            } else {
+                emit(&p.table(&cores))
+            }
+        }
         Command::Merge {
             mut paths,
             format,

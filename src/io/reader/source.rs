@@ -90,10 +90,12 @@ impl Source for ExrSource<'_> {
                     rest = tail;
                 }
                 let input = self.input;
+                let region = crate::trace::region("decode");
                 let spans: Vec<Result<Landed>> = batch
                     .par_iter()
                     .zip(slices.into_par_iter())
                     .map(|(r, dst)| {
+                        let _task = region.task("decode");
                         let (offset, expected) = r.chunks[0];
                         input.decode_chunk(
                             offset,
@@ -109,8 +111,14 @@ impl Source for ExrSource<'_> {
                 }
             } else {
                 // Tiles: decode each into its own buffer, then place it.
-                let decoded: Vec<Result<Vec<Decoded>>> =
-                    batch.par_iter().map(|r| self.input.decode_row(r)).collect();
+                let region = crate::trace::region("decode tiles");
+                let decoded: Vec<Result<Vec<Decoded>>> = batch
+                    .par_iter()
+                    .map(|r| {
+                        let _task = region.task("decode tiles");
+                        self.input.decode_row(r)
+                    })
+                    .collect();
                 let mut row_base = 0;
                 for (row, blocks) in batch.iter().zip(decoded) {
                     let lines = row.y1 - row.y0;

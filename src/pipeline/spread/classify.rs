@@ -304,12 +304,14 @@ impl GaussianStage {
         // Both phases row by row in one task: the pass reads the rows the
         // search for noise has just read.
         let mut hrows = self.hpass.range_mut(a * s, b * s);
+        let region = crate::trace::region("classify");
         let found: Vec<Found> = hrows
             .par_chunks_mut(s)
             .enumerate()
             .map_init(
                 <(FindScratch, Vec<f32>)>::default,
                 |(scratch, copy), (k, hs)| {
+                    let _task = region.task("classify");
                     let y = a + k;
                     let f = ctx.find(scratch, y);
                     ctx.pass(copy, y, hs, &f.0);

@@ -101,8 +101,10 @@ fn tent_up(
             up.push_stale(0.0); // every value is written below
         }
         let coarse = &*coarse;
+        let region = crate::trace::region("upsample across");
         let mut rows = up.range_mut(from, last + 1);
         rows.par_iter_mut().enumerate().for_each(|(k, row)| {
+            let _task = region.task("upsample across");
             let src = coarse.get(from + k);
             for (src, dst) in src.chunks_exact(n_coarse).zip(row.chunks_exact_mut(n_fine)) {
                 tent_x.gather(src, dst);
@@ -110,8 +112,10 @@ fn tent_up(
         });
     }
     let up = &*up;
+    let region = crate::trace::region("upsample down");
     let mut rows = dst.range_mut(a, b);
     rows.par_iter_mut().enumerate().for_each(|(k, row)| {
+        let _task = region.task("upsample down");
         // The same sum as the gather across: `0 + w0 * a (+ w1 * b)`.
         let (c, w) = tent_y.of(a + k);
         let add = |d: &mut f64, u: f64| {

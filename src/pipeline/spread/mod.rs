@@ -479,10 +479,12 @@ impl GaussianStage {
         }
         let lum = &self.lum;
         let real_counts = self.real_counts.as_ref();
+        let region = crate::trace::region("box luminance");
         let mut rows = self.ybox.range_mut(a, b);
         rows.par_iter_mut()
             .enumerate()
             .for_each_init(Vec::<f64>::new, |core, (k, row)| {
+                let _task = region.task("box luminance");
                 let y = a + k;
                 // The mean in f64, stored in f32 (`LumRows`).
                 core.clear();
@@ -519,10 +521,12 @@ impl GaussianStage {
         let hpass = &self.hpass;
         let inv = self.inv_s2;
         let (modes, s) = (&self.modes, self.grid.s);
+        let region = crate::trace::region("base rows");
         let mut rows = self.base_rows.range_mut(a, b);
         rows.par_iter_mut()
             .enumerate()
             .for_each_init(Vec::new, |taps, (k, row)| {
+                let _task = region.task("base rows");
                 let y = a + k;
                 let j0 = base.gather(y, h, in_h, taps);
                 for c in 0..nch {

@@ -47,28 +47,39 @@ impl Spread {
     }
 }
 
+/// Samples per task of the width search: a search takes about a
+/// microsecond, so a task of 64 is long enough for its scheduling (and its
+/// trace event) to cost little, and short enough to balance the load.
+const SEARCH_TASK: usize = 64;
+
 impl GaussianStage {
-    /// The width search of the first `split` pending samples, one sample
-    /// per task (each is independent of the rest).
+    /// The width search of the first `split` pending samples, in tasks of
+    /// [`SEARCH_TASK`] samples (each sample is independent of the rest).
     fn search_widths(&mut self, split: usize) {
         let Some(ep) = self.ep.as_ref() else { return };
         let s = self.grid.s;
         let batch = &mut self.pending[..split];
         let view = YView::new(&self.ybox, self.h);
+        let region = crate::trace::region("width search");
         let cost: u64 = batch
-            .par_iter_mut()
-            .map_init(Folded::default, |fold, n| {
-                let c = ep.search_in(
-                    &view,
-                    n.i as usize / s,
-                    n.j as usize / s,
-                    n.x0,
-                    n.xbar0,
-                    fold,
-                );
-                n.level = c.level;
-                n.capped = c.capped;
-                c.cost
+            .par_chunks_mut(SEARCH_TASK)
+            .map_init(Folded::default, |fold, chunk| {
+                let _task = region.task("width search");
+                let mut cost = 0;
+                for n in chunk {
+                    let c = ep.search_in(
+                        &view,
+                        n.i as usize / s,
+                        n.j as usize / s,
+                        n.x0,
+                        n.xbar0,
+                        fold,
+                    );
+                    n.level = c.level;
+                    n.capped = c.capped;
+                    cost += c.cost;
+                }
+                cost
             })
             .sum();
         self.counts.search_cost += cost;

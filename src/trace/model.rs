@@ -1,0 +1,507 @@
+//! The scaling model: work `T1`, span `T∞` and the wall time on `P` cores,
+//! from replaying a trace's units of work with the pipeline's constraints.
+//!
+//! A trace ([`super`]) is three lanes of segments, one per strip, each a
+//! sequence of serial pieces (run on the lane's own thread) and regions
+//! (parallel loops whose tasks run on any core). The replay keeps:
+//!
+//! * each lane's strips in order, one segment at a time;
+//! * `filter` of strip `k` after `read` of strip `k`; `write` after the
+//!   `filter` segment that made its rows;
+//! * the strip queue: `read` of strip `k` starts once `filter` of strip
+//!   `k - QUEUE` has started (the channel holds [`QUEUE`] strips);
+//! * a region ends when its last task does.
+//!
+//! Units are given to free cores first come, first served (a lane's next
+//! piece and a region's tasks as they become ready). Not modelled: memory
+//! bandwidth and caches (each unit takes on `P` cores the time it took in
+//! the trace), SMT, the operating system's scheduling of more threads than
+//! cores, and the output queue (the writer is never far behind). From a
+//! 1-thread trace these make the prediction optimistic where the cores
+//! share a memory bus; `scripts/bench-scaling` prints it beside measured
+//! times.
+
+use std::cmp::Reverse;
+use std::collections::{BTreeMap, BinaryHeap, HashMap, VecDeque};
+
+use super::Event;
+use crate::error::{Error, Result};
+
+/// Strips the reader may hold ahead of the filter (the strip channel's
+/// capacity, `pipeline::runner`).
+pub const QUEUE: usize = 2;
+
+/// One piece of a segment.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Phase {
+    /// Serial code on the lane's thread, seconds.
+    Serial(f64),
+    /// A parallel loop: its tasks' seconds.
+    Region(Vec<f64>),
+}
+
+/// One lane's work on one strip.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Segment {
+    /// 0 read, 1 filter, 2 write.
+    pub lane: usize,
+    /// The strip (`write`: the filter strip whose rows it writes).
+    pub strip: usize,
+    /// Its pieces, in order.
+    pub phases: Vec<Phase>,
+}
+
+/// The lanes, by their names in a trace.
+pub const LANES: [&str; 3] = ["read", "filter", "write"];
+
+/// A run to replay.
+#[derive(Clone, Debug, Default)]
+pub struct Model {
+    /// Segments of every lane, each lane's in strip order.
+    pub segments: Vec<Segment>,
+    /// Serial seconds by lane, and by region name the tasks' seconds.
+    pub serial_by_lane: BTreeMap<String, f64>,
+    /// Seconds in the tasks of each region name.
+    pub parallel_by_region: BTreeMap<String, f64>,
+}
+
+impl Model {
+    /// The model of a trace's events.
+    pub fn from_events(events: &[Event]) -> Result<Model> {
+        let bad = |why: String| Error::Config(format!("trace: {why}"));
+        let mut tasks: HashMap<u64, Vec<f64>> = HashMap::new();
+        let mut regions: HashMap<u64, Vec<&Event>> = HashMap::new();
+        for e in events {
+            match e.cat.as_str() {
+                "task" => {
+                    let r = *e
+                        .args
+                        .deps
+                        .first()
+                        .ok_or_else(|| bad("a task without its region".into()))?;
+                    tasks.entry(r).or_default().push(e.dur * 1e-6);
+                }
+                "region" => {
+                    if let Some(&s) = e.args.deps.first() {
+                        regions.entry(s).or_default().push(e);
+                    }
+                }
+                _ => {}
+            }
+        }
+        let mut model = Model::default();
+        let mut segs: Vec<&Event> = events.iter().filter(|e| e.cat == "segment").collect();
+        segs.sort_by(|a, b| a.ts.total_cmp(&b.ts));
+        for seg in segs {
+            let lane = LANES
+                .iter()
+                .position(|l| *l == seg.args.lane)
+                .ok_or_else(|| bad(format!("unknown lane {:?}", seg.args.lane)))?;
+            let strip = seg
+                .args
+                .strip
+                .ok_or_else(|| bad("a segment without its strip".into()))?;
+            let mut inner = regions.remove(&seg.args.id).unwrap_or_default();
+            inner.sort_by(|a, b| a.ts.total_cmp(&b.ts));
+            let mut phases = Vec::new();
+            let mut at = seg.ts;
+            let mut serial = 0.0;
+            for r in inner {
+                let gap = (r.ts - at).max(0.0) * 1e-6;
+                let t = tasks.remove(&r.args.id).unwrap_or_default();
+                // What the region took beyond its tasks (handing them out,
+                // joining) stays on the lane.
+                let over = (r.dur * 1e-6 - t.iter().sum::<f64>()).max(0.0);
+                *model.parallel_by_region.entry(r.name.clone()).or_default() +=
+                    t.iter().sum::<f64>();
+                serial += gap + over;
+                phases.push(Phase::Serial(gap + over));
+                phases.push(Phase::Region(t));
+                at = at.max(r.ts + r.dur);
+            }
+            let tail = (seg.ts + seg.dur - at).max(0.0) * 1e-6;
+            serial += tail;
+            phases.push(Phase::Serial(tail));
+            *model.serial_by_lane.entry(LANES[lane].into()).or_default() += serial;
+            model.segments.push(Segment {
+                lane,
+                strip,
+                phases,
+            });
+        }
+        Ok(model)
+    }
+
+    /// Total seconds of work, `T1`.
+    pub fn work(&self) -> f64 {
+        self.segments
+            .iter()
+            .flat_map(|s| &s.phases)
+            .map(|p| match p {
+                Phase::Serial(d) => *d,
+                Phase::Region(t) => t.iter().sum(),
+            })
+            .sum()
+    }
+
+    /// The critical path, `T∞`: the replay with a core for every unit.
+    pub fn span(&self) -> f64 {
+        self.replay(usize::MAX)
+    }
+
+    /// The wall time on `cores` cores.
+    pub fn replay(&self, cores: usize) -> f64 {
+        Replay::new(self).run(cores.max(1))
+    }
+}
+
+/// What the model predicts for a trace.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Prediction {
+    /// Total work, seconds (`T1`).
+    pub work_s: f64,
+    /// Critical path, seconds (`T∞`).
+    pub span_s: f64,
+    /// `T1 / T∞`: the most cores that can help.
+    pub parallelism: f64,
+    /// Predicted wall time on each number of cores.
+    pub predicted_s: BTreeMap<String, f64>,
+    /// Predicted speed-up over 1 core.
+    pub speedup: BTreeMap<String, f64>,
+    /// Serial seconds of each lane (what no core count shortens).
+    pub serial_s: BTreeMap<String, f64>,
+    /// Seconds in the tasks of each parallel loop.
+    pub parallel_s: BTreeMap<String, f64>,
+}
+
+impl Prediction {
+    /// The model's figures for `cores`.
+    pub fn of(m: &Model, cores: &[usize]) -> Prediction {
+        let one = m.replay(1);
+        let span = m.span();
+        let mut predicted = BTreeMap::new();
+        let mut speedup = BTreeMap::new();
+        for &p in cores {
+            let t = m.replay(p);
+            predicted.insert(p.to_string(), t);
+            speedup.insert(p.to_string(), one / t.max(1e-12));
+        }
+        Prediction {
+            work_s: m.work(),
+            span_s: span,
+            parallelism: m.work() / span.max(1e-12),
+            predicted_s: predicted,
+            speedup,
+            serial_s: m.serial_by_lane.clone(),
+            parallel_s: m.parallel_by_region.clone(),
+        }
+    }
+
+    /// The figures as a few lines of text.
+    pub fn table(&self, cores: &[usize]) -> String {
+        let mut s = format!(
+            "work T1 {:.3} s, span T∞ {:.3} s, parallelism {:.1}\n\ncores  predicted s  speed-up\n",
+            self.work_s, self.span_s, self.parallelism
+        );
+        for p in cores {
+            let k = p.to_string();
+            s.push_str(&format!(
+                "{p:>5}  {:>11.3}  {:>7.2}x\n",
+                self.predicted_s[&k], self.speedup[&k]
+            ));
+        }
+        let mut parts: Vec<(String, f64)> = self
+            .serial_s
+            .iter()
+            .map(|(k, v)| (format!("serial: {k} lane"), *v))
+            .chain(
+                self.parallel_s
+                    .iter()
+                    .map(|(k, v)| (format!("parallel: {k}"), *v)),
+            )
+            .collect();
+        parts.sort_by(|a, b| b.1.total_cmp(&a.1));
+        s.push_str("\nwhere the work is, largest first\n");
+        for (k, v) in parts {
+            s.push_str(&format!(
+                "  {k:<28} {v:>8.3} s  {:>5.1}%\n",
+                100.0 * v / self.work_s.max(1e-12)
+            ));
+        }
+        s
+    }
+}
+
+/// A unit on a core: a lane's serial piece or one task of a region.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+enum Unit {
+    Serial(usize),
+    /// Task `k` of segment `i`'s current region.
+    Task(usize, usize),
+}
+
+struct Replay<'a> {
+    m: &'a Model,
+    /// Each lane's segments in order.
+    lanes: [Vec<usize>; 3],
+    /// Per lane: the next segment to start, and the phase it is in.
+    next: [usize; 3],
+    phase: Vec<usize>,
+    /// Tasks left in the running region of each segment.
+    left: Vec<usize>,
+    started: Vec<Option<f64>>,
+    done: Vec<bool>,
+    /// (lane, strip) -> segment.
+    index: HashMap<(usize, usize), usize>,
+    /// Whether each lane is inside a segment.
+    busy: [bool; 3],
+}
+
+impl<'a> Replay<'a> {
+    fn new(m: &'a Model) -> Self {
+        let mut lanes: [Vec<usize>; 3] = Default::default();
+        let mut index = HashMap::new();
+        for (i, s) in m.segments.iter().enumerate() {
+            lanes[s.lane].push(i);
+            index.entry((s.lane, s.strip)).or_insert(i);
+        }
+        let n = m.segments.len();
+        Replay {
+            m,
+            lanes,
+            next: [0; 3],
+            phase: vec![0; n],
+            left: vec![0; n],
+            started: vec![None; n],
+            done: vec![false; n],
+            index,
+            busy: [false; 3],
+        }
+    }
+
+    /// Whether segment `i` may start.
+    fn can_start(&self, i: usize) -> bool {
+        let s = &self.m.segments[i];
+        let done = |lane: usize, strip: usize| {
+            self.index.get(&(lane, strip)).is_none_or(|&j| self.done[j])
+        };
+        match s.lane {
+            0 => s.strip.checked_sub(QUEUE).is_none_or(|k| {
+                self.index
+                    .get(&(1, k))
+                    .is_none_or(|&j| self.started[j].is_some())
+            }),
+            1 => done(0, s.strip),
+            _ => done(1, s.strip),
+        }
+    }
+
+    fn run(mut self, cores: usize) -> f64 {
+        let mut now = 0.0f64;
+        let mut free = cores;
+        let mut ready: VecDeque<Unit> = VecDeque::new();
+        // (end, unit), earliest first.
+        let mut running: BinaryHeap<Reverse<(Ordered, Unit)>> = BinaryHeap::new();
+        self.start_lanes(now, &mut ready);
+        loop {
+            while free > 0 {
+                let Some(u) = ready.pop_front() else { break };
+                free -= 1;
+                running.push(Reverse((Ordered(now + self.duration(u)), u)));
+            }
+            let Some(Reverse((Ordered(end), u))) = running.pop() else {
+                break;
+            };
+            now = end;
+            free += 1;
+            self.finish(u, now, &mut ready);
+        }
+        now
+    }
+
+    fn duration(&self, u: Unit) -> f64 {
+        match u {
+            Unit::Serial(i) => match self.m.segments[i].phases[self.phase[i]] {
+                Phase::Serial(d) => d,
+                Phase::Region(_) => 0.0,
+            },
+            Unit::Task(i, k) => match &self.m.segments[i].phases[self.phase[i]] {
+                Phase::Region(t) => t[k],
+                Phase::Serial(_) => 0.0,
+            },
+        }
+    }
+
+    /// Start what can start on each idle lane.
+    fn start_lanes(&mut self, now: f64, ready: &mut VecDeque<Unit>) {
+        let mut again = true;
+        while again {
+            again = false;
+            for lane in 0..3 {
+                if self.busy[lane] {
+                    continue;
+                }
+                let Some(&i) = self.lanes[lane].get(self.next[lane]) else {
+                    continue;
+                };
+                if !self.can_start(i) {
+                    continue;
+                }
+                self.busy[lane] = true;
+                self.next[lane] += 1;
+                self.started[i] = Some(now);
+                self.enter(i, ready);
+                again = true;
+            }
+        }
+    }
+
+    /// Segment `i` enters its current phase.
+    fn enter(&mut self, i: usize, ready: &mut VecDeque<Unit>) {
+        match &self.m.segments[i].phases[self.phase[i]] {
+            Phase::Serial(_) => ready.push_back(Unit::Serial(i)),
+            Phase::Region(t) if t.is_empty() => ready.push_back(Unit::Serial(i)),
+            Phase::Region(t) => {
+                self.left[i] = t.len();
+                ready.extend((0..t.len()).map(|k| Unit::Task(i, k)));
+            }
+        }
+    }
+
+    fn finish(&mut self, u: Unit, now: f64, ready: &mut VecDeque<Unit>) {
+        let i = match u {
+            Unit::Serial(i) => i,
+            Unit::Task(i, _) => {
+                self.left[i] -= 1;
+                if self.left[i] > 0 {
+                    return;
+                }
+                i
+            }
+        };
+        self.phase[i] += 1;
+        if self.phase[i] < self.m.segments[i].phases.len() {
+            self.enter(i, ready);
+            return;
+        }
+        self.done[i] = true;
+        self.busy[self.m.segments[i].lane] = false;
+        self.start_lanes(now, ready);
+    }
+}
+
+/// An f64 with a total order (the heap's key).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Ordered(f64);
+impl Eq for Ordered {}
+impl PartialOrd for Ordered {
+    fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl Ord for Ordered {
+    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
+        self.0.total_cmp(&o.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Replays are sums of the given durations: exact in f64 for these.
+    const EXACT: f64 = 1e-12;
+
+    fn seg(lane: usize, strip: usize, phases: Vec<Phase>) -> Segment {
+        Segment {
+            lane,
+            strip,
+            phases,
+        }
+    }
+
+    fn close(a: f64, b: f64) -> bool {
+        (a - b).abs() <= EXACT * b.abs().max(1.0)
+    }
+
+    #[test]
+    fn a_chain_is_its_own_span_on_any_number_of_cores() {
+        // Three serial pieces of one lane: T1 = T∞ = 6.
+        let m = Model {
+            segments: (0..3)
+                .map(|k| seg(1, k, vec![Phase::Serial(k as f64 + 1.0)]))
+                .collect(),
+            ..Model::default()
+        };
+        assert!(close(m.work(), 6.0));
+        assert!(close(m.span(), 6.0));
+        for p in [1, 2, 16] {
+            assert!(close(m.replay(p), 6.0), "P = {p}");
+        }
+    }
+
+    #[test]
+    fn a_fork_join_gives_the_textbook_speed_ups() {
+        // 1 s serial, 8 tasks of 1 s, 1 s serial: T1 = 10, T∞ = 3.
+        let m = Model {
+            segments: vec![seg(
+                1,
+                0,
+                vec![
+                    Phase::Serial(1.0),
+                    Phase::Region(vec![1.0; 8]),
+                    Phase::Serial(1.0),
+                ],
+            )],
+            ..Model::default()
+        };
+        assert!(close(m.work(), 10.0));
+        assert!(close(m.span(), 3.0));
+        for (p, want) in [(1, 10.0), (2, 6.0), (4, 4.0), (8, 3.0), (64, 3.0)] {
+            assert!(close(m.replay(p), want), "P = {p}: {}", m.replay(p));
+        }
+    }
+
+    #[test]
+    fn a_pipeline_of_three_stages_overlaps_its_strips() {
+        // n strips, each 1 s of read, filter and write: on one core 3n; on
+        // three, the pipeline's fill and drain, n + 2.
+        let n = 10;
+        let mut segments = Vec::new();
+        for k in 0..n {
+            for lane in 0..3 {
+                segments.push(seg(lane, k, vec![Phase::Serial(1.0)]));
+            }
+        }
+        let m = Model {
+            segments,
+            ..Model::default()
+        };
+        assert!(close(m.work(), 3.0 * n as f64));
+        assert!(close(m.replay(1), 3.0 * n as f64));
+        assert!(close(m.replay(3), n as f64 + 2.0));
+        assert!(close(m.span(), n as f64 + 2.0));
+    }
+
+    #[test]
+    fn the_reader_waits_for_the_strip_queue() {
+        // Reading is free, filtering 1 s a strip: the reader may run QUEUE
+        // strips ahead of the filter, never more.
+        let n = 6;
+        let mut segments = Vec::new();
+        for k in 0..n {
+            segments.push(seg(0, k, vec![Phase::Serial(0.0)]));
+            segments.push(seg(1, k, vec![Phase::Serial(1.0)]));
+        }
+        let m = Model {
+            segments,
+            ..Model::default()
+        };
+        let mut r = Replay::new(&m);
+        let mut ready = VecDeque::new();
+        r.start_lanes(0.0, &mut ready);
+        // Only read 0 can start before anything runs.
+        assert_eq!(r.next[0], 1);
+        assert!(close(m.replay(4), n as f64));
+    }
+}
