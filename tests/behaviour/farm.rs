@@ -404,6 +404,11 @@ fn sequence_usage_errors_are_one_line_and_exit_2() {
             "output folder does not exist",
         ),
         (
+            vec![&input, &out, "--trace", "t.json"],
+            vec![],
+            "--trace records the run of one file",
+        ),
+        (
             vec!["a.##.b.##.exr", &out],
             vec![],
             "more than one frame field",

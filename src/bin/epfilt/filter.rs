@@ -286,6 +286,11 @@ fn sequence(
             "the output pattern {output} is the input's: each frame would overwrite its input"
         )));
     }
+    if a.trace.is_some() {
+        return Err(usage(anyhow::anyhow!(
+            "--trace records the run of one file: filter one frame with it, not a sequence"
+        )));
+    }
     let frames = match &a.frames {
         Some(spec) => parse_frames(spec).map_err(usage)?,
         None => input.on_disk().map_err(usage)?,
