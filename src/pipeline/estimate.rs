@@ -14,6 +14,20 @@ pub fn auto_strip_rows(in_w: usize, channels: usize) -> usize {
     (STRIP_BYTES / (in_w * channels * 4).max(1)).clamp(1, 96)
 }
 
+/// Decoded bytes the reader asks for at once (beyond one strip's rows),
+/// whatever the thread count: enough chunks to keep 16 workers busy at
+/// ordinary widths, few enough that memory stays small at 32k.
+pub const READ_AHEAD_BYTES: u64 = 24 << 20;
+
+/// The reader's batch: [`READ_AHEAD_BYTES`] (two blocks at the least), at
+/// most the whole image (`h` rows of `row` bytes).
+fn read_ahead(row: u64, h: usize, block_bytes: u64) -> u64 {
+    let image = row.saturating_mul(h as u64).max(block_bytes);
+    READ_AHEAD_BYTES
+        .max(block_bytes.saturating_mul(2))
+        .min(image)
+}
+
 /// Bytes a job will hold at most, from its sizes alone: the strips in flight,
 /// the stage's windows (input rows, horizontal pass, base, accumulator, box
 /// luminance) and the decoder's and encoder's blocks (`block_bytes`: one
@@ -59,7 +73,12 @@ pub fn estimate_bytes(
         0
     };
     let strips = in_row.saturating_mul(strip).saturating_mul(4);
-    let blocks = block_bytes.saturating_mul(3 * 4);
+    // The encoder's blocks, and the reader's batch of decoded blocks.
+    let blocks = block_bytes.saturating_mul(3 * 4).saturating_add(read_ahead(
+        in_row,
+        job.grid.in_h,
+        block_bytes,
+    ));
     windows
         .saturating_add(coarse)
         .saturating_add(strips)
@@ -100,5 +119,10 @@ fn estimate_box_bytes(
         .saturating_add(bands)
         .saturating_add(strips)
         .saturating_add(block_bytes.saturating_mul(3 * 4))
+        .saturating_add(read_ahead(
+            w.saturating_mul(nall * 4),
+            job.grid.in_h,
+            block_bytes,
+        ))
         .saturating_add(w.saturating_mul(nch * 8 * 16 * 4))
 }

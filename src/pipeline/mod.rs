@@ -53,7 +53,7 @@ pub use ledger::{ChannelLedger, Ledger};
 pub use stage::{Stage, WindowUse};
 pub use stream::{OutRows, Streamer};
 
-pub use estimate::{auto_strip_rows, estimate_bytes, STRIP_BYTES};
+pub use estimate::{auto_strip_rows, estimate_bytes, READ_AHEAD_BYTES, STRIP_BYTES};
 pub use memory::{filter_in_memory, MemorySink, MemorySource};
 pub use runner::{mean_luminance, run, thread_pool, Progress};
 
