@@ -603,7 +603,12 @@ impl ExrOutput {
         } else {
             rows / self.lines
         };
-        if full == 0 {
+        // Compress blocks in batches of WRITE_AHEAD_BYTES (one block at the
+        // least): a batch of one or two blocks per strip made the writer's
+        // compression the critical path (the scaling model, 12288x12288).
+        let block = (row_len * self.lines * 4).max(1);
+        let batch = (WRITE_AHEAD_BYTES / block).max(1);
+        if full == 0 || (!all && full < batch) {
             return Ok(());
         }
         let (w, nch, lines, y0) = (self.w, self.nch, self.lines, self.pending_y0);
@@ -746,6 +751,10 @@ struct Writeback {
     file: std::fs::File,
     unsynced: u64,
 }
+
+/// Rows the writer holds before it compresses them (as f32), so that a
+/// batch holds enough blocks to keep 16 workers busy.
+pub const WRITE_AHEAD_BYTES: usize = 16 << 20;
 
 /// Bytes written between two requests to start writing back.
 const WRITEBACK_BYTES: u64 = 4 << 20;
