@@ -255,12 +255,7 @@ impl StatsChannels {
 
 /// Find the statistics channels of `header` (of `path`, for messages).
 pub fn find_stats(path: &Path, header: &Header, req: &StatsRequest) -> Result<StatsChannels> {
-    let names: Vec<String> = header
-        .channels
-        .list
-        .iter()
-        .map(|c| c.name.to_string())
-        .collect();
+    let names = super::reader::channel_names(header);
     let listing = || names.join(", ");
     let refuse = |m: String| Error::Channels {
         path: path.to_path_buf(),

@@ -124,6 +124,11 @@ pub(crate) fn check_chunks(path: &Path, bytes: &[u8]) -> Result<(MetaData, Vec<V
     Ok((meta, tables))
 }
 
+/// The names of a header's channels, in the header's (sorted) order.
+pub(crate) fn channel_names(h: &Header) -> Vec<String> {
+    h.channels.list.iter().map(|c| c.name.to_string()).collect()
+}
+
 /// A text attribute of a header (the part's own custom attributes).
 pub(crate) fn text_attribute(h: &Header, name: &str) -> Option<String> {
     match h

@@ -113,12 +113,7 @@ pub(crate) fn choose_channels(
     header: &Header,
     layer: Option<&str>,
 ) -> Result<(Vec<Selected>, Vec<String>)> {
-    let names: Vec<String> = header
-        .channels
-        .list
-        .iter()
-        .map(|c| c.name.to_string())
-        .collect();
+    let names = channel_names(header);
     let mut layers: Vec<String> = vec![String::new()];
     for n in &names {
         if let Some((l, _)) = n.rsplit_once('.') {

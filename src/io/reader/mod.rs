@@ -453,12 +453,7 @@ impl ExrInput {
 
     /// Every channel name of the chosen part, in header order.
     pub fn all_channels(&self) -> Vec<String> {
-        self.header()
-            .channels
-            .list
-            .iter()
-            .map(|c| c.name.to_string())
-            .collect()
+        channel_names(self.header())
     }
 
     /// Also read `names` (after the filtered channels, in this order), as
