@@ -334,7 +334,7 @@ impl Report {
             digest: format!("{:016x}", stats.digest),
             tile: job.pipeline.tile,
             strip_rows: match job.pipeline.strip_rows {
-                0 => crate::pipeline::auto_strip_rows(g.w, pipe_job.strip_channels()),
+                0 => pipe_job.auto_strip_rows(),
                 n => n,
             },
             threads,

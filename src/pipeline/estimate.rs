@@ -14,17 +14,60 @@ pub fn auto_strip_rows(in_w: usize, channels: usize) -> usize {
     (STRIP_BYTES / (in_w * channels * 4).max(1)).clamp(1, 96)
 }
 
+/// Pixel rows a filtered strip holds at the least: a strip's rows are the
+/// tasks of its parallel loops (classification, base rows, ledger), so a
+/// strip of few pixel rows bounds the speed-up whatever the cores. At 32769
+/// wide [`STRIP_BYTES`] held 10 input rows, 3 pixel rows at S = 3: the scaling
+/// model's span on the filter lane was the longest of three row tasks per
+/// strip (ep-gauss 5.4x at 16 cores, 7.1x with 8 pixel rows; RSS 224 -> 242
+/// MB at 1 thread).
+pub const MIN_STRIP_PIXEL_ROWS: usize = 6;
+
+impl StripLayout {
+    /// Default strip height of this job: [`auto_strip_rows`], at least
+    /// [`MIN_STRIP_PIXEL_ROWS`] pixel rows (whole pixel rows: `S` input rows
+    /// each), at most 96 input rows or [`MIN_STRIP_PIXEL_ROWS`] pixel rows,
+    /// whichever is more.
+    pub fn auto_strip_rows(&self) -> usize {
+        let s = self.grid.s.max(1);
+        let min = MIN_STRIP_PIXEL_ROWS * s;
+        auto_strip_rows(self.grid.in_w.max(1), self.strip_channels().max(1)).max(min)
+    }
+}
+
 /// Decoded bytes the reader asks for at once (beyond one strip's rows),
 /// whatever the thread count: enough chunks to keep 16 workers busy at
 /// ordinary widths, few enough that memory stays small at 32k.
 pub const READ_AHEAD_BYTES: u64 = 24 << 20;
 
-/// The reader's batch: [`READ_AHEAD_BYTES`] (two blocks at the least), at
-/// most the whole image (`h` rows of `row` bytes).
+/// Blocks the reader's batch holds at the least, up to
+/// [`READ_AHEAD_MAX_BYTES`]: a batch's blocks decode in parallel and the
+/// batches one after another, so a batch of few blocks bounds the speed-up
+/// whatever the cores. At 32769 wide a 16-row ZIP block is 6.3 MB and 24 MiB
+/// held three: the scaling model's span was 75 batches of one block's decode
+/// (1.9 s, 3.8x at 16 cores, box).
+pub const READ_AHEAD_MIN_BLOCKS: u64 = 8;
+
+/// The most decoded bytes a batch holds for [`READ_AHEAD_MIN_BLOCKS`].
+pub const READ_AHEAD_MAX_BYTES: u64 = 64 << 20;
+
+/// Blocks (chunks) of `block_bytes` decoded bytes in the reader's batch:
+/// [`READ_AHEAD_BYTES`] of them, or [`READ_AHEAD_MIN_BLOCKS`] within
+/// [`READ_AHEAD_MAX_BYTES`] where blocks are large; two at the least.
+pub fn read_ahead_blocks(block_bytes: u64) -> u64 {
+    let b = block_bytes.max(1);
+    let by_bytes = READ_AHEAD_BYTES / b;
+    let by_count = READ_AHEAD_MIN_BLOCKS.min(READ_AHEAD_MAX_BYTES / b);
+    by_bytes.max(by_count).max(2)
+}
+
+/// The reader's batch in bytes ([`read_ahead_blocks`]), at most the whole
+/// image (`h` rows of `row` bytes).
 fn read_ahead(row: u64, h: usize, block_bytes: u64) -> u64 {
     let image = row.saturating_mul(h as u64).max(block_bytes);
-    READ_AHEAD_BYTES
-        .max(block_bytes.saturating_mul(2))
+    read_ahead_blocks(block_bytes)
+        .saturating_mul(block_bytes)
+        .max(READ_AHEAD_BYTES)
         .min(image)
 }
 
@@ -51,7 +94,7 @@ pub fn estimate_bytes(
         (job.grid.in_w / job.grid.s.max(1)) as u64,
     );
     let strip = match cfg.strip_rows {
-        0 => auto_strip_rows(job.grid.in_w.max(1), job.strip_channels().max(1)),
+        0 => job.auto_strip_rows(),
         n => n,
     } as u64;
     // Input rows carry the statistics too (ep-gauss at S = 1 reads them).
@@ -95,7 +138,7 @@ fn estimate_box_bytes(
     let w = job.grid.in_w as u64;
     let (nch, nall) = (job.channels.len() as u64, job.strip_channels() as u64);
     let strip = match cfg.strip_rows {
-        0 => auto_strip_rows(job.grid.in_w.max(1), job.strip_channels().max(1)),
+        0 => job.auto_strip_rows(),
         n => n,
     } as u64;
     let (p, r) = (halo.search_reach as u64, halo.spread_reach as u64);

@@ -53,7 +53,9 @@ pub use ledger::{ChannelLedger, Ledger};
 pub use stage::{Stage, WindowUse};
 pub use stream::{OutRows, Streamer};
 
-pub use estimate::{auto_strip_rows, estimate_bytes, READ_AHEAD_BYTES, STRIP_BYTES};
+pub use estimate::{
+    auto_strip_rows, estimate_bytes, read_ahead_blocks, READ_AHEAD_BYTES, STRIP_BYTES,
+};
 pub use memory::{filter_in_memory, MemorySink, MemorySource};
 pub use runner::{mean_luminance, run, thread_pool, Progress};
 
@@ -131,7 +133,7 @@ pub enum NonFinite {
 pub struct PipelineConfig {
     /// Tile width of the accumulators, in output pixels.
     pub tile: usize,
-    /// Input rows per strip (0: automatic, [`auto_strip_rows`]).
+    /// Input rows per strip (0: automatic, [`StripLayout::auto_strip_rows`]).
     pub strip_rows: usize,
     /// Worker threads (0: one per core).
     pub threads: usize,

@@ -46,7 +46,7 @@ pub fn run<S: Source, K: Sink>(
     let (strip_tx, strip_rx) = crossbeam_channel::bounded::<Result<Strip>>(2);
     let (row_tx, row_rx) = crossbeam_channel::bounded::<(usize, OutRows)>(2);
     let strip_rows = match cfg.strip_rows {
-        0 => auto_strip_rows(job.grid.in_w, job.strip_channels()),
+        0 => job.auto_strip_rows(),
         n => n,
     };
     let pool = &pool;
@@ -208,7 +208,7 @@ pub fn mean_luminance<S: Source>(
     let w = job.grid.in_w;
     let nall = job.strip_channels();
     let strip_rows = match strip_rows {
-        0 => auto_strip_rows(w, nall),
+        0 => job.auto_strip_rows(),
         n => n,
     };
     let luminance = &crate::filter::luminance::Luminance::new(&job.luminance);

@@ -3,7 +3,7 @@
 
 use super::*;
 
-pub use crate::pipeline::READ_AHEAD_BYTES;
+pub use crate::pipeline::{read_ahead_blocks, READ_AHEAD_BYTES};
 
 /// A [`Source`] over an [`ExrInput`].
 pub struct ExrSource<'a> {
@@ -49,7 +49,8 @@ impl Source for ExrSource<'_> {
         // worker made the reader the critical path: the model's T∞ 0.57 ->
         // 0.31 s on the 6144x6144 bench), memory does not grow with the
         // threads, and a 1-thread run cuts the work as a 16-thread one.
-        let by_bytes = (READ_AHEAD_BYTES / self.input.block_bytes().max(1)).max(2) as usize;
+        // (At least READ_AHEAD_MIN_BLOCKS where blocks are large.)
+        let by_bytes = read_ahead_blocks(self.input.block_bytes()) as usize;
         // A batch is decoded only once the last is handed over (its last
         // strip may be short): the buffer is then reused as it is, never
         // moved or grown around rows still held.
