@@ -169,3 +169,26 @@ fn estimate_box_bytes(
         ))
         .saturating_add(w.saturating_mul(nch * 8 * 16 * 4))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_batch_counts_bytes_at_ordinary_widths_and_blocks_where_they_are_large() {
+        // 6144 x 3 samples wide, float RGB, 16-row ZIP blocks: 3.5 MB each;
+        // 24 MiB holds 7, the floor of 8 (28 MB) decides.
+        let bench = 18432 * 3 * 4 * 16;
+        assert_eq!(read_ahead_blocks(bench), 8);
+        // Tiles of 64 x 64: bytes decide.
+        let tile = 64 * 64 * 3 * 4;
+        assert_eq!(read_ahead_blocks(tile), READ_AHEAD_BYTES / tile);
+        // 32769 wide: 6.3 MB blocks, 8 of them (50 MB, within 64 MiB).
+        let wide = 32769 * 3 * 4 * 16;
+        assert_eq!(read_ahead_blocks(wide), READ_AHEAD_MIN_BLOCKS);
+        assert!(read_ahead_blocks(wide) * wide <= READ_AHEAD_MAX_BYTES);
+        // Blocks past the cap: two at the least.
+        assert_eq!(read_ahead_blocks(READ_AHEAD_MAX_BYTES), 2);
+        assert_eq!(read_ahead_blocks(0), READ_AHEAD_BYTES);
+    }
+}
