@@ -19,8 +19,9 @@ pub fn auto_strip_rows(in_w: usize, channels: usize) -> usize {
 /// strip of few pixel rows bounds the speed-up whatever the cores. At 32769
 /// wide [`STRIP_BYTES`] held 10 input rows, 3 pixel rows at S = 3: the scaling
 /// model's span on the filter lane was the longest of three row tasks per
-/// strip (ep-gauss 5.4x at 16 cores, 7.1x with 8 pixel rows; RSS 224 -> 242
-/// MB at 1 thread).
+/// strip. Six, not more, for memory: 8 pixel rows gave ep-gauss 7.1x at 16
+/// cores but 259 MiB at 2 threads (over 256 MiB at 32k); 6 gives 6.4x at
+/// 228-237 MiB.
 pub const MIN_STRIP_PIXEL_ROWS: usize = 6;
 
 impl StripLayout {

@@ -3,7 +3,8 @@
 
 use super::*;
 
-pub use crate::pipeline::{read_ahead_blocks, READ_AHEAD_BYTES};
+use crate::pipeline::read_ahead_blocks;
+pub use crate::pipeline::READ_AHEAD_BYTES;
 
 /// A [`Source`] over an [`ExrInput`].
 pub struct ExrSource<'a> {
@@ -44,12 +45,12 @@ impl Source for ExrSource<'_> {
         let nch = self.input.selected.len();
         let buffered = |s: &Self| (s.buf.len() - s.head) / s.row_len;
         // Decode whole block rows until the strip is covered, at least
-        // READ_AHEAD_BYTES of blocks (two chunks) at a time whatever the
+        // READ_AHEAD_BYTES of blocks (two chunks, and at least
+        // READ_AHEAD_MIN_BLOCKS where blocks are large) at a time whatever the
         // thread count: several strips' blocks decode in parallel (two per
         // worker made the reader the critical path: the model's T∞ 0.57 ->
         // 0.31 s on the 6144x6144 bench), memory does not grow with the
         // threads, and a 1-thread run cuts the work as a 16-thread one.
-        // (At least READ_AHEAD_MIN_BLOCKS where blocks are large.)
         let by_bytes = read_ahead_blocks(self.input.block_bytes()) as usize;
         // A batch is decoded only once the last is handed over (its last
         // strip may be short): the buffer is then reused as it is, never
