@@ -6,7 +6,10 @@ use crate::filter::{FilterParams, Method};
 use crate::host::{cpu_seconds, peak_rss_bytes};
 use crate::io::StatsChannels;
 use crate::job::{FilterPlan, Outcome};
-use crate::pipeline::{ChannelLedger, MethodCounts, RunStats, StageSeconds, WindowUse};
+use crate::pipeline::{
+    ChannelLedger, MemoryRun, MethodCounts, PipelineConfig, RunStats, StageSeconds, StripLayout,
+    WindowUse,
+};
 
 /// Summary of one filtering run (the `--report` JSON).
 #[derive(Clone, Debug, Serialize)]
@@ -239,6 +242,16 @@ impl EpBoxReport {
     }
 }
 
+/// The method's own counts (noisy, spread, capped, kept): ep-gauss in
+/// super-samples, ep-box in pixels.
+fn method_counts(stats: &RunStats) -> (u64, u64, u64, u64) {
+    match stats.method {
+        MethodCounts::EpGauss(g) => (g.noisy, g.spread, g.capped, g.kept),
+        MethodCounts::EpBox(b) => (b.noisy, b.spread, b.capped, 0),
+        MethodCounts::Plain => (0, 0, 0, 0),
+    }
+}
+
 impl Report {
     /// Add the run of another view of the same image (`--view all`): its
     /// channels, their ledger and rules, its counts, time and warnings join
@@ -283,12 +296,7 @@ impl Report {
             0 => rayon::current_num_threads(),
             n => n,
         };
-        // The method's own counts: ep-gauss in super-samples, ep-box in pixels.
-        let counts = match stats.method {
-            MethodCounts::EpGauss(g) => (g.noisy, g.spread, g.capped, g.kept),
-            MethodCounts::EpBox(b) => (b.noisy, b.spread, b.capped, 0),
-            MethodCounts::Plain => (0, 0, 0, 0),
-        };
+        let counts = method_counts(stats);
         let pipe_job = &plan.pipe_job;
         let channel_rules = (plan.channels.iter())
             .zip(plan.input.channel_rules())
@@ -370,6 +378,110 @@ impl Report {
             parts: Vec::new(),
         };
         report.set_ledger(&outcome.ledger);
+        report
+    }
+
+    /// The settings of an in-memory run, as a file's run records them.
+    pub fn array_settings(
+        settings: Vec<(&'static str, serde_json::Value)>,
+    ) -> serde_json::Map<String, serde_json::Value> {
+        settings
+            .into_iter()
+            .map(|(k, v)| (k.to_string(), v))
+            .collect()
+    }
+
+    /// The report of an in-memory run ([`crate::job::array`]): the fields
+    /// a file's run fills, with `<array>` for its files.
+    pub fn of_array(
+        layout: &StripLayout,
+        cfg: &PipelineConfig,
+        run: &MemoryRun,
+        found: Option<&StatsChannels>,
+        settings: serde_json::Map<String, serde_json::Value>,
+        warnings: Vec<String>,
+    ) -> Report {
+        let (params, stats) = (&run.params, &run.stats);
+        let g = layout.grid;
+        let counts = method_counts(stats);
+        let channel_rules = (layout.channels.iter())
+            .zip(&layout.luminance)
+            .map(|(c, &l)| {
+                (
+                    c.clone(),
+                    if l != 0.0 { "colour" } else { "alpha" }.to_string(),
+                )
+            })
+            .collect();
+        let mut report = Report {
+            input: "<array>".into(),
+            output: "<array>".into(),
+            method: params.method.name().into(),
+            supersample: g.s,
+            supersample_assumed: false,
+            width: g.in_w,
+            height: g.in_h,
+            out_width: g.in_w / g.s,
+            out_height: g.in_h / g.s,
+            channels: layout.channels.clone(),
+            channel_rules,
+            dropped_channels: Vec::new(),
+            tolerance: params.tolerance,
+            radius: params.radius,
+            max_radius: params.max_radius,
+            seconds: stats.seconds,
+            megapixels_per_second: (g.in_w * g.in_h) as f64 / stats.seconds.max(1e-9) / 1e6,
+            samples_noisy: counts.0,
+            samples_spread: counts.1,
+            samples_capped: counts.2,
+            samples_kept: counts.3,
+            search_cost: stats.ep_gauss().map_or(0, |g| g.search_cost),
+            spread_taps: stats.ep_gauss().map_or(0, |g| g.spread_taps),
+            energy_in: vec![],
+            energy_out: vec![],
+            energy_rel_error: vec![],
+            energy_out_rounded: vec![],
+            energy_rel_error_rounded: vec![],
+            digest: format!("{:016x}", stats.digest),
+            tile: cfg.tile,
+            strip_rows: match cfg.strip_rows {
+                0 => layout.auto_strip_rows(),
+                n => n,
+            },
+            threads: match cfg.threads {
+                0 => rayon::current_num_threads(),
+                n => n,
+            },
+            peak_rss_bytes: peak_rss_bytes(),
+            windows: stats.windows.clone(),
+            window_bytes: stats.window_bytes(),
+            stage_seconds: stats.stages,
+            cpu_seconds: None,
+            nonfinite_zeroed: stats.nonfinite_zeroed.clone(),
+            first_nonfinite: stats.first_nonfinite.map(|(x, y, c)| {
+                let name = layout.channels.iter().chain(&layout.aux).nth(c);
+                (x, y, name.cloned().unwrap_or_default())
+            }),
+            stats_channels: layout.aux.clone(),
+            ep_box: found
+                .filter(|_| params.method == Method::EpBox)
+                .map(|f| EpBoxReport::of(params, f, run.l_ave, stats)),
+            carriers_rule: found.filter(|_| params.method == Method::EpGauss).map(|f| {
+                StatsReport {
+                    variance_channels: f.variance.clone(),
+                    variance_kind: f.kind.name().into(),
+                    spp_from: f.spp_from(),
+                }
+            }),
+            version: env!("CARGO_PKG_VERSION").into(),
+            settings,
+            compression: "none".into(),
+            energy_on_disk_decoded: false,
+            warnings,
+            band: None,
+            parts: Vec::new(),
+        };
+        report.set_ledger(&stats.ledger);
         report
     }
 

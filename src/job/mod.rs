@@ -1,11 +1,14 @@
 //! A filtering job from file to file: validate everything first, stream, check
 //! the ledger, and only then put the output in place.
 
+pub mod array;
+pub mod options;
 mod plan;
 mod run;
 
 use std::path::{Path, PathBuf};
 
+pub use options::{FilterOptions, Setting, StatsOptions};
 pub use plan::FilterPlan;
 pub use run::Outcome;
 

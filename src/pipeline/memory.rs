@@ -89,23 +89,40 @@ impl<K: Sink> Sink for &mut K {
     }
 }
 
-/// Filter a whole in-memory image (planar `[row][channel][x]`) — for tests,
-/// the demo and small jobs. Returns the output image and the statistics.
-pub fn filter_in_memory(
+/// A whole in-memory run ([`filter_planar`]).
+#[derive(Clone, Debug)]
+pub struct MemoryRun {
+    /// Output rows, `[row][channel][x]`, rounded to the precision asked for.
+    pub data: Vec<f32>,
+    /// What the run counted and its ledger.
+    pub stats: RunStats,
+    /// The settings used (ep-box's `L_tvis` settled by the first pass).
+    pub params: FilterParams,
+    /// ep-box: the mean luminance the first pass found (`None` when `L_tvis`
+    /// was given, or another method).
+    pub l_ave: Option<f64>,
+}
+
+/// Filter a whole in-memory image (planar `[row][channel][x]`) into values
+/// rounded to `precision` (as a file of that sample type would hold them).
+pub fn filter_planar(
     data: Vec<f32>,
     job: &StripLayout,
     params: &FilterParams,
     cfg: &PipelineConfig,
-) -> Result<(Vec<f32>, RunStats)> {
+    precision: Precision,
+) -> Result<MemoryRun> {
     // Rows as the source holds them (`--edge pad` completes them in `run`).
     let row_len = job.strip_channels() * job.padded_from.map_or(job.grid.in_w, |r| r.0);
     let mut params = params.clone();
+    let mut l_ave = None;
     if params.method == Method::EpBox && params.ep_box.ltvis.is_none() {
         let source = MemorySource::new(data.clone(), row_len);
-        let l_ave = mean_luminance(source, job, cfg.strip_rows)?;
-        params.ep_box.ltvis = Some(crate::filter::ep_box::ltvis(l_ave, params.ep_box.nmid));
+        let mean = mean_luminance(source, job, cfg.strip_rows)?;
+        params.ep_box.ltvis = Some(crate::filter::ep_box::ltvis(mean, params.ep_box.nmid));
+        l_ave = Some(mean);
     }
-    let mut sink = MemorySink::default();
+    let mut sink = MemorySink::with_precision(precision);
     let stats = run(
         MemorySource::new(data, row_len),
         &mut sink,
@@ -114,5 +131,22 @@ pub fn filter_in_memory(
         cfg,
         &|_, _| {},
     )?;
-    Ok((sink.data, stats))
+    Ok(MemoryRun {
+        data: sink.data,
+        stats,
+        params,
+        l_ave,
+    })
+}
+
+/// Filter a whole in-memory image (planar `[row][channel][x]`) — for tests,
+/// the demo and small jobs. Returns the output image and the statistics.
+pub fn filter_in_memory(
+    data: Vec<f32>,
+    job: &StripLayout,
+    params: &FilterParams,
+    cfg: &PipelineConfig,
+) -> Result<(Vec<f32>, RunStats)> {
+    let run = filter_planar(data, job, params, cfg, Precision::F32)?;
+    Ok((run.data, run.stats))
 }

@@ -56,7 +56,7 @@ pub use stream::{OutRows, Streamer};
 pub use estimate::{
     auto_strip_rows, estimate_bytes, read_ahead_blocks, READ_AHEAD_BYTES, STRIP_BYTES,
 };
-pub use memory::{filter_in_memory, MemorySink, MemorySource};
+pub use memory::{filter_in_memory, filter_planar, MemoryRun, MemorySink, MemorySource};
 pub use runner::{mean_luminance, run, thread_pool, Progress};
 
 /// Rows of input samples, `[row][channel][x]`.

@@ -18,7 +18,7 @@ use epfilt::io::{parse_compression, Format, PartSelect, Selection};
 use epfilt::synth::{Sampling, Scene, SceneKind, SynthJob};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use args::{Cli, Command, CompareArgs, PreviewArgs, SelectArgs, StatsArgs, SynthArgs};
+use args::{Cli, Command, CompareArgs, PreviewArgs, SelectArgs, SynthArgs};
 
 fn main() {
     tune_allocator();
@@ -56,7 +56,7 @@ fn dispatch(cli: Cli, matches: &clap::ArgMatches, cancel: Arc<AtomicBool>) -> Re
         Command::Filter(args) => {
             let given = matches
                 .subcommand_matches("filter")
-                .map(filter::given_options)
+                .map(epfilt::job::FilterOptions::given)
                 .unwrap_or_default();
             filter::run(*args, &given, cancel)
         }
@@ -76,8 +76,8 @@ fn dispatch(cli: Cli, matches: &clap::ArgMatches, cancel: Arc<AtomicBool>) -> Re
         Command::Compare(a) => compare(*a),
         Command::Preview(a) => preview(*a),
         Command::Plan(a) => {
-            let request = stats_request(&a.stats).map_err(usage)?;
-            let params = ep_box_params(&a.stats).map_err(usage)?;
+            let request = a.stats.request().map_err(usage)?;
+            let params = a.stats.ep_box_params().map_err(usage)?;
             let select = selection(&a.select);
             let plan = epfilt::plan::plan_file(
                 &a.input,
@@ -258,7 +258,7 @@ fn synth(a: SynthArgs) -> Result<(), Exit> {
         compression: parse_compression(&a.compression)
             .with_context(|| format!("unknown --compression {:?}", a.compression))
             .map_err(usage)?,
-        threads: cap_threads(a.threads),
+        threads: capped_threads(a.threads),
         format: a
             .format
             .as_deref()
@@ -297,53 +297,13 @@ fn synth(a: SynthArgs) -> Result<(), Exit> {
 }
 
 /// ep-box's statistics request from the flags.
-fn stats_request(a: &StatsArgs) -> Result<epfilt::io::StatsRequest> {
-    Ok(epfilt::io::StatsRequest {
-        variance_channel: a.variance_channel.clone(),
-        kind: a
-            .variance_kind
-            .as_deref()
-            .map(epfilt::filter::ep_box::VarianceKind::parse)
-            .transpose()?,
-        spp: a.spp,
-        spp_channel: a.spp_channel.clone(),
-    })
-}
-
-/// ep-box's noise test from the flags (the confidence as 0.8, 80 or 80%).
-fn ep_box_params(a: &StatsArgs) -> Result<epfilt::filter::ep_box::EpBoxParams> {
-    let c = a.confidence.trim();
-    let (num, pct) = match c.strip_suffix('%') {
-        Some(n) => (n, true),
-        None => (c, false),
-    };
-    let v: f64 = num
-        .trim()
-        .parse()
-        .with_context(|| format!("--confidence {c:?} is not a number"))?;
-    let confidence = if pct || v > 1.0 { v / 100.0 } else { v };
-    let p = epfilt::filter::ep_box::EpBoxParams {
-        d: a.d,
-        nmid: a.nmid,
-        confidence,
-        ..Default::default()
-    };
-    p.validate()?;
-    Ok(p)
-}
-
-/// `--threads` above the machine's cores only slows the run down (999
-/// threads ran 50x slower): capped, with a warning.
-fn cap_threads(n: usize) -> usize {
-    let cores = std::thread::available_parallelism().map_or(n, |c| c.get());
-    if n > cores {
-        warn(&format!(
-            "--threads {n} is more than this machine's {cores} cores: using {cores}"
-        ));
-        cores
-    } else {
-        n
+/// `--threads`, capped to the machine's cores with a warning.
+fn capped_threads(n: usize) -> usize {
+    let (n, warning) = epfilt::job::options::cap_threads(n);
+    if let Some(w) = warning {
+        warn(&w);
     }
+    n
 }
 
 /// A warning about the user's data or settings: printed even under `-q`.
