@@ -1,0 +1,105 @@
+"""epfilt: energy-preserving non-linear filters (Rushmeier & Ward 1994) for HDR renders.
+
+Each noisy Monte Carlo sample is spread over a region just wide enough that its
+influence on any output pixel stays below a tolerance; every sample's weights
+sum to one, so the image's energy is exact, and real features (lamps, rims,
+highlights) are kept.
+
+    import numpy as np, epfilt
+    image, report = epfilt.filter(samples, supersample=3)        # (H, W, C) float32/float16
+    report = epfilt.filter_file("render_3x.exr", "out.exr", tolerance=0.08)
+
+Settings are the command line's options with underscores (``support_region=8``,
+``threads=4``, ``channel_rule=["Z=average"]``); see ``epfilt filter --help``.
+Every call releases the GIL while it works, and Ctrl-C stops it, leaving no output.
+"""
+
+from . import _epfilt
+
+__version__ = _epfilt.__version__
+
+__all__ = [
+    "filter",
+    "filter_file",
+    "info",
+    "compare",
+    "read",
+    "Error",
+    "InputError",
+    "ConfigError",
+    "IoError",
+    "__version__",
+]
+
+
+class Error(Exception):
+    """Any error epfilt reports (the message is the command line's one line)."""
+
+
+class InputError(Error):
+    """An input epfilt cannot filter: damaged, unsupported, NaN/inf samples, missing channels."""
+
+
+class ConfigError(Error, ValueError):
+    """Settings that do not fit: an unknown option, a bad value, a wrong array shape or dtype."""
+
+
+class IoError(Error, OSError):
+    """Reading or writing a file failed, or the output path cannot be written."""
+
+
+def filter(samples, supersample=None, method="ep-gauss", *, channels=None, variance=None, spp=None, **settings):
+    """Filter super-sampled samples held in memory.
+
+    samples: numpy array (height, width, channels) of float32 or float16, any strides;
+        1 channel is Y, 2 Y A, 3 R G B, 4 R G B A (or name them with ``channels``).
+    supersample: samples per output pixel along each axis (default: 3; ep-box: 1).
+        The height and width must be multiples of it.
+    method: ``ep-gauss`` (default), ``ep-box``, ``gauss``, ``box``, ``clamp``, ``median``, ``alpha-trim``.
+    variance, spp: ep-box's per-pixel statistics (also read by ep-gauss at supersample 1):
+        variance an array (height, width) of the luminance's variance or (height, width, 3),
+        of single samples unless ``variance_kind`` says ``mean`` or ``moment``; spp a number or
+        an array (height, width) of sample counts.
+    settings: the command line's options with underscores (``tolerance=0.08``, ``quality="best"``,
+        ``threads=2``, ``nonfinite="zero"``); options about files raise ConfigError.
+
+    Returns ``(image, report)``: the filtered (height / S, width / S, channels) array (float32,
+    or float16 for float16 samples unless ``pixel_type="f32"``), bit-identical to what
+    ``epfilt filter`` writes for the same samples, and the ``--report`` fields as a dict
+    (energy ledger, counts, settings, version).
+    """
+    return _epfilt.filter(
+        samples, supersample, method, channels=channels, variance=variance, spp=spp, **settings
+    )
+
+
+def filter_file(input, output, **settings):
+    """Filter an EXR (or Radiance picture) into another, streamed in constant memory.
+
+    input, output: paths; frame sequences as on the command line (``r.####.exr``), with
+        ``frames=``, ``task_index=``/``task_count=``; one band with ``band="3/8"``.
+    settings: the command line's options with underscores (``method="ep-box"``,
+        ``compression="zip"``, ``skip_existing=True``, ``threads=8``).
+
+    The output is written whole or not at all. Returns the ``--report`` fields as a dict
+    (a sequence's report for a sequence; ``{"skipped": True, ...}`` when ``skip_existing``
+    found a complete output).
+    """
+    return _epfilt.filter_file(str(input), str(output), **settings)
+
+
+def info(path):
+    """What an EXR file or Radiance picture holds, as ``epfilt info --json`` prints it."""
+    return _epfilt.info(str(path))
+
+
+def compare(a, b):
+    """Image file ``a`` against reference ``b``: rmse, rel_mse, psnr, energy_ratio, identical, ..."""
+    return _epfilt.compare(str(a), str(b))
+
+
+def read(path, extra=None):
+    """The samples ``filter_file`` would filter (the beauty's channels, then the ``extra``
+    channels named, e.g. ``["variance.R", "variance.G", "variance.B"]``) as a float32 array
+    (height, width, channels), and the channel names. The whole image is held in memory."""
+    return _epfilt.read(str(path), extra)

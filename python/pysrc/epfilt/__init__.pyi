@@ -1,0 +1,33 @@
+"""Type stubs of epfilt's Python API (see the module's docstrings)."""
+
+from os import PathLike
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+_Path = Union[str, "PathLike[str]"]
+_Samples = Union[npt.NDArray[np.float32], npt.NDArray[np.float16]]
+_Setting = Union[str, int, float, bool, Sequence[str], None]
+
+class Error(Exception): ...
+class InputError(Error): ...
+class ConfigError(Error, ValueError): ...
+class IoError(Error, OSError): ...
+
+def filter(
+    samples: _Samples,
+    supersample: Optional[int] = None,
+    method: str = "ep-gauss",
+    *,
+    channels: Optional[Sequence[str]] = None,
+    variance: Optional[npt.NDArray[Any]] = None,
+    spp: Union[int, float, npt.NDArray[Any], None] = None,
+    **settings: _Setting,
+) -> Tuple[_Samples, Dict[str, Any]]: ...
+def filter_file(input: _Path, output: _Path, **settings: _Setting) -> Dict[str, Any]: ...
+def info(path: _Path) -> Dict[str, Any]: ...
+def compare(a: _Path, b: _Path) -> Dict[str, Any]: ...
+def read(path: _Path, extra: Optional[Sequence[str]] = None) -> Tuple[npt.NDArray[np.float32], List[str]]: ...

@@ -1,0 +1,404 @@
+//! epfilt for Python: numpy arrays in and out (`filter`), the streaming file
+//! filter (`filter_file`), `info`, `compare` and `read`. Every call releases
+//! the GIL while it works; Ctrl-C stops it (no output is left); the
+//! library's errors become `epfilt.Error` subclasses, with its message.
+//!
+//! The settings are the command line's options, named with underscores, and
+//! parsed by the same parser ([`FilterOptions::from_settings`]).
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use epfilt::job::array::{filter_array, ArrayInput, ArrayStats};
+use epfilt::job::{Existing, FilterOptions, Setting};
+use epfilt::pipeline::{Precision, Source};
+use half::f16;
+use numpy::{PyArray1, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn};
+use pyo3::exceptions::PyKeyboardInterrupt;
+use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyDict, PyList, PyTuple};
+
+/// How often a running call looks for Ctrl-C (and lets other Python
+/// threads run: it holds the GIL only while it looks).
+const SIGNAL_POLL: Duration = Duration::from_millis(20);
+
+/// The `epfilt` exception class for a library error: configuration,
+/// input, I/O, or the base class.
+fn to_py(e: epfilt::Error) -> PyErr {
+    use epfilt::Error as E;
+    let class = match &e {
+        E::Interrupted => return PyKeyboardInterrupt::new_err(e.to_string()),
+        E::Config(_) => "ConfigError",
+        E::InvalidFile { .. }
+        | E::InvalidPicture { .. }
+        | E::Unsupported { .. }
+        | E::Channels { .. }
+        | E::Value { .. }
+        | E::StreamValue { .. } => "InputError",
+        E::Io { .. } | E::Output { .. } => "IoError",
+        _ => "Error",
+    };
+    let line = epfilt::error::one_line(&e);
+    Python::with_gil(|py| {
+        match py
+            .import("epfilt")
+            .and_then(|m| m.getattr(class))
+            .and_then(|c| c.call1((line.clone(),)))
+        {
+            Ok(exc) => PyErr::from_value(exc),
+            Err(import_failed) => import_failed,
+        }
+    })
+}
+
+fn config_error(text: impl Into<String>) -> PyErr {
+    to_py(epfilt::Error::Config(text.into()))
+}
+
+/// Run `work` with the GIL released, on a thread of its own, looking for
+/// Ctrl-C every [`SIGNAL_POLL`]: a signal sets the run's cancel flag, the
+/// run stops (leaving no output) and the signal's exception is raised.
+fn detached<T: Send>(
+    py: Python<'_>,
+    work: impl FnOnce(Arc<AtomicBool>) -> epfilt::Result<T> + Send,
+) -> PyResult<T> {
+    let cancel = Arc::new(AtomicBool::new(false));
+    let flag = cancel.clone();
+    let (result, signal) = py.allow_threads(move || {
+        std::thread::scope(|s| {
+            let handle = s.spawn(move || work(flag));
+            let mut signal: Option<PyErr> = None;
+            while !handle.is_finished() {
+                std::thread::sleep(SIGNAL_POLL);
+                if signal.is_none() {
+                    if let Err(e) = Python::with_gil(|py| py.check_signals()) {
+                        cancel.store(true, Ordering::SeqCst);
+                        signal = Some(e);
+                    }
+                }
+            }
+            (handle.join(), signal)
+        })
+    });
+    if let Some(e) = signal {
+        return Err(e);
+    }
+    match result {
+        Ok(r) => r.map_err(to_py),
+        Err(panic) => {
+            let what = panic
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_default();
+            Err(to_py(epfilt::Error::Internal(format!("panic: {what}"))))
+        }
+    }
+}
+
+/// Keyword settings as the library's: True/False switch, a list repeats
+/// the option, anything else is its `str()`; None leaves a setting unset.
+fn settings_of(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Vec<(String, Setting)>> {
+    let mut out = Vec::new();
+    let Some(kwargs) = kwargs else {
+        return Ok(out);
+    };
+    for (k, v) in kwargs.iter() {
+        let name: String = k.extract()?;
+        if v.is_none() {
+            continue;
+        }
+        let setting = if let Ok(b) = v.downcast::<PyBool>() {
+            Setting::Flag(b.is_true())
+        } else if v.downcast::<PyList>().is_ok() || v.downcast::<PyTuple>().is_ok() {
+            let items: Vec<Bound<'_, PyAny>> = v.try_iter()?.collect::<PyResult<_>>()?;
+            Setting::List(
+                items
+                    .iter()
+                    .map(|i| i.str().map(|s| s.to_string()))
+                    .collect::<PyResult<_>>()?,
+            )
+        } else {
+            Setting::Value(v.str()?.to_string())
+        };
+        out.push((name, setting));
+    }
+    Ok(out)
+}
+
+/// A report (any of the library's serialisable ones) as a Python dict,
+/// the `--report` JSON's fields.
+fn to_dict<'py>(py: Python<'py>, value: &impl serde::Serialize) -> PyResult<Bound<'py, PyAny>> {
+    let text = serde_json::to_string(value)
+        .map_err(|e| to_py(epfilt::Error::Internal(format!("report: {e}"))))?;
+    py.import("json")?.call_method1("loads", (text,))
+}
+
+/// Pass the library's warnings on as Python `UserWarning`s.
+fn warn_all(py: Python<'_>, warnings: &[String]) -> PyResult<()> {
+    let category = py.get_type::<pyo3::exceptions::PyUserWarning>();
+    for w in warnings {
+        PyErr::warn(py, &category, &std::ffi::CString::new(w.as_str())?, 2)?;
+    }
+    Ok(())
+}
+
+/// A numpy array of float32 or float16 values as f32 in C order (any
+/// strides), its shape, and whether it held half floats.
+fn samples_of(a: &Bound<'_, PyAny>, what: &str) -> PyResult<(Vec<f32>, Vec<usize>, bool)> {
+    if let Ok(arr) = a.downcast::<PyArrayDyn<f32>>() {
+        let ro: PyReadonlyArrayDyn<'_, f32> = arr.readonly();
+        let v = ro.as_array();
+        return Ok((v.iter().copied().collect(), v.shape().to_vec(), false));
+    }
+    if let Ok(arr) = a.downcast::<PyArrayDyn<f16>>() {
+        let ro: PyReadonlyArrayDyn<'_, f16> = arr.readonly();
+        let v = ro.as_array();
+        return Ok((
+            v.iter().map(|h| h.to_f32()).collect(),
+            v.shape().to_vec(),
+            true,
+        ));
+    }
+    let dtype = a
+        .getattr("dtype")
+        .and_then(|d| d.str().map(|s| s.to_string()))
+        .unwrap_or_else(|_| a.get_type().to_string());
+    Err(config_error(format!(
+        "{what} must be a numpy array of float32 or float16, not {dtype} (convert with .astype(numpy.float32))"
+    )))
+}
+
+/// The channel names of an image of `c` channels.
+fn default_channels(c: usize) -> PyResult<Vec<String>> {
+    let names: &[&str] = match c {
+        1 => &["Y"],
+        2 => &["Y", "A"],
+        3 => &["R", "G", "B"],
+        4 => &["R", "G", "B", "A"],
+        _ => {
+            return Err(config_error(format!(
+                "samples have {c} channels: 1 (Y), 2 (Y A), 3 (R G B) or 4 (R G B A)"
+            )))
+        }
+    };
+    Ok(names.iter().map(|s| s.to_string()).collect())
+}
+
+/// Filter super-sampled samples held in a numpy array; see the stub.
+#[pyfunction]
+#[pyo3(signature = (samples, supersample=None, method="ep-gauss", *, channels=None, variance=None, spp=None, **settings))]
+#[allow(clippy::too_many_arguments)]
+fn filter<'py>(
+    py: Python<'py>,
+    samples: &Bound<'py, PyAny>,
+    supersample: Option<usize>,
+    method: &str,
+    channels: Option<Vec<String>>,
+    variance: Option<&Bound<'py, PyAny>>,
+    spp: Option<&Bound<'py, PyAny>>,
+    settings: Option<&Bound<'py, PyDict>>,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    let (data, shape, half) = samples_of(samples, "samples")?;
+    let [h, w, c] = shape[..] else {
+        return Err(config_error(format!(
+            "samples must have shape (height, width, channels), not {shape:?}"
+        )));
+    };
+    let channels = match channels {
+        Some(names) if names.len() == c => names,
+        Some(names) => {
+            return Err(config_error(format!(
+                "{} channel names for {c} channels",
+                names.len()
+            )))
+        }
+        None => default_channels(c)?,
+    };
+    let mut pairs = settings_of(settings)?;
+    pairs.push(("method".into(), Setting::Value(method.into())));
+    if let Some(s) = supersample {
+        pairs.push(("supersample".into(), Setting::Value(s.to_string())));
+    }
+    // One count for the image is the `spp` setting; an array, per pixel.
+    let mut spp_counts = None;
+    if let Some(n) = spp {
+        if n.hasattr("shape")? {
+            let (v, shape, _) = samples_of(n, "spp")?;
+            if shape != [h, w] {
+                return Err(config_error(format!(
+                    "spp has shape {shape:?}, not ({h}, {w})"
+                )));
+            }
+            spp_counts = Some(v);
+        } else {
+            pairs.push(("spp".into(), Setting::Value(n.str()?.to_string())));
+        }
+    }
+    let variance = match variance {
+        Some(v) => {
+            let (v, shape, _) = samples_of(v, "variance")?;
+            let nv = match shape[..] {
+                [vh, vw] if (vh, vw) == (h, w) => 1,
+                [vh, vw, k] if (vh, vw) == (h, w) => k,
+                _ => {
+                    return Err(config_error(format!(
+                        "variance has shape {shape:?}, not ({h}, {w}) or ({h}, {w}, 3)"
+                    )))
+                }
+            };
+            Some((v, nv))
+        }
+        None if spp_counts.is_some() => return Err(config_error("spp= without variance=")),
+        None => None,
+    };
+    let (opts, given) = FilterOptions::from_settings(pairs).map_err(to_py)?;
+    let out = detached(py, |cancel| {
+        let input = ArrayInput {
+            samples: &data,
+            width: w,
+            height: h,
+            channels: &channels,
+            half,
+            stats: variance.as_ref().map(|(v, nv)| ArrayStats {
+                variance: v,
+                variance_channels: *nv,
+                spp: spp_counts.as_deref(),
+            }),
+        };
+        filter_array(&input, &opts, &given, Some(cancel))
+    })?;
+    warn_all(py, &out.report.warnings)?;
+    let dims = [out.height, out.width, c];
+    let image = match out.precision {
+        Precision::F16 => {
+            let v: Vec<f16> = out.samples.iter().map(|&x| f16::from_f32(x)).collect();
+            PyArray1::from_vec(py, v).reshape(dims)?.into_any()
+        }
+        _ => PyArray1::from_vec(py, out.samples)
+            .reshape(dims)?
+            .into_any(),
+    };
+    Ok((image, to_dict(py, &out.report)?))
+}
+
+/// Filter a file (or a frame sequence) into another, streamed; see the stub.
+#[pyfunction]
+#[pyo3(signature = (input, output, **settings))]
+fn filter_file<'py>(
+    py: Python<'py>,
+    input: PathBuf,
+    output: PathBuf,
+    settings: Option<&Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let (opts, given) = FilterOptions::from_settings(settings_of(settings)?).map_err(to_py)?;
+    let env = |k: &str| std::env::var(k).ok();
+    let share = opts.share(&env).map_err(to_py)?;
+    let (job, warnings) = opts
+        .job(input, output, share.band, &given, None)
+        .map_err(to_py)?;
+    warn_all(py, &warnings)?;
+    if let Some(seq) = opts.sequence(job.clone(), share.task).map_err(to_py)? {
+        let report = detached(py, move |cancel| {
+            let mut seq = seq;
+            seq.template.pipeline.cancel = Some(cancel);
+            epfilt::sequence::run_sequence(&seq, &|_| {}, &|_, _| {})
+        })?;
+        return to_dict(py, &report);
+    }
+    job.output_format().map_err(to_py)?;
+    epfilt::io::Destination::resolve(&job.output).map_err(to_py)?;
+    if opts.skip_existing && epfilt::job::existing_output(&job).map_err(to_py)? == Existing::Done {
+        let skipped = PyDict::new(py);
+        skipped.set_item("skipped", true)?;
+        skipped.set_item("output", job.output.display().to_string())?;
+        return Ok(skipped.into_any());
+    }
+    let report = detached(py, move |cancel| {
+        let mut job = job;
+        job.pipeline.cancel = Some(cancel);
+        epfilt::filter_file(&job, &|_, _| {})
+    })?;
+    warn_all(py, &report.warnings)?;
+    to_dict(py, &report)
+}
+
+/// What a file holds (`epfilt info --json`); see the stub.
+#[pyfunction]
+fn info<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyAny>> {
+    let described = detached(py, move |_| epfilt::io::info::describe(&path))?;
+    to_dict(py, &described)
+}
+
+/// Image `a` against reference `b` (`epfilt compare --json`); see the stub.
+#[pyfunction]
+fn compare<'py>(py: Python<'py>, a: PathBuf, b: PathBuf) -> PyResult<Bound<'py, PyAny>> {
+    let cmp = detached(py, move |_| {
+        epfilt::compare::compare_files(&a, &b, &epfilt::io::Selection::default())
+    })?;
+    to_dict(py, &cmp)
+}
+
+/// The samples of a file's image (the channels `filter` reads, then
+/// `extra` ones) as a float32 array (height, width, channels) and their
+/// names; see the stub.
+#[pyfunction]
+#[pyo3(signature = (path, extra=None))]
+fn read<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    extra: Option<Vec<String>>,
+) -> PyResult<(Bound<'py, PyAny>, Vec<String>)> {
+    let (data, w, h, names) = detached(py, move |cancel| {
+        let mut input = epfilt::io::ExrInput::open(&path, None)?;
+        input.add_aux_channels(&extra.unwrap_or_default())?;
+        let (w, h) = input.size();
+        let mut names = input.channels();
+        names.extend(input.aux_channels());
+        let nch = names.len();
+        // Checked before anything is allocated: the whole image is held.
+        let bytes = (w as u64) * (h as u64) * (nch as u64) * 4;
+        let limit = epfilt::host::default_max_memory();
+        if bytes > limit {
+            return Err(epfilt::Error::Config(format!(
+                "{}: {w}x{h} of {nch} channels is {} MiB, more than the {} MiB read() may hold: use filter_file, which streams",
+                path.display(),
+                bytes >> 20,
+                limit >> 20
+            )));
+        }
+        let mut data = vec![0.0f32; w * h * nch];
+        let mut src = input.source();
+        while let Some(strip) = src.next_strip(64)? {
+            if cancel.load(Ordering::Relaxed) {
+                return Err(epfilt::Error::Interrupted);
+            }
+            for (k, row) in strip.data.chunks_exact(w * nch).enumerate() {
+                let y = strip.y0 + k;
+                for c in 0..nch {
+                    for (x, &v) in row[c * w..(c + 1) * w].iter().enumerate() {
+                        data[(y * w + x) * nch + c] = v;
+                    }
+                }
+            }
+        }
+        Ok((data, w, h, names))
+    })?;
+    let nch = names.len();
+    let arr = PyArray1::from_vec(py, data).reshape([h, w, nch])?;
+    Ok((arr.into_any(), names))
+}
+
+/// The native module (`epfilt._epfilt`); `epfilt/__init__.py` is the API.
+#[pymodule]
+fn _epfilt(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(filter, m)?)?;
+    m.add_function(wrap_pyfunction!(filter_file, m)?)?;
+    m.add_function(wrap_pyfunction!(info, m)?)?;
+    m.add_function(wrap_pyfunction!(compare, m)?)?;
+    m.add_function(wrap_pyfunction!(read, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,245 @@
+"""epfilt's Python bindings against the command line, on `epfilt synth` scenes.
+
+The CLI binary is EPFILT_BIN, else the repository's target/release/epfilt, else
+target/debug/epfilt (`.ci/run` builds the release one before pytest).
+"""
+
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import epfilt
+
+ROOT = Path(__file__).resolve().parents[2]
+
+# The ledger's bound (the library checks 1e-9 before writing; its own sums
+# reach a few ulps): every run here must balance to this.
+LEDGER_TOL = 1e-12
+
+# The energy-preserving methods, then the foils that lose energy by design.
+EXACT = ["ep-gauss", "gauss", "box"]
+METHODS = EXACT + ["clamp", "median", "alpha-trim"]
+
+
+def cli():
+    for p in (
+        os.environ.get("EPFILT_BIN"),
+        ROOT / "target" / "release" / "epfilt",
+        ROOT / "target" / "debug" / "epfilt",
+    ):
+        if p and Path(p).is_file():
+            return str(p)
+    pytest.fail("no epfilt binary: run `cargo build --release` first (or set EPFILT_BIN)")
+
+
+def run(*args):
+    subprocess.run([cli(), *map(str, args)], check=True, capture_output=True)
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    """A 120x90-pixel `mixed` scene at S = 3 (fireflies, a light edge, a caustic)."""
+    path = tmp_path_factory.mktemp("scene") / "mixed.exr"
+    run("synth", "-q", "--scene", "mixed", "--size", "120x90", "-o", path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def variance_scene(tmp_path_factory):
+    """The `lights` scene as 16-spp pixel means with per-pixel variance (ep-box's input)."""
+    path = tmp_path_factory.mktemp("var") / "lights.exr"
+    run("synth", "-q", "--scene", "lights", "--size", "96x80", "--spp", "16", "--variance", "-o", path)
+    return path
+
+
+def cli_filter(src, dst, *args):
+    report = dst.with_suffix(".json")
+    run("filter", "-q", src, dst, "--report", report, *args)
+    return json.loads(report.read_text())
+
+
+def assert_bits_equal(a, b):
+    assert a.shape == b.shape and a.dtype == b.dtype
+    assert np.array_equal(a.view(np.uint32 if a.dtype == np.float32 else np.uint16),
+                          b.view(np.uint32 if b.dtype == np.float32 else np.uint16))
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_arrays_are_bit_identical_to_the_cli(scene, tmp_path, method):
+    samples, names = epfilt.read(scene)
+    assert names == ["R", "G", "B"]
+    image, report = epfilt.filter(samples, supersample=3, method=method, threads=2)
+    out = tmp_path / "cli.exr"
+    cli_report = cli_filter(scene, out, "-s", "3", "--method", method)
+    want, _ = epfilt.read(out)
+    assert_bits_equal(image, want)
+    assert report["digest"] == cli_report["digest"]
+    assert report["settings"] == cli_report["settings"]
+    assert report["energy_rel_error"] == cli_report["energy_rel_error"]
+    assert report["version"] == epfilt.__version__
+
+
+def test_ep_box_with_per_pixel_statistics_is_bit_identical_to_the_cli(variance_scene, tmp_path):
+    both, names = epfilt.read(variance_scene, extra=["variance.R", "variance.G", "variance.B"])
+    assert names[:3] == ["R", "G", "B"]
+    samples, variance = np.ascontiguousarray(both[:, :, :3]), both[:, :, 3:]
+    image, report = epfilt.filter(samples, method="ep-box", variance=variance, spp=16)
+    out = tmp_path / "cli.exr"
+    cli_report = cli_filter(variance_scene, out, "--method", "ep-box")
+    want, _ = epfilt.read(out)
+    assert_bits_equal(image, want)
+    assert report["ep_box"]["l_tvis"] == cli_report["ep_box"]["l_tvis"]
+    assert report["samples_spread"] == cli_report["samples_spread"] > 0
+    assert max(abs(e) for e in report["energy_rel_error"]) <= LEDGER_TOL
+
+
+def test_energy_is_exact_for_every_energy_preserving_method(scene):
+    samples, _ = epfilt.read(scene)
+    for method in EXACT:
+        image, report = epfilt.filter(samples, method=method)
+        total_in = samples.astype(np.float64).sum(axis=(0, 1))
+        total_out = image.astype(np.float64).sum(axis=(0, 1)) * 9
+        # After rounding to f32 the sums move by about an ulp per pixel.
+        assert np.allclose(total_out, total_in, rtol=1e-6)
+        assert max(abs(e) for e in report["energy_rel_error"]) <= LEDGER_TOL
+
+
+def test_strided_and_half_inputs(scene, tmp_path):
+    samples, _ = epfilt.read(scene)
+    # A view with negative and non-unit strides filters as its copy.
+    flipped = samples[::-1, :, ::-1]
+    assert not flipped.flags["C_CONTIGUOUS"]
+    a, _ = epfilt.filter(flipped)
+    b, _ = epfilt.filter(np.ascontiguousarray(flipped))
+    assert_bits_equal(a, b)
+    # float16 in, float16 out, as the CLI does for a half file.
+    half_file = tmp_path / "half.exr"
+    run("filter", "-q", scene, half_file, "-s", "1", "--method", "box", "--pixel-type", "f16")
+    half, _ = epfilt.read(half_file)
+    image, report = epfilt.filter(half.astype(np.float16))
+    assert image.dtype == np.float16 and report["settings"]["pixel_type"] == "f16"
+    out = tmp_path / "cli.exr"
+    cli_filter(half_file, out, "-s", "3")
+    want, _ = epfilt.read(out)
+    assert_bits_equal(image.astype(np.float32), want)
+    image32, _ = epfilt.filter(half.astype(np.float16), pixel_type="f32")
+    assert image32.dtype == np.float32
+
+
+def test_errors_raise_the_right_exceptions(scene, tmp_path):
+    samples, _ = epfilt.read(scene)
+    with pytest.raises(epfilt.ConfigError, match="shape"):
+        epfilt.filter(samples[:, :, 0])
+    with pytest.raises(ValueError):  # ConfigError is a ValueError too
+        epfilt.filter(samples[:, :10])
+    with pytest.raises(epfilt.ConfigError, match="float32 or float16"):
+        epfilt.filter(samples.astype(np.float64))
+    with pytest.raises(epfilt.ConfigError, match='unknown setting "tolerence"'):
+        epfilt.filter(samples, tolerence=0.1)
+    with pytest.raises(epfilt.ConfigError, match="tolerance"):
+        epfilt.filter(samples, tolerance="lots")
+    with pytest.raises(epfilt.ConfigError, match="applies to files"):
+        epfilt.filter(samples, compression="zip")
+    nan = samples.copy()
+    nan[4, 7, 1] = np.nan
+    with pytest.raises(epfilt.InputError, match="non-finite"):
+        epfilt.filter(nan)
+    _, report = epfilt.filter(nan, nonfinite="zero")
+    assert report["nonfinite_zeroed"] == [0, 1, 0]
+    with pytest.raises(epfilt.IoError):
+        epfilt.filter_file(tmp_path / "missing.exr", tmp_path / "out.exr")
+    damaged = tmp_path / "damaged.exr"
+    damaged.write_bytes(scene.read_bytes()[:5000])
+    with pytest.raises(epfilt.InputError):
+        epfilt.filter_file(damaged, tmp_path / "out.exr")
+    assert not (tmp_path / "out.exr").exists()
+    assert issubclass(epfilt.IoError, OSError) and issubclass(epfilt.InputError, epfilt.Error)
+
+
+def test_filter_file_info_and_compare(scene, tmp_path):
+    out = tmp_path / "py.exr"
+    with pytest.warns(UserWarning, match="no effect"):
+        report = epfilt.filter_file(scene, out, method="gauss", tolerance=0.1, threads=1)
+    cli = tmp_path / "cli.exr"
+    cli_report = cli_filter(scene, cli, "--method", "gauss")
+    assert report["digest"] == cli_report["digest"]
+    assert epfilt.compare(out, cli)["identical"]
+    info = epfilt.info(out)
+    assert info["parts"][0]["width"] == 120
+    # A band of the output, as on the command line.
+    band = epfilt.filter_file(scene, tmp_path / "band.exr", band="2/3")
+    assert (band["band"]["index"], band["band"]["count"]) == (2, 3)
+
+
+def test_the_gil_is_released_while_filtering():
+    rng = np.random.default_rng(7)
+    samples = np.full((1800, 1800, 3), 0.2, np.float32)
+    hot = rng.random(samples.shape[:2]) < 0.01
+    samples[hot] = 1e4
+    ticks = []
+    stop = threading.Event()
+
+    def count():
+        while not stop.is_set():
+            ticks.append(time.perf_counter())
+            time.sleep(0.001)
+
+    t = threading.Thread(target=count)
+    t.start()
+    try:
+        start = time.perf_counter()
+        epfilt.filter(samples, threads=1)
+        end = time.perf_counter()
+    finally:
+        stop.set()
+        t.join()
+    during = [x for x in ticks if start < x < end]
+    # The filter takes about a second here: a thread that got the GIL only
+    # between calls would tick zero times during it.
+    assert end - start > 0.2
+    assert len(during) >= 0.25 * (end - start) / 0.001 / 4, (len(during), end - start)
+
+
+def test_ctrl_c_interrupts_a_run_and_leaves_no_output(tmp_path):
+    big = tmp_path / "big.exr"
+    run("synth", "-q", "--scene", "mixed", "--size", "1400x1400", "-o", big)
+    out = tmp_path / "out" / "filtered.exr"
+    out.parent.mkdir()
+    timer = threading.Timer(0.3, lambda: __import__("_thread").interrupt_main())
+    timer.start()
+    start = time.perf_counter()
+    with pytest.raises(KeyboardInterrupt):
+        epfilt.filter_file(big, out, threads=1)
+    timer.cancel()
+    assert time.perf_counter() - start < 5.0
+    assert list(out.parent.iterdir()) == []
+
+
+RSS_PROBE = """
+import resource, sys, epfilt
+epfilt.filter_file(sys.argv[1], sys.argv[2], threads=1, strip_rows=24)
+print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+"""
+
+
+def test_filter_file_memory_is_flat_in_height(tmp_path):
+    peaks = []
+    for h in (200, 1600):
+        src = tmp_path / f"h{h}.exr"
+        run("synth", "-q", "--scene", "mixed", "--size", f"400x{h}", "-o", src)
+        probe = subprocess.run(
+            [sys.executable, "-c", RSS_PROBE, str(src), str(tmp_path / f"o{h}.exr")],
+            check=True, capture_output=True, text=True,
+        )
+        peaks.append(int(probe.stdout.split()[-1]) * 1024)
+    # 8x the rows: holding the image would add 1200x4200 samples of 3 f32
+    # channels, 60 MB, on either side; streaming adds the allocator's noise.
+    growth = peaks[1] - peaks[0]
+    assert growth < 24 << 20, f"peak RSS {peaks[0] >> 20} -> {peaks[1] >> 20} MiB"
