@@ -242,6 +242,16 @@ impl EpBoxReport {
     }
 }
 
+/// What a run was and did, for [`Report::of_run`].
+struct RunFacts<'a> {
+    layout: &'a StripLayout,
+    cfg: &'a PipelineConfig,
+    params: &'a FilterParams,
+    stats: &'a RunStats,
+    found: Option<&'a StatsChannels>,
+    l_ave: Option<f64>,
+}
+
 /// The method's own counts (noisy, spread, capped, kept): ep-gauss in
 /// super-samples, ep-box in pixels.
 fn method_counts(stats: &RunStats) -> (u64, u64, u64, u64) {
@@ -289,14 +299,9 @@ impl Report {
 
     /// The report of a run: what its plan settled and what the run did.
     pub fn of(plan: &FilterPlan<'_>, outcome: &Outcome) -> Report {
-        let (job, params, stats) = (plan.job, &plan.params, &outcome.stats);
+        let (job, stats) = (plan.job, &outcome.stats);
         let g = &plan.geometry;
         let s = job.params.supersample;
-        let threads = match job.pipeline.threads {
-            0 => rayon::current_num_threads(),
-            n => n,
-        };
-        let counts = method_counts(stats);
         let pipe_job = &plan.pipe_job;
         let channel_rules = (plan.channels.iter())
             .zip(plan.input.channel_rules())
@@ -310,11 +315,20 @@ impl Report {
                 (c.clone(), name.to_string())
             })
             .collect();
+        let settings = (outcome.settings.iter())
+            .map(|(k, v)| (k.to_string(), v.clone()))
+            .collect();
+        let run = RunFacts {
+            layout: pipe_job,
+            cfg: &job.pipeline,
+            params: &plan.params,
+            stats,
+            found: plan.found.as_ref(),
+            l_ave: outcome.l_ave,
+        };
         let mut report = Report {
             input: job.input.display().to_string(),
             output: job.output.display().to_string(),
-            method: job.params.method.name().into(),
-            supersample: s,
             supersample_assumed: job.supersample_assumed,
             width: g.read_w,
             height: g.read_h,
@@ -323,60 +337,15 @@ impl Report {
             channel_rules,
             channels: plan.channels.clone(),
             dropped_channels: plan.input.dropped_channels().to_vec(),
-            tolerance: job.params.tolerance,
-            radius: job.params.radius,
-            max_radius: job.params.max_radius,
-            seconds: stats.seconds,
             megapixels_per_second: (g.w * g.h) as f64 / stats.seconds.max(1e-9) / 1e6,
-            samples_noisy: counts.0,
-            samples_spread: counts.1,
-            samples_capped: counts.2,
-            samples_kept: counts.3,
-            search_cost: stats.ep_gauss().map_or(0, |g| g.search_cost),
-            spread_taps: stats.ep_gauss().map_or(0, |g| g.spread_taps),
-            energy_in: vec![],
-            energy_out: vec![],
-            energy_rel_error: vec![],
-            energy_out_rounded: vec![],
-            energy_rel_error_rounded: vec![],
-            digest: format!("{:016x}", stats.digest),
-            tile: job.pipeline.tile,
-            strip_rows: match job.pipeline.strip_rows {
-                0 => pipe_job.auto_strip_rows(),
-                n => n,
-            },
-            threads,
-            peak_rss_bytes: peak_rss_bytes(),
-            nonfinite_zeroed: stats.nonfinite_zeroed.clone(),
-            first_nonfinite: stats.first_nonfinite.map(|(x, y, c)| {
-                let name = pipe_job.channels.iter().chain(&pipe_job.aux).nth(c);
-                (x, y, name.cloned().unwrap_or_default())
-            }),
-            stats_channels: pipe_job.aux.clone(),
-            carriers_rule: (plan.found.as_ref())
-                .filter(|_| params.method == Method::EpGauss)
-                .map(|f| StatsReport {
-                    variance_channels: f.variance.clone(),
-                    variance_kind: f.kind.name().into(),
-                    spp_from: f.spp_from(),
-                }),
-            ep_box: (plan.found.as_ref())
-                .filter(|_| params.method == Method::EpBox)
-                .map(|f| EpBoxReport::of(params, f, outcome.l_ave, stats)),
-            window_bytes: stats.window_bytes(),
-            windows: stats.windows.clone(),
-            stage_seconds: stats.stages,
             cpu_seconds: cpu_seconds().map(|c| c - plan.cpu_start),
-            version: env!("CARGO_PKG_VERSION").into(),
-            settings: (outcome.settings.iter())
-                .map(|(k, v)| (k.to_string(), v.clone()))
-                .collect(),
             compression: outcome.compression.clone(),
             energy_on_disk_decoded: outcome.lossy,
-            warnings: plan.warnings.clone(),
             band: outcome.band.clone(),
-            parts: Vec::new(),
+            ..Report::of_run(&run, settings, plan.warnings.clone())
         };
+        // The file's ledger: after rounding, what the file holds (a lossy
+        // codec's decoded, a picture's RGBE), not the run's.
         report.set_ledger(&outcome.ledger);
         report
     }
@@ -401,7 +370,25 @@ impl Report {
         settings: serde_json::Map<String, serde_json::Value>,
         warnings: Vec<String>,
     ) -> Report {
-        let (params, stats) = (&run.params, &run.stats);
+        let facts = RunFacts {
+            layout,
+            cfg,
+            params: &run.params,
+            stats: &run.stats,
+            found,
+            l_ave: run.l_ave,
+        };
+        Report::of_run(&facts, settings, warnings)
+    }
+
+    /// What every run's report holds, from its layout, settings and
+    /// counts; a file's run then says what its files and plan settled.
+    fn of_run(
+        run: &RunFacts<'_>,
+        settings: serde_json::Map<String, serde_json::Value>,
+        warnings: Vec<String>,
+    ) -> Report {
+        let (layout, params, stats) = (run.layout, run.params, run.stats);
         let g = layout.grid;
         let counts = method_counts(stats);
         let channel_rules = (layout.channels.iter())
@@ -443,12 +430,12 @@ impl Report {
             energy_out_rounded: vec![],
             energy_rel_error_rounded: vec![],
             digest: format!("{:016x}", stats.digest),
-            tile: cfg.tile,
-            strip_rows: match cfg.strip_rows {
+            tile: run.cfg.tile,
+            strip_rows: match run.cfg.strip_rows {
                 0 => layout.auto_strip_rows(),
                 n => n,
             },
-            threads: match cfg.threads {
+            threads: match run.cfg.threads {
                 0 => rayon::current_num_threads(),
                 n => n,
             },
@@ -463,16 +450,16 @@ impl Report {
                 (x, y, name.cloned().unwrap_or_default())
             }),
             stats_channels: layout.aux.clone(),
-            ep_box: found
+            ep_box: (run.found)
                 .filter(|_| params.method == Method::EpBox)
                 .map(|f| EpBoxReport::of(params, f, run.l_ave, stats)),
-            carriers_rule: found.filter(|_| params.method == Method::EpGauss).map(|f| {
-                StatsReport {
+            carriers_rule: (run.found)
+                .filter(|_| params.method == Method::EpGauss)
+                .map(|f| StatsReport {
                     variance_channels: f.variance.clone(),
                     variance_kind: f.kind.name().into(),
                     spp_from: f.spp_from(),
-                }
-            }),
+                }),
             version: env!("CARGO_PKG_VERSION").into(),
             settings,
             compression: "none".into(),

@@ -7,7 +7,7 @@
 //! parsed by the same parser ([`FilterOptions::from_settings`]).
 
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -64,6 +64,16 @@ fn detached<T: Send>(
     py: Python<'_>,
     work: impl FnOnce(Arc<AtomicBool>) -> epfilt::Result<T> + Send,
 ) -> PyResult<T> {
+    detached_with(py, work, |_| Ok(()))
+}
+
+/// [`detached`], calling `tick` with the GIL at every look (a progress
+/// callback): an exception it raises stops the run as Ctrl-C does.
+fn detached_with<T: Send>(
+    py: Python<'_>,
+    work: impl FnOnce(Arc<AtomicBool>) -> epfilt::Result<T> + Send,
+    mut tick: impl FnMut(Python<'_>) -> PyResult<()> + Send,
+) -> PyResult<T> {
     let cancel = Arc::new(AtomicBool::new(false));
     let flag = cancel.clone();
     let (result, signal) = py.allow_threads(move || {
@@ -73,7 +83,8 @@ fn detached<T: Send>(
             while !handle.is_finished() {
                 std::thread::sleep(SIGNAL_POLL);
                 if signal.is_none() {
-                    if let Err(e) = Python::with_gil(|py| py.check_signals()) {
+                    if let Err(e) = Python::with_gil(|py| py.check_signals().and_then(|_| tick(py)))
+                    {
                         cancel.store(true, Ordering::SeqCst);
                         signal = Some(e);
                     }
@@ -286,13 +297,36 @@ fn filter<'py>(
 
 /// Filter a file (or a frame sequence) into another, streamed; see the stub.
 #[pyfunction]
-#[pyo3(signature = (input, output, **settings))]
+#[pyo3(signature = (input, output, *, progress=None, **settings))]
 fn filter_file<'py>(
     py: Python<'py>,
     input: PathBuf,
     output: PathBuf,
+    progress: Option<PyObject>,
     settings: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    // Rows done and in all, as the run reports them; passed on to
+    // `progress(done, total)` with the GIL, when they change.
+    let rows = Arc::new((AtomicUsize::new(0), AtomicUsize::new(0)));
+    let seen = rows.clone();
+    let mut last = (usize::MAX, usize::MAX);
+    let tick = move |py: Python<'_>| -> PyResult<()> {
+        let now = (
+            seen.0.load(Ordering::Relaxed),
+            seen.1.load(Ordering::Relaxed),
+        );
+        match &progress {
+            Some(f) if now != last && now.1 > 0 => {
+                last = now;
+                f.call1(py, now).map(|_| ())
+            }
+            _ => Ok(()),
+        }
+    };
+    let report_rows = move |done: usize, total: usize| {
+        rows.1.store(total, Ordering::Relaxed);
+        rows.0.store(done, Ordering::Relaxed);
+    };
     let (opts, given) = FilterOptions::from_settings(settings_of(settings)?).map_err(to_py)?;
     let env = |k: &str| std::env::var(k).ok();
     let share = opts.share(&env).map_err(to_py)?;
@@ -301,11 +335,15 @@ fn filter_file<'py>(
         .map_err(to_py)?;
     warn_all(py, &warnings)?;
     if let Some(seq) = opts.sequence(job.clone(), share.task).map_err(to_py)? {
-        let report = detached(py, move |cancel| {
-            let mut seq = seq;
-            seq.template.pipeline.cancel = Some(cancel);
-            epfilt::sequence::run_sequence(&seq, &|_| {}, &|_, _| {})
-        })?;
+        let report = detached_with(
+            py,
+            move |cancel| {
+                let mut seq = seq;
+                seq.template.pipeline.cancel = Some(cancel);
+                epfilt::sequence::run_sequence(&seq, &|_| {}, &report_rows)
+            },
+            tick,
+        )?;
         return to_dict(py, &report);
     }
     job.output_format().map_err(to_py)?;
@@ -316,11 +354,15 @@ fn filter_file<'py>(
         skipped.set_item("output", job.output.display().to_string())?;
         return Ok(skipped.into_any());
     }
-    let report = detached(py, move |cancel| {
-        let mut job = job;
-        job.pipeline.cancel = Some(cancel);
-        epfilt::filter_file(&job, &|_, _| {})
-    })?;
+    let report = detached_with(
+        py,
+        move |cancel| {
+            let mut job = job;
+            job.pipeline.cancel = Some(cancel);
+            epfilt::filter_file(&job, &report_rows)
+        },
+        tick,
+    )?;
     warn_all(py, &report.warnings)?;
     to_dict(py, &report)
 }

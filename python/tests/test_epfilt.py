@@ -6,6 +6,7 @@ target/debug/epfilt (`.ci/run` builds the release one before pytest).
 
 import json
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -212,12 +213,19 @@ def test_ctrl_c_interrupts_a_run_and_leaves_no_output(tmp_path):
     run("synth", "-q", "--scene", "mixed", "--size", "1400x1400", "-o", big)
     out = tmp_path / "out" / "filtered.exr"
     out.parent.mkdir()
-    timer = threading.Timer(0.3, lambda: __import__("_thread").interrupt_main())
+    # Python's own SIGINT handler, as in a terminal (a shell that starts
+    # pytest in the background leaves SIGINT ignored, and interrupt_main
+    # then does nothing).
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    timer = threading.Timer(0.3, lambda: os.kill(os.getpid(), signal.SIGINT))
     timer.start()
     start = time.perf_counter()
-    with pytest.raises(KeyboardInterrupt):
-        epfilt.filter_file(big, out, threads=1)
-    timer.cancel()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            epfilt.filter_file(big, out, threads=1)
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, previous)
     assert time.perf_counter() - start < 5.0
     assert list(out.parent.iterdir()) == []
 
@@ -243,3 +251,27 @@ def test_filter_file_memory_is_flat_in_height(tmp_path):
     # channels, 60 MB, on either side; streaming adds the allocator's noise.
     growth = peaks[1] - peaks[0]
     assert growth < 24 << 20, f"peak RSS {peaks[0] >> 20} -> {peaks[1] >> 20} MiB"
+
+
+def test_filter_file_reports_progress_and_a_failing_callback_stops_it(tmp_path):
+    src = tmp_path / "in.exr"
+    run("synth", "-q", "--scene", "mixed", "--size", "800x800", "-o", src)
+    seen = []
+    report = epfilt.filter_file(src, tmp_path / "out.exr", threads=1, strip_rows=24,
+                                progress=lambda done, total: seen.append((done, total)))
+    assert report["out_height"] == 800
+    assert len(seen) >= 2, seen
+    assert all(t == seen[0][1] for _, t in seen)
+    assert [d for d, _ in seen] == sorted(d for d, _ in seen)
+
+    class Stop(Exception):
+        pass
+
+    def stop(done, total):
+        raise Stop
+
+    out = tmp_path / "stopped" / "out.exr"
+    out.parent.mkdir()
+    with pytest.raises(Stop):
+        epfilt.filter_file(src, out, threads=1, progress=stop)
+    assert list(out.parent.iterdir()) == []

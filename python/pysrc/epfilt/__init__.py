@@ -73,19 +73,22 @@ def filter(samples, supersample=None, method="ep-gauss", *, channels=None, varia
     )
 
 
-def filter_file(input, output, **settings):
+def filter_file(input, output, *, progress=None, **settings):
     """Filter an EXR (or Radiance picture) into another, streamed in constant memory.
 
     input, output: paths; frame sequences as on the command line (``r.####.exr``), with
         ``frames=``, ``task_index=``/``task_count=``; one band with ``band="3/8"``.
     settings: the command line's options with underscores (``method="ep-box"``,
         ``compression="zip"``, ``skip_existing=True``, ``threads=8``).
+    progress: a callable ``progress(done, total)`` (output rows; frames of a sequence),
+        called from the calling thread as the run advances; an exception it raises stops
+        the run, leaving no output.
 
     The output is written whole or not at all. Returns the ``--report`` fields as a dict
     (a sequence's report for a sequence; ``{"skipped": True, ...}`` when ``skip_existing``
     found a complete output).
     """
-    return _epfilt.filter_file(str(input), str(output), **settings)
+    return _epfilt.filter_file(str(input), str(output), progress=progress, **settings)
 
 
 def info(path):

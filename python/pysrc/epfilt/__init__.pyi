@@ -1,7 +1,7 @@
 """Type stubs of epfilt's Python API (see the module's docstrings)."""
 
 from os import PathLike
-from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -27,7 +27,13 @@ def filter(
     spp: Union[int, float, npt.NDArray[Any], None] = None,
     **settings: _Setting,
 ) -> Tuple[_Samples, Dict[str, Any]]: ...
-def filter_file(input: _Path, output: _Path, **settings: _Setting) -> Dict[str, Any]: ...
+def filter_file(
+    input: _Path,
+    output: _Path,
+    *,
+    progress: Optional[Callable[[int, int], Any]] = None,
+    **settings: _Setting,
+) -> Dict[str, Any]: ...
 def info(path: _Path) -> Dict[str, Any]: ...
 def compare(a: _Path, b: _Path) -> Dict[str, Any]: ...
 def read(path: _Path, extra: Optional[Sequence[str]] = None) -> Tuple[npt.NDArray[np.float32], List[str]]: ...
