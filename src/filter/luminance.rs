@@ -64,8 +64,14 @@ impl Luminance {
     /// samples per channel): [`Luminance::of`] for every sample, a channel at
     /// a time.
     pub fn row_into(&self, row: &[f32], w: usize, out: &mut [f64]) {
-        let out = &mut out[..w];
-        let ch = |c: usize| &row[c * w..(c + 1) * w];
+        self.cols_into(row, w, 0..w, out);
+    }
+
+    /// [`Luminance::row_into`] for the samples `cols` of the row only
+    /// (`out[i - cols.start]`): the same sum for each.
+    pub fn cols_into(&self, row: &[f32], w: usize, cols: std::ops::Range<usize>, out: &mut [f64]) {
+        let out = &mut out[..cols.len()];
+        let ch = |c: usize| &row[c * w + cols.start..c * w + cols.end];
         // Colour, the common case: one pass.
         if let [c0, c1, c2] = self.used[..] {
             let (l0, l1, l2) = (self.weights[c0], self.weights[c1], self.weights[c2]);

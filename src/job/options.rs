@@ -584,6 +584,7 @@ impl FilterOptions {
             threads,
             cancel,
             nonfinite,
+            classify_samples: 0,
         };
         Ok((cfg, warning))
     }

@@ -141,6 +141,10 @@ pub struct PipelineConfig {
     pub cancel: Option<Arc<AtomicBool>>,
     /// NaN and infinite input samples.
     pub nonfinite: NonFinite,
+    /// Samples of an input row one classification task searches for noise
+    /// (0: automatic; rows wider than that are cut into column ranges).
+    /// Does not change the result.
+    pub classify_samples: usize,
 }
 
 impl Default for PipelineConfig {
@@ -151,6 +155,7 @@ impl Default for PipelineConfig {
             threads: 0,
             cancel: None,
             nonfinite: NonFinite::Error,
+            classify_samples: 0,
         }
     }
 }

@@ -5,14 +5,19 @@ use super::excess::ExcessStage;
 use super::order::OrderStage;
 use super::spread::GaussianStage;
 use super::stage::Stage;
-use super::StripLayout;
+use super::{PipelineConfig, StripLayout};
 use crate::error::{Error, Result};
 use crate::filter::ep_box::{Spp, StatsLayout};
 use crate::filter::{Method, ValidParams};
 
 /// The stage of `params.method` for strips laid out as `job`, its
 /// accumulators cut in column tiles of `tile`.
-pub fn make(job: &StripLayout, params: &ValidParams, tile: usize) -> Result<Box<dyn Stage>> {
+pub fn make(
+    job: &StripLayout,
+    params: &ValidParams,
+    cfg: &PipelineConfig,
+) -> Result<Box<dyn Stage>> {
+    let tile = cfg.tile;
     let (grid, nch) = (job.grid, job.channels.len());
     Ok(match params.method {
         Method::EpBox => {
@@ -67,6 +72,7 @@ pub fn make(job: &StripLayout, params: &ValidParams, tile: usize) -> Result<Box<
             if let Some(real) = job.padded_from {
                 stage.set_real_size(real);
             }
+            stage.set_classify_samples(cfg.classify_samples);
             Box::new(stage)
         }
     })

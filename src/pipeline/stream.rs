@@ -130,7 +130,7 @@ impl Streamer {
                 Some(Coverage::of(params, grid, (rw, rh)))
             }
         };
-        let stage = super::stages::make(job, params, cfg.tile)?;
+        let stage = super::stages::make(job, params, cfg)?;
         let nall = job.strip_channels();
         let mut books = Books::new(job.channels.clone(), nall);
         books.set_nonfinite(cfg.nonfinite);

@@ -183,7 +183,14 @@ pub fn invariant(
 ) -> Result<(Vec<f32>, RunStats), String> {
     let mut first: Option<(Vec<f32>, RunStats)> = None;
     for &(tile, strip, threads) in cuts {
-        let (out, stats) = filter_in_memory(data.to_vec(), job, params, &cfg(tile, strip, threads))
+        // Narrow tiles also cut each row's classification into column
+        // ranges of 3 tile + 1 samples (4, 22, 49: ranges that divide no
+        // row evenly), which wide images get.
+        let mut cut = cfg(tile, strip, threads);
+        if tile < 32 {
+            cut.classify_samples = 3 * tile + 1;
+        }
+        let (out, stats) = filter_in_memory(data.to_vec(), job, params, &cut)
             .map_err(|e| format!("{} {tile}/{strip}/{threads}: {e}", params.method.name()))?;
         let Some((o, s)) = &first else {
             first = Some((out, stats));

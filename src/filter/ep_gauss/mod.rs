@@ -413,7 +413,20 @@ impl EpGauss {
         out: &mut Vec<f64>,
         h: &mut Vec<f64>,
     ) {
-        let pad = self.pad();
+        self.xbar0_cols_into(rows, y, 0..w, out, h);
+    }
+
+    /// [`EpGauss::xbar0_row_into`] for the pixels `cols` of the row only
+    /// (`out[x - cols.start]`): the same sum for each.
+    pub fn xbar0_cols_into(
+        &self,
+        rows: &impl LumRows,
+        y: i64,
+        cols: std::ops::Range<usize>,
+        out: &mut Vec<f64>,
+        h: &mut Vec<f64>,
+    ) {
+        let (w, pad) = (cols.len(), self.pad() + cols.start);
         let lv = &self.levels[0];
         let c = lv.shell;
         out.clear();

@@ -31,6 +31,36 @@ struct FindScratch {
 /// how many noisy samples were kept as features.
 type Found = (Vec<Noisy>, Vec<f32>, u64);
 
+/// Samples of one input row that one classification task searches for
+/// noise: a pixel row of a wider image is cut into column ranges, searched
+/// by tasks of their own, so that one row is not the longest task of its
+/// strip (32769 pixels at S = 3: 1.1 ms, the span of a wide ep-gauss run).
+/// Rows up to this wide are one task, the search and the pass together.
+const FIND_TASK_SAMPLES: usize = 32_768;
+
+/// What [`FindCtx::find_cols`] found in a column range of a pixel row.
+struct FoundPart {
+    found: Found,
+    /// Where each sample row's entries end in `found.0` (S <= 8).
+    ends: [usize; 8],
+}
+
+/// A pixel row's parts, from left to right, in the row-major order of one
+/// search over the whole row: by sample row, then column.
+fn merge_parts(parts: &[FoundPart], s: usize, nch: usize) -> Found {
+    let mut out: Found = (Vec::new(), Vec::new(), 0);
+    for bb in 0..s {
+        for p in parts {
+            let start = if bb == 0 { 0 } else { p.ends[bb - 1] };
+            let end = p.ends[bb];
+            out.0.extend_from_slice(&p.found.0[start..end]);
+            out.1.extend_from_slice(&p.found.1[start * nch..end * nch]);
+        }
+    }
+    out.2 = parts.iter().map(|p| p.found.2).sum();
+    out
+}
+
 /// What classification reads, shared by its tasks.
 #[derive(Clone, Copy)]
 struct FindCtx<'a> {
@@ -56,10 +86,9 @@ impl FindCtx<'_> {
     /// which samples of pixel row `y` are noise, and which of those are kept
     /// as features. The row's noisy samples in row-major order, their values
     /// (`nch` each, in the same order) and how many were kept.
-    fn find(&self, sc: &mut FindScratch, y: usize) -> Found {
+    fn find_cols(&self, sc: &mut FindScratch, y: usize, cols: std::ops::Range<usize>) -> FoundPart {
         let FindCtx {
             s,
-            w,
             in_w,
             in_h,
             nch,
@@ -80,61 +109,68 @@ impl FindCtx<'_> {
         let mut found = Vec::new();
         let mut vals = Vec::new();
         let mut kept = 0u64;
+        let mut ends = [0usize; 8];
         let Some(ep) = ep else {
-            return (found, vals, kept);
+            return FoundPart {
+                found: (found, vals, kept),
+                ends,
+            };
         };
         let view = yview;
-        ep.xbar0_row_into(view, y as i64, w, xbars, xbar_h);
+        ep.xbar0_cols_into(view, y as i64, cols.clone(), xbars, xbar_h);
+        // This part's samples, `i0..i1` of each row (`n` of them).
+        let (i0, i1) = (cols.start * s, cols.end * s);
+        let n = i1 - i0;
         let luma = |row: &[f32], i: usize| lum.of(|c| row[c * in_w + i] as f64);
         // The luminance of the pixel row's samples, a row at a time
         // (the same sum, in the same order, as `luma`).
         lrows.clear();
-        lrows.resize(s * in_w, 0.0f64);
-        for (bb, lrow) in lrows.chunks_exact_mut(in_w).enumerate() {
-            lum.row_into(input.get(y * s + bb), in_w, lrow);
+        lrows.resize(s * n, 0.0f64);
+        for (bb, lrow) in lrows.chunks_exact_mut(n).enumerate() {
+            lum.cols_into(input.get(y * s + bb), in_w, i0..i1, lrow);
         }
         // Which pixels hold a noisy sample: one branch-free test of
         // all their samples first (most hold none).
         flagged.clear();
         if ep.low_outliers() {
-            for (px, &xbar) in xbars.iter().enumerate() {
+            for (k, &xbar) in xbars.iter().enumerate() {
                 let Some((hi, lo)) = ep.bounds(xbar) else {
                     continue;
                 };
                 let mut any = false;
                 for bb in 0..s {
-                    for &x0 in &lrows[bb * in_w + px * s..bb * in_w + (px + 1) * s] {
+                    for &x0 in &lrows[bb * n + k * s..bb * n + (k + 1) * s] {
                         any |= EpGauss::outside(x0, (hi, lo));
                     }
                 }
                 if any {
-                    flagged.push((px, xbar, hi, lo));
+                    flagged.push((cols.start + k, xbar, hi, lo));
                 }
             }
         } else {
             // Only bright samples can fail (`lo <= 0`): a pixel
             // holds one iff its brightest sample is above `hi`.
             pmax.clear();
-            pmax.resize(w, f64::NEG_INFINITY);
-            for lrow in lrows.chunks_exact(in_w) {
+            pmax.resize(cols.len(), f64::NEG_INFINITY);
+            for lrow in lrows.chunks_exact(n) {
                 row_max(pmax, lrow, s);
             }
-            for (px, (&xbar, &m)) in xbars.iter().zip(pmax.iter()).enumerate() {
+            for (k, (&xbar, &m)) in xbars.iter().zip(pmax.iter()).enumerate() {
                 let Some((hi, lo)) = ep.bounds(xbar) else {
                     continue;
                 };
                 if m > hi {
-                    flagged.push((px, xbar, hi, lo));
+                    flagged.push((cols.start + k, xbar, hi, lo));
                 }
             }
         }
         // Row-major order: by input row, then column.
         for bb in 0..s {
             let j = y * s + bb;
-            let lrow = &lrows[bb * in_w..(bb + 1) * in_w];
+            let lrow = &lrows[bb * n..(bb + 1) * n];
             for &(px, xbar, hi, lo) in flagged.iter() {
                 for i in px * s..(px + 1) * s {
-                    let x0 = lrow[i];
+                    let x0 = lrow[i - i0];
                     if !EpGauss::outside(x0, (hi, lo)) {
                         continue;
                     }
@@ -144,10 +180,10 @@ impl FindCtx<'_> {
                             return None;
                         }
                         let (ni, nj) = (ni as usize, nj as usize);
-                        // This pixel row's samples are in `lrows`.
+                        // This part's samples are in `lrows`.
                         Some(match nj.checked_sub(y * s).filter(|&b| b < s) {
-                            Some(b) => lrows[b * in_w + ni],
-                            None => luma(input.get(nj), ni),
+                            Some(b) if (i0..i1).contains(&ni) => lrows[b * n + ni - i0],
+                            _ => luma(input.get(nj), ni),
                         })
                     };
                     let background = || self.background(px, y);
@@ -171,8 +207,12 @@ impl FindCtx<'_> {
                     });
                 }
             }
+            ends[bb] = found.len();
         }
-        (found, vals, kept)
+        FoundPart {
+            found: (found, vals, kept),
+            ends,
+        }
     }
 
     /// The box luminance of the eight pixels about pixel `(px, y)`
@@ -301,24 +341,59 @@ impl GaussianStage {
             pixel_stats: self.pixel_stats.as_ref(),
             input,
         };
-        // Both phases row by row in one task: the pass reads the rows the
-        // search for noise has just read.
+        let rows = b - a;
         let mut hrows = self.hpass.range_mut(a * s, b * s);
         let region = crate::trace::region("classify");
-        let found: Vec<Found> = hrows
-            .par_chunks_mut(s)
-            .enumerate()
-            .map_init(
-                <(FindScratch, Vec<f32>)>::default,
-                |(scratch, copy), (k, hs)| {
+        let per_task = match self.classify_samples {
+            0 => FIND_TASK_SAMPLES,
+            n => n,
+        };
+        let parts = self.grid.in_w.div_ceil(per_task).clamp(1, self.w);
+        let found: Vec<Found> = if parts == 1 {
+            // Both phases row by row in one task: the pass reads the rows
+            // the search for noise has just read.
+            hrows
+                .par_chunks_mut(s)
+                .enumerate()
+                .map_init(
+                    <(FindScratch, Vec<f32>)>::default,
+                    |(scratch, copy), (k, hs)| {
+                        let _task = region.task("classify");
+                        let y = a + k;
+                        let f = ctx.find_cols(scratch, y, 0..ctx.w).found;
+                        ctx.pass(copy, y, hs, &f.0);
+                        f
+                    },
+                )
+                .collect()
+        } else {
+            // A wide row: its column ranges searched by tasks of their own,
+            // then each row's pass with what they found, in its order.
+            let span = ctx.w.div_ceil(parts);
+            // No empty range at the end (10 pixels in 6 parts: 5 of 2).
+            let parts = ctx.w.div_ceil(span);
+            let found_parts: Vec<FoundPart> = (0..rows * parts)
+                .into_par_iter()
+                .map_init(FindScratch::default, |scratch, t| {
                     let _task = region.task("classify");
-                    let y = a + k;
-                    let f = ctx.find(scratch, y);
-                    ctx.pass(copy, y, hs, &f.0);
-                    f
-                },
-            )
-            .collect();
+                    let x0 = (t % parts) * span;
+                    ctx.find_cols(scratch, a + t / parts, x0..(x0 + span).min(ctx.w))
+                })
+                .collect();
+            let merged: Vec<Found> = found_parts
+                .par_chunks(parts)
+                .map(|row| merge_parts(row, s, ctx.nch))
+                .collect();
+            hrows
+                .par_chunks_mut(s)
+                .zip(merged.par_iter())
+                .enumerate()
+                .for_each_init(Vec::new, |copy, (k, (hs, f))| {
+                    let _task = region.task("classify");
+                    ctx.pass(copy, a + k, hs, &f.0);
+                });
+            merged
+        };
         for (list, vals, kept) in found {
             // Kept samples failed the test too; the spread ones are counted
             // when they are spread.

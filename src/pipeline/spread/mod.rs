@@ -170,6 +170,8 @@ pub struct GaussianStage {
     /// The 4x grid, whose rows are upsampled into the 2x grid's: its share
     /// enters a 2x row once, just before that row is upsampled.
     c4: CoarseGrid,
+    /// Samples of an input row per classification task (0: automatic).
+    classify_samples: usize,
 }
 
 impl GaussianStage {
@@ -271,7 +273,14 @@ impl GaussianStage {
             c2: CoarseGrid::new(nch, (w, h), 2, coarse),
             up_done: 0,
             c4: CoarseGrid::new(nch, (w.div_ceil(2), h.div_ceil(2)), 2, coarse4),
+            classify_samples: 0,
         }
+    }
+
+    /// Samples of an input row per classification task
+    /// ([`super::PipelineConfig::classify_samples`]; 0: automatic).
+    pub fn set_classify_samples(&mut self, n: usize) {
+        self.classify_samples = n;
     }
 
     /// `--edge pad`: the grid's first `real.0` x `real.1` samples are real,
