@@ -14,7 +14,7 @@
 //!   area: energy is `sum(value * coverage) * S^2`, which is what the ledger
 //!   counts, exact as before.
 
-use super::{Source, Strip};
+use super::{Decoder, Source, Strip};
 use crate::error::Result;
 use crate::filter::kernel::Kernel1d;
 use crate::filter::{FilterParams, Method};
@@ -44,6 +44,17 @@ impl<S: Source> Cropped<S> {
 }
 
 impl<S: Source> Source for Cropped<S> {
+    fn decoder<'s>(&mut self, max_rows: usize, pool: &'s rayon::ThreadPool) -> Option<Decoder<'s>>
+    where
+        Self: 's,
+    {
+        self.inner.decoder(max_rows, pool)
+    }
+
+    fn wait_ready(&mut self) {
+        self.inner.wait_ready();
+    }
+
     fn next_strip(&mut self, max_rows: usize) -> Result<Option<Strip>> {
         if self.done {
             return Ok(None);
@@ -107,6 +118,17 @@ impl<S: Source> Padded<S> {
 }
 
 impl<S: Source> Source for Padded<S> {
+    fn decoder<'s>(&mut self, max_rows: usize, pool: &'s rayon::ThreadPool) -> Option<Decoder<'s>>
+    where
+        Self: 's,
+    {
+        self.inner.decoder(max_rows, pool)
+    }
+
+    fn wait_ready(&mut self) {
+        self.inner.wait_ready();
+    }
+
     fn next_strip(&mut self, max_rows: usize) -> Result<Option<Strip>> {
         let ((rw, rh), (w, h), nch) = (self.real, self.size, self.nch);
         if !self.inner_done {

@@ -38,8 +38,14 @@ impl StripLayout {
 
 /// Decoded bytes the reader asks for at once (beyond one strip's rows),
 /// whatever the thread count: enough chunks to keep 16 workers busy at
-/// ordinary widths, few enough that memory stays small at 32k.
+/// ordinary widths, few enough that memory stays small at 32k. The reader
+/// holds [`READ_AHEAD_BATCHES`] such batches: one decodes while the one
+/// before it is handed over.
 pub const READ_AHEAD_BYTES: u64 = 24 << 20;
+
+/// Batches of [`read_ahead_blocks`] the reader holds at once (the decoder's
+/// buffers, `io::reader::AHEAD_BUFFERS`).
+pub const READ_AHEAD_BATCHES: u64 = 2;
 
 /// Blocks the reader's batch holds at the least, up to
 /// [`READ_AHEAD_MAX_BYTES`]: a batch's blocks decode in parallel and the
@@ -49,8 +55,10 @@ pub const READ_AHEAD_BYTES: u64 = 24 << 20;
 /// (1.9 s, 3.8x at 16 cores, box).
 pub const READ_AHEAD_MIN_BLOCKS: u64 = 8;
 
-/// The most decoded bytes a batch holds for [`READ_AHEAD_MIN_BLOCKS`].
-pub const READ_AHEAD_MAX_BYTES: u64 = 64 << 20;
+/// The most decoded bytes a batch holds for [`READ_AHEAD_MIN_BLOCKS`]. Two
+/// batches are held: at 32769 wide, 5 blocks of 6.3 MB each (63 MB in all;
+/// 8 in each, 100 MB, took ep-gauss's peak RSS to 275 MiB at 1 thread).
+pub const READ_AHEAD_MAX_BYTES: u64 = 32 << 20;
 
 /// Blocks (chunks) of `block_bytes` decoded bytes in the reader's batch:
 /// [`READ_AHEAD_BYTES`] of them, or [`READ_AHEAD_MIN_BLOCKS`] within
@@ -62,14 +70,15 @@ pub fn read_ahead_blocks(block_bytes: u64) -> u64 {
     by_bytes.max(by_count).max(2)
 }
 
-/// The reader's batch in bytes ([`read_ahead_blocks`]), at most the whole
-/// image (`h` rows of `row` bytes).
+/// The reader's batches in bytes ([`read_ahead_blocks`], each at most the
+/// whole image of `h` rows of `row` bytes), [`READ_AHEAD_BATCHES`] of them.
 fn read_ahead(row: u64, h: usize, block_bytes: u64) -> u64 {
     let image = row.saturating_mul(h as u64).max(block_bytes);
     read_ahead_blocks(block_bytes)
         .saturating_mul(block_bytes)
         .max(READ_AHEAD_BYTES)
         .min(image)
+        .saturating_mul(READ_AHEAD_BATCHES)
 }
 
 /// Bytes a job will hold at most, from its sizes alone: the strips in flight,
@@ -184,9 +193,9 @@ mod tests {
         // Tiles of 64 x 64: bytes decide.
         let tile = 64 * 64 * 3 * 4;
         assert_eq!(read_ahead_blocks(tile), READ_AHEAD_BYTES / tile);
-        // 32769 wide: 6.3 MB blocks, 8 of them (50 MB, within 64 MiB).
+        // 32769 wide: 6.3 MB blocks, 5 of them (31.5 MB, within 32 MiB).
         let wide = 32769 * 3 * 4 * 16;
-        assert_eq!(read_ahead_blocks(wide), READ_AHEAD_MIN_BLOCKS);
+        assert_eq!(read_ahead_blocks(wide), 5);
         assert!(read_ahead_blocks(wide) * wide <= READ_AHEAD_MAX_BYTES);
         // Blocks past the cap: two at the least.
         assert_eq!(read_ahead_blocks(READ_AHEAD_MAX_BYTES), 2);

@@ -54,7 +54,8 @@ pub use stage::{Stage, WindowUse};
 pub use stream::{OutRows, Streamer};
 
 pub use estimate::{
-    auto_strip_rows, estimate_bytes, read_ahead_blocks, READ_AHEAD_BYTES, STRIP_BYTES,
+    auto_strip_rows, estimate_bytes, read_ahead_blocks, READ_AHEAD_BATCHES, READ_AHEAD_BYTES,
+    STRIP_BYTES,
 };
 pub use memory::{filter_in_memory, filter_planar, MemoryRun, MemorySink, MemorySource};
 pub use runner::{mean_luminance, run, thread_pool, Progress};
@@ -70,10 +71,31 @@ pub struct Strip {
     pub data: Vec<f32>,
 }
 
+/// A loop that decodes a source's rows ahead of its strips, on a thread of
+/// its own ([`Source::decoder`]).
+pub type Decoder<'s> = Box<dyn FnOnce() + Send + 's>;
+
 /// Something that delivers input rows in increasing order.
 pub trait Source: Send {
     /// The next `max_rows` rows (fewer at the end); `None` when done.
     fn next_strip(&mut self, max_rows: usize) -> Result<Option<Strip>>;
+
+    /// For a source that decodes: the loop that decodes its rows ahead, for
+    /// strips of `max_rows`, with `pool`'s threads, to run on a thread of
+    /// its own while the strips are taken (it returns once the rows are
+    /// decoded, on an error, or once the source is dropped). Then call
+    /// [`Source::wait_ready`] before each `next_strip`. `None` (the default):
+    /// `next_strip` does the work itself.
+    fn decoder<'s>(&mut self, _max_rows: usize, _pool: &'s rayon::ThreadPool) -> Option<Decoder<'s>>
+    where
+        Self: 's,
+    {
+        None
+    }
+
+    /// Wait, outside the thread pool, until the next strip's rows are
+    /// decoded (a source with a [`Source::decoder`]; else nothing).
+    fn wait_ready(&mut self) {}
 }
 
 /// Something that takes finished output rows in increasing order.

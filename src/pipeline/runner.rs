@@ -130,32 +130,42 @@ pub fn run<S: Source, K: Sink>(
 }
 
 /// The reader thread: strips of `strip_rows` from `source` into `tx` (an
-/// error ends them); returns its busy seconds.
+/// error ends them); returns its busy seconds. A source that decodes does so
+/// ahead, on a thread of its own ([`Source::decoder`]), while this one hands
+/// the strips over.
 fn read_strips<S: Source>(
     mut source: S,
     pool: &rayon::ThreadPool,
     strip_rows: usize,
     tx: crossbeam_channel::Sender<Result<Strip>>,
 ) -> f64 {
-    let mut busy = 0.0;
-    for k in 0.. {
-        let t = Instant::now();
-        let next = pool.install(|| {
-            let _segment = crate::trace::segment("read", k, &[]);
-            source.next_strip(strip_rows)
-        });
-        busy += t.elapsed().as_secs_f64();
-        let stop = !matches!(next, Ok(Some(_)));
-        let msg = match next {
-            Ok(Some(s)) => Ok(s),
-            Ok(None) => break,
-            Err(e) => Err(e),
-        };
-        if tx.send(msg).is_err() || stop {
-            break;
+    std::thread::scope(|scope| {
+        if let Some(decoder) = source.decoder(strip_rows, pool) {
+            scope.spawn(decoder);
         }
-    }
-    busy
+        let mut busy = 0.0;
+        for k in 0.. {
+            source.wait_ready();
+            let t = Instant::now();
+            let next = pool.install(|| {
+                let _segment = crate::trace::segment("read", k, &[]);
+                source.next_strip(strip_rows)
+            });
+            busy += t.elapsed().as_secs_f64();
+            let stop = !matches!(next, Ok(Some(_)));
+            let msg = match next {
+                Ok(Some(s)) => Ok(s),
+                Ok(None) => break,
+                Err(e) => Err(e),
+            };
+            if tx.send(msg).is_err() || stop {
+                break;
+            }
+        }
+        // Its channels closed, the decoder ends (the scope waits for it).
+        drop(source);
+        busy
+    })
 }
 
 /// The writer thread: the rows from `rx` (each with the strip that finished

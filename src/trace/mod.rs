@@ -6,10 +6,14 @@
 //! coordinator) and `write` (the writer thread). Each strip is one *segment*
 //! of each lane, in strip order; inside a segment the lane's thread runs
 //! serial code and *regions*, parallel loops whose *tasks* run on the pool.
+//! A fourth lane, `decode`, is the reader's decoder thread where it decodes
+//! ahead: a segment per batch of blocks.
 //! Every event carries its id and the ids of the events it depends on:
 //! a segment the lane's previous segment (and, for `filter`, the `read` of
-//! its strip; for `write`, the `filter` segment that made its rows), a region
-//! its segment, a task its region.
+//! its strip; for `write`, the `filter` segment that made its rows; for a
+//! `read` that hands over a new batch, the `decode` of it; for a `decode`,
+//! the `read` that gave its buffer back), a region its segment, a task its
+//! region.
 //!
 //! Off by default, and then a span costs one relaxed atomic load. The
 //! recorder is process-wide (one traced run at a time, as the command line
@@ -40,6 +44,9 @@ thread_local! {
 struct Recorder {
     start: Instant,
     events: Vec<Event>,
+    /// Dependencies found while a segment ran ([`wait_for`]): (segment, what
+    /// it waited for).
+    waits: Vec<(u64, u64)>,
 }
 
 /// One event: a complete span (`ph: "X"`), times in microseconds.
@@ -95,6 +102,7 @@ pub fn start() -> Session {
         *r = Some(Recorder {
             start: Instant::now(),
             events: Vec::new(),
+            waits: Vec::new(),
         });
     }
     ON.store(true, Ordering::Relaxed);
@@ -105,12 +113,21 @@ impl Session {
     /// Stop recording; the events, in the order they ended.
     pub fn finish(self) -> Vec<Event> {
         ON.store(false, Ordering::Relaxed);
-        let mut events = RECORDER
+        let (mut events, waits) = RECORDER
             .lock()
             .ok()
             .and_then(|mut r| r.take())
-            .map(|r| r.events)
+            .map(|r| (r.events, r.waits))
             .unwrap_or_default();
+        let mut found: std::collections::HashMap<u64, Vec<u64>> = Default::default();
+        for (seg, dep) in waits {
+            found.entry(seg).or_default().push(dep);
+        }
+        for e in &mut events {
+            if let Some(d) = found.remove(&e.args.id) {
+                e.args.deps.extend(d);
+            }
+        }
         link(&mut events);
         events
     }
@@ -257,6 +274,28 @@ pub fn segment(lane: &'static str, strip: usize, deps: &[u64]) -> Span {
         o.outer = Some(outer);
     }
     span
+}
+
+/// The segment this thread is in (0 when not recording or in none).
+pub fn current_segment() -> u64 {
+    if !on() {
+        return 0;
+    }
+    SEGMENT.with(|s| s.get())
+}
+
+/// The segment this thread is in waited for event `id` (found while it ran,
+/// e.g. the decoding of the rows it hands over).
+pub fn wait_for(id: u64) {
+    let seg = current_segment();
+    if seg == 0 || id == 0 {
+        return;
+    }
+    if let Ok(mut r) = RECORDER.lock() {
+        if let Some(r) = r.as_mut() {
+            r.waits.push((seg, id));
+        }
+    }
 }
 
 /// A parallel loop opened on this thread, inside its current segment; its

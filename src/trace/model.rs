@@ -10,7 +10,11 @@
 //!   `filter` segment that made its rows;
 //! * the strip queue: `read` of strip `k` starts once `filter` of strip
 //!   `k - QUEUE` has started (the channel holds [`QUEUE`] strips);
-//! * a region ends when its last task does.
+//! * a region ends when its last task does;
+//! * what a segment says it waited for (`args.deps` naming another lane's
+//!   segment): a `read` that hands over a new batch waits for its `decode`
+//!   (the reader's decoder lane, a segment per batch), and a `decode` for the
+//!   `read` that gave its buffer back.
 //!
 //! Units are given to free cores first come, first served (a lane's next
 //! piece and a region's tasks as they become ready). Not modelled: memory
@@ -43,16 +47,20 @@ pub enum Phase {
 /// One lane's work on one strip.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Segment {
-    /// 0 read, 1 filter, 2 write.
+    /// 0 read, 1 filter, 2 write, 3 decode.
     pub lane: usize,
-    /// The strip (`write`: the filter strip whose rows it writes).
+    /// The strip (`write`: the filter strip whose rows it writes; `decode`:
+    /// the batch).
     pub strip: usize,
     /// Its pieces, in order.
     pub phases: Vec<Phase>,
+    /// Segments (indices) that must be done before it starts, besides the
+    /// lanes' rules: what the trace says it waited for.
+    pub after: Vec<usize>,
 }
 
 /// The lanes, by their names in a trace.
-pub const LANES: [&str; 3] = ["read", "filter", "write"];
+pub const LANES: [&str; 4] = ["read", "filter", "write", "decode"];
 
 /// A run to replay.
 #[derive(Clone, Debug, Default)]
@@ -92,6 +100,8 @@ impl Model {
         let mut model = Model::default();
         let mut segs: Vec<&Event> = events.iter().filter(|e| e.cat == "segment").collect();
         segs.sort_by(|a, b| a.ts.total_cmp(&b.ts));
+        let mut ids = Vec::with_capacity(segs.len());
+        let mut deps = Vec::with_capacity(segs.len());
         for seg in segs {
             let lane = LANES
                 .iter()
@@ -123,11 +133,18 @@ impl Model {
             serial += tail;
             phases.push(Phase::Serial(tail));
             *model.serial_by_lane.entry(LANES[lane].into()).or_default() += serial;
+            ids.push(seg.args.id);
+            deps.push(&seg.args.deps);
             model.segments.push(Segment {
                 lane,
                 strip,
                 phases,
+                after: Vec::new(),
             });
+        }
+        let at: HashMap<u64, usize> = ids.iter().enumerate().map(|(i, &id)| (id, i)).collect();
+        for (seg, d) in model.segments.iter_mut().zip(deps) {
+            seg.after = d.iter().filter_map(|id| at.get(id).copied()).collect();
         }
         Ok(model)
     }
@@ -243,9 +260,9 @@ enum Unit {
 struct Replay<'a> {
     m: &'a Model,
     /// Each lane's segments in order.
-    lanes: [Vec<usize>; 3],
+    lanes: [Vec<usize>; 4],
     /// Per lane: the next segment to start, and the phase it is in.
-    next: [usize; 3],
+    next: [usize; 4],
     phase: Vec<usize>,
     /// Tasks left in the running region of each segment.
     left: Vec<usize>,
@@ -254,12 +271,12 @@ struct Replay<'a> {
     /// (lane, strip) -> segment.
     index: HashMap<(usize, usize), usize>,
     /// Whether each lane is inside a segment.
-    busy: [bool; 3],
+    busy: [bool; 4],
 }
 
 impl<'a> Replay<'a> {
     fn new(m: &'a Model) -> Self {
-        let mut lanes: [Vec<usize>; 3] = Default::default();
+        let mut lanes: [Vec<usize>; 4] = Default::default();
         let mut index = HashMap::new();
         for (i, s) in m.segments.iter().enumerate() {
             lanes[s.lane].push(i);
@@ -269,13 +286,13 @@ impl<'a> Replay<'a> {
         Replay {
             m,
             lanes,
-            next: [0; 3],
+            next: [0; 4],
             phase: vec![0; n],
             left: vec![0; n],
             started: vec![None; n],
             done: vec![false; n],
             index,
-            busy: [false; 3],
+            busy: [false; 4],
         }
     }
 
@@ -285,15 +302,17 @@ impl<'a> Replay<'a> {
         let done = |lane: usize, strip: usize| {
             self.index.get(&(lane, strip)).is_none_or(|&j| self.done[j])
         };
-        match s.lane {
+        let by_lane = match s.lane {
             0 => s.strip.checked_sub(QUEUE).is_none_or(|k| {
                 self.index
                     .get(&(1, k))
                     .is_none_or(|&j| self.started[j].is_some())
             }),
             1 => done(0, s.strip),
-            _ => done(1, s.strip),
-        }
+            2 => done(1, s.strip),
+            _ => true,
+        };
+        by_lane && s.after.iter().all(|&j| self.done[j])
     }
 
     fn run(mut self, cores: usize) -> f64 {
@@ -337,7 +356,7 @@ impl<'a> Replay<'a> {
         let mut again = true;
         while again {
             again = false;
-            for lane in 0..3 {
+            for lane in 0..LANES.len() {
                 if self.busy[lane] {
                     continue;
                 }
@@ -417,6 +436,7 @@ mod tests {
             lane,
             strip,
             phases,
+            after: Vec::new(),
         }
     }
 
@@ -503,5 +523,41 @@ mod tests {
         // Only read 0 can start before anything runs.
         assert_eq!(r.next[0], 1);
         assert!(close(m.replay(4), n as f64));
+    }
+
+    #[test]
+    fn a_decoder_lane_overlaps_the_next_batch_with_this_one() {
+        // 4 batches of one strip: decoding 2 s (one task), handing over free,
+        // filtering 2 s. Each read waits for its batch's decode, each decode
+        // for the read that gave its buffer back (two buffers). Decoding
+        // ahead, batch b + 1 decodes while batch b is filtered: 2 + 4 * 2 on
+        // two cores (the decodes inside the reads would take 16).
+        let n = 4;
+        let mut segments = Vec::new();
+        for b in 0..n {
+            // Indices: decode 3b, read 3b + 1, filter 3b + 2.
+            let mut decode = seg(3, b, vec![Phase::Region(vec![2.0])]);
+            if b >= 2 {
+                decode.after = vec![3 * (b - 2) + 1];
+            }
+            segments.push(decode);
+            let mut read = seg(0, b, vec![Phase::Serial(0.0)]);
+            read.after = vec![3 * b];
+            segments.push(read);
+            segments.push(seg(1, b, vec![Phase::Serial(2.0)]));
+        }
+        let m = Model {
+            segments,
+            ..Model::default()
+        };
+        let mut r = Replay::new(&m);
+        let mut ready = VecDeque::new();
+        r.start_lanes(0.0, &mut ready);
+        // At first only the first decode can start: read 0 waits for it.
+        assert_eq!((r.next[3], r.next[0]), (1, 0));
+        assert!(close(m.work(), 16.0));
+        assert!(close(m.replay(1), 16.0));
+        assert!(close(m.replay(2), 10.0), "{}", m.replay(2));
+        assert!(close(m.span(), 10.0));
     }
 }

@@ -93,6 +93,29 @@ fn a_trace_holds_every_strips_work_with_its_dependencies_and_changes_nothing() {
         assert_eq!(filter, (0..n).collect::<Vec<u64>>(), "{method}");
         assert!((0..n).all(|k| read.contains(&k)), "{method}: {read:?}");
         assert!(!strips["write"].is_empty());
+        // The reader decodes ahead on a lane of its own: batches in order,
+        // each waited for by the read that hands over its first rows.
+        let decode = &strips["decode"];
+        assert_eq!(
+            *decode,
+            (0..decode.len() as u64).collect::<Vec<u64>>(),
+            "{method}"
+        );
+        let seg_id = |e: &serde_json::Value| e["args"]["id"].as_u64().unwrap();
+        let lane_of = |e: &serde_json::Value| e["args"]["lane"].as_str().unwrap_or("").to_string();
+        let decodes: HashSet<u64> = events
+            .iter()
+            .filter(|e| e["cat"] == "segment" && lane_of(e) == "decode")
+            .map(seg_id)
+            .collect();
+        let waited: HashSet<u64> = events
+            .iter()
+            .filter(|e| e["cat"] == "segment" && lane_of(e) == "read")
+            .flat_map(|e| e["args"]["deps"].as_array().unwrap().clone())
+            .map(|d| d.as_u64().unwrap())
+            .filter(|d| decodes.contains(d))
+            .collect();
+        assert_eq!(waited, decodes, "{method}: a batch no read waited for");
         let names: HashSet<&str> = events.iter().map(|e| e["name"].as_str().unwrap()).collect();
         for n in ["decode", "compress", "ledger in", "finish rows"] {
             assert!(names.contains(n), "{method}: no {n} in the trace");

@@ -29,7 +29,7 @@ pub use source::*;
 use super::mapped::MappedFile;
 use crate::error::{Error, Result};
 use crate::filter::channels::ChannelRule;
-use crate::pipeline::{Source, Strip};
+use crate::pipeline::{Decoder, Source, Strip};
 
 thread_local! {
     /// Set while a codec decodes a block on this thread.
@@ -580,6 +580,7 @@ impl ExrInput {
             buf_y0: 0,
             row_len: self.selected.len() * w,
             released: None,
+            ahead: None,
         })
     }
 
