@@ -9,7 +9,7 @@ use std::sync::{Arc, Mutex};
 
 use super::edge::Coverage;
 use super::ledger::CompensatedSum;
-use super::{Decoder, Precision, Sink, Source, Strip};
+use super::{Precision, Sink, Source, Strip};
 use crate::error::Result;
 use crate::filter::FilterParams;
 
@@ -83,16 +83,7 @@ pub fn values(sums: &OwnedSums) -> Vec<f64> {
 }
 
 impl<S: Source> Source for BandSource<S> {
-    fn decoder<'s>(&mut self, max_rows: usize, pool: &'s rayon::ThreadPool) -> Option<Decoder<'s>>
-    where
-        Self: 's,
-    {
-        self.inner.decoder(max_rows, pool)
-    }
-
-    fn wait_ready(&mut self) {
-        self.inner.wait_ready();
-    }
+    super::decode_ahead_in_inner!();
 
     fn next_strip(&mut self, max_rows: usize) -> Result<Option<Strip>> {
         loop {

@@ -14,7 +14,7 @@
 //!   area: energy is `sum(value * coverage) * S^2`, which is what the ledger
 //!   counts, exact as before.
 
-use super::{Decoder, Source, Strip};
+use super::{Source, Strip};
 use crate::error::Result;
 use crate::filter::kernel::Kernel1d;
 use crate::filter::{FilterParams, Method};
@@ -44,16 +44,7 @@ impl<S: Source> Cropped<S> {
 }
 
 impl<S: Source> Source for Cropped<S> {
-    fn decoder<'s>(&mut self, max_rows: usize, pool: &'s rayon::ThreadPool) -> Option<Decoder<'s>>
-    where
-        Self: 's,
-    {
-        self.inner.decoder(max_rows, pool)
-    }
-
-    fn wait_ready(&mut self) {
-        self.inner.wait_ready();
-    }
+    super::decode_ahead_in_inner!();
 
     fn next_strip(&mut self, max_rows: usize) -> Result<Option<Strip>> {
         if self.done {
@@ -118,16 +109,7 @@ impl<S: Source> Padded<S> {
 }
 
 impl<S: Source> Source for Padded<S> {
-    fn decoder<'s>(&mut self, max_rows: usize, pool: &'s rayon::ThreadPool) -> Option<Decoder<'s>>
-    where
-        Self: 's,
-    {
-        self.inner.decoder(max_rows, pool)
-    }
-
-    fn wait_ready(&mut self) {
-        self.inner.wait_ready();
-    }
+    super::decode_ahead_in_inner!();
 
     fn next_strip(&mut self, max_rows: usize) -> Result<Option<Strip>> {
         let ((rw, rh), (w, h), nch) = (self.real, self.size, self.nch);

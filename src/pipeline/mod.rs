@@ -98,6 +98,28 @@ pub trait Source: Send {
     fn wait_ready(&mut self) {}
 }
 
+/// A wrapper's [`Source::decoder`] and [`Source::wait_ready`]: its `inner`
+/// source's (the wrappers edit rows; the inner source decodes them).
+macro_rules! decode_ahead_in_inner {
+    () => {
+        fn decoder<'s>(
+            &mut self,
+            max_rows: usize,
+            pool: &'s rayon::ThreadPool,
+        ) -> Option<$crate::pipeline::Decoder<'s>>
+        where
+            Self: 's,
+        {
+            self.inner.decoder(max_rows, pool)
+        }
+
+        fn wait_ready(&mut self) {
+            self.inner.wait_ready();
+        }
+    };
+}
+pub(crate) use decode_ahead_in_inner;
+
 /// Something that takes finished output rows in increasing order.
 pub trait Sink: Send {
     /// The precision it stores: the pipeline rounds to it (and refuses what
