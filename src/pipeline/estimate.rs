@@ -38,36 +38,23 @@ impl StripLayout {
 
 /// Decoded bytes the reader asks for at once (beyond one strip's rows),
 /// whatever the thread count: enough chunks to keep 16 workers busy at
-/// ordinary widths, few enough that memory stays small at 32k. The reader
-/// holds [`READ_AHEAD_BATCHES`] such batches: one decodes while the one
-/// before it is handed over.
+/// ordinary widths, few enough that memory stays small at 32k. Decoding
+/// ahead, the reader holds a window of [`READ_AHEAD_BATCHES`] such batches'
+/// blocks.
 pub const READ_AHEAD_BYTES: u64 = 24 << 20;
 
-/// Batches of [`read_ahead_blocks`] the reader holds at once (the decoder's
-/// buffers, `io::reader::AHEAD_BUFFERS`).
+/// Batches of [`read_ahead_blocks`] the reader's window of blocks decoding
+/// ahead holds at once (`io::reader::ahead`).
 pub const READ_AHEAD_BATCHES: u64 = 2;
 
-/// Blocks the reader's batch holds at the least, up to
-/// [`READ_AHEAD_MAX_BYTES`]: a batch's blocks decode in parallel and the
-/// batches one after another, so a batch of few blocks bounds the speed-up
-/// whatever the cores. At 32769 wide a 16-row ZIP block is 6.3 MB and 24 MiB
-/// held three: the scaling model's span was 75 batches of one block's decode
-/// (1.9 s, 3.8x at 16 cores, box).
-pub const READ_AHEAD_MIN_BLOCKS: u64 = 8;
-
-/// The most decoded bytes a batch holds for [`READ_AHEAD_MIN_BLOCKS`]. Two
-/// batches are held: at 32769 wide, 5 blocks of 6.3 MB each (63 MB in all;
-/// 8 in each, 100 MB, took ep-gauss's peak RSS to 275 MiB at 1 thread).
-pub const READ_AHEAD_MAX_BYTES: u64 = 32 << 20;
-
-/// Blocks (chunks) of `block_bytes` decoded bytes in the reader's batch:
-/// [`READ_AHEAD_BYTES`] of them, or [`READ_AHEAD_MIN_BLOCKS`] within
-/// [`READ_AHEAD_MAX_BYTES`] where blocks are large; two at the least.
+/// Blocks (chunks) of `block_bytes` decoded bytes in a batch of the reader:
+/// [`READ_AHEAD_BYTES`] of them, two at the least. (A floor of 8 blocks within
+/// 64 MiB was needed while batches decoded one after another, each as long as
+/// its longest block; the window of blocks decoding ahead has no such
+/// boundary, and at 32769 wide 10 blocks in it took ep-gauss's peak RSS to 280
+/// MiB at 2 threads, over 256: it holds 6.)
 pub fn read_ahead_blocks(block_bytes: u64) -> u64 {
-    let b = block_bytes.max(1);
-    let by_bytes = READ_AHEAD_BYTES / b;
-    let by_count = READ_AHEAD_MIN_BLOCKS.min(READ_AHEAD_MAX_BYTES / b);
-    by_bytes.max(by_count).max(2)
+    (READ_AHEAD_BYTES / block_bytes.max(1)).max(2)
 }
 
 /// The reader's batches in bytes ([`read_ahead_blocks`], each at most the
@@ -185,20 +172,19 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_batch_counts_bytes_at_ordinary_widths_and_blocks_where_they_are_large() {
+    fn a_batch_counts_bytes_two_blocks_at_the_least() {
         // 6144 x 3 samples wide, float RGB, 16-row ZIP blocks: 3.5 MB each;
-        // 24 MiB holds 7, the floor of 8 (28 MB) decides.
+        // 24 MiB holds 7.
         let bench = 18432 * 3 * 4 * 16;
-        assert_eq!(read_ahead_blocks(bench), 8);
+        assert_eq!(read_ahead_blocks(bench), 7);
         // Tiles of 64 x 64: bytes decide.
         let tile = 64 * 64 * 3 * 4;
         assert_eq!(read_ahead_blocks(tile), READ_AHEAD_BYTES / tile);
-        // 32769 wide: 6.3 MB blocks, 5 of them (31.5 MB, within 32 MiB).
+        // 32769 wide: 6.3 MB blocks, 3 of them (18.9 MB).
         let wide = 32769 * 3 * 4 * 16;
-        assert_eq!(read_ahead_blocks(wide), 5);
-        assert!(read_ahead_blocks(wide) * wide <= READ_AHEAD_MAX_BYTES);
+        assert_eq!(read_ahead_blocks(wide), 3);
         // Blocks past the cap: two at the least.
-        assert_eq!(read_ahead_blocks(READ_AHEAD_MAX_BYTES), 2);
+        assert_eq!(read_ahead_blocks(READ_AHEAD_BYTES), 2);
         assert_eq!(read_ahead_blocks(0), READ_AHEAD_BYTES);
     }
 }

@@ -6,14 +6,14 @@
 //! coordinator) and `write` (the writer thread). Each strip is one *segment*
 //! of each lane, in strip order; inside a segment the lane's thread runs
 //! serial code and *regions*, parallel loops whose *tasks* run on the pool.
-//! A fourth lane, `decode`, is the reader's decoder thread where it decodes
-//! ahead: a segment per batch of blocks.
+//! A fourth lane, `decode`, is the reader's decoding ahead: a segment per
+//! block row, each a task of its own, many at once.
 //! Every event carries its id and the ids of the events it depends on:
-//! a segment the lane's previous segment (and, for `filter`, the `read` of
+//! a segment the lane's previous segment (not a `decode`) (and, for `filter`, the `read` of
 //! its strip; for `write`, the `filter` segment that made its rows; for a
-//! `read` that hands over a new batch, the `decode` of it; for a `decode`,
-//! the `read` that gave its buffer back), a region its segment, a task its
-//! region.
+//! `read`, the `decode` of each block row it is the first to hand over; for
+//! a `decode`, the `read` that gave its slot back), a region its segment, a
+//! task its region.
 //!
 //! Off by default, and then a span costs one relaxed atomic load. The
 //! recorder is process-wide (one traced run at a time, as the command line
@@ -165,7 +165,12 @@ fn link(events: &mut [Event]) {
             "write" => Some("filter"),
             _ => None,
         };
-        let mut deps: Vec<u64> = last.get(&lane).copied().into_iter().collect();
+        // Block rows decode at once: a decode waits for no other.
+        let mut deps: Vec<u64> = if lane == "decode" {
+            Vec::new()
+        } else {
+            last.get(&lane).copied().into_iter().collect()
+        };
         if let (Some(up), Some(k)) = (upstream, strip) {
             deps.extend(first.get(&(up.to_string(), k)).copied());
         }

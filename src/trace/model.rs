@@ -62,6 +62,10 @@ pub struct Segment {
 /// The lanes, by their names in a trace.
 pub const LANES: [&str; 4] = ["read", "filter", "write", "decode"];
 
+/// The decode lane: its segments (block rows decoding ahead, each a task on
+/// the pool) run at once, started in order.
+const DECODE: usize = 3;
+
 /// A run to replay.
 #[derive(Clone, Debug, Default)]
 pub struct Model {
@@ -282,6 +286,9 @@ impl<'a> Replay<'a> {
             lanes[s.lane].push(i);
             index.entry((s.lane, s.strip)).or_insert(i);
         }
+        // Decoding starts block rows in order; their segments begin (and
+        // end) in any.
+        lanes[DECODE].sort_by_key(|&i| m.segments[i].strip);
         let n = m.segments.len();
         Replay {
             m,
@@ -351,7 +358,8 @@ impl<'a> Replay<'a> {
         }
     }
 
-    /// Start what can start on each idle lane.
+    /// Start what can start on each idle lane (the decode lane's segments,
+    /// block rows decoding as tasks of their own, in order and at once).
     fn start_lanes(&mut self, now: f64, ready: &mut VecDeque<Unit>) {
         let mut again = true;
         while again {
@@ -366,7 +374,7 @@ impl<'a> Replay<'a> {
                 if !self.can_start(i) {
                     continue;
                 }
-                self.busy[lane] = true;
+                self.busy[lane] = lane != DECODE;
                 self.next[lane] += 1;
                 self.started[i] = Some(now);
                 self.enter(i, ready);
@@ -527,16 +535,17 @@ mod tests {
 
     #[test]
     fn a_decoder_lane_overlaps_the_next_batch_with_this_one() {
-        // 4 batches of one strip: decoding 2 s (one task), handing over free,
-        // filtering 2 s. Each read waits for its batch's decode, each decode
-        // for the read that gave its buffer back (two buffers). Decoding
-        // ahead, batch b + 1 decodes while batch b is filtered: 2 + 4 * 2 on
-        // two cores (the decodes inside the reads would take 16).
+        // 4 block rows of one strip each: decoding 2 s (one task), handing
+        // over free, filtering 2 s. Each read waits for its block row's
+        // decode, each decode for the read that gave its slot back (a window
+        // of two). Decoding ahead, block row b + 1 decodes while b is
+        // filtered: 2 + 4 * 2 on two cores (the decodes inside the reads
+        // would take 16).
         let n = 4;
         let mut segments = Vec::new();
         for b in 0..n {
             // Indices: decode 3b, read 3b + 1, filter 3b + 2.
-            let mut decode = seg(3, b, vec![Phase::Region(vec![2.0])]);
+            let mut decode = seg(DECODE, b, vec![Phase::Region(vec![2.0])]);
             if b >= 2 {
                 decode.after = vec![3 * (b - 2) + 1];
             }
@@ -553,8 +562,9 @@ mod tests {
         let mut r = Replay::new(&m);
         let mut ready = VecDeque::new();
         r.start_lanes(0.0, &mut ready);
-        // At first only the first decode can start: read 0 waits for it.
-        assert_eq!((r.next[3], r.next[0]), (1, 0));
+        // At first the window's two decodes start, at once: read 0 waits.
+        assert_eq!((r.next[3], r.next[0]), (2, 0));
+        assert_eq!(ready.len(), 2);
         assert!(close(m.work(), 16.0));
         assert!(close(m.replay(1), 16.0));
         assert!(close(m.replay(2), 10.0), "{}", m.replay(2));

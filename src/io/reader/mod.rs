@@ -18,6 +18,7 @@ use exr::meta::{magic_number, MetaData, Requirements};
 use exr::prelude::Compression;
 use rayon::prelude::*;
 
+mod ahead;
 mod blocks;
 mod layers;
 mod source;
