@@ -448,6 +448,14 @@ mod tests {
         }
     }
 
+    /// A replay of `m` with what can start at time 0 started.
+    fn at_start(m: &Model) -> (Replay<'_>, VecDeque<Unit>) {
+        let mut r = Replay::new(m);
+        let mut ready = VecDeque::new();
+        r.start_lanes(0.0, &mut ready);
+        (r, ready)
+    }
+
     fn close(a: f64, b: f64) -> bool {
         (a - b).abs() <= EXACT * b.abs().max(1.0)
     }
@@ -525,9 +533,7 @@ mod tests {
             segments,
             ..Model::default()
         };
-        let mut r = Replay::new(&m);
-        let mut ready = VecDeque::new();
-        r.start_lanes(0.0, &mut ready);
+        let (r, _) = at_start(&m);
         // Only read 0 can start before anything runs.
         assert_eq!(r.next[0], 1);
         assert!(close(m.replay(4), n as f64));
@@ -559,9 +565,7 @@ mod tests {
             segments,
             ..Model::default()
         };
-        let mut r = Replay::new(&m);
-        let mut ready = VecDeque::new();
-        r.start_lanes(0.0, &mut ready);
+        let (r, ready) = at_start(&m);
         // At first the window's two decodes start, at once: read 0 waits.
         assert_eq!((r.next[3], r.next[0]), (2, 0));
         assert_eq!(ready.len(), 2);
