@@ -406,6 +406,7 @@ fn set(params: &mut FilterParams, key: &str, value: &str) -> Result<()> {
         "support_level" => params.support_level = f()?,
         "support_region" => params.support_region = value.parse()?,
         "coarse_from" => params.coarse_from = f()?,
+        "bound_from" => params.bound_from = f()?,
         "guard" => params.ep_box.guard = epfilt::filter::ep_box::Guard::parse(value)?,
         "quality" => {
             *params = params

@@ -4,16 +4,24 @@
 //! Pareto front, today's defaults and the presets on it.
 //!
 //! ```text
-//! eval_renders --sweep [--renders DIR]... [--grid KEY=V1,V2,...]... [--bench FILE]
-//!     [--bench-runs N] [--threads N] [--out DIR] [--no-write] [--list-lost]
+//! eval_renders --sweep [--renders DIR]... [--held-out DIR]... [--grid KEY=V1,V2,...]...
+//!     [--bench FILE] [--bench-runs N] [--threads N] [--out DIR] [--no-write] [--list-lost]
 //! ```
+//!
+//! Renders in a `--held-out` folder are filtered by every setting and
+//! reported, but play no part in the error, the lights constraint, the front
+//! or the choice: they check a choice on renders it was not made on.
 //!
 //! * **factor** per input, as for the defaults' table: relMSE of ep-gauss
 //!   against the Gaussian of the reference over the relMSE the Gaussian of
 //!   the same radius leaves; **error** of a setting: the geometric mean of its
 //!   factors over every input (each input counts the same);
 //!   **worst vs defaults**: the largest ratio of a setting's factor to the
-//!   old defaults' on any one input (above 1: some render got worse).
+//!   old defaults' on any one input (above 1: some render got worse);
+//!   **worst vs best**: the largest ratio of a setting's factor to the best
+//!   factor any setting of the sweep reached on that input (what a user loses
+//!   on their worst render to the setting that would have suited it; 1: the
+//!   setting is the best on every input).
 //! * **peak**: per light (`lights` of the reference), its brightest pixel
 //!   over the linear filter's, or over the reference's where that is lower
 //!   (a firefly on a light raises the linear filter's); the worst light;
@@ -63,6 +71,7 @@ type Setting = Vec<(String, String)>;
 
 struct Args {
     renders: Vec<PathBuf>,
+    held_out: Vec<PathBuf>,
     grid: Vec<(String, Vec<String>)>,
     extra: Vec<Setting>,
     bench: Option<PathBuf>,
@@ -77,6 +86,7 @@ struct Args {
 fn parse(args: &[String]) -> Result<Args> {
     let mut a = Args {
         renders: Vec::new(),
+        held_out: Vec::new(),
         grid: Vec::new(),
         extra: Vec::new(),
         bench: None,
@@ -92,6 +102,7 @@ fn parse(args: &[String]) -> Result<Args> {
         match x.as_str() {
             "--sweep" => {}
             "--renders" => a.renders.push(next("--renders DIR")?.into()),
+            "--held-out" => a.held_out.push(next("--held-out DIR")?.into()),
             "--grid" => {
                 let kv = next("--grid KEY=V1,V2")?;
                 let (k, v) = kv.split_once('=').context("--grid KEY=V1,V2")?;
@@ -210,6 +221,8 @@ fn params_for(setting: &Setting, s: usize) -> Result<FilterParams> {
 /// One super-sampled input with its linear filters, per radius.
 struct Prepared {
     input: Input,
+    /// From a `--held-out` folder: reported, never chosen on.
+    held_out: bool,
     /// radius -> the linear filters at that radius.
     by_radius: BTreeMap<String, Baseline>,
     /// The oracle's best factor at radius 0.6.
@@ -237,11 +250,18 @@ struct Outcome {
     setting: Setting,
     factors: Vec<f64>,
     peaks: Vec<Option<f64>>,
-    /// Lights, over every input, whose peak fell below [`KEPT_PEAK`].
+    /// Lights, over every input chosen on, whose peak fell below
+    /// [`KEPT_PEAK`].
     lost: usize,
-    /// Lights over every input.
+    /// Lights over every input chosen on.
     lights: usize,
+    /// The same over the held-out inputs.
+    lost_held: usize,
+    lights_held: usize,
+    /// Geometric mean of the factors of the inputs chosen on, and of the
+    /// held-out ones.
     error: f64,
+    error_held: Option<f64>,
     seconds_per_mpx: Option<f64>,
     x_gauss: Option<f64>,
 }
@@ -293,7 +313,8 @@ pub fn run(args: &[String]) -> Result<()> {
         r.dedup();
         r
     };
-    for dir in &a.renders {
+    let dirs = (a.renders.iter().map(|d| (d, false))).chain(a.held_out.iter().map(|d| (d, true)));
+    for (dir, held_out) in dirs {
         for inp in inputs(dir)?.into_iter().filter(|i| i.s > 1) {
             eprintln!("{}", inp.name);
             let noisy = Image::read(&inp.path)?;
@@ -348,6 +369,7 @@ pub fn run(args: &[String]) -> Result<()> {
             };
             prepared.push(Prepared {
                 input: inp,
+                held_out,
                 by_radius,
                 oracle,
             });
@@ -391,6 +413,7 @@ pub fn run(args: &[String]) -> Result<()> {
         let mut factors = Vec::new();
         let mut peaks = Vec::new();
         let (mut lost, mut lights_seen) = (0, 0);
+        let (mut lost_held, mut lights_held) = (0, 0);
         for p in &prepared {
             let params = params_for(&setting, p.input.s)?;
             let key = format!("{}", params.radius);
@@ -415,7 +438,14 @@ pub fn run(args: &[String]) -> Result<()> {
                 .zip(lin_peaks)
                 .map(|(e, l)| e / l.max(1e-12))
                 .collect();
-            lost += ratios.iter().filter(|&&r| r < KEPT_PEAK).count();
+            let n_lost = ratios.iter().filter(|&&r| r < KEPT_PEAK).count();
+            if p.held_out {
+                lost_held += n_lost;
+                lights_held += ratios.len();
+            } else {
+                lost += n_lost;
+                lights_seen += ratios.len();
+            }
             if a.list_lost {
                 for (fp, r) in ls.iter().zip(&ratios).filter(|(_, &r)| r < KEPT_PEAK) {
                     let (x0, x1) = fp
@@ -431,10 +461,17 @@ pub fn run(args: &[String]) -> Result<()> {
                     );
                 }
             }
-            lights_seen += ratios.len();
             peaks.push(ratios.into_iter().reduce(f64::min));
         }
-        let error = (factors.iter().map(|f| f.ln()).sum::<f64>() / factors.len() as f64).exp();
+        let geo = |held: bool| -> Option<f64> {
+            let v: Vec<f64> = (factors.iter().zip(&prepared))
+                .filter(|(_, p)| p.held_out == held)
+                .map(|(f, _)| f.ln())
+                .collect();
+            (!v.is_empty()).then(|| (v.iter().sum::<f64>() / v.len() as f64).exp())
+        };
+        let error = geo(false).context("no render to choose on (only --held-out)")?;
+        let error_held = geo(true);
         let (mut seconds_per_mpx, mut x_gauss) = (None, None);
         if let Some(b) = &a.bench {
             let mut ep = Vec::new();
@@ -460,9 +497,12 @@ pub fn run(args: &[String]) -> Result<()> {
             x_gauss = Some(e / median(recent));
         }
         eprintln!(
-            "[{}/{n_all}] {}: error {error:.4}{}",
+            "[{}/{n_all}] {}: error {error:.4}{}{}",
             k + 1,
             label(&setting),
+            error_held
+                .map(|e| format!(", held out {e:.4}"))
+                .unwrap_or_default(),
             x_gauss
                 .map(|x| format!(", {x:.3}x gauss"))
                 .unwrap_or_default()
@@ -473,7 +513,10 @@ pub fn run(args: &[String]) -> Result<()> {
             peaks,
             lost,
             lights: lights_seen,
+            lost_held,
+            lights_held,
             error,
+            error_held,
             seconds_per_mpx,
             x_gauss,
         });
@@ -532,10 +575,16 @@ fn markdown(a: &Args, prepared: &[Prepared], outcomes: &[Outcome], gauss: &[f64]
     let names: Vec<String> = prepared
         .iter()
         .map(|p| {
-            p.input
+            let n = p
+                .input
                 .name
                 .replace("_ss3x_768", "")
-                .replace("_ss4x_1024", " S=4")
+                .replace("_ss4x_1024", " S=4");
+            if p.held_out {
+                format!("{n} (held out)")
+            } else {
+                n
+            }
         })
         .collect();
     let _ = writeln!(
@@ -545,12 +594,14 @@ fn markdown(a: &Args, prepared: &[Prepared], outcomes: &[Outcome], gauss: &[f64]
          **factor**: relMSE against the Gaussian of the reference over the relMSE the Gaussian of the \
          same radius leaves (below 1: noise removed); **error**: the geometric mean of a setting's \
          factors over every input; **worst vs old**: the largest ratio of its factor to the old \
-         defaults' on one input (above 1: that render got worse); **lights < 0.8**: lights (bright \
+         defaults' on one input (above 1: that render got worse); **worst vs best**: the largest \
+         ratio of its factor to the best factor any setting of this sweep reached on one input (what \
+         it loses on its worst render to the setting that would have suited that render); **lights < 0.8**: lights (bright \
          components of the reference, every input) whose brightest pixel fell below 0.8 of the linear filter's \
          (or of the reference's, where lower: a firefly on a light raises the linear filter's), of all; \
          **peak**: the worst such ratio (each input's cell: factor; its worst light's ratio, – where none). **s/Mpx**: seconds per input megapixel of \
          ep-gauss on the 6144x6144 bench input ({} threads, median of {} runs interleaved with gauss), \
-         **x gauss**: the ratio of the medians.{}\n",
+         **x gauss**: the ratio of the medians.{}{}\n",
         prepared.len(),
         a.renders
             .iter()
@@ -559,6 +610,20 @@ fn markdown(a: &Args, prepared: &[Prepared], outcomes: &[Outcome], gauss: &[f64]
             .join(", "),
         a.threads,
         a.bench_runs,
+        if prepared.iter().any(|p| p.held_out) {
+            format!(
+                " **Held out** ({}): renders no choice was made on; their factors are in every \
+                 table, apart from the error, the lights, the front and the worst ratios, which \
+                 have held-out columns of their own.",
+                a.held_out
+                    .iter()
+                    .map(|d| format!("`{}`", d.display()))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        } else {
+            String::new()
+        },
         if gauss.is_empty() {
             " No bench file was given: no times.".to_string()
         } else {
@@ -587,23 +652,51 @@ fn markdown(a: &Args, prepared: &[Prepared], outcomes: &[Outcome], gauss: &[f64]
         }
         m.join(", ")
     };
+    let chosen = |k: usize| !prepared[k].held_out;
     let worst_vs_old = |o: &Outcome| -> f64 {
         old.map_or(f64::NAN, |j| {
-            o.factors
-                .iter()
-                .zip(&outcomes[j].factors)
-                .map(|(a, b)| a / b)
+            (0..o.factors.len())
+                .filter(|&k| chosen(k))
+                .map(|k| o.factors[k] / outcomes[j].factors[k])
                 .fold(0.0, f64::max)
         })
     };
+    // The best factor any setting reached on each input.
+    let best: Vec<f64> = (0..prepared.len())
+        .map(|k| {
+            outcomes
+                .iter()
+                .map(|o| o.factors[k])
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect();
+    let worst_vs_best = |o: &Outcome, held: bool| -> f64 {
+        (0..o.factors.len())
+            .filter(|&k| prepared[k].held_out == held)
+            .map(|k| o.factors[k] / best[k])
+            .fold(0.0, f64::max)
+    };
+    let any_held = prepared.iter().any(|p| p.held_out);
     let row = |i: usize, o: &Outcome| -> String {
+        let held = if any_held {
+            format!(
+                " {:.4} | {:.3} | {}/{} |",
+                o.error_held.unwrap_or(f64::NAN),
+                worst_vs_best(o, true),
+                o.lost_held,
+                o.lights_held
+            )
+        } else {
+            String::new()
+        };
         format!(
-            "| {} | {} | {} | {:.4} | {:.3} | {}/{} | {} | {} | {} |",
+            "| {} | {} | {} | {:.4} | {:.3} | {:.3} | {}/{} | {} |{held} {} | {} |",
             label(&o.setting),
             o.seconds_per_mpx.map_or("–".into(), |t| format!("{t:.4}")),
             o.x_gauss.map_or("–".into(), |x| format!("{x:.3}")),
             o.error,
             worst_vs_old(o),
+            worst_vs_best(o, false),
             o.lost,
             o.lights,
             min_peak(o).map_or("–".into(), |p| format!("{p:.2}")),
@@ -619,9 +712,15 @@ fn markdown(a: &Args, prepared: &[Prepared], outcomes: &[Outcome], gauss: &[f64]
             marks(i)
         )
     };
+    let held_head = if any_held {
+        " held-out error | held-out worst vs best | held-out lights < 0.8 |"
+    } else {
+        ""
+    };
     let head = format!(
-        "| setting | s/Mpx | x gauss | error | worst vs old | lights < 0.8 | peak | {} | |\n|---|---|---|---|---|---|---|{}---|",
+        "| setting | s/Mpx | x gauss | error | worst vs old | worst vs best | lights < 0.8 | peak |{held_head} {} | |\n|---|---|---|---|---|---|---|---|{}{}---|",
         names.join(" | "),
+        if any_held { "---|---|---|" } else { "" },
         "---|".repeat(names.len())
     );
     let _ = writeln!(s, "## The Pareto front\n\n{head}");
@@ -642,7 +741,8 @@ fn markdown(a: &Args, prepared: &[Prepared], outcomes: &[Outcome], gauss: &[f64]
         .collect();
     let _ = writeln!(
         s,
-        "| outlier-only oracle (radius 0.6; `docs/renders.md`) | | | | | | | {} | |",
+        "| outlier-only oracle (radius 0.6; `docs/renders.md`) | | | | | | | |{} {} | |",
+        if any_held { " | | |" } else { "" },
         oracle.join(" | ")
     );
     let mut order: Vec<usize> = (0..outcomes.len()).collect();
@@ -668,12 +768,14 @@ fn min_peak(o: &Outcome) -> Option<f64> {
 }
 
 fn csv(prepared: &[Prepared], outcomes: &[Outcome]) -> String {
-    let mut s = String::from("setting,seconds_per_mpx,x_gauss,error,min_peak,lights_lost");
+    let mut s =
+        String::from("setting,seconds_per_mpx,x_gauss,error,min_peak,lights_lost,error_held_out,lights_lost_held_out");
+    let tag = |p: &Prepared| if p.held_out { " (held out)" } else { "" };
     for p in prepared {
-        let _ = write!(s, ",{}", p.input.name);
+        let _ = write!(s, ",{}{}", p.input.name, tag(p));
     }
     for p in prepared {
-        let _ = write!(s, ",peak {}", p.input.name);
+        let _ = write!(s, ",peak {}{}", p.input.name, tag(p));
     }
     s.push('\n');
     for o in outcomes {
@@ -687,7 +789,13 @@ fn csv(prepared: &[Prepared], outcomes: &[Outcome]) -> String {
             o.error,
             min_peak(o).map_or(String::new(), |p| format!("{p:.4}")),
         );
-        let _ = write!(s, ",{}", o.lost);
+        let _ = write!(
+            s,
+            ",{},{},{}",
+            o.lost,
+            o.error_held.map_or(String::new(), |e| format!("{e:.6}")),
+            o.lost_held
+        );
         for f in &o.factors {
             let _ = write!(s, ",{f:.6}");
         }

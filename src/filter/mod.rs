@@ -197,6 +197,7 @@ impl Quality {
                 cutoff: 3.0,
                 max_radius: 16.0,
                 width_step: 0.1,
+                bound_from: 0.0,
             },
             // The least error measured with every light kept: the cap at
             // 32 px, a coarser ladder (docs/pareto.md).
@@ -236,6 +237,8 @@ pub struct Knobs {
     pub max_radius: f64,
     /// [`FilterParams::width_step`].
     pub width_step: f64,
+    /// [`FilterParams::bound_from`].
+    pub bound_from: f64,
 }
 
 /// The halo of a job from its settings alone (no kernels built): what the
@@ -271,6 +274,22 @@ pub fn halo(p: &FilterParams) -> crate::geometry::Halo {
             spread_reach: p.max_radius.max(0.0).floor() as usize,
             ..Default::default()
         },
+    }
+}
+
+/// Rows a band's window must start on a multiple of (output rows), so
+/// that what the stage computes on a grid fixed by the image is the whole
+/// image's there: the 4x coarse grid (`--coarse-from`), and the blocks of
+/// the column sums the bound reads (`--bound-from`).
+pub fn window_align(p: &FilterParams) -> usize {
+    let bounded = p.method == Method::EpGauss
+        && p.bound_from > 0.0
+        && p.max_radius.max(p.radius) >= p.bound_from
+        && p.max_radius > p.radius;
+    if bounded {
+        ep_gauss::csum_block_for(halo(p).search_reach)
+    } else {
+        4
     }
 }
 
@@ -331,6 +350,11 @@ pub struct FilterParams {
     /// ep-gauss: widths of this radius (output pixels) and more are spread
     /// on the 2x coarser grid ([`kernel::Coarse`]); 0: none.
     pub coarse_from: f64,
+    /// ep-gauss: widths of this radius (output pixels) and more are checked
+    /// against a lower bound of their average read from column sums
+    /// ([`ep_gauss::Bound`]: conservative, a few rows instead of the disc's
+    /// every row); 0: never.
+    pub bound_from: f64,
     /// The preset the knobs came from (`--quality`); options given one by
     /// one override its values.
     pub quality: Quality,
@@ -383,6 +407,7 @@ impl FilterParams {
                 ("support_region", json!(self.support_region)),
                 ("support_level", json!(self.support_level)),
                 ("coarse_from", json!(self.coarse_from)),
+                ("bound_from", json!(self.bound_from)),
             ]),
             Method::Gauss => v.extend([
                 ("radius", json!(self.radius)),
@@ -426,7 +451,7 @@ impl FilterParams {
         match option.replace('-', "_").as_str() {
             "tolerance" | "support" | "support_ratio" | "support_group" | "support_compact"
             | "support_over" | "support_region" | "support_level" | "width_step"
-            | "coarse_from" | "quality" => m == EpGauss,
+            | "coarse_from" | "bound_from" | "quality" => m == EpGauss,
             "radius" | "cutoff" => matches!(m, EpGauss | Gauss | Clamp),
             "max_radius" => matches!(m, EpGauss | EpBox),
             "clamp" => m == Clamp,
@@ -463,6 +488,7 @@ impl FilterParams {
         self.cutoff = k.cutoff;
         self.max_radius = k.max_radius;
         self.width_step = k.width_step;
+        self.bound_from = k.bound_from;
         self
     }
 
@@ -483,6 +509,7 @@ impl FilterParams {
             ("cutoff", k.cutoff.to_string()),
             ("max_radius", k.max_radius.to_string()),
             ("width_step", k.width_step.to_string()),
+            ("bound_from", k.bound_from.to_string()),
         ]
     }
 
@@ -513,6 +540,7 @@ impl FilterParams {
             support_region: 0,
             support_level: 4.0,
             coarse_from: DEFAULT_COARSE_FROM,
+            bound_from: 0.0,
             quality: Quality::Default,
         }
         .with_quality_if(method == Method::EpGauss)
@@ -587,6 +615,12 @@ impl FilterParams {
         at_least(
             "--coarse-from",
             self.coarse_from,
+            0.0,
+            "a radius >= 0 output pixels (0: off)",
+        )?;
+        at_least(
+            "--bound-from",
+            self.bound_from,
             0.0,
             "a radius >= 0 output pixels (0: off)",
         )?;

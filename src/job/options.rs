@@ -137,6 +137,13 @@ pub struct FilterOptions {
     /// pixel given more than the full-resolution kernel would; 0 = off.
     #[arg(long, default_value_t = crate::filter::DEFAULT_COARSE_FROM, help_heading = "ep-gauss")]
     pub coarse_from: f64,
+    /// Check widths of this radius (output pixels) and more against a lower
+    /// bound of their average read from column sums, a few rows instead of
+    /// every row of the average's disc: conservative (a width that passes on
+    /// the bound passes on the average), at most about half a rung wider; 0 =
+    /// the exact average always [default: --quality's].
+    #[arg(long, help_heading = "ep-gauss")]
+    pub bound_from: Option<f64>,
 
     // ---- ep-box ----
     // ep-box's statistics and noise test (shared with `epfilt plan`).
@@ -326,6 +333,7 @@ pub const METHOD_OPTIONS: &[&str] = &[
     "support_ratio",
     "width_step",
     "coarse_from",
+    "bound_from",
     "variance_channel",
     "variance_kind",
     "spp",
@@ -542,6 +550,7 @@ impl FilterOptions {
         set(&mut params.max_radius, self.max_radius);
         set(&mut params.width_step, self.width_step);
         set(&mut params.tolerance, self.tolerance);
+        set(&mut params.bound_from, self.bound_from);
         if let Some(n) = self.support {
             params.support = n;
         }

@@ -370,9 +370,13 @@ fn plan_band(
         n,
         a,
         b,
-        // A multiple of 4, so the window's 2x and 4x coarse grids
-        // (--coarse-from) are the whole image's.
-        wa: a.saturating_sub(m) & !3,
+        // On the grid of the window's 2x and 4x coarse grids
+        // (--coarse-from) and column sums' blocks (--bound-from), so they
+        // are the whole image's.
+        wa: {
+            let align = crate::filter::window_align(&job.params);
+            a.saturating_sub(m) / align * align
+        },
         wb: (b + m).min(out_h),
         out_h,
     })

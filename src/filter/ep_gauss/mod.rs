@@ -49,8 +49,10 @@
 
 use super::kernel::{Coarse, Kernel1d};
 
+mod bound;
 mod features;
 mod search;
+pub use bound::{csum_block_for, csum_row, Bound, ColSums, BOUND_KEEP};
 pub use features::{Carriers, Support, COMPACT_REACH, SUPPORT_REACH};
 pub use search::{Choice, Folded};
 
@@ -164,6 +166,9 @@ pub struct Level {
     inv_1mw0: f64,
     /// Its spread on the 2x coarser grid (`--coarse-from`), when on.
     pub coarse: Option<Coarse>,
+    /// The lower bound the search checks it against (`--bound-from`), when
+    /// on.
+    pub bound: Option<Bound>,
 }
 
 /// Access to rows of box luminance, mirrored at the borders and padded by
@@ -184,6 +189,9 @@ pub trait LumRows {
 pub struct LumImage {
     h: usize,
     rows: Vec<Vec<f32>>,
+    /// Column sums ([`ColSums`]) in blocks of [`csum_block_for`]`(pad)`.
+    csums: Vec<Vec<f64>>,
+    block: usize,
 }
 
 impl LumImage {
@@ -196,14 +204,39 @@ impl LumImage {
                     .map(|i| f(crate::geometry::mirror(i as i64 - pad as i64, w), y) as f32)
                     .collect()
             })
-            .collect();
-        LumImage { h, rows }
+            .collect::<Vec<Vec<f32>>>();
+        let block = csum_block_for(pad);
+        let mut csums: Vec<Vec<f64>> = Vec::with_capacity(h);
+        for (y, r) in rows.iter().enumerate() {
+            let mut out = vec![0.0; r.len() + 2];
+            let prev = (y % block != 0).then(|| csums[y - 1].as_slice());
+            csum_row(r, prev, &mut out);
+            csums.push(out);
+        }
+        LumImage {
+            h,
+            rows,
+            csums,
+            block,
+        }
     }
 }
 
 impl LumRows for LumImage {
     fn row(&self, vy: i64) -> &[f32] {
         &self.rows[crate::geometry::mirror(vy, self.h)]
+    }
+}
+
+impl ColSums for LumImage {
+    fn csum(&self, y: usize) -> Option<&[f64]> {
+        self.csums.get(y).map(Vec::as_slice)
+    }
+    fn height(&self) -> usize {
+        self.h
+    }
+    fn block(&self) -> usize {
+        self.block
     }
 }
 
@@ -297,6 +330,7 @@ impl EpGauss {
                     inv_w0: s2 * norm,
                     inv_1mw0: 1.0 / (1.0 - 1.0 / (s2 * norm)),
                     coarse: None,
+                    bound: None,
                 }
             })
             .collect();
@@ -338,6 +372,31 @@ impl EpGauss {
             };
         }
         self
+    }
+
+    /// Check the widths of radius `from` output pixels and more against a
+    /// lower bound of their average ([`Bound`]) instead of the average
+    /// itself where the bound can be trusted (`0` or infinity: never). The
+    /// base width never is.
+    pub fn with_bound(mut self, from: f64) -> Self {
+        let a = avg_cutoff(self.cutoff);
+        for lv in self.levels.iter_mut().skip(1) {
+            lv.bound =
+                (from > 0.0 && lv.rho >= from).then(|| Bound::new(lv.rho, a * lv.rho, lv.norm));
+        }
+        self
+    }
+
+    /// Rows per block of the column sums the bound reads
+    /// ([`csum_block_for`] of [`EpGauss::pad`]).
+    pub fn csum_block(&self) -> usize {
+        csum_block_for(self.pad)
+    }
+
+    /// Whether any width is checked against a bound (the column sums are
+    /// needed).
+    pub fn uses_bound(&self) -> bool {
+        self.levels.iter().any(|l| l.bound.is_some())
     }
 
     /// The ladder; level 0 is the base kernel.

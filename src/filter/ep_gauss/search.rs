@@ -3,7 +3,7 @@
 //! a quadrant of the box luminance folded about the sample's pixel, which
 //! grows outwards as the widths tried widen.
 
-use super::{dot4, relation14, EpGauss, Level, LumRows};
+use super::{dot4, relation14, ColSums, EpGauss, Level, LumRows};
 
 /// Entries a quadrant row grows past what the width being tried needs
 /// (within the padding). Each width the search tries is about one entry
@@ -137,7 +137,7 @@ pub struct Choice {
 impl EpGauss {
     /// Find the width of a sample at pixel `(px, py)` with luminance `x0`
     /// that failed the base test against `xbar0`.
-    pub fn search(&self, rows: &impl LumRows, px: usize, py: usize, x0: f64, xbar0: f64) -> Choice {
+    pub fn search(&self, rows: &impl ColSums, px: usize, py: usize, x0: f64, xbar0: f64) -> Choice {
         self.search_in(rows, px, py, x0, xbar0, &mut Folded::default())
     }
 
@@ -145,7 +145,7 @@ impl EpGauss {
     /// has grown to the widest average).
     pub fn search_in(
         &self,
-        rows: &impl LumRows,
+        rows: &impl ColSums,
         px: usize,
         py: usize,
         x0: f64,
@@ -165,8 +165,19 @@ impl EpGauss {
         fold.reset(self.pad());
         let mut eval = |l: usize| -> (f64, f64) {
             let lv = &self.levels[l];
-            fold.grow(rows, cx, cy, lv);
-            let xbar = fold.average(lv);
+            // A lower bound where it can be trusted (Relation 14 against it
+            // is conservative), else the exact average.
+            let bounded = lv.bound.as_ref().and_then(|b| {
+                fold.cost += b.cost;
+                b.average(rows, cx as usize, cy as usize)
+            });
+            let xbar = match bounded {
+                Some(v) => v,
+                None => {
+                    fold.grow(rows, cx, cy, lv);
+                    fold.average(lv)
+                }
+            };
             if !(xbar > 0.0) || !xbar.is_finite() {
                 return (f64::INFINITY, xbar);
             }

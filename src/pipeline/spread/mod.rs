@@ -41,7 +41,7 @@ use super::stage::{Stage, WindowUse};
 use super::window::RowWindow;
 use super::ChannelMode;
 use crate::filter::ep_box::{cluster_count, StatsLayout};
-use crate::filter::ep_gauss::{Carriers, EpGauss, Folded, LumRows, Support};
+use crate::filter::ep_gauss::{csum_row, Carriers, ColSums, EpGauss, Folded, LumRows, Support};
 use crate::filter::kernel::{ColumnTaps, Kernel1d, TentTaps};
 use crate::filter::luminance::Luminance;
 use crate::filter::{Method, ValidParams};
@@ -107,6 +107,11 @@ struct YView<'a> {
     rows: Vec<&'a [f32]>,
     first: usize,
     h: usize,
+    /// The column sums' rows (from `csum_first`) and block, where the
+    /// search reads them.
+    csums: Vec<&'a [f64]>,
+    csum_first: usize,
+    block: usize,
 }
 
 impl<'a> YView<'a> {
@@ -115,7 +120,18 @@ impl<'a> YView<'a> {
             rows: (win.first()..win.end()).map(|y| win.get(y)).collect(),
             first: win.first(),
             h,
+            csums: Vec::new(),
+            csum_first: 0,
+            block: 1,
         }
+    }
+
+    /// With the column sums of `csum` (blocks of `block` rows).
+    fn with_csums(mut self, csum: &'a RowWindow<f64>, block: usize) -> Self {
+        self.csums = (csum.first()..csum.end()).map(|y| csum.get(y)).collect();
+        self.csum_first = csum.first();
+        self.block = block;
+        self
     }
 }
 
@@ -123,6 +139,20 @@ impl LumRows for YView<'_> {
     #[inline]
     fn row(&self, vy: i64) -> &[f32] {
         self.rows[mirror(vy, self.h) - self.first]
+    }
+}
+
+impl ColSums for YView<'_> {
+    #[inline]
+    fn csum(&self, y: usize) -> Option<&[f64]> {
+        y.checked_sub(self.csum_first)
+            .and_then(|k| self.csums.get(k).copied())
+    }
+    fn height(&self) -> usize {
+        self.h
+    }
+    fn block(&self) -> usize {
+        self.block
     }
 }
 
@@ -142,6 +172,9 @@ pub struct GaussianStage {
     pad: usize,
     tile: usize,
     ybox: RowWindow<f32>,
+    /// Column sums of `ybox` (`--bound-from`), one row more above, and
+    /// their block; `None` where no width is bounded.
+    csum: Option<(RowWindow<f64>, usize)>,
     hpass: RowWindow<f64>,
     base_rows: RowWindow<f64>,
     acc: RowWindow<f64>,
@@ -206,6 +239,7 @@ impl GaussianStage {
                     params.width_step,
                 )
                 .with_coarse(params.coarse_from)
+                .with_bound(params.bound_from)
             })
             // Beyond the paper, with its feature rules (`support > 0`): only
             // samples brighter than their neighbourhood are noise. Relation 14's
@@ -235,6 +269,10 @@ impl GaussianStage {
             spread_reach: ep.as_ref().map_or(0, |e| e.spread_reach()),
         };
         let pad = ep.as_ref().map_or(0, |e| e.pad());
+        let csum = ep
+            .as_ref()
+            .filter(|e| e.uses_bound())
+            .map(|e| (RowWindow::new(w + 2 * pad + 2), e.csum_block()));
         let cols = ColumnTaps::new(&base, w, grid.in_w);
         GaussianStage {
             grid,
@@ -251,6 +289,7 @@ impl GaussianStage {
             pad,
             tile,
             ybox: RowWindow::new(w + 2 * pad),
+            csum,
             hpass: RowWindow::new(nch * w),
             base_rows: RowWindow::new(nch * w),
             acc: RowWindow::new(nch * w),
@@ -356,6 +395,11 @@ impl Stage for GaussianStage {
                 name: "box luminance",
                 rows: self.ybox.high_water(),
                 row_bytes: (w + 2 * self.pad) * 8,
+            },
+            WindowUse {
+                name: "summed-area table",
+                rows: self.csum.as_ref().map_or(0, |c| c.0.high_water()),
+                row_bytes: (w + 2 * self.pad + 2) * 8,
             },
             WindowUse {
                 name: "horizontal pass",
@@ -477,6 +521,10 @@ impl GaussianStage {
             yb
         };
         self.ybox.evict_below(keep.min(yb));
+        if let Some((c, _)) = &mut self.csum {
+            // The bound reads the row above its topmost.
+            c.evict_below(keep.min(yb).saturating_sub(1));
+        }
         out_target
     }
 
@@ -519,6 +567,29 @@ impl GaussianStage {
                     row[pad + w + i] = row[pad + mirror((w + i) as i64, w)];
                 }
             });
+        drop(rows);
+        self.make_csums(a, b);
+    }
+
+    /// Column sums of the box luminance rows `a..b` (`--bound-from`): each
+    /// row adds to the one above it, restarting on every block of the
+    /// image's grid, so the sums do not depend on the strips.
+    fn make_csums(&mut self, a: usize, b: usize) {
+        let Some((csum, block)) = &mut self.csum else {
+            return;
+        };
+        for y in a..b {
+            csum.push_stale(0.0); // every value is written below
+            let lum = self.ybox.get(y);
+            if y % *block == 0 {
+                let row = csum.range_mut(y, y + 1).pop().expect("the row pushed");
+                csum_row(lum, None, row);
+            } else {
+                let mut two = csum.range_mut(y - 1, y + 1);
+                let row = two.pop().expect("the row pushed");
+                csum_row(lum, Some(two[0]), row);
+            }
+        }
     }
 
     fn make_base_rows(&mut self, a: usize, b: usize) {

@@ -59,7 +59,10 @@ impl GaussianStage {
         let Some(ep) = self.ep.as_ref() else { return };
         let s = self.grid.s;
         let batch = &mut self.pending[..split];
-        let view = YView::new(&self.ybox, self.h);
+        let mut view = YView::new(&self.ybox, self.h);
+        if let Some((csum, block)) = &self.csum {
+            view = view.with_csums(csum, *block);
+        }
         let region = crate::trace::region("width search");
         let cost: u64 = batch
             .par_chunks_mut(SEARCH_TASK)
