@@ -64,6 +64,9 @@ pub struct Report {
     /// ep-gauss: the width search's work, the luminance values the widths
     /// it tried need plus average weights applied (0 for the other methods).
     pub search_cost: u64,
+    /// ep-gauss: widths the search decided on a lower bound of their
+    /// average (`--bound-from`) instead of the average itself.
+    pub search_bounded: u64,
     /// ep-gauss: weights the spreading wrote, per channel (0 for the others).
     pub spread_taps: u64,
     /// Per channel: sum of input values.
@@ -277,6 +280,7 @@ impl Report {
         self.samples_capped += other.samples_capped;
         self.samples_kept += other.samples_kept;
         self.search_cost += other.search_cost;
+        self.search_bounded += other.search_bounded;
         self.spread_taps += other.spread_taps;
         self.energy_in.extend(other.energy_in);
         self.energy_out.extend(other.energy_out);
@@ -423,6 +427,7 @@ impl Report {
             samples_capped: counts.2,
             samples_kept: counts.3,
             search_cost: stats.ep_gauss().map_or(0, |g| g.search_cost),
+            search_bounded: stats.ep_gauss().map_or(0, |g| g.bounded),
             spread_taps: stats.ep_gauss().map_or(0, |g| g.spread_taps),
             energy_in: vec![],
             energy_out: vec![],

@@ -156,7 +156,7 @@ impl Quality {
     pub fn describe(self) -> String {
         let k = self.knobs();
         format!(
-            "--tolerance {} (at S = 3) --support {} --support-ratio {} --support-group {} --support-compact {} --support-over {} --support-region {} --support-level {} --radius {} --cutoff {} --max-radius {} --width-step {}",
+            "--tolerance {} (at S = 3) --support {} --support-ratio {} --support-group {} --support-compact {} --support-over {} --support-region {} --support-level {} --radius {} --cutoff {} --max-radius {} --width-step {} --bound-from {}",
             k.tolerance,
             k.support,
             k.support_ratio,
@@ -168,7 +168,8 @@ impl Quality {
             k.radius,
             k.cutoff,
             k.max_radius,
-            k.width_step
+            k.width_step,
+            k.bound_from
         )
     }
 
@@ -176,14 +177,18 @@ impl Quality {
     /// feature rules', base radius, cut-off and the width ladder's.
     pub fn knobs(self) -> Knobs {
         match self {
-            // The default with the cap at 8 px and a coarser ladder: the
-            // widest spreads, which cost the most, go (docs/pareto.md).
+            // The default with the cap at 8 px: the widest spreads, which
+            // cost the most, go (docs/pareto.md: 1.25x gauss against the
+            // default's 1.28x on 1e2..1e6 fireflies; it loses most on the
+            // held-out caustics).
             Quality::Fast => Knobs {
                 max_radius: 8.0,
-                width_step: 0.2,
                 ..Quality::Default.knobs()
             },
-            // The knee of the front on the real renders (docs/pareto.md).
+            // The knee of the front on the real renders (docs/pareto.md):
+            // the third round's joint sweep added the bound from 3 px and
+            // the coarser ladder, which are faster and have less error on
+            // the renders chosen on and the held-out ones alike.
             Quality::Default => Knobs {
                 tolerance: 0.08,
                 support: 2,
@@ -196,14 +201,14 @@ impl Quality {
                 radius: 0.6,
                 cutoff: 3.0,
                 max_radius: 16.0,
-                width_step: 0.1,
-                bound_from: 0.0,
+                width_step: 0.2,
+                bound_from: 3.0,
             },
             // The least error measured with every light kept: the cap at
-            // 32 px, a coarser ladder (docs/pareto.md).
+            // 32 px (docs/pareto.md), twice the default's halo: more memory
+            // on wide images.
             Quality::Best => Knobs {
                 max_radius: 32.0,
-                width_step: 0.2,
                 ..Quality::Default.knobs()
             },
         }
@@ -282,15 +287,21 @@ pub fn halo(p: &FilterParams) -> crate::geometry::Halo {
 /// image's there: the 4x coarse grid (`--coarse-from`), and the blocks of
 /// the column sums the bound reads (`--bound-from`).
 pub fn window_align(p: &FilterParams) -> usize {
-    let bounded = p.method == Method::EpGauss
-        && p.bound_from > 0.0
-        && p.max_radius.max(p.radius) >= p.bound_from
-        && p.max_radius > p.radius;
-    if bounded {
+    if uses_bound(p) {
         ep_gauss::csum_block_for(halo(p).search_reach)
     } else {
         4
     }
+}
+
+/// Whether a job checks some widths against the bound of
+/// [`ep_gauss::Bound`] (`--bound-from` at or below the cap), and so holds
+/// the summed-area table it reads.
+pub fn uses_bound(p: &FilterParams) -> bool {
+    p.method == Method::EpGauss
+        && p.bound_from > 0.0
+        && p.max_radius > p.radius
+        && p.max_radius >= p.bound_from
 }
 
 /// Default `--coarse-from`: widths from 2 output pixels are spread on the

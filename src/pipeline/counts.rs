@@ -17,6 +17,9 @@ pub struct SpreadCounts {
     /// need (each counted once; it reads a few ahead) plus (folded) average
     /// weights applied.
     pub search_cost: u64,
+    /// Widths the search decided on a lower bound of their average
+    /// (`--bound-from`) instead of the average itself.
+    pub bounded: u64,
     /// Weights the spreading wrote, per channel (the reflected kernels'
     /// areas, on the coarse grid for the coarse ones).
     pub spread_taps: u64,

@@ -105,6 +105,14 @@ pub fn estimate_bytes(
         + out_row.saturating_mul(2 * lag)
         + (ow + 2 * halo.search_reach as u64)
             .saturating_mul(8 * (2 * halo.search_reach as u64 + strip / s + 4));
+    // The summed-area table the bound reads (--bound-from): f64 rows of the
+    // padded width, one more than the box luminance's.
+    let table = if crate::filter::uses_bound(params) {
+        (ow + 2 * halo.search_reach as u64 + 2)
+            .saturating_mul(8 * (2 * halo.search_reach as u64 + strip / s + 5))
+    } else {
+        0
+    };
     // The coarse grid: accumulator rows of half the width over half the
     // lag, and a few rows upsampled across.
     let coarse = if params.method == Method::EpGauss && params.coarse_from > 0.0 {
@@ -120,6 +128,7 @@ pub fn estimate_bytes(
         block_bytes,
     ));
     windows
+        .saturating_add(table)
         .saturating_add(coarse)
         .saturating_add(strips)
         .saturating_add(blocks)

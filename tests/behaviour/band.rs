@@ -152,6 +152,15 @@ fn bands_merge_into_the_file_of_one_run_for_every_method() {
     ok(&[&["synth", "-q"][..], &px_args[..]].concat());
     for n in [2, 7, 40] {
         bands_equal_one_run(d, &tall, &["--method", "ep-gauss"], n, "ep-gauss, tall");
+        // The cap at 32 px: the summed-area table's blocks of 148 rows, on
+        // which band windows start.
+        bands_equal_one_run(
+            d,
+            &tall,
+            &["--method", "ep-gauss", "--quality", "best"],
+            n,
+            "ep-gauss best, tall",
+        );
         bands_equal_one_run(d, &tall, &["--method", "gauss"], n, "gauss, tall");
         bands_equal_one_run(d, &tall_px, &["--method", "ep-box"], n, "ep-box, tall");
         // 48x2100 at S = 8: the last output row holds 4 of 8 sample rows.

@@ -271,9 +271,11 @@ pub fn fireflies(w: usize, h: usize, nch: usize, frac: f64, seed: u64) -> Img {
 
 /// Reference filter, written for clarity rather than speed: every sample is
 /// scattered, in row-major order, with its own 2-D weights into a full-size
-/// f64 image. Noise test and width choice use direct sums over the whole
-/// Gaussian footprint (no ring sums, no cheap path) and take the narrowest
-/// passing width on the ladder.
+/// f64 image. The noise test and the feature rules use direct sums over the
+/// whole Gaussian footprint (no ring sums, no cheap path); the width is the
+/// width search's over an in-memory image (its guarantees are unit tests of
+/// `filter::ep_gauss`), so the streamed windows, the scatter and the coarse
+/// grids are what this checks.
 pub fn reference(img: &Img, s: usize, p: &FilterParams, lum: &[f64]) -> (Vec<f64>, usize) {
     let (w, h) = (img.w / s, img.h / s);
     let mirror = |v: i64, n: usize| -> usize {
@@ -296,22 +298,26 @@ pub fn reference(img: &Img, s: usize, p: &FilterParams, lum: &[f64]) -> (Vec<f64
             ybox[y * w + x] = (acc / (s * s) as f64) as f32 as f64;
         }
     }
+    let ep = EpGauss::new(
+        s,
+        p.radius,
+        p.max_radius,
+        p.cutoff,
+        p.tolerance,
+        p.width_step,
+    )
+    .with_bound(p.bound_from);
     let ladder: Vec<f64> = if p.method == Method::EpGauss {
-        EpGauss::new(
-            s,
-            p.radius,
-            p.max_radius,
-            p.cutoff,
-            p.tolerance,
-            p.width_step,
-        )
-        .levels()
-        .iter()
-        .map(|l| l.rho)
-        .collect()
+        ep.levels().iter().map(|l| l.rho).collect()
     } else {
         vec![p.radius]
     };
+    // The widths: the search's own (its guarantees, each width found passes
+    // Relation 14 on its average, or on a lower bound of it from
+    // `--bound-from`, and the next narrower fails, are unit tests of
+    // `filter::ep_gauss`), over an in-memory image of the box luminance
+    // instead of the engine's streamed windows and summed-area table.
+    let field = epfilt::filter::ep_gauss::LumImage::new(w, h, ep.pad(), |x, y| ybox[y * w + x]);
     // xbar and w0 of Relation 14 at radius rho around pixel (x, y): Gaussian
     // weights over the disc dx^2 + dy^2 <= (min(cutoff, 2.5) * rho)^2.
     let xbar_w0 = |x: usize, y: usize, rho: f64| -> (f64, f64) {
@@ -445,14 +451,8 @@ pub fn reference(img: &Img, s: usize, p: &FilterParams, lum: &[f64]) -> (Vec<f64
                 };
                 let kept = p.support > 0 && (support >= p.support || region || compact || group);
                 if x0 > xb && noisy(x0) && !kept {
-                    rho = *ladder.last().unwrap();
-                    for &r in &ladder[1..] {
-                        let (xb, w0) = xbar_w0(px, py, r);
-                        if xb > 0.0 && relation14(x0 / xb, w0) <= p.tolerance {
-                            rho = r;
-                            break;
-                        }
-                    }
+                    let c = ep.search(&field, px, py, x0, ep.xbar0(&field, px, py as i64));
+                    rho = ladder[c.level as usize];
                     if rho > p.radius {
                         spread += 1;
                     }

@@ -143,8 +143,11 @@ fn dense_wide_fireflies_give_one_answer_and_keep_energy() {
     let c = stats.eg();
     assert!(c.spread > 300, "{c:?}");
     assert!(c.search_cost > 0 && c.spread_taps > c.spread, "{c:?}");
-    // Both coarse grids take part (from 2 px the 2x one, from 4 px the 4x).
+    // Both coarse grids take part (from 2 px the 2x one, from 4 px the 4x),
+    // and the widths from 3 px are checked on the summed-area table's bound
+    // (the defaults' `--bound-from`) wherever its rows are in the image.
     assert!(c.coarse4 > 0 && c.coarse > c.coarse4, "{c:?}");
+    assert!(p.bound_from > 0.0 && c.bounded > 0, "{c:?}");
     for l in &stats.ledger {
         assert!(
             l.rel_error <= ENERGY_TOL,

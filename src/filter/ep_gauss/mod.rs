@@ -52,7 +52,7 @@ use super::kernel::{Coarse, Kernel1d};
 mod bound;
 mod features;
 mod search;
-pub use bound::{csum_block_for, csum_row, Bound, ColSums, BOUND_KEEP};
+pub use bound::{csum_add, csum_block_for, csum_prefix, csum_row, Bound, ColSums, BOUND_KEEP};
 pub use features::{Carriers, Support, COMPACT_REACH, SUPPORT_REACH};
 pub use search::{Choice, Folded};
 

@@ -132,6 +132,9 @@ pub struct Choice {
     /// What the search cost: luminance values read plus quadrant entries
     /// weighed.
     pub cost: u64,
+    /// Widths it decided on a lower bound of their average
+    /// (`--bound-from`) rather than the average itself.
+    pub bounded: u32,
 }
 
 impl EpGauss {
@@ -158,11 +161,13 @@ impl EpGauss {
                 level: 0,
                 capped: true,
                 cost: 0,
+                bounded: 0,
             };
         }
         let cost0 = fold.cost;
         let (cx, cy) = ((px + self.pad()) as i64, py as i64);
         fold.reset(self.pad());
+        let mut bounded_evals = 0u32;
         let mut eval = |l: usize| -> (f64, f64) {
             let lv = &self.levels[l];
             // A lower bound where it can be trusted (Relation 14 against it
@@ -172,7 +177,10 @@ impl EpGauss {
                 b.average(rows, cx as usize, cy as usize)
             });
             let xbar = match bounded {
-                Some(v) => v,
+                Some(v) => {
+                    bounded_evals += 1;
+                    v
+                }
                 None => {
                     fold.grow(rows, cx, cy, lv);
                     fold.average(lv)
@@ -217,6 +225,7 @@ impl EpGauss {
                         level: h as u16,
                         capped: false,
                         cost: fold.finish() - cost0,
+                        bounded: bounded_evals,
                     }
                 }
                 // Every width below the cap failed: the cap it is, whether
@@ -227,6 +236,7 @@ impl EpGauss {
                         level: last as u16,
                         capped: true,
                         cost: fold.finish() - cost0,
+                        bounded: bounded_evals,
                     }
                 }
                 _ => {}
@@ -468,6 +478,56 @@ mod tests {
             ratio <= COST_PER_AREA,
             "search cost {ratio:.2} x the area it finds"
         );
+    }
+
+    #[test]
+    fn widths_checked_on_the_bound_pass_on_the_exact_average() {
+        // Relation 14 against a lower bound of the average is conservative:
+        // a width found passes on the exact average too, and is never
+        // narrower than the exact search's.
+        let exact = EpGauss::new(3, 0.6, 16.0, 3.0, 0.08, 0.1);
+        let bounded = exact.clone().with_bound(3.0);
+        assert!(bounded.uses_bound());
+        let (w, h) = (150, 150);
+        let hash = |x: usize, y: usize| {
+            let mut z = (x as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (y as u64 + 5);
+            z = (z ^ (z >> 31)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            (z ^ (z >> 29)) as f64 / u64::MAX as f64
+        };
+        let mag = |x: usize, y: usize| {
+            let u = hash(x, y);
+            (u < 0.05).then(|| 10f64.powf(1.0 + 4.0 * u / 0.05))
+        };
+        let f = Field::new(w, h, exact.pad(), |x, y| {
+            mag(x, y).map_or(0.3 + 0.01 * (x % 7) as f64, |m| (8.0 + m) / 9.0)
+        });
+        let (mut searched, mut wider) = (0, 0);
+        for y in 0..h {
+            for x in 0..w {
+                let Some(m) = mag(x, y) else { continue };
+                let xb = exact.xbar0(&f, x, y as i64);
+                if !exact.is_noisy(m, xb) {
+                    continue;
+                }
+                searched += 1;
+                let e = exact.search(&f, x, y, m, xb);
+                let b = bounded.search(&f, x, y, m, xb);
+                let l = b.level as usize;
+                if !b.capped {
+                    let d = relation14(
+                        m / direct_average(&exact, &f, x, y, l),
+                        exact.levels()[l].w0,
+                    );
+                    assert!(d <= 0.08, "({x},{y}) {m}: D = {d} at level {l}");
+                }
+                // Not narrower, unless the exact search's path stopped at a
+                // width the bound's never tried (D is not monotone).
+                wider += usize::from(b.level > e.level);
+                assert!(b.cost > 0);
+            }
+        }
+        assert!(searched > 200, "{searched} searched");
+        assert!(wider > 0, "the bound never widened a spread");
     }
 
     #[test]

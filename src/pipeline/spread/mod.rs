@@ -41,7 +41,9 @@ use super::stage::{Stage, WindowUse};
 use super::window::RowWindow;
 use super::ChannelMode;
 use crate::filter::ep_box::{cluster_count, StatsLayout};
-use crate::filter::ep_gauss::{csum_row, Carriers, ColSums, EpGauss, Folded, LumRows, Support};
+use crate::filter::ep_gauss::{
+    csum_add, csum_prefix, Carriers, ColSums, EpGauss, Folded, LumRows, Support,
+};
 use crate::filter::kernel::{ColumnTaps, Kernel1d, TentTaps};
 use crate::filter::luminance::Luminance;
 use crate::filter::{Method, ValidParams};
@@ -571,25 +573,53 @@ impl GaussianStage {
         self.make_csums(a, b);
     }
 
-    /// Column sums of the box luminance rows `a..b` (`--bound-from`): each
-    /// row adds to the one above it, restarting on every block of the
-    /// image's grid, so the sums do not depend on the strips.
+    /// The summed-area table's rows for the box luminance rows `a..b`
+    /// (`--bound-from`): each row's running sum (rows in parallel), plus the
+    /// row above's where the row is not the first of its block (columns in
+    /// parallel, rows in order), on the image's grid of blocks, so the table
+    /// does not depend on the strips. The same operations in the same order
+    /// as [`csum_row`].
     fn make_csums(&mut self, a: usize, b: usize) {
         let Some((csum, block)) = &mut self.csum else {
             return;
         };
-        for y in a..b {
+        let block = *block;
+        for _ in a..b {
             csum.push_stale(0.0); // every value is written below
-            let lum = self.ybox.get(y);
-            if y % *block == 0 {
-                let row = csum.range_mut(y, y + 1).pop().expect("the row pushed");
-                csum_row(lum, None, row);
-            } else {
-                let mut two = csum.range_mut(y - 1, y + 1);
-                let row = two.pop().expect("the row pushed");
-                csum_row(lum, Some(two[0]), row);
+        }
+        let ybox = &self.ybox;
+        let region = crate::trace::region("summed-area rows");
+        csum.range_mut(a, b)
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(k, row)| {
+                let _task = region.task("summed-area rows");
+                csum_prefix(ybox.get(a + k), row);
+            });
+        drop(region);
+        // Rows a - 1 (when held and in a's block) ..b, split into column
+        // chunks: each chunk adds down its rows.
+        let first = if a % block != 0 { a - 1 } else { a };
+        let mut rows = csum.range_mut(first, b);
+        let len = rows.first().map_or(0, |r| r.len());
+        const CHUNK: usize = 2048;
+        let mut chunks: Vec<Vec<&mut [f64]>> =
+            (0..len.div_ceil(CHUNK)).map(|_| Vec::new()).collect();
+        for row in rows.iter_mut() {
+            for (c, part) in row.chunks_mut(CHUNK).enumerate() {
+                chunks[c].push(part);
             }
         }
+        let region = crate::trace::region("summed-area columns");
+        chunks.par_iter_mut().for_each(|col| {
+            let _task = region.task("summed-area columns");
+            for (k, y) in (first..b).enumerate().skip(1) {
+                if y % block != 0 {
+                    let (above, below) = col.split_at_mut(k);
+                    csum_add(above[k - 1], below[0]);
+                }
+            }
+        });
     }
 
     fn make_base_rows(&mut self, a: usize, b: usize) {

@@ -64,11 +64,11 @@ impl GaussianStage {
             view = view.with_csums(csum, *block);
         }
         let region = crate::trace::region("width search");
-        let cost: u64 = batch
+        let (cost, bounded): (u64, u64) = batch
             .par_chunks_mut(SEARCH_TASK)
             .map_init(Folded::default, |fold, chunk| {
                 let _task = region.task("width search");
-                let mut cost = 0;
+                let (mut cost, mut bounded) = (0, 0);
                 for n in chunk {
                     let c = ep.search_in(
                         &view,
@@ -81,11 +81,13 @@ impl GaussianStage {
                     n.level = c.level;
                     n.capped = c.capped;
                     cost += c.cost;
+                    bounded += u64::from(c.bounded);
                 }
-                cost
+                (cost, bounded)
             })
-            .sum();
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
         self.counts.search_cost += cost;
+        self.counts.bounded += bounded;
     }
 
     /// Spread the pending samples of pixel rows before `target`: their
