@@ -9,14 +9,13 @@ use super::*;
 
 /// A coarse grid of the spread (`--coarse-from`): its accumulator (`[c][X]`
 /// rows of cells `factor` times coarser than the grid it feeds), its rows
-/// upsampled across to that grid (`[c][x]`), the tent's taps, the arena of
-/// its reflected kernels, and whether anything was spread on it.
+/// upsampled across to that grid (`[c][x]`), the tent's taps, and whether
+/// anything was spread on it.
 pub(super) struct CoarseGrid {
     pub(super) acc: RowWindow<f64>,
     pub(super) up: RowWindow<f64>,
     pub(super) tent_x: TentTaps,
     pub(super) tent_y: TentTaps,
-    pub(super) arena: Vec<f64>,
     pub(super) used: bool,
 }
 
@@ -29,7 +28,6 @@ impl CoarseGrid {
             up: RowWindow::new(nch * w),
             tent_x: TentTaps::new(if on { w } else { 0 }),
             tent_y: TentTaps::new(if on { h } else { 0 }),
-            arena: Vec::new(),
             used: false,
         }
     }

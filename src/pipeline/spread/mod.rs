@@ -183,10 +183,9 @@ pub struct GaussianStage {
     pending: Vec<Noisy>,
     /// The pending samples' values, `nch` each, in the same order.
     pending_v: Vec<f32>,
-    /// The values of one chunk's spreads, `nch` each (0 in channels not
-    /// spread).
-    vals: Vec<f64>,
-    arena: Vec<f64>,
+    /// One chunk's spreads, reflected weights and values, reused from chunk
+    /// to chunk.
+    placed: scatter::Placed,
     classified: usize,
     spread_done: usize,
     counts: SpreadCounts,
@@ -297,8 +296,7 @@ impl GaussianStage {
             acc: RowWindow::new(nch * w),
             pending: Vec::new(),
             pending_v: Vec::new(),
-            vals: Vec::new(),
-            arena: Vec::new(),
+            placed: Default::default(),
             classified: 0,
             spread_done: 0,
             counts: SpreadCounts::default(),

@@ -47,6 +47,134 @@ impl Spread {
     }
 }
 
+/// Samples per task of the kernels' placement (each a few hundred
+/// nanoseconds where it is reflected at an edge, a few dozen inside).
+const PLACE_TASK: usize = 512;
+
+/// The spreads of a run of noisy samples, at each resolution (fine, 2x and
+/// 4x coarse), with the reflected weights and the values they read, and
+/// what was counted: a part placed by one task, or the parts of a chunk
+/// joined in order.
+#[derive(Default)]
+pub(super) struct Placed {
+    lists: [Vec<Spread>; 3],
+    arenas: [Vec<f64>; 3],
+    vals: Vec<f64>,
+    counts: SpreadCounts,
+}
+
+impl Placed {
+    fn clear(&mut self) {
+        self.lists.iter_mut().for_each(Vec::clear);
+        self.arenas.iter_mut().for_each(Vec::clear);
+        self.vals.clear();
+        self.counts = SpreadCounts::default();
+    }
+
+    /// `part`'s spreads after this one's: its offsets into the arenas and
+    /// the values moved past what this one holds.
+    fn append(&mut self, part: Placed) {
+        let voff = self.vals.len();
+        for k in 0..3 {
+            let aoff = self.arenas[k].len();
+            self.lists[k].extend(part.lists[k].iter().map(|sp| Spread {
+                wx: sp.wx.moved(aoff),
+                wy: sp.wy.moved(aoff),
+                voff: sp.voff + voff,
+                ..*sp
+            }));
+            self.arenas[k].extend_from_slice(&part.arenas[k]);
+        }
+        self.vals.extend_from_slice(&part.vals);
+        let (c, p) = (&mut self.counts, &part.counts);
+        c.noisy += p.noisy;
+        c.spread += p.spread;
+        c.capped += p.capped;
+        c.coarse += p.coarse;
+        c.coarse4 += p.coarse4;
+        c.spread_taps += p.spread_taps;
+    }
+}
+
+impl Weights {
+    /// The same weights after the arena they are in moved by `by`.
+    fn moved(self, by: usize) -> Weights {
+        match self {
+            Weights::Arena(off) => Weights::Arena(off + by),
+            k => k,
+        }
+    }
+}
+
+/// What placing a sample's kernels reads: the ladder, the channels, the
+/// grids' sizes.
+struct PlaceCtx<'a> {
+    ep: &'a EpGauss,
+    modes: &'a [ChannelMode],
+    inv_s2: f64,
+    s: usize,
+    nch: usize,
+    /// Columns and rows of the fine, 2x and 4x grids.
+    fine: (usize, usize),
+    c2: (usize, usize),
+    c4: (usize, usize),
+}
+
+impl PlaceCtx<'_> {
+    /// Place noisy sample `n` (values `x`) in `out`: its values, and its
+    /// kernels on the grid its width goes to (read in place inside the
+    /// image, reflected into the arena at an edge).
+    fn place(&self, n: &Noisy, x: &[f32], out: &mut Placed, tmp: &mut Vec<f64>) {
+        let s = self.s;
+        out.counts.noisy += 1;
+        out.counts.spread += (n.level > 0) as u64;
+        out.counts.capped += n.capped as u64;
+        let level = &self.ep.levels()[n.level as usize];
+        let (i, j) = (n.i as usize, n.j as usize);
+        let voff = out.vals.len();
+        out.vals.extend(x.iter().zip(self.modes).map(|(&x, &m)| {
+            if m == ChannelMode::Spread {
+                x as f64 * self.inv_s2
+            } else {
+                0.0
+            }
+        }));
+        debug_assert_eq!(out.vals.len(), voff + self.nch);
+        // Wide kernels on a coarse grid, the others at full resolution; each
+        // list keeps the batch order.
+        let lv = n.level;
+        let (sp, k) = match &level.coarse {
+            Some(c) => {
+                out.counts.coarse += 1;
+                let four = c.factor == 4;
+                out.counts.coarse4 += u64::from(four);
+                let (k, cells) = if four { (2, self.c4) } else { (1, self.c2) };
+                let arena = &mut out.arenas[k];
+                let mut axis = |q: usize, n: usize| {
+                    let (a, p) = (q % s, q / s);
+                    let inside = c.interior(a, p, n);
+                    place(&c.kernel, inside, lv, arena, tmp, |t| c.fold(a, p, n, t))
+                };
+                let (x, y) = (axis(i, cells.0), axis(j, cells.1));
+                (Spread::new(x, y, voff), k)
+            }
+            None => {
+                let kernel = &level.kernel;
+                let arena = &mut out.arenas[0];
+                let mut axis = |q: usize, n: usize| {
+                    let (a, p) = (q % s, q / s);
+                    let inside = kernel.interior(p, n).map(|st| (a, st));
+                    place(kernel, inside, lv, arena, tmp, |t| kernel.fold(a, p, n, t))
+                };
+                let (x, y) = (axis(i, self.fine.0), axis(j, self.fine.1));
+                (Spread::new(x, y, voff), 0)
+            }
+        };
+        out.counts.spread_taps += (sp.xl * sp.yl) as u64;
+        out.lists[k].push(sp);
+    }
+}
+
 /// Samples per task of the width search: a search takes about a
 /// microsecond, so a task of 64 is long enough for its scheduling (and its
 /// trace event) to cost little, and short enough to balance the load.
@@ -119,87 +247,60 @@ impl GaussianStage {
             (need.div_ceil(4) + 1).min(coarse_rows4),
             0.0,
         );
-        let mut cspreads = Vec::new();
-        let mut cspreads4 = Vec::new();
         // Spread in chunks of the (row-major) batch: the folded weights of one
         // chunk at a time bound the arena, and the order of contributions to
         // every pixel stays the batch order.
-        let mut spreads = Vec::with_capacity(SPREAD_CHUNK.min(split));
-        let mut tmp = Vec::new();
+        let ctx = PlaceCtx {
+            ep,
+            modes: &self.modes,
+            inv_s2: self.inv_s2,
+            s,
+            nch,
+            fine: (w, h),
+            c2: (ncw, coarse_rows),
+            c4: (ncw4, coarse_rows4),
+        };
+        let mut placed = std::mem::take(&mut self.placed);
         for c0 in (0..split).step_by(SPREAD_CHUNK) {
-            // Reflect each sample's kernel once, in order.
-            self.arena.clear();
-            self.c2.arena.clear();
-            self.c4.arena.clear();
-            self.vals.clear();
-            spreads.clear();
-            cspreads.clear();
-            cspreads4.clear();
             let c1 = (c0 + SPREAD_CHUNK).min(split);
-            for (n, x) in self.pending[c0..c1]
-                .iter()
-                .zip(self.pending_v[c0 * nch..c1 * nch].chunks_exact(nch))
-            {
-                self.counts.noisy += 1;
-                self.counts.spread += (n.level > 0) as u64;
-                self.counts.capped += n.capped as u64;
-                let level = &ep.levels()[n.level as usize];
-                let (i, j) = (n.i as usize, n.j as usize);
-                let voff = self.vals.len();
-                self.vals.extend(x.iter().zip(&self.modes).map(|(&x, &m)| {
-                    if m == ChannelMode::Spread {
-                        x as f64 * self.inv_s2
-                    } else {
-                        0.0
+            // Each sample's kernels placed (reflected where they cross an
+            // edge) in parallel parts, joined in order.
+            let region = crate::trace::region("place kernels");
+            let parts: Vec<Placed> = self.pending[c0..c1]
+                .par_chunks(PLACE_TASK)
+                .zip(self.pending_v[c0 * nch..c1 * nch].par_chunks(PLACE_TASK * nch))
+                .map_init(Vec::new, |tmp, (samples, values)| {
+                    let _task = region.task("place kernels");
+                    let mut part = Placed::default();
+                    for (n, x) in samples.iter().zip(values.chunks_exact(nch)) {
+                        ctx.place(n, x, &mut part, tmp);
                     }
-                }));
-                // Wide kernels on a coarse grid, the others at full
-                // resolution; each list keeps the batch order. Kernels inside
-                // the image are read in place, the others reflected into the
-                // arena.
-                let lv = n.level;
-                let (sp, list) = match &level.coarse {
-                    Some(c) => {
-                        self.counts.coarse += 1;
-                        let four = c.factor == 4;
-                        self.counts.coarse4 += u64::from(four);
-                        let (arena, cells, list) = if four {
-                            (&mut self.c4.arena, (ncw4, coarse_rows4), &mut cspreads4)
-                        } else {
-                            (&mut self.c2.arena, (ncw, coarse_rows), &mut cspreads)
-                        };
-                        let mut axis = |q: usize, n: usize| {
-                            let (a, p) = (q % s, q / s);
-                            let inside = c.interior(a, p, n);
-                            place(&c.kernel, inside, lv, arena, &mut tmp, |t| {
-                                c.fold(a, p, n, t)
-                            })
-                        };
-                        let (x, y) = (axis(i, cells.0), axis(j, cells.1));
-                        (Spread::new(x, y, voff), list)
-                    }
-                    None => {
-                        let k = &level.kernel;
-                        let arena = &mut self.arena;
-                        let mut axis = |q: usize, n: usize| {
-                            let (a, p) = (q % s, q / s);
-                            let inside = k.interior(p, n).map(|st| (a, st));
-                            place(k, inside, lv, arena, &mut tmp, |t| k.fold(a, p, n, t))
-                        };
-                        let (x, y) = (axis(i, w), axis(j, h));
-                        (Spread::new(x, y, voff), &mut spreads)
-                    }
-                };
-                self.counts.spread_taps += (sp.xl * sp.yl) as u64;
-                list.push(sp);
+                    part
+                })
+                .collect();
+            drop(region);
+            placed.clear();
+            for part in parts {
+                placed.append(part);
             }
+            let c = &placed.counts;
+            (self.counts.noisy, self.counts.spread, self.counts.capped) = (
+                self.counts.noisy + c.noisy,
+                self.counts.spread + c.spread,
+                self.counts.capped + c.capped,
+            );
+            self.counts.coarse += c.coarse;
+            self.counts.coarse4 += c.coarse4;
+            self.counts.spread_taps += c.spread_taps;
+            let (spreads, cspreads, cspreads4) =
+                (&placed.lists[0], &placed.lists[1], &placed.lists[2]);
             if !spreads.is_empty() {
                 let rows = |l: u16, ph: u16| ep.levels()[l as usize].kernel.row(ph as usize);
                 scatter(
                     &mut self.acc,
-                    (&self.arena, &rows),
-                    &self.vals,
-                    &spreads,
+                    (&placed.arenas[0], &rows),
+                    &placed.vals,
+                    spreads,
                     w,
                     nch,
                     self.tile,
@@ -216,9 +317,9 @@ impl GaussianStage {
                 let tile = (self.tile / 2).max(1);
                 scatter(
                     &mut self.c2.acc,
-                    (&self.c2.arena, &rows),
-                    &self.vals,
-                    &cspreads,
+                    (&placed.arenas[1], &rows),
+                    &placed.vals,
+                    cspreads,
                     ncw,
                     nch,
                     tile,
@@ -231,15 +332,16 @@ impl GaussianStage {
                 let tile = (self.tile / 4).max(1);
                 scatter(
                     &mut self.c4.acc,
-                    (&self.c4.arena, &rows),
-                    &self.vals,
-                    &cspreads4,
+                    (&placed.arenas[2], &rows),
+                    &placed.vals,
+                    cspreads4,
                     ncw4,
                     nch,
                     tile,
                 );
             }
         }
+        self.placed = placed;
         self.pending.drain(..split);
         self.pending_v.drain(..split * nch);
     }
