@@ -888,7 +888,12 @@ fn plot(path: &Path, outcomes: &[Outcome]) -> Result<()> {
                     )))?;
                     // Labels of points close together go one under another.
                     let (x, y) = at(t, o.error);
-                    labels.push((x + 10, y.saturating_sub(12) + 14 * (marked % 4), name, (c.0, c.1, c.2)));
+                    labels.push((
+                        x + 10,
+                        y.saturating_sub(12) + 14 * (marked % 4),
+                        name,
+                        (c.0, c.1, c.2),
+                    ));
                     marked += 1;
                 }
             }

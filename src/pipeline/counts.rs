@@ -29,6 +29,21 @@ pub struct SpreadCounts {
     pub coarse4: u64,
 }
 
+impl std::ops::AddAssign for SpreadCounts {
+    /// Counts of two runs of samples, together.
+    fn add_assign(&mut self, o: SpreadCounts) {
+        self.noisy += o.noisy;
+        self.spread += o.spread;
+        self.capped += o.capped;
+        self.kept += o.kept;
+        self.search_cost += o.search_cost;
+        self.bounded += o.bounded;
+        self.spread_taps += o.spread_taps;
+        self.coarse += o.coarse;
+        self.coarse4 += o.coarse4;
+    }
+}
+
 /// What ep-box counted, in pixels.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct ExcessCounts {

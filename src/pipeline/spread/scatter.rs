@@ -86,13 +86,7 @@ impl Placed {
             self.arenas[k].extend_from_slice(&part.arenas[k]);
         }
         self.vals.extend_from_slice(&part.vals);
-        let (c, p) = (&mut self.counts, &part.counts);
-        c.noisy += p.noisy;
-        c.spread += p.spread;
-        c.capped += p.capped;
-        c.coarse += p.coarse;
-        c.coarse4 += p.coarse4;
-        c.spread_taps += p.spread_taps;
+        self.counts += part.counts;
     }
 }
 
@@ -283,15 +277,7 @@ impl GaussianStage {
             for part in parts {
                 placed.append(part);
             }
-            let c = &placed.counts;
-            (self.counts.noisy, self.counts.spread, self.counts.capped) = (
-                self.counts.noisy + c.noisy,
-                self.counts.spread + c.spread,
-                self.counts.capped + c.capped,
-            );
-            self.counts.coarse += c.coarse;
-            self.counts.coarse4 += c.coarse4;
-            self.counts.spread_taps += c.spread_taps;
+            self.counts += placed.counts;
             let (spreads, cspreads, cspreads4) =
                 (&placed.lists[0], &placed.lists[1], &placed.lists[2]);
             if !spreads.is_empty() {
