@@ -183,6 +183,10 @@ pub struct GaussianStage {
     pending: Vec<Noisy>,
     /// The pending samples' values, `nch` each, in the same order.
     pending_v: Vec<f32>,
+    /// Samples of `pending` before this one are spread (dropped from the
+    /// front once they are half of it, so that dropping them moves no more
+    /// than was spread: a drain per strip moved every later one).
+    pending_first: usize,
     /// One chunk's spreads, reflected weights and values, reused from chunk
     /// to chunk.
     placed: scatter::Placed,
@@ -296,6 +300,7 @@ impl GaussianStage {
             acc: RowWindow::new(nch * w),
             pending: Vec::new(),
             pending_v: Vec::new(),
+            pending_first: 0,
             placed: Default::default(),
             classified: 0,
             spread_done: 0,

@@ -175,12 +175,12 @@ impl PlaceCtx<'_> {
 const SEARCH_TASK: usize = 64;
 
 impl GaussianStage {
-    /// The width search of the first `split` pending samples, in tasks of
+    /// The width search of the pending samples `from..to`, in tasks of
     /// [`SEARCH_TASK`] samples (each sample is independent of the rest).
-    fn search_widths(&mut self, split: usize) {
+    fn search_widths(&mut self, from: usize, to: usize) {
         let Some(ep) = self.ep.as_ref() else { return };
         let s = self.grid.s;
-        let batch = &mut self.pending[..split];
+        let batch = &mut self.pending[from..to];
         let mut view = YView::new(&self.ybox, self.h);
         if let Some((csum, block)) = &self.csum {
             view = view.with_csums(csum, *block);
@@ -219,10 +219,9 @@ impl GaussianStage {
     /// the three lists share the chunk's arena and values.)
     pub(super) fn spread(&mut self, target: usize) {
         let (s, w, h, nch) = (self.grid.s, self.w, self.h, self.nch);
-        let split = self
-            .pending
-            .partition_point(|n| (n.j as usize) / s < target);
-        self.search_widths(split);
+        let first = self.pending_first;
+        let split = first + self.pending[first..].partition_point(|n| (n.j as usize) / s < target);
+        self.search_widths(first, split);
         let Some(ep) = self.ep.as_ref() else { return };
         // Accumulator rows down to the widest reach of this batch.
         let need = (target + self.halo.spread_reach).min(h);
@@ -255,7 +254,7 @@ impl GaussianStage {
             c4: (ncw4, coarse_rows4),
         };
         let mut placed = std::mem::take(&mut self.placed);
-        for c0 in (0..split).step_by(SPREAD_CHUNK) {
+        for c0 in (first..split).step_by(SPREAD_CHUNK) {
             let c1 = (c0 + SPREAD_CHUNK).min(split);
             // Each sample's kernels placed (reflected where they cross an
             // edge) in parallel parts, joined in order.
@@ -328,8 +327,12 @@ impl GaussianStage {
             }
         }
         self.placed = placed;
-        self.pending.drain(..split);
-        self.pending_v.drain(..split * nch);
+        self.pending_first = split;
+        if 2 * split >= self.pending.len() {
+            self.pending.drain(..split);
+            self.pending_v.drain(..split * nch);
+            self.pending_first = 0;
+        }
     }
 }
 
