@@ -97,9 +97,10 @@ fn summed(kind: SceneKind, settings: &[FilterParams]) -> Vec<f64> {
 }
 
 /// The `lights` scene (bulbs 0.5 to 3 px and a thin line among fireflies,
-/// hot 1e4): the paper's rule turns the bulbs into discs (about 5, worse
-/// than the linear filter: 16.0), the old defaults keep them (0.330) and the
-/// defaults also remove the fireflies next to them (0.291). The synthetic
+/// hot 1e4), factors summed over the seeds: the paper's rule turns the bulbs
+/// into discs (16.0, worse than the linear filter's 3), the old defaults keep
+/// them (0.330) and the defaults also remove the fireflies next to them
+/// (0.291). The synthetic
 /// penumbra, glossy and caustic scenes go the other way (every hot sample
 /// there is the same light hit by independent chance, which the feature
 /// rules keep: `docs/DESIGN.md`), so they are not the scene for this.
