@@ -135,9 +135,10 @@ impl Bound {
         let span = disc_spans(r);
         let n = span.len() - 1;
         let g = |d: usize| (-((d * d) as f64) / (rho * rho)).exp();
+        let mut steps = Steps1d::new((0..=n).map(g).collect());
         let mut best = None;
         for m in 1..=MAX_STEPS.min(n + 1) {
-            let ends = steps_1d(&g, n, m);
+            let ends = steps.ends(m);
             // Cell weights (0 where the outer corner is outside the disc) and
             // their mixed differences as rectangles.
             let k = ends.len();
@@ -280,43 +281,62 @@ impl Bound {
     }
 }
 
-/// The `m` (or fewer) outer rows `b_1 < ... < b_m <= n` of steps that keep
-/// the most of the 1-D weights `g(0..=n)` (both sides) when each row of a
-/// step `(b_{j-1}, b_j]` weighs `g(b_j)`, rows past the last one dropped.
-fn steps_1d(g: &impl Fn(usize) -> f64, n: usize, m: usize) -> Vec<usize> {
-    // Rows a..=b each side of 0 (0 counted once).
-    let rows_in = |a: usize, b: usize| (2 * (b + 1 - a) - usize::from(a == 0)) as f64;
-    // best[k][a]: the most steps k.. keep over rows a..=n, and where the
-    // first of them ends (usize::MAX: it uses fewer).
-    let mut best: Vec<Vec<(f64, usize)>> = vec![vec![(0.0, usize::MAX); n + 2]];
-    for k in 1..=m {
-        let prev = &best[k - 1];
-        let mut cur = vec![(0.0, usize::MAX); n + 2];
-        for a in 0..=n {
-            let mut top = (prev[a].0, usize::MAX);
-            for b in a..=n {
-                let v = rows_in(a, b) * g(b) + prev[b + 1].0;
-                if v > top.0 {
-                    top = (v, b);
+/// The dynamic programme of the steps along one axis: for `k` steps, the
+/// outer rows `b_1 < ... < b_k <= n` that keep the most of the 1-D weights
+/// `g(0..=n)` (both sides) when each row of a step `(b_{j-1}, b_j]` weighs
+/// `g(b_j)`, rows past the last one dropped. Each step more extends the
+/// table of the ones before, so trying `m = 1, 2, ...` computes it once.
+struct Steps1d {
+    /// `g(0..=n)`.
+    g: Vec<f64>,
+    /// `best[k][a]`: the most `k` steps keep over rows `a..=n`, and where
+    /// the first of them ends (`usize::MAX`: it uses fewer).
+    best: Vec<Vec<(f64, usize)>>,
+}
+
+impl Steps1d {
+    fn new(g: Vec<f64>) -> Self {
+        let n = g.len() - 1;
+        Steps1d {
+            g,
+            best: vec![vec![(0.0, usize::MAX); n + 2]],
+        }
+    }
+
+    /// The best `m` (or fewer) steps' outer rows, innermost first.
+    fn ends(&mut self, m: usize) -> Vec<usize> {
+        let n = self.g.len() - 1;
+        // Rows a..=b each side of 0 (0 counted once).
+        let rows_in = |a: usize, b: usize| (2 * (b + 1 - a) - usize::from(a == 0)) as f64;
+        while self.best.len() <= m {
+            let prev = self.best.last().expect("the table of no step");
+            let mut cur = vec![(0.0, usize::MAX); n + 2];
+            for a in 0..=n {
+                let mut top = (prev[a].0, usize::MAX);
+                for b in a..=n {
+                    let v = rows_in(a, b) * self.g[b] + prev[b + 1].0;
+                    if v > top.0 {
+                        top = (v, b);
+                    }
                 }
+                cur[a] = top;
             }
-            cur[a] = top;
+            self.best.push(cur);
         }
-        best.push(cur);
+        let mut ends = Vec::new();
+        let mut a = 0;
+        for k in (1..=m).rev() {
+            if a > n {
+                break;
+            }
+            let (_, b) = self.best[k][a];
+            if b != usize::MAX {
+                ends.push(b);
+                a = b + 1;
+            }
+        }
+        ends
     }
-    let mut ends = Vec::new();
-    let mut a = 0;
-    for k in (1..=m).rev() {
-        if a > n {
-            break;
-        }
-        let (_, b) = best[k][a];
-        if b != usize::MAX {
-            ends.push(b);
-            a = b + 1;
-        }
-    }
-    ends
 }
 
 #[cfg(test)]
