@@ -285,7 +285,7 @@ pub fn halo(p: &FilterParams) -> crate::geometry::Halo {
 /// Rows a band's window must start on a multiple of (output rows), so
 /// that what the stage computes on a grid fixed by the image is the whole
 /// image's there: the 4x coarse grid (`--coarse-from`), and the blocks of
-/// the column sums the bound reads (`--bound-from`).
+/// the summed-area table the bound reads (`--bound-from`).
 pub fn window_align(p: &FilterParams) -> usize {
     if uses_bound(p) {
         ep_gauss::csum_block_for(halo(p).search_reach)
@@ -362,7 +362,7 @@ pub struct FilterParams {
     /// on the 2x coarser grid ([`kernel::Coarse`]); 0: none.
     pub coarse_from: f64,
     /// ep-gauss: widths of this radius (output pixels) and more are checked
-    /// against a lower bound of their average read from column sums
+    /// against a lower bound of their average read from a summed-area table
     /// ([`ep_gauss::Bound`]: conservative, a few rows instead of the disc's
     /// every row); 0: never.
     pub bound_from: f64,

@@ -138,9 +138,9 @@ pub struct FilterOptions {
     #[arg(long, default_value_t = crate::filter::DEFAULT_COARSE_FROM, help_heading = "ep-gauss")]
     pub coarse_from: f64,
     /// Check widths of this radius (output pixels) and more against a lower
-    /// bound of their average read from column sums, a few rows instead of
+    /// bound of their average read from a summed-area table, a few entries instead of
     /// every row of the average's disc: conservative (a width that passes on
-    /// the bound passes on the average), at most about half a rung wider; 0 =
+    /// the bound passes on the average), at most about a rung wider; 0 =
     /// the exact average always [default: --quality's].
     #[arg(long, help_heading = "ep-gauss")]
     pub bound_from: Option<f64>,

@@ -371,7 +371,7 @@ fn plan_band(
         a,
         b,
         // On the grid of the window's 2x and 4x coarse grids
-        // (--coarse-from) and column sums' blocks (--bound-from), so they
+        // (--coarse-from) and summed-area table's blocks (--bound-from), so they
         // are the whole image's.
         wa: {
             let align = crate::filter::window_align(&job.params);

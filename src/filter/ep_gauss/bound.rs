@@ -59,7 +59,7 @@ pub fn csum_block_for(pad: usize) -> usize {
 /// `0..=k` over the rows from the first of `y`'s block ([`csum_block_for`])
 /// down to `y`, in f64; index 0 holds 0, and one entry more at the end the
 /// count of rows of that range holding a value below 0 or not finite.
-pub trait ColSums: LumRows {
+pub trait AreaSums: LumRows {
     /// Row `y` of the table (`0 <= y < height()`); `None` where it is not
     /// held.
     fn csum(&self, y: usize) -> Option<&[f64]>;
@@ -71,7 +71,7 @@ pub trait ColSums: LumRows {
 
 /// Fill `out` (the padded row's length plus two) with the table's row for
 /// a luminance row `lum` (padded), given the row above's `prev` (`None` at
-/// the first row of a block): what every implementor of [`ColSums`]
+/// the first row of a block): what every implementor of [`AreaSums`]
 /// computes, in this order ([`csum_prefix`], then [`csum_add`]).
 pub fn csum_row(lum: &[f32], prev: Option<&[f64]>, out: &mut [f64]) {
     csum_prefix(lum, out);
@@ -211,7 +211,7 @@ impl Bound {
     /// `None` where it cannot be trusted (rows outside the image or not
     /// held, a row with a value below 0 or not finite, rounding not small).
     #[inline]
-    pub fn average(&self, sums: &impl ColSums, cx: usize, cy: usize) -> Option<f64> {
+    pub fn average(&self, sums: &impl AreaSums, cx: usize, cy: usize) -> Option<f64> {
         let (h, blk) = (sums.height(), sums.block());
         if cy < self.reach || cy + self.reach >= h {
             return None;

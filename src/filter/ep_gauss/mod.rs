@@ -52,7 +52,7 @@ use super::kernel::{Coarse, Kernel1d};
 mod bound;
 mod features;
 mod search;
-pub use bound::{csum_add, csum_block_for, csum_prefix, csum_row, Bound, ColSums, BOUND_KEEP};
+pub use bound::{csum_add, csum_block_for, csum_prefix, csum_row, AreaSums, Bound, BOUND_KEEP};
 pub use features::{Carriers, Support, COMPACT_REACH, SUPPORT_REACH};
 pub use search::{Choice, Folded};
 
@@ -189,7 +189,7 @@ pub trait LumRows {
 pub struct LumImage {
     h: usize,
     rows: Vec<Vec<f32>>,
-    /// Column sums ([`ColSums`]) in blocks of [`csum_block_for`]`(pad)`.
+    /// The summed-area table ([`AreaSums`]) in blocks of [`csum_block_for`]`(pad)`.
     csums: Vec<Vec<f64>>,
     block: usize,
 }
@@ -228,7 +228,7 @@ impl LumRows for LumImage {
     }
 }
 
-impl ColSums for LumImage {
+impl AreaSums for LumImage {
     fn csum(&self, y: usize) -> Option<&[f64]> {
         self.csums.get(y).map(Vec::as_slice)
     }
@@ -387,13 +387,13 @@ impl EpGauss {
         self
     }
 
-    /// Rows per block of the column sums the bound reads
+    /// Rows per block of the summed-area table the bound reads
     /// ([`csum_block_for`] of [`EpGauss::pad`]).
     pub fn csum_block(&self) -> usize {
         csum_block_for(self.pad)
     }
 
-    /// Whether any width is checked against a bound (the column sums are
+    /// Whether any width is checked against a bound (the summed-area table is
     /// needed).
     pub fn uses_bound(&self) -> bool {
         self.levels.iter().any(|l| l.bound.is_some())

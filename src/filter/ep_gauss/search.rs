@@ -3,7 +3,7 @@
 //! a quadrant of the box luminance folded about the sample's pixel, which
 //! grows outwards as the widths tried widen.
 
-use super::{dot4, relation14, ColSums, EpGauss, Level, LumRows};
+use super::{dot4, relation14, AreaSums, EpGauss, Level, LumRows};
 
 /// Entries a quadrant row grows past what the width being tried needs
 /// (within the padding). Each width the search tries is about one entry
@@ -140,7 +140,14 @@ pub struct Choice {
 impl EpGauss {
     /// Find the width of a sample at pixel `(px, py)` with luminance `x0`
     /// that failed the base test against `xbar0`.
-    pub fn search(&self, rows: &impl ColSums, px: usize, py: usize, x0: f64, xbar0: f64) -> Choice {
+    pub fn search(
+        &self,
+        rows: &impl AreaSums,
+        px: usize,
+        py: usize,
+        x0: f64,
+        xbar0: f64,
+    ) -> Choice {
         self.search_in(rows, px, py, x0, xbar0, &mut Folded::default())
     }
 
@@ -148,7 +155,7 @@ impl EpGauss {
     /// has grown to the widest average).
     pub fn search_in(
         &self,
-        rows: &impl ColSums,
+        rows: &impl AreaSums,
         px: usize,
         py: usize,
         x0: f64,

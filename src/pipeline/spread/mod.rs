@@ -42,7 +42,7 @@ use super::window::RowWindow;
 use super::ChannelMode;
 use crate::filter::ep_box::{cluster_count, StatsLayout};
 use crate::filter::ep_gauss::{
-    csum_add, csum_prefix, Carriers, ColSums, EpGauss, Folded, LumRows, Support,
+    csum_add, csum_prefix, AreaSums, Carriers, EpGauss, Folded, LumRows, Support,
 };
 use crate::filter::kernel::{ColumnTaps, Kernel1d, TentTaps};
 use crate::filter::luminance::Luminance;
@@ -109,7 +109,7 @@ struct YView<'a> {
     rows: Vec<&'a [f32]>,
     first: usize,
     h: usize,
-    /// The column sums' rows (from `csum_first`) and block, where the
+    /// The summed-area table's rows (from `csum_first`) and block, where the
     /// search reads them.
     csums: Vec<&'a [f64]>,
     csum_first: usize,
@@ -128,7 +128,7 @@ impl<'a> YView<'a> {
         }
     }
 
-    /// With the column sums of `csum` (blocks of `block` rows).
+    /// With the summed-area table `csum` (blocks of `block` rows).
     fn with_csums(mut self, csum: &'a RowWindow<f64>, block: usize) -> Self {
         self.csums = (csum.first()..csum.end()).map(|y| csum.get(y)).collect();
         self.csum_first = csum.first();
@@ -144,7 +144,7 @@ impl LumRows for YView<'_> {
     }
 }
 
-impl ColSums for YView<'_> {
+impl AreaSums for YView<'_> {
     #[inline]
     fn csum(&self, y: usize) -> Option<&[f64]> {
         y.checked_sub(self.csum_first)
@@ -174,7 +174,7 @@ pub struct GaussianStage {
     pad: usize,
     tile: usize,
     ybox: RowWindow<f32>,
-    /// Column sums of `ybox` (`--bound-from`), one row more above, and
+    /// The summed-area table of `ybox` (`--bound-from`), one row more above, and
     /// their block; `None` where no width is bounded.
     csum: Option<(RowWindow<f64>, usize)>,
     hpass: RowWindow<f64>,
