@@ -43,3 +43,61 @@ pub fn cpu_seconds() -> Option<f64> {
     #[cfg(not(unix))]
     None
 }
+
+/// How much lower than the filter's threads the decoding and compressing
+/// threads run (a `nice` increment: at 10 the scheduler gives a busy thread
+/// of the filter about ten times the time of one of them).
+pub const IO_NICE: i32 = 10;
+
+/// Lower the calling thread's scheduling priority by [`IO_NICE`] (Linux,
+/// where each thread has its own `nice`; elsewhere nothing). Lowering needs
+/// no privilege; a failure leaves the priority as it was.
+pub fn lower_this_threads_priority() {
+    #[cfg(target_os = "linux")]
+    {
+        // SAFETY: gettid takes nothing and returns this thread's id;
+        // setpriority reads only its three integer arguments.
+        #[allow(unsafe_code)]
+        unsafe {
+            let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+            let now = libc::getpriority(libc::PRIO_PROCESS, tid);
+            libc::setpriority(libc::PRIO_PROCESS, tid, (now + IO_NICE).min(19));
+        }
+    }
+}
+
+/// The calling thread's `nice` (Linux; elsewhere `None`).
+pub fn this_threads_nice() -> Option<i32> {
+    #[cfg(target_os = "linux")]
+    {
+        // SAFETY: as in `lower_this_threads_priority`.
+        #[allow(unsafe_code)]
+        let nice = unsafe {
+            let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+            libc::getpriority(libc::PRIO_PROCESS, tid)
+        };
+        Some(nice)
+    }
+    #[cfg(not(target_os = "linux"))]
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn lowering_moves_only_the_calling_thread() {
+        let before = this_threads_nice();
+        let (was, now) = std::thread::spawn(|| {
+            let was = this_threads_nice().unwrap();
+            lower_this_threads_priority();
+            (was, this_threads_nice().unwrap())
+        })
+        .join()
+        .unwrap();
+        assert_eq!(now, (was + IO_NICE).min(19));
+        assert_eq!(this_threads_nice(), before, "the caller keeps its priority");
+    }
+}

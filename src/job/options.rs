@@ -252,7 +252,11 @@ pub struct FilterOptions {
 
     // ---- Performance ----
     /// Worker threads, 0 = one per core (does not change the result; more
-    /// than the machine's cores are capped, with a warning).
+    /// than the machine's cores are capped, with a warning). From 2, as many
+    /// again decode and compress blocks at a lower priority: they take the
+    /// cores the filter leaves, so under a CPU quota (Slurm, cgroups,
+    /// taskset) the run keeps to N cores, and on an idle machine uses up to
+    /// about 1.5 N.
     #[arg(
         long,
         default_value_t = 0,
