@@ -253,10 +253,9 @@ pub struct FilterOptions {
     // ---- Performance ----
     /// Worker threads, 0 = one per core (does not change the result; more
     /// than the machine's cores are capped, with a warning). From 2, as many
-    /// again decode and compress blocks at a lower priority: they take the
-    /// cores the filter leaves, so under a CPU quota (Slurm, cgroups,
-    /// taskset) the run keeps to N cores, and on an idle machine uses up to
-    /// about 1.5 N.
+    /// again decode and compress blocks, beside the filter's: under a CPU
+    /// quota (Slurm, cgroups, taskset) they share its N cores; on idle cores
+    /// the run may use up to about 1.5 N.
     #[arg(
         long,
         default_value_t = 0,

@@ -21,21 +21,15 @@ pub fn thread_pool(threads: usize) -> Result<rayon::ThreadPool> {
 /// and the filter lane (one strip at a time) became the run's critical path
 /// (measured on 16 cores, 12288x12288 box: each strip's filtering 1 ms alone
 /// and 10-14 ms with one, 2.4 of the run's 2.7 s). Pools of their own keep the
-/// filter's loops to its own tasks. Its threads run at a lower priority
-/// ([`crate::host::IO_NICE`]): where both pools are busy, the scheduler
-/// gives the cores to the filter's loops (the run's critical path) and
-/// decodes on what they leave, so `--threads N` keeps to about N busy cores.
+/// filter's loops to their own tasks. Both run at the process's priority: a
+/// lower one for this pool (nice +10) was 0-7% faster alone on 16 cores but
+/// 4.5x slower beside two busy processes on this 2-core host (a renderer on
+/// the same node), where decoding then got a tenth of a core's share.
 pub fn io_pool(threads: usize) -> Result<Option<rayon::ThreadPool>> {
     if threads <= 1 {
         return Ok(None);
     }
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .thread_name(|i| format!("epfilt-io-{i}"))
-        .start_handler(|_| crate::host::lower_this_threads_priority())
-        .build()
-        .map(Some)
-        .map_err(|e| Error::Config(format!("cannot start {threads} threads: {e}")))
+    named_pool(threads, "epfilt-io").map(Some)
 }
 
 fn named_pool(threads: usize, name: &'static str) -> Result<rayon::ThreadPool> {
@@ -291,13 +285,11 @@ mod tests {
         assert!(io_pool(1).unwrap().is_none());
         let io = io_pool(3).unwrap().expect("an I/O pool from 2 threads");
         assert_eq!(io.current_num_threads(), 3);
-        #[cfg(target_os = "linux")]
-        {
-            let filter = thread_pool(2)
-                .unwrap()
-                .install(crate::host::this_threads_nice);
-            let decode = io.install(crate::host::this_threads_nice);
-            assert_eq!(decode, filter.map(|n| (n + crate::host::IO_NICE).min(19)));
-        }
+        let name =
+            |p: &rayon::ThreadPool| p.install(|| std::thread::current().name().map(String::from));
+        assert!(name(&io).unwrap().starts_with("epfilt-io-"));
+        assert!(!name(&thread_pool(2).unwrap())
+            .unwrap()
+            .starts_with("epfilt-io-"));
     }
 }

@@ -17,10 +17,7 @@
 //!   `read` that gave its buffer back.
 //!
 //! Units are given to free cores first come, first served (a lane's next
-//! piece and a region's tasks as they become ready), except that from 2
-//! cores the tasks of the reading, decoding and writing lanes wait while
-//! the filter's or a lane's serial piece is ready (they run on a pool of
-//! their own at a lower priority, `pipeline::runner::io_pool`). Not modelled: memory
+//! piece and a region's tasks as they become ready). Not modelled: memory
 //! bandwidth and caches (each unit takes on `P` cores the time it took in
 //! the trace), SMT, the operating system's scheduling of more threads than
 //! cores (the decoding pool's beside the filter's), the time a loop's
@@ -67,9 +64,6 @@ pub struct Segment {
 
 /// The lanes, by their names in a trace.
 pub const LANES: [&str; 4] = ["read", "filter", "write", "decode"];
-
-/// The filter lane (its loops run on the filter's pool).
-const FILTER: usize = 1;
 
 /// The decode lane: its segments (block rows decoding ahead, each a task on
 /// the pool) run at once, started in order.
@@ -335,26 +329,12 @@ impl<'a> Replay<'a> {
         let mut now = 0.0f64;
         let mut free = cores;
         let mut ready: VecDeque<Unit> = VecDeque::new();
-        // From 2 cores the pipeline decodes and compresses on a pool of its
-        // own at a lower priority (`pipeline::runner::io_pool`): the
-        // filter's tasks and the lanes' serial pieces go first.
-        let mut first: VecDeque<Unit> = VecDeque::new();
-        let mut behind: VecDeque<Unit> = VecDeque::new();
         // (end, unit), earliest first.
         let mut running: BinaryHeap<Reverse<(Ordered, Unit)>> = BinaryHeap::new();
         self.start_lanes(now, &mut ready);
         loop {
-            for u in ready.drain(..) {
-                if cores > 1 && self.on_io_pool(u) {
-                    behind.push_back(u);
-                } else {
-                    first.push_back(u);
-                }
-            }
             while free > 0 {
-                let Some(u) = first.pop_front().or_else(|| behind.pop_front()) else {
-                    break;
-                };
+                let Some(u) = ready.pop_front() else { break };
                 free -= 1;
                 running.push(Reverse((Ordered(now + self.duration(u)), u)));
             }
@@ -366,13 +346,6 @@ impl<'a> Replay<'a> {
             self.finish(u, now, &mut ready);
         }
         now
-    }
-
-    /// Whether `u` runs on the decoding and compressing pool: a task of
-    /// the read, write or decode lane (their serial pieces run on the
-    /// lanes' own threads).
-    fn on_io_pool(&self, u: Unit) -> bool {
-        matches!(u, Unit::Task(i, _) if self.m.segments[i].lane != FILTER)
     }
 
     fn duration(&self, u: Unit) -> f64 {
@@ -567,34 +540,6 @@ mod tests {
         // Only read 0 can start before anything runs.
         assert_eq!(r.next[0], 1);
         assert!(close(m.replay(4), n as f64));
-    }
-
-    #[test]
-    fn from_two_cores_the_filter_goes_before_decoding() {
-        // Four 1 s decodes are queued at 0; the filter's two 1 s tasks are
-        // ready at 0.5 (after the read), and the write (5 s) after them.
-        // Two cores, the decoding pool behind: the filter runs at 0.5-1.5
-        // and 1-2, the write 2-7 (first come, first served it would wait
-        // for the decodes: 8.5). One core, one pool: 0.5 + 4 + 2 + 5.
-        let m = Model {
-            segments: vec![
-                seg(0, 0, vec![Phase::Serial(0.5)]),
-                seg(
-                    1,
-                    0,
-                    vec![
-                        Phase::Serial(0.0),
-                        Phase::Region(vec![1.0, 1.0]),
-                        Phase::Serial(0.0),
-                    ],
-                ),
-                seg(2, 0, vec![Phase::Serial(5.0)]),
-                seg(3, 0, vec![Phase::Region(vec![1.0; 4])]),
-            ],
-            ..Model::default()
-        };
-        assert!(close(m.replay(2), 7.0), "{}", m.replay(2));
-        assert!(close(m.replay(1), 11.5), "{}", m.replay(1));
     }
 
     #[test]
