@@ -24,7 +24,7 @@
 //! waiting thread takes to wake when its last task ends, idle workers'
 //! search for work, and the output queue (the writer is never far behind).
 //! From a 1-thread trace these make the prediction optimistic where the
-//! cores are many: on a 16-core machine it was 1-30% under the measured
+//! cores are many: on a 16-core machine it was 8-35% under the measured
 //! time (docs/DESIGN.md); `scripts/bench-scaling` prints it beside measured
 //! times.
 
