@@ -89,6 +89,12 @@ pub enum Command {
         /// Numbers of cores to predict.
         #[arg(long, value_delimiter = ',', default_value = "1,2,4,8,16,32,64")]
         cores: Vec<usize>,
+        /// What the end of a parallel loop costs its lane, in microseconds per
+        /// doubling of the cores (waking the threads that wait for it; 44 was
+        /// measured on 16 cores, docs/DESIGN.md). 0: the replay of the tasks
+        /// alone.
+        #[arg(long, default_value_t = epfilt::trace::model::JOIN_S * 1e6, value_parser = join_us)]
+        join_us: f64,
         /// Print JSON: {"work_s", "span_s", "predicted_s": {"1": .., ...}, ...}.
         #[arg(long)]
         json: bool,
@@ -253,4 +259,12 @@ pub struct FilterArgs {
     /// No progress bar and no summary (warnings about data are still printed).
     #[arg(long, short = 'q', help_heading = "Output")]
     pub quiet: bool,
+}
+
+/// `--join-us`: a finite number of microseconds, not negative.
+fn join_us(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!("{s:?} is not a number of microseconds (0 or more)")),
+    }
 }
