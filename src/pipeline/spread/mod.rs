@@ -50,8 +50,13 @@ use crate::filter::{Method, ValidParams};
 use crate::geometry::{mirror, Grid, Halo};
 
 /// Noisy samples spread per chunk (bounds the folded-weight arena to about
-/// 4096 x 1.5 KiB at the widest kernel).
-const SPREAD_CHUNK: usize = 4096;
+/// 8192 x 1.5 KiB at the widest kernel, where every kernel of a chunk
+/// crosses an edge). Each chunk is two parallel loops (placing, scattering),
+/// and each loop's end costs a wake-up on many cores (docs/DESIGN.md, "The
+/// model's join"): at 4096, 12288x12288 ep-gauss had 4.2 chunks a strip.
+/// The chunks do not change the result (each pixel takes its contributions
+/// in the batch's order).
+const SPREAD_CHUNK: usize = 8192;
 
 #[cfg(test)]
 mod tests {

@@ -279,52 +279,53 @@ impl GaussianStage {
             self.counts += placed.counts;
             let (spreads, cspreads, cspreads4) =
                 (&placed.lists[0], &placed.lists[1], &placed.lists[2]);
-            if !spreads.is_empty() {
-                let rows = |l: u16, ph: u16| ep.levels()[l as usize].kernel.row(ph as usize);
-                scatter(
-                    &mut self.acc,
-                    (&placed.arenas[0], &rows),
-                    &placed.vals,
-                    spreads,
-                    w,
-                    nch,
-                    self.tile,
-                );
-            }
-            let rows = |l: u16, ph: u16| {
+            let fine_rows = |l: u16, ph: u16| ep.levels()[l as usize].kernel.row(ph as usize);
+            let coarse_rows = |l: u16, ph: u16| {
                 ep.levels()[l as usize]
                     .coarse
                     .as_ref()
                     .map_or(&[][..], |c| c.kernel.row(ph as usize))
             };
+            // The three grids' tiles in one parallel loop: one join a chunk,
+            // not three (each costs its lane a wake-up; docs/DESIGN.md, "The
+            // model's join"). Each pixel still gets its grid's spreads in
+            // order, from one task.
+            let mut grids = Vec::with_capacity(3);
+            if !spreads.is_empty() {
+                grids.push(GridScatter {
+                    acc: &mut self.acc,
+                    arena: &placed.arenas[0],
+                    rows: &fine_rows,
+                    spreads,
+                    w,
+                    tile: self.tile,
+                });
+            }
             if !cspreads.is_empty() {
                 self.c2.used = true;
-                let tile = (self.tile / 2).max(1);
-                scatter(
-                    &mut self.c2.acc,
-                    (&placed.arenas[1], &rows),
-                    &placed.vals,
-                    cspreads,
-                    ncw,
-                    nch,
-                    tile,
-                );
+                grids.push(GridScatter {
+                    acc: &mut self.c2.acc,
+                    arena: &placed.arenas[1],
+                    rows: &coarse_rows,
+                    spreads: cspreads,
+                    w: ncw,
+                    tile: (self.tile / 2).max(1),
+                });
             }
             if !cspreads4.is_empty() {
                 // Through the 2x grid: its rows carry the 4x share.
                 self.c2.used = true;
                 self.c4.used = true;
-                let tile = (self.tile / 4).max(1);
-                scatter(
-                    &mut self.c4.acc,
-                    (&placed.arenas[2], &rows),
-                    &placed.vals,
-                    cspreads4,
-                    ncw4,
-                    nch,
-                    tile,
-                );
+                grids.push(GridScatter {
+                    acc: &mut self.c4.acc,
+                    arena: &placed.arenas[2],
+                    rows: &coarse_rows,
+                    spreads: cspreads4,
+                    w: ncw4,
+                    tile: (self.tile / 4).max(1),
+                });
             }
+            scatter(grids, &placed.vals, nch);
         }
         self.placed = placed;
         self.pending_first = split;
@@ -379,60 +380,105 @@ fn place(
     }
 }
 
-/// Add `spreads` (in order) into the accumulator, one task per tile of
-/// columns: each pixel receives its contributions in the given order.
-fn scatter<'k>(
-    acc: &mut RowWindow<f64>,
+/// What one accumulator grid receives from a chunk: its spreads (in
+/// order), their folded weights and the kernel rows they name.
+struct GridScatter<'a, 'k> {
+    acc: &'a mut RowWindow<f64>,
+    arena: &'a [f64],
+    rows: &'a (dyn Fn(u16, u16) -> &'k [f64] + Sync),
+    spreads: &'a [Spread],
+    /// Columns of the grid, and of one of its tiles.
+    w: usize,
+    tile: usize,
+}
+
+/// Add each grid's spreads (in order) into its accumulator: every column
+/// tile of every grid is a task of one loop, so each pixel receives its
+/// contributions in the given order from one task, whatever the tile size.
+fn scatter(grids: Vec<GridScatter<'_, '_>>, vals: &[f64], nch: usize) {
+    if grids.is_empty() {
+        return;
+    }
+    type Task<'a, 'k> = (
+        std::ops::Range<usize>,
+        Vec<&'a mut [f64]>,
+        usize,
+        &'a [f64],
+        &'a (dyn Fn(u16, u16) -> &'k [f64] + Sync),
+        &'a [Spread],
+    );
+    let mut tasks: Vec<Task> = Vec::new();
+    for g in grids {
+        let first = g.acc.first();
+        let (w, tile) = (g.w, g.tile);
+        for (t, parts) in crate::pipeline::tiles::column_tiles(g.acc, w, nch, tile)
+            .into_iter()
+            .enumerate()
+        {
+            let cols = t * tile..((t + 1) * tile).min(w);
+            tasks.push((cols, parts, first, g.arena, g.rows, g.spreads));
+        }
+    }
+    let region = crate::trace::region("scatter");
+    tasks
+        .into_par_iter()
+        .for_each(|(cols, mut parts, first, arena, rows, spreads)| {
+            let _task = region.task("scatter");
+            scatter_tile(cols, &mut parts, first, (arena, rows), vals, spreads, nch);
+        });
+}
+
+/// [`scatter`]'s task: `spreads` added into one column tile of a grid
+/// (`parts` as [`crate::pipeline::tiles::column_tiles`] lists them, from
+/// the window's row `first`).
+fn scatter_tile<'k>(
+    cols: std::ops::Range<usize>,
+    parts: &mut [&mut [f64]],
+    first: usize,
     (arena, rows): (&[f64], &(dyn Fn(u16, u16) -> &'k [f64] + Sync)),
     vals: &[f64],
     spreads: &[Spread],
-    w: usize,
     nch: usize,
-    tile: usize,
 ) {
-    let first = acc.first();
-    crate::pipeline::tiles::for_each_tile(acc, w, nch, tile, |cols, parts| {
-        let (x0, x1) = (cols.start, cols.end);
-        for sp in spreads {
-            let (cx0, cx1) = (sp.xs.max(x0), (sp.xs + sp.xl).min(x1));
-            if cx0 >= cx1 {
+    let (x0, x1) = (cols.start, cols.end);
+    for sp in spreads {
+        let (cx0, cx1) = (sp.xs.max(x0), (sp.xs + sp.xl).min(x1));
+        if cx0 >= cx1 {
+            continue;
+        }
+        let weights = |at: Weights, len: usize| match at {
+            Weights::Arena(off) => &arena[off..off + len],
+            Weights::Kernel(l, ph) => rows(l, ph),
+        };
+        let wx = &weights(sp.wx, sp.xl)[cx0 - sp.xs..cx1 - sp.xs];
+        let wy = weights(sp.wy, sp.yl);
+        let v = &vals[sp.voff..sp.voff + nch];
+        // Colour without alpha, the common case: the three channels in one
+        // loop (each value gets the same products in the same order as
+        // channel by channel).
+        let rgb = nch >= 3 && v[..3].iter().all(|&v| v != 0.0) && v[3..].iter().all(|&v| v == 0.0);
+        for (dy, &wyv) in wy.iter().enumerate() {
+            let r = sp.ys + dy - first;
+            if rgb {
+                let (k0, k1, k2) = (v[0] * wyv, v[1] * wyv, v[2] * wyv);
+                if let [a, b, c, ..] = &mut parts[r * nch..(r + 1) * nch] {
+                    let span = cx0 - x0..cx1 - x0;
+                    let (a, b, c) = (&mut a[span.clone()], &mut b[span.clone()], &mut c[span]);
+                    for (((a, b), c), &wv) in a.iter_mut().zip(b).zip(c).zip(wx) {
+                        *a += k0 * wv;
+                        *b += k1 * wv;
+                        *c += k2 * wv;
+                    }
+                }
                 continue;
             }
-            let weights = |at: Weights, len: usize| match at {
-                Weights::Arena(off) => &arena[off..off + len],
-                Weights::Kernel(l, ph) => rows(l, ph),
-            };
-            let wx = &weights(sp.wx, sp.xl)[cx0 - sp.xs..cx1 - sp.xs];
-            let wy = weights(sp.wy, sp.yl);
-            let v = &vals[sp.voff..sp.voff + nch];
-            // Colour without alpha, the common case: the three channels in
-            // one loop (each value gets the same products in the same
-            // order as channel by channel).
-            let rgb =
-                nch >= 3 && v[..3].iter().all(|&v| v != 0.0) && v[3..].iter().all(|&v| v == 0.0);
-            for (dy, &wyv) in wy.iter().enumerate() {
-                let r = sp.ys + dy - first;
-                if rgb {
-                    let (k0, k1, k2) = (v[0] * wyv, v[1] * wyv, v[2] * wyv);
-                    if let [a, b, c, ..] = &mut parts[r * nch..(r + 1) * nch] {
-                        let span = cx0 - x0..cx1 - x0;
-                        let (a, b, c) = (&mut a[span.clone()], &mut b[span.clone()], &mut c[span]);
-                        for (((a, b), c), &wv) in a.iter_mut().zip(b).zip(c).zip(wx) {
-                            *a += k0 * wv;
-                            *b += k1 * wv;
-                            *c += k2 * wv;
-                        }
-                    }
-                    continue;
-                }
-                for c in (0..nch).filter(|&c| v[c] != 0.0) {
-                    let coef = v[c] * wyv;
-                    let dst = &mut parts[r * nch + c][cx0 - x0..cx1 - x0];
-                    for (d, &wv) in dst.iter_mut().zip(wx) {
-                        *d += coef * wv;
-                    }
+            for c in (0..nch).filter(|&c| v[c] != 0.0) {
+                let coef = v[c] * wyv;
+                let dst = &mut parts[r * nch + c][cx0 - x0..cx1 - x0];
+                for (d, &wv) in dst.iter_mut().zip(wx) {
+                    *d += coef * wv;
                 }
             }
         }
-    });
+    }
 }
