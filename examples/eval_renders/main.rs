@@ -33,7 +33,12 @@
 //! Writes `renders.md`, `renders.csv` and a montage PNG per input
 //! (`renders/<input>.png`: input, linear, methods, reference) into `--out`
 //! (default `docs`), and prints the Markdown.
+//!
+//! `--sweep` runs ep-gauss over a grid of its knobs (`sweep.rs`);
+//! `--sweep-ep-box` runs ep-box over given settings of its knobs
+//! (`box_sweep.rs`, `scripts/joint-search --method ep-box`).
 
+mod box_sweep;
 mod sweep;
 
 use std::collections::BTreeMap;
@@ -453,6 +458,9 @@ fn main() -> Result<()> {
     let argv: Vec<String> = std::env::args().skip(1).collect();
     if argv.iter().any(|a| a == "--sweep") {
         return sweep::run(&argv);
+    }
+    if argv.iter().any(|a| a == "--sweep-ep-box") {
+        return box_sweep::run(&argv);
     }
     let mut dir = PathBuf::from("../shared/renders");
     let mut out_dir = PathBuf::from("docs");
