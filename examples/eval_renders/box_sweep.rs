@@ -30,16 +30,14 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use epfilt::{filter_file, FilterJob, FilterParams, Method};
+use epfilt::{FilterParams, Method};
 
+use super::sweep::{label, light_peaks as peaks, parse_setting, run_filter, Setting};
 use super::{inputs, lights, oracle_input, rel_mse, set, Image, Input, ORACLE_OVER};
 
 /// A light is kept when its peak is at least this share of the linear
 /// filter's (the "within 20%"), as in `--sweep`.
 const KEPT_PEAK: f64 = 0.8;
-
-/// One setting: key = value pairs over the defaults.
-type Setting = Vec<(String, String)>;
 
 /// One input with what every setting is measured against.
 struct Prepared {
@@ -60,30 +58,6 @@ struct Prepared {
     oracle: f64,
 }
 
-fn run_filter(tmp: &Path, input: &Path, p: FilterParams, tag: &str) -> Result<Image> {
-    let out = tmp.join(format!("{tag}.exr"));
-    let job = FilterJob::new(input, &out, p);
-    filter_file(&job, &|_, _| {}).with_context(|| format!("{tag}: {}", input.display()))?;
-    Image::read(&out)
-}
-
-fn peaks(img: &Image, lights: &[Vec<(usize, usize)>]) -> Vec<f64> {
-    lights
-        .iter()
-        .map(|fp| fp.iter().map(|&(x, y)| img.y(x, y)).fold(0.0, f64::max))
-        .collect()
-}
-
-fn label(s: &Setting) -> String {
-    if s.is_empty() {
-        return "(defaults)".into();
-    }
-    s.iter()
-        .map(|(k, v)| format!("{k}={v}"))
-        .collect::<Vec<_>>()
-        .join(" ")
-}
-
 pub fn run(args: &[String]) -> Result<()> {
     let (mut renders, mut held): (Vec<PathBuf>, Vec<PathBuf>) = (Vec::new(), Vec::new());
     let mut extra: Vec<Setting> = vec![Vec::new()];
@@ -97,16 +71,7 @@ pub fn run(args: &[String]) -> Result<()> {
             "--held-out" => held.push(next("--held-out DIR")?.into()),
             "--out" => out = next("--out DIR")?.into(),
             "--also" => {
-                let kv = next("--also KEY=V;KEY=V")?;
-                extra.push(
-                    kv.split(';')
-                        .filter(|s| !s.is_empty())
-                        .map(|p| {
-                            let (k, v) = p.split_once('=').context("KEY=V")?;
-                            Ok((k.to_string(), v.to_string()))
-                        })
-                        .collect::<Result<_>>()?,
-                );
+                extra.push(parse_setting(&next("--also KEY=V;KEY=V")?)?);
             }
             other => bail!("--sweep-ep-box: unknown argument {other:?}"),
         }

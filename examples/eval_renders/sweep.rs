@@ -67,7 +67,18 @@ const DEFAULT_GRID: &[(&str, &[&str])] = &[
 const KEPT_PEAK: f64 = 0.8;
 
 /// One setting: key = value pairs over the defaults.
-type Setting = Vec<(String, String)>;
+pub(super) type Setting = Vec<(String, String)>;
+
+/// `KEY=V;KEY=V` (`--also`) as a setting.
+pub(super) fn parse_setting(kv: &str) -> Result<Setting> {
+    kv.split(';')
+        .filter(|s| !s.is_empty())
+        .map(|p| {
+            let (k, v) = p.split_once('=').context("KEY=V")?;
+            Ok((k.to_string(), v.to_string()))
+        })
+        .collect()
+}
 
 struct Args {
     renders: Vec<PathBuf>,
@@ -111,16 +122,7 @@ fn parse(args: &[String]) -> Result<Args> {
             }
             "--also" => {
                 // One more setting beside the grid: KEY=V;KEY=V.
-                let kv = next("--also KEY=V;KEY=V")?;
-                a.extra.push(
-                    kv.split(';')
-                        .filter(|s| !s.is_empty())
-                        .map(|p| {
-                            let (k, v) = p.split_once('=').context("KEY=V")?;
-                            Ok((k.to_string(), v.to_string()))
-                        })
-                        .collect::<Result<_>>()?,
-                );
+                a.extra.push(parse_setting(&next("--also KEY=V;KEY=V")?)?);
             }
             "--bench" => a.bench = Some(next("--bench FILE")?.into()),
             "--bench-runs" => a.bench_runs = next("--bench-runs N")?.parse()?,
@@ -161,7 +163,7 @@ fn settings(grid: &[(String, Vec<String>)]) -> Vec<Setting> {
     out
 }
 
-fn label(s: &Setting) -> String {
+pub(super) fn label(s: &Setting) -> String {
     if s.is_empty() {
         return "(defaults)".into();
     }
@@ -267,7 +269,7 @@ struct Outcome {
     x_gauss: Option<f64>,
 }
 
-fn run_filter(tmp: &Path, input: &Path, p: FilterParams, tag: &str) -> Result<Image> {
+pub(super) fn run_filter(tmp: &Path, input: &Path, p: FilterParams, tag: &str) -> Result<Image> {
     let out = tmp.join(format!("{tag}.exr"));
     let job = FilterJob::new(input, &out, p);
     filter_file(&job, &|_, _| {}).with_context(|| format!("{tag}: {}", input.display()))?;
@@ -755,7 +757,7 @@ fn markdown(a: &Args, prepared: &[Prepared], outcomes: &[Outcome], gauss: &[f64]
 }
 
 /// The brightest pixel of each light (its luminance).
-fn light_peaks(img: &Image, lights: &[Vec<(usize, usize)>]) -> Vec<f64> {
+pub(super) fn light_peaks(img: &Image, lights: &[Vec<(usize, usize)>]) -> Vec<f64> {
     lights
         .iter()
         .map(|fp| fp.iter().map(|&(x, y)| img.y(x, y)).fold(0.0, f64::max))

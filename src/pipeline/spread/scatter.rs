@@ -277,8 +277,6 @@ impl GaussianStage {
                 placed.append(part);
             }
             self.counts += placed.counts;
-            let (spreads, cspreads, cspreads4) =
-                (&placed.lists[0], &placed.lists[1], &placed.lists[2]);
             let fine_rows = |l: u16, ph: u16| ep.levels()[l as usize].kernel.row(ph as usize);
             let coarse_rows = |l: u16, ph: u16| {
                 ep.levels()[l as usize]
@@ -286,45 +284,32 @@ impl GaussianStage {
                     .as_ref()
                     .map_or(&[][..], |c| c.kernel.row(ph as usize))
             };
+            // The 4x grid goes through the 2x one: its rows carry the share.
+            let [_, two, four] = placed.lists.each_ref().map(|l| !l.is_empty());
+            self.c2.used |= two || four;
+            self.c4.used |= four;
             // The three grids' tiles in one parallel loop: one join a chunk,
             // not three (each costs its lane a wake-up; docs/DESIGN.md, "The
             // model's join"). Each pixel still gets its grid's spreads in
             // order, from one task.
-            let mut grids = Vec::with_capacity(3);
-            if !spreads.is_empty() {
-                grids.push(GridScatter {
-                    acc: &mut self.acc,
-                    arena: &placed.arenas[0],
-                    rows: &fine_rows,
+            let grids: [(_, _, &KernelRows<'_>, _); 3] = [
+                (&mut self.acc, w, &fine_rows, 1),
+                (&mut self.c2.acc, ncw, &coarse_rows, 2),
+                (&mut self.c4.acc, ncw4, &coarse_rows, 4),
+            ];
+            let grids = grids
+                .into_iter()
+                .zip(placed.lists.iter().zip(&placed.arenas))
+                .filter(|(_, (spreads, _))| !spreads.is_empty())
+                .map(|((acc, w, rows, k), (spreads, arena))| GridScatter {
+                    acc,
+                    arena,
+                    rows,
                     spreads,
                     w,
-                    tile: self.tile,
-                });
-            }
-            if !cspreads.is_empty() {
-                self.c2.used = true;
-                grids.push(GridScatter {
-                    acc: &mut self.c2.acc,
-                    arena: &placed.arenas[1],
-                    rows: &coarse_rows,
-                    spreads: cspreads,
-                    w: ncw,
-                    tile: (self.tile / 2).max(1),
-                });
-            }
-            if !cspreads4.is_empty() {
-                // Through the 2x grid: its rows carry the 4x share.
-                self.c2.used = true;
-                self.c4.used = true;
-                grids.push(GridScatter {
-                    acc: &mut self.c4.acc,
-                    arena: &placed.arenas[2],
-                    rows: &coarse_rows,
-                    spreads: cspreads4,
-                    w: ncw4,
-                    tile: (self.tile / 4).max(1),
-                });
-            }
+                    tile: (self.tile / k).max(1),
+                })
+                .collect();
             scatter(grids, &placed.vals, nch);
         }
         self.placed = placed;
@@ -380,12 +365,15 @@ fn place(
     }
 }
 
+/// The kernel row a spread names by level and phase.
+type KernelRows<'k> = dyn Fn(u16, u16) -> &'k [f64] + Sync + 'k;
+
 /// What one accumulator grid receives from a chunk: its spreads (in
 /// order), their folded weights and the kernel rows they name.
 struct GridScatter<'a, 'k> {
     acc: &'a mut RowWindow<f64>,
     arena: &'a [f64],
-    rows: &'a (dyn Fn(u16, u16) -> &'k [f64] + Sync),
+    rows: &'a KernelRows<'k>,
     spreads: &'a [Spread],
     /// Columns of the grid, and of one of its tiles.
     w: usize,
@@ -404,7 +392,7 @@ fn scatter(grids: Vec<GridScatter<'_, '_>>, vals: &[f64], nch: usize) {
         Vec<&'a mut [f64]>,
         usize,
         &'a [f64],
-        &'a (dyn Fn(u16, u16) -> &'k [f64] + Sync),
+        &'a KernelRows<'k>,
         &'a [Spread],
     );
     let mut tasks: Vec<Task> = Vec::new();
@@ -435,7 +423,7 @@ fn scatter_tile<'k>(
     cols: std::ops::Range<usize>,
     parts: &mut [&mut [f64]],
     first: usize,
-    (arena, rows): (&[f64], &(dyn Fn(u16, u16) -> &'k [f64] + Sync)),
+    (arena, rows): (&[f64], &KernelRows<'k>),
     vals: &[f64],
     spreads: &[Spread],
     nch: usize,
