@@ -386,19 +386,19 @@ impl GaussianStage {
                     ctx.find_cols(scratch, a + t / parts, x0..(x0 + span).min(ctx.w))
                 })
                 .collect();
-            let merged: Vec<Found> = found_parts
-                .par_chunks(parts)
-                .map(|row| merge_parts(row, s, ctx.nch))
-                .collect();
+            // Each row's parts merged in the task of its pass: one loop
+            // (one join) less a strip.
             hrows
                 .par_chunks_mut(s)
-                .zip(merged.par_iter())
+                .zip(found_parts.par_chunks(parts))
                 .enumerate()
-                .for_each_init(Vec::new, |copy, (k, (hs, f))| {
+                .map_init(Vec::new, |copy, (k, (hs, row))| {
                     let _task = region.task("classify");
+                    let f = merge_parts(row, s, ctx.nch);
                     ctx.pass(copy, a + k, hs, &f.0);
-                });
-            merged
+                    f
+                })
+                .collect()
         };
         for (list, vals, kept) in found {
             // Kept samples failed the test too; the spread ones are counted

@@ -546,11 +546,23 @@ impl GaussianStage {
         }
         let lum = &self.lum;
         let real_counts = self.real_counts.as_ref();
+        // The summed-area table's row sums in the same task as their row
+        // (one loop, one join, a strip: docs/DESIGN.md, "The model's join").
+        let mut csum_rows: Vec<Option<&mut [f64]>> = match &mut self.csum {
+            Some((csum, _)) => {
+                for _ in a..b {
+                    csum.push_stale(0.0); // every value is written below
+                }
+                csum.range_mut(a, b).into_iter().map(Some).collect()
+            }
+            None => (a..b).map(|_| None).collect(),
+        };
         let region = crate::trace::region("box luminance");
         let mut rows = self.ybox.range_mut(a, b);
         rows.par_iter_mut()
+            .zip(csum_rows.par_iter_mut())
             .enumerate()
-            .for_each_init(Vec::<f64>::new, |core, (k, row)| {
+            .for_each_init(Vec::<f64>::new, |core, (k, (row, csum_row))| {
                 let _task = region.task("box luminance");
                 let y = a + k;
                 // The mean in f64, stored in f32 (`LumRows`).
@@ -576,35 +588,26 @@ impl GaussianStage {
                     row[i] = row[pad + mirror(i as i64 - pad as i64, w)];
                     row[pad + w + i] = row[pad + mirror((w + i) as i64, w)];
                 }
+                if let Some(c) = csum_row {
+                    csum_prefix(row, c);
+                }
             });
         drop(rows);
+        drop(csum_rows);
         self.make_csums(a, b);
     }
 
     /// The summed-area table's rows for the box luminance rows `a..b`
-    /// (`--bound-from`): each row's running sum (rows in parallel), plus the
-    /// row above's where the row is not the first of its block (columns in
-    /// parallel, rows in order), on the image's grid of blocks, so the table
-    /// does not depend on the strips. The same operations in the same order
-    /// as [`csum_row`].
+    /// (`--bound-from`): each row's running sum ([`Self::make_ybox`], in
+    /// its row's task), plus here the row above's where the row is not the
+    /// first of its block (columns in parallel, rows in order), on the
+    /// image's grid of blocks, so the table does not depend on the strips.
+    /// The same operations in the same order as [`csum_row`].
     fn make_csums(&mut self, a: usize, b: usize) {
         let Some((csum, block)) = &mut self.csum else {
             return;
         };
         let block = *block;
-        for _ in a..b {
-            csum.push_stale(0.0); // every value is written below
-        }
-        let ybox = &self.ybox;
-        let region = crate::trace::region("summed-area rows");
-        csum.range_mut(a, b)
-            .par_iter_mut()
-            .enumerate()
-            .for_each(|(k, row)| {
-                let _task = region.task("summed-area rows");
-                csum_prefix(ybox.get(a + k), row);
-            });
-        drop(region);
         // Rows a - 1 (when held and in a's block) ..b, split into column
         // chunks: each chunk adds down its rows.
         let first = if a % block != 0 { a - 1 } else { a };
