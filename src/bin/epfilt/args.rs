@@ -90,9 +90,9 @@ pub enum Command {
         #[arg(long, value_delimiter = ',', default_value = "1,2,4,8,16,32,64")]
         cores: Vec<usize>,
         /// What the end of a parallel loop costs its lane, in microseconds per
-        /// doubling of the cores (waking the threads that wait for it; 44 was
-        /// measured on 16 cores, docs/DESIGN.md). 0: the replay of the tasks
-        /// alone.
+        /// doubling of the cores (waking the threads that wait for it; 44 fits
+        /// four runs on a 16-core machine, docs/DESIGN.md). 0: the replay of
+        /// the tasks alone.
         #[arg(long, default_value_t = epfilt::trace::model::JOIN_S * 1e6, value_parser = join_us)]
         join_us: f64,
         /// Print JSON: {"work_s", "span_s", "predicted_s": {"1": .., ...}, ...}.
