@@ -303,9 +303,11 @@ impl GaussianStage {
                 .filter(|(_, (spreads, _))| !spreads.is_empty())
                 .map(|((acc, w, rows, k), (spreads, arena))| GridScatter {
                     acc,
-                    arena,
-                    rows,
-                    spreads,
+                    src: SpreadSrc {
+                        arena,
+                        rows,
+                        spreads,
+                    },
                     w,
                     tile: (self.tile / k).max(1),
                 })
@@ -368,13 +370,19 @@ fn place(
 /// The kernel row a spread names by level and phase.
 type KernelRows<'k> = dyn Fn(u16, u16) -> &'k [f64] + Sync + 'k;
 
-/// What one accumulator grid receives from a chunk: its spreads (in
-/// order), their folded weights and the kernel rows they name.
-struct GridScatter<'a, 'k> {
-    acc: &'a mut RowWindow<f64>,
+/// A chunk's spreads for one grid (in order), their folded weights and the
+/// kernel rows they name.
+#[derive(Clone, Copy)]
+struct SpreadSrc<'a, 'k> {
     arena: &'a [f64],
     rows: &'a KernelRows<'k>,
     spreads: &'a [Spread],
+}
+
+/// One accumulator grid and what it receives from a chunk.
+struct GridScatter<'a, 'k> {
+    acc: &'a mut RowWindow<f64>,
+    src: SpreadSrc<'a, 'k>,
     /// Columns of the grid, and of one of its tiles.
     w: usize,
     tile: usize,
@@ -384,50 +392,43 @@ struct GridScatter<'a, 'k> {
 /// tile of every grid is a task of one loop, so each pixel receives its
 /// contributions in the given order from one task, whatever the tile size.
 fn scatter(grids: Vec<GridScatter<'_, '_>>, vals: &[f64], nch: usize) {
-    if grids.is_empty() {
-        return;
-    }
-    type Task<'a, 'k> = (
-        std::ops::Range<usize>,
-        Vec<&'a mut [f64]>,
-        usize,
-        &'a [f64],
-        &'a KernelRows<'k>,
-        &'a [Spread],
-    );
-    let mut tasks: Vec<Task> = Vec::new();
+    let mut tasks = Vec::new();
     for g in grids {
         let first = g.acc.first();
         let (w, tile) = (g.w, g.tile);
-        for (t, parts) in crate::pipeline::tiles::column_tiles(g.acc, w, nch, tile)
-            .into_iter()
-            .enumerate()
-        {
-            let cols = t * tile..((t + 1) * tile).min(w);
-            tasks.push((cols, parts, first, g.arena, g.rows, g.spreads));
+        let tiles = crate::pipeline::tiles::column_tiles(g.acc, w, nch, tile);
+        for (t, parts) in tiles.into_iter().enumerate() {
+            tasks.push((t * tile..((t + 1) * tile).min(w), parts, first, g.src));
         }
+    }
+    if tasks.is_empty() {
+        return;
     }
     let region = crate::trace::region("scatter");
     tasks
         .into_par_iter()
-        .for_each(|(cols, mut parts, first, arena, rows, spreads)| {
+        .for_each(|(cols, mut parts, first, src)| {
             let _task = region.task("scatter");
-            scatter_tile(cols, &mut parts, first, (arena, rows), vals, spreads, nch);
+            scatter_tile(cols, &mut parts, first, src, vals, nch);
         });
 }
 
-/// [`scatter`]'s task: `spreads` added into one column tile of a grid
+/// [`scatter`]'s task: `src`'s spreads added into one column tile of a grid
 /// (`parts` as [`crate::pipeline::tiles::column_tiles`] lists them, from
 /// the window's row `first`).
-fn scatter_tile<'k>(
+fn scatter_tile(
     cols: std::ops::Range<usize>,
     parts: &mut [&mut [f64]],
     first: usize,
-    (arena, rows): (&[f64], &KernelRows<'k>),
+    src: SpreadSrc<'_, '_>,
     vals: &[f64],
-    spreads: &[Spread],
     nch: usize,
 ) {
+    let SpreadSrc {
+        arena,
+        rows,
+        spreads,
+    } = src;
     let (x0, x1) = (cols.start, cols.end);
     for sp in spreads {
         let (cx0, cx1) = (sp.xs.max(x0), (sp.xs + sp.xl).min(x1));
