@@ -597,6 +597,7 @@ impl FilterOptions {
             cancel,
             nonfinite,
             classify_samples: 0,
+            spread_chunk: 0,
         };
         Ok((cfg, warning))
     }

@@ -189,6 +189,10 @@ pub struct PipelineConfig {
     /// (0: automatic; rows wider than that are cut into column ranges).
     /// Does not change the result.
     pub classify_samples: usize,
+    /// Noisy samples whose kernels may reach an edge per spread chunk (the
+    /// memory of a chunk's reflected weights; 0: automatic). Does not change
+    /// the result.
+    pub spread_chunk: usize,
 }
 
 impl Default for PipelineConfig {
@@ -200,6 +204,7 @@ impl Default for PipelineConfig {
             cancel: None,
             nonfinite: NonFinite::Error,
             classify_samples: 0,
+            spread_chunk: 0,
         }
     }
 }

@@ -73,6 +73,7 @@ pub fn make(
                 stage.set_real_size(real);
             }
             stage.set_classify_samples(cfg.classify_samples);
+            stage.set_spread_chunk(cfg.spread_chunk);
             Box::new(stage)
         }
     })

@@ -185,10 +185,13 @@ pub fn invariant(
     for &(tile, strip, threads) in cuts {
         // Narrow tiles also cut each row's classification into column
         // ranges of 3 tile + 1 samples (4, 22, 49: ranges that divide no
-        // row evenly), which wide images get.
+        // row evenly), which wide images get, and the spread into chunks
+        // of the memory of tile + 1 samples at an edge (small images have
+        // little interior: a few samples a chunk).
         let mut cut = cfg(tile, strip, threads);
         if tile < 32 {
             cut.classify_samples = 3 * tile + 1;
+            cut.spread_chunk = tile + 1;
         }
         let (out, stats) = filter_in_memory(data.to_vec(), job, params, &cut)
             .map_err(|e| format!("{} {tile}/{strip}/{threads}: {e}", params.method.name()))?;

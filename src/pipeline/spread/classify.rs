@@ -387,13 +387,16 @@ impl GaussianStage {
                 })
                 .collect();
             // Each row's parts merged in the task of its pass: one loop
-            // (one join) less a strip.
+            // (one join) less a strip. A loop of its own, so a region of its
+            // own (the model replays a region's tasks as independent).
+            drop(region);
+            let region = crate::trace::region("classify pass");
             hrows
                 .par_chunks_mut(s)
                 .zip(found_parts.par_chunks(parts))
                 .enumerate()
                 .map_init(Vec::new, |copy, (k, (hs, row))| {
-                    let _task = region.task("classify");
+                    let _task = region.task("classify pass");
                     let f = merge_parts(row, s, ctx.nch);
                     ctx.pass(copy, a + k, hs, &f.0);
                     f

@@ -49,11 +49,13 @@ use crate::filter::luminance::Luminance;
 use crate::filter::{Method, ValidParams};
 use crate::geometry::{mirror, Grid, Halo};
 
-/// Noisy samples spread per chunk (bounds the folded-weight arena to about
-/// 8192 x 1.5 KiB at the widest kernel, where every kernel of a chunk
-/// crosses an edge). Each chunk is two parallel loops (placing, scattering),
-/// and each loop's end costs a wake-up on many cores (docs/DESIGN.md, "The
-/// model's join"): at 4096, 12288x12288 ep-gauss had 4.2 chunks a strip.
+/// The memory of a spread chunk: that of this many noisy samples whose every
+/// kernel is reflected at an edge (about 8192 x 1.5 KiB of folded weights at
+/// the widest kernel). A chunk of the interior, whose kernels are read in
+/// place, holds far more samples in the same memory: at 12288x12288 a strip's
+/// noisy samples are one chunk, two parallel loops (searching and placing,
+/// scattering), where chunks of 8192 samples were 2.4 a strip, and each loop's
+/// end costs a wake-up on many cores (docs/DESIGN.md, "The model's join").
 /// The chunks do not change the result (each pixel takes its contributions
 /// in the batch's order).
 const SPREAD_CHUNK: usize = 8192;
@@ -192,9 +194,6 @@ pub struct GaussianStage {
     /// front once they are half of it, so that dropping them moves no more
     /// than was spread: a drain per strip moved every later one).
     pending_first: usize,
-    /// One chunk's spreads, reflected weights and values, reused from chunk
-    /// to chunk.
-    placed: scatter::Placed,
     classified: usize,
     spread_done: usize,
     counts: SpreadCounts,
@@ -215,6 +214,8 @@ pub struct GaussianStage {
     c4: CoarseGrid,
     /// Samples of an input row per classification task (0: automatic).
     classify_samples: usize,
+    /// Noisy samples at an edge per spread chunk (0: [`SPREAD_CHUNK`]).
+    spread_chunk: usize,
 }
 
 impl GaussianStage {
@@ -306,7 +307,6 @@ impl GaussianStage {
             pending: Vec::new(),
             pending_v: Vec::new(),
             pending_first: 0,
-            placed: Default::default(),
             classified: 0,
             spread_done: 0,
             counts: SpreadCounts::default(),
@@ -323,6 +323,7 @@ impl GaussianStage {
             up_done: 0,
             c4: CoarseGrid::new(nch, (w.div_ceil(2), h.div_ceil(2)), 2, coarse4),
             classify_samples: 0,
+            spread_chunk: 0,
         }
     }
 
@@ -330,6 +331,12 @@ impl GaussianStage {
     /// ([`super::PipelineConfig::classify_samples`]; 0: automatic).
     pub fn set_classify_samples(&mut self, n: usize) {
         self.classify_samples = n;
+    }
+
+    /// Noisy samples whose kernels may reach an edge per spread chunk
+    /// ([`super::PipelineConfig::spread_chunk`]; 0: automatic).
+    pub fn set_spread_chunk(&mut self, n: usize) {
+        self.spread_chunk = n;
     }
 
     /// `--edge pad`: the grid's first `real.0` x `real.1` samples are real,

@@ -47,57 +47,17 @@ impl Spread {
     }
 }
 
-/// Samples per task of the kernels' placement (each a few hundred
-/// nanoseconds where it is reflected at an edge, a few dozen inside).
-const PLACE_TASK: usize = 512;
-
-/// The spreads of a run of noisy samples, at each resolution (fine, 2x and
-/// 4x coarse), with the reflected weights and the values they read, and
-/// what was counted: a part placed by one task, or the parts of a chunk
-/// joined in order.
+/// The spreads of a run of noisy samples placed by one task, at each
+/// resolution (fine, 2x and 4x coarse), with the reflected weights and the
+/// values they read, and what was counted (the width search's too). A
+/// chunk's parts are scattered as they are, in order (joining them was a
+/// serial copy of every spread).
 #[derive(Default)]
 pub(super) struct Placed {
     lists: [Vec<Spread>; 3],
     arenas: [Vec<f64>; 3],
     vals: Vec<f64>,
     counts: SpreadCounts,
-}
-
-impl Placed {
-    fn clear(&mut self) {
-        self.lists.iter_mut().for_each(Vec::clear);
-        self.arenas.iter_mut().for_each(Vec::clear);
-        self.vals.clear();
-        self.counts = SpreadCounts::default();
-    }
-
-    /// `part`'s spreads after this one's: its offsets into the arenas and
-    /// the values moved past what this one holds.
-    fn append(&mut self, part: Placed) {
-        let voff = self.vals.len();
-        for k in 0..3 {
-            let aoff = self.arenas[k].len();
-            self.lists[k].extend(part.lists[k].iter().map(|sp| Spread {
-                wx: sp.wx.moved(aoff),
-                wy: sp.wy.moved(aoff),
-                voff: sp.voff + voff,
-                ..*sp
-            }));
-            self.arenas[k].extend_from_slice(&part.arenas[k]);
-        }
-        self.vals.extend_from_slice(&part.vals);
-        self.counts += part.counts;
-    }
-}
-
-impl Weights {
-    /// The same weights after the arena they are in moved by `by`.
-    fn moved(self, by: usize) -> Weights {
-        match self {
-            Weights::Arena(off) => Weights::Arena(off + by),
-            k => k,
-        }
-    }
 }
 
 /// What placing a sample's kernels reads: the ladder, the channels, the
@@ -169,80 +129,118 @@ impl PlaceCtx<'_> {
     }
 }
 
-/// Samples per task of the width search: a search takes about a
-/// microsecond, so a task of 64 is long enough for its scheduling (and its
-/// trace event) to cost little, and short enough to balance the load.
-const SEARCH_TASK: usize = 64;
+/// Samples per task of the width search and placement: a search takes
+/// about a microsecond and a placement a few dozen nanoseconds (a few
+/// hundred where a kernel is reflected at an edge), so a task of 64 is long
+/// enough for its scheduling (and its trace event) to cost little, and
+/// short enough to balance the load.
+const SEARCH_TASK: usize = 256;
 
-impl GaussianStage {
-    /// The width search of the pending samples `from..to`, in tasks of
-    /// [`SEARCH_TASK`] samples (each sample is independent of the rest).
-    fn search_widths(&mut self, from: usize, to: usize) {
-        let Some(ep) = self.ep.as_ref() else { return };
-        let s = self.grid.s;
-        let batch = &mut self.pending[from..to];
-        let mut view = YView::new(&self.ybox, self.h);
-        if let Some((csum, block)) = &self.csum {
-            view = view.with_csums(csum, *block);
+/// How far from an image edge (in pixels of the grid) a sample's kernels may
+/// be reflected at it, and the longest row of weights one axis of a spread
+/// can fold into the arena: what bounds a chunk's memory before its widths
+/// are known.
+#[derive(Clone, Copy, Debug)]
+struct EdgeBound {
+    margin: usize,
+    row_len: usize,
+}
+
+impl EdgeBound {
+    fn of(ep: &EpGauss) -> Self {
+        let (mut margin, mut row_len) = (0, 0);
+        for l in ep.levels() {
+            let r = l.kernel.reach();
+            margin = margin.max(r);
+            row_len = row_len.max(2 * r + 1);
+            if let Some(c) = &l.coarse {
+                // A coarse cell `p / f` is inside when `f * reach` pixels
+                // from either edge (`Coarse::interior`).
+                let rc = c.kernel.reach();
+                margin = margin.max(c.factor * rc);
+                row_len = row_len.max(2 * rc + 1);
+            }
         }
-        let region = crate::trace::region("width search");
-        let (cost, bounded): (u64, u64) = batch
-            .par_chunks_mut(SEARCH_TASK)
-            .map_init(Folded::default, |fold, chunk| {
-                let _task = region.task("width search");
-                let (mut cost, mut bounded) = (0, 0);
-                for n in chunk {
-                    let c = ep.search_in(
-                        &view,
-                        n.i as usize / s,
-                        n.j as usize / s,
-                        n.x0,
-                        n.xbar0,
-                        fold,
-                    );
-                    n.level = c.level;
-                    n.capped = c.capped;
-                    cost += c.cost;
-                    bounded += u64::from(c.bounded);
-                }
-                (cost, bounded)
-            })
-            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-        self.counts.search_cost += cost;
-        self.counts.bounded += bounded;
+        EdgeBound { margin, row_len }
     }
 
-    /// Spread the pending samples of pixel rows before `target`: their
-    /// widths, their kernels placed in chunks of [`SPREAD_CHUNK`], and the
-    /// scatter into the accumulators, in the pending (row-major) order.
+    /// The input samples `lo..hi` of each axis (columns, rows) whose pixel
+    /// is at least `margin` from both edges of `0..n` pixels, `s` samples
+    /// each: what [`Self::arena_len`] compares with.
+    fn inner(&self, s: usize, (w, h): (usize, usize)) -> [(u32, u32); 2] {
+        let lim = |n: usize| {
+            let lo = (self.margin * s).min(u32::MAX as usize) as u32;
+            let hi = (n.saturating_sub(self.margin) * s).min(u32::MAX as usize) as u32;
+            (lo, hi)
+        };
+        [lim(w), lim(h)]
+    }
+
+    /// The weights sample `n` may add to its chunk's arena (0 where no
+    /// kernel it could get reaches an edge), given [`Self::inner`].
+    #[inline]
+    fn arena_len(&self, n: &Noisy, [(x0, x1), (y0, y1)]: [(u32, u32); 2]) -> usize {
+        let near = |q: u32, lo: u32, hi: u32| usize::from(q < lo || q >= hi);
+        self.row_len * (near(n.i, x0, x1) + near(n.j, y0, y1))
+    }
+}
+
+impl GaussianStage {
+    /// The end of the chunk of pending samples that starts at `c0` (before
+    /// `end`): as many as fit the memory of [`SPREAD_CHUNK`] samples whose
+    /// every kernel is reflected at an edge, so that a chunk of the
+    /// interior, whose kernels are read in place, takes a whole strip's
+    /// samples in one chunk (two loops), and the worst case holds what it
+    /// held when every chunk was [`SPREAD_CHUNK`] samples.
+    fn chunk_end(&self, bound: EdgeBound, c0: usize, end: usize) -> usize {
+        let per_sample = std::mem::size_of::<Spread>() + self.nch * std::mem::size_of::<f64>();
+        let weight = std::mem::size_of::<f64>();
+        let chunk = match self.spread_chunk {
+            0 => SPREAD_CHUNK,
+            n => n,
+        };
+        let budget = chunk * (per_sample + 2 * bound.row_len * weight);
+        if (end - c0) <= chunk {
+            return end;
+        }
+        let inner = bound.inner(self.grid.s, (self.w, self.h));
+        let mut used = 0;
+        for (k, n) in self.pending[c0..end].iter().enumerate() {
+            used += per_sample + bound.arena_len(n, inner) * weight;
+            if used > budget {
+                return c0 + k.max(1);
+            }
+        }
+        end
+    }
+
+    /// Spread the pending samples of pixel rows before `target`, in the
+    /// pending (row-major) order, chunk by chunk: in one loop each sample's
+    /// width searched and its kernels placed, in the next the scatter into
+    /// the accumulators.
     /// (Long: one chunk loop places each kernel at one of three resolutions;
     /// the three lists share the chunk's arena and values.)
     pub(super) fn spread(&mut self, target: usize) {
         let (s, w, h, nch) = (self.grid.s, self.w, self.h, self.nch);
         let first = self.pending_first;
         let split = first + self.pending[first..].partition_point(|n| (n.j as usize) / s < target);
-        self.search_widths(first, split);
         let Some(ep) = self.ep.as_ref() else { return };
-        // Accumulator rows down to the widest reach of this batch.
+        // Accumulator rows down to the widest reach of this batch, and the
+        // coarse rows reaching fine rows below that (and a spare; 4x row K
+        // reaches fine rows 4K - 3 ..= 4K + 6).
         let need = (target + self.halo.spread_reach).min(h);
-        grow_filled(&mut self.acc, need, -0.0);
-        // Coarse rows reaching fine rows below `need` (and a spare).
         let (ncw, coarse_rows) = (w.div_ceil(2), h.div_ceil(2));
-        grow_filled(
-            &mut self.c2.acc,
-            (need.div_ceil(2) + 1).min(coarse_rows),
-            0.0,
-        );
-        // 4x row K reaches fine rows 4K - 3 ..= 4K + 6.
         let (ncw4, coarse_rows4) = (w.div_ceil(4), h.div_ceil(4));
-        grow_filled(
-            &mut self.c4.acc,
-            (need.div_ceil(4) + 1).min(coarse_rows4),
-            0.0,
-        );
-        // Spread in chunks of the (row-major) batch: the folded weights of one
-        // chunk at a time bound the arena, and the order of contributions to
-        // every pixel stays the batch order.
+        // New rows are filled (-0.0 on the accumulator, whose untouched
+        // pixels keep the sign of the base's zero; 0.0 on the coarse grids)
+        // by the first scatter's tasks, a tile each: a loop of their own
+        // was a join a strip.
+        let fresh = [
+            grow(&mut self.acc, need),
+            grow(&mut self.c2.acc, (need.div_ceil(2) + 1).min(coarse_rows)),
+            grow(&mut self.c4.acc, (need.div_ceil(4) + 1).min(coarse_rows4)),
+        ];
+        let fills = [-0.0, 0.0, 0.0];
         let ctx = PlaceCtx {
             ep,
             modes: &self.modes,
@@ -253,30 +251,47 @@ impl GaussianStage {
             c2: (ncw, coarse_rows),
             c4: (ncw4, coarse_rows4),
         };
-        let mut placed = std::mem::take(&mut self.placed);
-        for c0 in (first..split).step_by(SPREAD_CHUNK) {
-            let c1 = (c0 + SPREAD_CHUNK).min(split);
-            // Each sample's kernels placed (reflected where they cross an
-            // edge) in parallel parts, joined in order.
-            let region = crate::trace::region("place kernels");
+        let bound = EdgeBound::of(ep);
+        let (mut c0, mut fresh) = (first, fresh.map(Some));
+        loop {
+            let c1 = self.chunk_end(bound, c0, split);
+            let mut view = YView::new(&self.ybox, h);
+            if let Some((csum, block)) = &self.csum {
+                view = view.with_csums(csum, *block);
+            }
+            // Each sample's width searched and its kernels placed (reflected
+            // where they cross an edge) in one task: one loop, one join
+            // (docs/DESIGN.md, "The model's join").
+            let region = crate::trace::region("search and place");
             let parts: Vec<Placed> = self.pending[c0..c1]
-                .par_chunks(PLACE_TASK)
-                .zip(self.pending_v[c0 * nch..c1 * nch].par_chunks(PLACE_TASK * nch))
-                .map_init(Vec::new, |tmp, (samples, values)| {
-                    let _task = region.task("place kernels");
-                    let mut part = Placed::default();
-                    for (n, x) in samples.iter().zip(values.chunks_exact(nch)) {
-                        ctx.place(n, x, &mut part, tmp);
-                    }
-                    part
-                })
+                .par_chunks_mut(SEARCH_TASK)
+                .zip(self.pending_v[c0 * nch..c1 * nch].par_chunks(SEARCH_TASK * nch))
+                .map_init(
+                    <(Folded, Vec<f64>)>::default,
+                    |(fold, tmp), (samples, values)| {
+                        let _task = region.task("search and place");
+                        let mut part = Placed::default();
+                        for (n, x) in samples.iter_mut().zip(values.chunks_exact(nch)) {
+                            let (px, py) = (n.i as usize / s, n.j as usize / s);
+                            let c = ep.search_in(&view, px, py, n.x0, n.xbar0, fold);
+                            n.level = c.level;
+                            n.capped = c.capped;
+                            part.counts.search_cost += c.cost;
+                            part.counts.bounded += u64::from(c.bounded);
+                            ctx.place(n, x, &mut part, tmp);
+                        }
+                        part
+                    },
+                )
                 .collect();
             drop(region);
-            placed.clear();
-            for part in parts {
-                placed.append(part);
+            let mut used = [false; 3];
+            for part in &parts {
+                self.counts += part.counts;
+                for (u, list) in used.iter_mut().zip(&part.lists) {
+                    *u |= !list.is_empty();
+                }
             }
-            self.counts += placed.counts;
             let fine_rows = |l: u16, ph: u16| ep.levels()[l as usize].kernel.row(ph as usize);
             let coarse_rows = |l: u16, ph: u16| {
                 ep.levels()[l as usize]
@@ -285,9 +300,8 @@ impl GaussianStage {
                     .map_or(&[][..], |c| c.kernel.row(ph as usize))
             };
             // The 4x grid goes through the 2x one: its rows carry the share.
-            let [_, two, four] = placed.lists.each_ref().map(|l| !l.is_empty());
-            self.c2.used |= two || four;
-            self.c4.used |= four;
+            self.c2.used |= used[1] || used[2];
+            self.c4.used |= used[2];
             // The three grids' tiles in one parallel loop: one join a chunk,
             // not three (each costs its lane a wake-up; docs/DESIGN.md, "The
             // model's join"). Each pixel still gets its grid's spreads in
@@ -299,22 +313,27 @@ impl GaussianStage {
             ];
             let grids = grids
                 .into_iter()
-                .zip(placed.lists.iter().zip(&placed.arenas))
-                .filter(|(_, (spreads, _))| !spreads.is_empty())
-                .map(|((acc, w, rows, k), (spreads, arena))| GridScatter {
+                .enumerate()
+                .filter(|&(k, (ref acc, ..))| used[k] || fresh[k].is_some_and(|f| f < acc.end()))
+                .map(|(k, (acc, w, rows, f))| GridScatter {
                     acc,
                     src: SpreadSrc {
-                        arena,
+                        parts: &parts,
+                        grid: k,
                         rows,
-                        spreads,
                     },
+                    fresh: fresh[k].map(|from| (from, fills[k])),
                     w,
-                    tile: (self.tile / k).max(1),
+                    tile: (self.tile / f).max(1),
                 })
                 .collect();
-            scatter(grids, &placed.vals, nch);
+            scatter(grids, nch);
+            fresh = [None; 3];
+            c0 = c1;
+            if c0 >= split {
+                break;
+            }
         }
-        self.placed = placed;
         self.pending_first = split;
         if 2 * split >= self.pending.len() {
             self.pending.drain(..split);
@@ -324,20 +343,14 @@ impl GaussianStage {
     }
 }
 
-/// Rows of `win` up to `end` (absolute), the new ones filled with `fill`
-/// in parallel (an accumulator row of 2048 pixels and 3 channels is 48 KiB:
-/// filled one after another, they were a serial stretch of every strip).
-fn grow_filled(win: &mut RowWindow<f64>, end: usize, fill: f64) {
+/// Rows of `win` up to `end` (absolute), not yet filled; returns the
+/// first of them (what the scatter fills, [`GridScatter::fresh`]).
+fn grow(win: &mut RowWindow<f64>, end: usize) -> usize {
     let from = win.end();
-    if end <= from {
-        return;
-    }
     for _ in from..end {
-        win.push_stale(fill);
+        win.push_stale(0.0); // the first scatter of the batch fills them
     }
-    win.range_mut(from, end)
-        .into_par_iter()
-        .for_each(|r| r.fill(fill));
+    from
 }
 
 /// One axis of a sample's spread: its first target, its length and where
@@ -370,19 +383,23 @@ fn place(
 /// The kernel row a spread names by level and phase.
 type KernelRows<'k> = dyn Fn(u16, u16) -> &'k [f64] + Sync + 'k;
 
-/// A chunk's spreads for one grid (in order), their folded weights and the
-/// kernel rows they name.
+/// A chunk's spreads for one grid: its parts (each with its spreads in
+/// order, their folded weights and values), the grid's index in them, and
+/// the kernel rows they name.
 #[derive(Clone, Copy)]
 struct SpreadSrc<'a, 'k> {
-    arena: &'a [f64],
+    parts: &'a [Placed],
+    grid: usize,
     rows: &'a KernelRows<'k>,
-    spreads: &'a [Spread],
 }
 
 /// One accumulator grid and what it receives from a chunk.
 struct GridScatter<'a, 'k> {
     acc: &'a mut RowWindow<f64>,
     src: SpreadSrc<'a, 'k>,
+    /// The first row the batch added and the value its rows start from,
+    /// which this scatter's tasks write first (the batch's first scatter).
+    fresh: Option<(usize, f64)>,
     /// Columns of the grid, and of one of its tiles.
     w: usize,
     tile: usize,
@@ -391,46 +408,69 @@ struct GridScatter<'a, 'k> {
 /// Add each grid's spreads (in order) into its accumulator: every column
 /// tile of every grid is a task of one loop, so each pixel receives its
 /// contributions in the given order from one task, whatever the tile size.
-fn scatter(grids: Vec<GridScatter<'_, '_>>, vals: &[f64], nch: usize) {
+fn scatter(grids: Vec<GridScatter<'_, '_>>, nch: usize) {
     let mut tasks = Vec::new();
     for g in grids {
         let first = g.acc.first();
         let (w, tile) = (g.w, g.tile);
         let tiles = crate::pipeline::tiles::column_tiles(g.acc, w, nch, tile);
         for (t, parts) in tiles.into_iter().enumerate() {
-            tasks.push((t * tile..((t + 1) * tile).min(w), parts, first, g.src));
+            tasks.push(TileJob {
+                cols: t * tile..((t + 1) * tile).min(w),
+                parts,
+                first,
+                src: g.src,
+                fresh: g.fresh,
+            });
         }
     }
     if tasks.is_empty() {
         return;
     }
     let region = crate::trace::region("scatter");
-    tasks
-        .into_par_iter()
-        .for_each(|(cols, mut parts, first, src)| {
-            let _task = region.task("scatter");
-            scatter_tile(cols, &mut parts, first, src, vals, nch);
-        });
+    tasks.into_par_iter().for_each(|mut job| {
+        let _task = region.task("scatter");
+        scatter_tile(&mut job, nch);
+    });
 }
 
-/// [`scatter`]'s task: `src`'s spreads added into one column tile of a grid
-/// (`parts` as [`crate::pipeline::tiles::column_tiles`] lists them, from
-/// the window's row `first`).
-fn scatter_tile(
+/// One column tile of a grid and what [`scatter_tile`] adds into it.
+struct TileJob<'a, 'k> {
     cols: std::ops::Range<usize>,
-    parts: &mut [&mut [f64]],
+    /// The tile's slices as [`crate::pipeline::tiles::column_tiles`] lists
+    /// them, from the window's row `first`.
+    parts: Vec<&'a mut [f64]>,
     first: usize,
-    src: SpreadSrc<'_, '_>,
-    vals: &[f64],
-    nch: usize,
-) {
-    let SpreadSrc {
-        arena,
-        rows,
-        spreads,
-    } = src;
+    src: SpreadSrc<'a, 'k>,
+    fresh: Option<(usize, f64)>,
+}
+
+/// [`scatter`]'s task: the tile's new rows filled, then the spreads of
+/// `src` added into it, in order.
+fn scatter_tile(job: &mut TileJob<'_, '_>, nch: usize) {
+    let TileJob {
+        cols,
+        parts,
+        first,
+        src: SpreadSrc {
+            parts: placed,
+            grid,
+            rows,
+        },
+        fresh,
+    } = job;
+    let (first, grid, rows) = (*first, *grid, *rows);
+    if let Some((from, fill)) = *fresh {
+        parts[(from - first) * nch..]
+            .iter_mut()
+            .for_each(|p| p.fill(fill));
+    }
     let (x0, x1) = (cols.start, cols.end);
-    for sp in spreads {
+    let spreads = placed.iter().flat_map(|p| {
+        let (arena, vals) = (&p.arenas[grid][..], &p.vals[..]);
+        p.lists[grid].iter().map(move |sp| (sp, arena, vals))
+    });
+    for (sp, arena, vals) in spreads {
         let (cx0, cx1) = (sp.xs.max(x0), (sp.xs + sp.xl).min(x1));
         if cx0 >= cx1 {
             continue;
