@@ -113,8 +113,9 @@ pub fn estimate_bytes(
     } else {
         0
     };
-    // The coarse grid: accumulator rows of half the width over half the
-    // lag, and a few rows upsampled across.
+    // The coarse grids: accumulator rows of half (and a quarter of) the
+    // width over half the lag (each upsampling task holds two rows of its
+    // own, not counted).
     let coarse = if params.method == Method::EpGauss && params.coarse_from > 0.0 {
         out_row.saturating_mul(lag / 4 + 8)
     } else {

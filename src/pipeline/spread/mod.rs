@@ -391,11 +391,9 @@ impl Stage for GaussianStage {
         // Coarse row C reaches fine rows 2C - 1 ..= 2C + 2.
         let c = y.saturating_sub(2) / 2;
         self.c2.acc.evict_below(c);
-        self.c2.up.evict_below(c);
         // And 4x row K reaches 2x rows 2K - 1 ..= 2K + 2.
         let k = c.saturating_sub(2) / 2;
         self.c4.acc.evict_below(k);
-        self.c4.up.evict_below(k);
     }
 
     fn counts(&self) -> MethodCounts {
@@ -439,19 +437,9 @@ impl Stage for GaussianStage {
                 row_bytes: nch * w.div_ceil(2) * 8,
             },
             WindowUse {
-                name: "coarse rows upsampled",
-                rows: self.c2.up.high_water(),
-                row_bytes: nch * w * 8,
-            },
-            WindowUse {
                 name: "4x accumulator",
                 rows: self.c4.acc.high_water(),
                 row_bytes: nch * w.div_ceil(4) * 8,
-            },
-            WindowUse {
-                name: "4x rows upsampled",
-                rows: self.c4.up.high_water(),
-                row_bytes: nch * w.div_ceil(2) * 8,
             },
         ]
     }
