@@ -298,7 +298,7 @@ impl Prediction {
         s.push_str("\nwhere the work is, largest first\n");
         for (k, v) in parts {
             s.push_str(&format!(
-                "  {k:<28} {v:>8.3} s  {:>5.1}%\n",
+                "  {k:<34} {v:>8.3} s  {:>5.1}%\n",
                 100.0 * v / self.work_s.max(1e-12)
             ));
         }

@@ -497,11 +497,8 @@ impl GaussianStage {
         } else {
             self.classified.saturating_sub(self.halo.base_reach)
         };
-        if base_target > self.base_rows.end() {
-            self.make_base_rows(self.base_rows.end(), base_target);
-            self.hpass
-                .evict_below(base_target.saturating_sub(self.halo.base_reach) * s);
-        }
+        let base =
+            (base_target > self.base_rows.end()).then(|| (self.base_rows.end(), base_target));
         // 5. output: base plus spread noise, once no later row can reach it.
         let by_spread = match &self.ep {
             Some(_) if self.spread_done < h => {
@@ -509,14 +506,15 @@ impl GaussianStage {
             }
             _ => h,
         };
-        let out_target = self.base_rows.end().min(by_spread);
+        let out_target = base_target.max(self.base_rows.end()).min(by_spread);
         // The coarse grid's share of final rows (none before it was used:
         // no coarse spread reaches a row that was final before it).
-        if out_target > self.up_done {
-            if self.c2.used {
-                self.upsample(self.up_done, out_target);
-            }
-            self.up_done = out_target;
+        let up = (out_target > self.up_done && self.c2.used).then_some((self.up_done, out_target));
+        self.base_and_upsample(base, up);
+        self.up_done = self.up_done.max(out_target);
+        if base.is_some() {
+            self.hpass
+                .evict_below(base_target.saturating_sub(self.halo.base_reach) * s);
         }
         let keep = if self.ep.is_some() {
             self.classified
@@ -595,72 +593,150 @@ impl GaussianStage {
     /// The summed-area table's rows for the box luminance rows `a..b`
     /// (`--bound-from`): each row's running sum ([`Self::make_ybox`], in
     /// its row's task), plus here the row above's where the row is not the
-    /// first of its block (columns in parallel, rows in order), on the
-    /// image's grid of blocks, so the table does not depend on the strips.
-    /// The same operations in the same order as [`csum_row`].
+    /// first of its block, on the image's grid of blocks, so the table does
+    /// not depend on the strips. The same operations in the same order as
+    /// [`csum_row`]. On the calling thread: a strip's additions take about
+    /// 10 µs at 12288 wide, where a parallel loop's end costs many cores
+    /// more (docs/DESIGN.md, "The model's join").
     fn make_csums(&mut self, a: usize, b: usize) {
         let Some((csum, block)) = &mut self.csum else {
             return;
         };
         let block = *block;
-        // Rows a - 1 (when held and in a's block) ..b, split into column
-        // chunks: each chunk adds down its rows.
+        // Rows a - 1 (when held and in a's block) ..b, each added to the
+        // one above.
         let first = if a % block != 0 { a - 1 } else { a };
         let mut rows = csum.range_mut(first, b);
-        let len = rows.first().map_or(0, |r| r.len());
-        const CHUNK: usize = 2048;
-        let mut chunks: Vec<Vec<&mut [f64]>> =
-            (0..len.div_ceil(CHUNK)).map(|_| Vec::new()).collect();
-        for row in rows.iter_mut() {
-            for (c, part) in row.chunks_mut(CHUNK).enumerate() {
-                chunks[c].push(part);
+        for (k, y) in (first..b).enumerate().skip(1) {
+            if y % block != 0 {
+                let (above, below) = rows.split_at_mut(k);
+                csum_add(above[k - 1], below[0]);
             }
         }
-        let region = crate::trace::region("summed-area columns");
-        chunks.par_iter_mut().for_each(|col| {
-            let _task = region.task("summed-area columns");
-            for (k, y) in (first..b).enumerate().skip(1) {
-                if y % block != 0 {
-                    let (above, below) = col.split_at_mut(k);
-                    csum_add(above[k - 1], below[0]);
-                }
-            }
-        });
     }
 
-    fn make_base_rows(&mut self, a: usize, b: usize) {
-        let (w, h, nch, in_h) = (self.w, self.h, self.nch, self.grid.in_h);
-        for _ in a..b {
-            self.base_rows.push_stale(0.0); // every value is written below
+    /// Base rows `base` (the vertical gather of the horizontal pass) and the
+    /// coarse grids' share of final rows `up` ([`Self::upsample`]): rows of
+    /// different windows, read from different ones, so their tasks share
+    /// loops, one where only the 2x grid is used, two with the 4x grid,
+    /// whose share enters the 2x rows first (a loop's end costs many cores
+    /// a wake-up; docs/DESIGN.md, "The model's join").
+    fn base_and_upsample(&mut self, base: Option<(usize, usize)>, up: Option<(usize, usize)>) {
+        let (w, ncw, nch) = (self.w, self.w.div_ceil(2), self.nch);
+        if let Some((a, b)) = base {
+            for _ in a..b {
+                self.base_rows.push_stale(0.0); // every value is written below
+            }
         }
-        let base = &self.base;
-        let hpass = &self.hpass;
-        let inv = self.inv_s2;
-        let (modes, s) = (&self.modes, self.grid.s);
-        let region = crate::trace::region("base rows");
-        let mut rows = self.base_rows.range_mut(a, b);
-        rows.par_iter_mut()
-            .enumerate()
-            .for_each_init(Vec::new, |taps, (k, row)| {
-                let _task = region.task("base rows");
-                let y = a + k;
-                let j0 = base.gather(y, h, in_h, taps);
-                for c in 0..nch {
-                    let dst = &mut row[c * w..(c + 1) * w];
-                    if modes[c] == ChannelMode::Nearest {
-                        // The centre row's centre sample (horizontal pass).
-                        dst.copy_from_slice(&hpass.get(y * s + (s - 1) / 2)[c * w..(c + 1) * w]);
-                        continue;
-                    }
-                    dst.iter_mut().for_each(|v| *v = -0.0);
-                    for (t, &wt) in taps.iter().enumerate() {
-                        let src = &hpass.get(j0 + t)[c * w..(c + 1) * w];
-                        for (d, &v) in dst.iter_mut().zip(src) {
-                            *d += wt * v;
-                        }
-                    }
-                    dst.iter_mut().for_each(|v| *v *= inv);
+        // The 2x rows that take the 4x share before the accumulator reads
+        // them.
+        let four = up.and_then(|(a, b)| self.coarse_rows_read(a, b));
+        let ctx = BaseCtx {
+            base: &self.base,
+            hpass: &self.hpass,
+            modes: &self.modes,
+            w,
+            h: self.h,
+            nch,
+            s: self.grid.s,
+            in_h: self.grid.in_h,
+            inv: self.inv_s2,
+        };
+        let mut jobs: Vec<RowJob<'_>> = Vec::new();
+        if let Some((a, b)) = base {
+            let rows = self.base_rows.range_mut(a, b);
+            jobs.extend(
+                rows.into_iter()
+                    .zip(a..)
+                    .map(|(row, y)| RowJob::Base(y, row)),
+            );
+        }
+        let Some((a, b)) = up else {
+            return run_rows(&ctx, jobs);
+        };
+        if let Some((f, l)) = four {
+            let rows = self.c2.acc.range_mut(f, l);
+            let c4 = &self.c4;
+            jobs.extend(
+                rows.into_iter()
+                    .zip(f..)
+                    .map(|(row, y)| RowJob::Up(c4, ncw, y, row)),
+            );
+            run_rows(&ctx, jobs);
+            jobs = Vec::new();
+        }
+        let (c2, rows) = (&self.c2, self.acc.range_mut(a, b));
+        jobs.extend(
+            rows.into_iter()
+                .zip(a..)
+                .map(|(row, y)| RowJob::Up(c2, w, y, row)),
+        );
+        run_rows(&ctx, jobs);
+    }
+}
+
+/// What a base row's task reads.
+struct BaseCtx<'a> {
+    base: &'a Kernel1d,
+    hpass: &'a RowWindow<f64>,
+    modes: &'a [ChannelMode],
+    w: usize,
+    h: usize,
+    nch: usize,
+    s: usize,
+    in_h: usize,
+    inv: f64,
+}
+
+/// A row task of [`GaussianStage::base_and_upsample`]: a base row, or a row
+/// of a grid that takes a coarse grid's share (the grid, the row's columns
+/// per channel).
+enum RowJob<'a> {
+    Base(usize, &'a mut [f64]),
+    Up(&'a CoarseGrid, usize, usize, &'a mut [f64]),
+}
+
+/// `jobs` as the tasks of one parallel loop (none when there are none).
+fn run_rows(ctx: &BaseCtx<'_>, jobs: Vec<RowJob<'_>>) {
+    if jobs.is_empty() {
+        return;
+    }
+    let region = crate::trace::region("base rows, upsample");
+    jobs.into_par_iter()
+        .for_each_init(
+            <(Vec<f64>, [Vec<f64>; 2])>::default,
+            |(taps, up), job| match job {
+                RowJob::Base(y, row) => {
+                    let _task = region.task("base rows");
+                    base_row(ctx, y, row, taps);
                 }
-            });
+                RowJob::Up(grid, n_fine, y, row) => {
+                    let _task = region.task("upsample");
+                    coarse::tent_row(grid, n_fine, y, row, up);
+                }
+            },
+        );
+}
+
+/// Base row `y`: the vertical gather of the horizontal pass (`taps`: the
+/// task's scratch).
+fn base_row(ctx: &BaseCtx<'_>, y: usize, row: &mut [f64], taps: &mut Vec<f64>) {
+    let (w, s) = (ctx.w, ctx.s);
+    let j0 = ctx.base.gather(y, ctx.h, ctx.in_h, taps);
+    for c in 0..ctx.nch {
+        let dst = &mut row[c * w..(c + 1) * w];
+        if ctx.modes[c] == ChannelMode::Nearest {
+            // The centre row's centre sample (horizontal pass).
+            dst.copy_from_slice(&ctx.hpass.get(y * s + (s - 1) / 2)[c * w..(c + 1) * w]);
+            continue;
+        }
+        dst.iter_mut().for_each(|v| *v = -0.0);
+        for (t, &wt) in taps.iter().enumerate() {
+            let src = &ctx.hpass.get(j0 + t)[c * w..(c + 1) * w];
+            for (d, &v) in dst.iter_mut().zip(src) {
+                *d += wt * v;
+            }
+        }
+        dst.iter_mut().for_each(|v| *v *= ctx.inv);
     }
 }
