@@ -56,58 +56,62 @@ impl Books {
         self.coverage = Some(coverage);
     }
 
-    /// Take the next strip: it must start at row `next` of `in_h` rows of
-    /// `in_w` samples; non-finite samples are refused or zeroed, and the
-    /// filtered channels enter the ledger.
-    pub fn take(&mut self, strip: &mut Strip, next: usize, in_w: usize, in_h: usize) -> Result<()> {
-        let row_len = self.zeroed.len() * in_w;
-        if strip.y0 != next || strip.data.len() != strip.rows * row_len || next + strip.rows > in_h
-        {
-            return Err(Error::Internal(format!(
-                "source delivered rows {}..{} but row {next} was expected (source bug)",
-                strip.y0,
-                strip.y0 + strip.rows,
-            )));
-        }
-        let sums = ingest(
-            strip,
-            in_w,
-            &self.names,
-            &self.data,
-            self.nonfinite,
-            &mut self.zeroed,
-            &mut self.first_nonfinite,
-        )?;
-        self.ledger.input.merge(&sums);
-        Ok(())
-    }
-
-    /// Output rows `a..b` of `base_rows + acc` (or `base_rows`), `w` wide, rounded to
-    /// `precision`; the ledger and digest take them in row order.
-    pub fn finish(
+    /// Take the next strip (`take`), and finish the output rows of
+    /// `finish`, in one parallel loop: the strip's rows enter the ledger and
+    /// the output rows are rounded, counted and digested by the tasks of one
+    /// loop, whose end costs many cores one wake-up, not two (docs/DESIGN.md,
+    /// "The model's join"). The strip must start at row `next` of `in_h`
+    /// rows of `in_w` samples; its non-finite samples are refused or zeroed
+    /// first. Returns the finished rows.
+    pub fn take_and_finish(
         &mut self,
-        base_rows: &RowWindow<f64>,
-        acc: Option<&RowWindow<f64>>,
-        a: usize,
-        b: usize,
-        w: usize,
-        precision: &[Precision],
-    ) -> Result<OutRows> {
-        let (out, raw, rounded, digests) = finish_rows(
-            base_rows,
-            acc,
-            (a, b, w),
-            &self.names,
-            &self.data,
-            precision,
-            self.coverage.as_ref(),
-        )?;
+        take: Option<Take<'_>>,
+        finish: Option<Finish<'_>>,
+    ) -> Result<Option<OutRows>> {
+        let mut input = None;
+        if let Some(Take {
+            strip,
+            next,
+            in_w,
+            in_h,
+        }) = take
+        {
+            let row_len = self.zeroed.len() * in_w;
+            if strip.y0 != next
+                || strip.data.len() != strip.rows * row_len
+                || next + strip.rows > in_h
+            {
+                return Err(Error::Internal(format!(
+                    "source delivered rows {}..{} but row {next} was expected (source bug)",
+                    strip.y0,
+                    strip.y0 + strip.rows,
+                )));
+            }
+            self.zero_nonfinite(strip, in_w);
+            input = Some((&*strip, in_w));
+        }
+        let BooksLoop { input, output } = self.run_rows(input, finish.as_ref());
+        self.ledger.input.merge(&input?);
+        let Some((out, raw, rounded, digests)) = output.transpose()? else {
+            return Ok(None);
+        };
         for d in digests {
             self.digest = fnv(self.digest, d);
         }
         self.ledger.output.merge(&raw);
         self.ledger.rounded.merge(&rounded);
-        Ok(out)
+        Ok(Some(out))
+    }
+
+    /// Output rows alone ([`Self::take_and_finish`] without a strip).
+    pub fn finish(&mut self, finish: Finish<'_>) -> Result<OutRows> {
+        Ok(self
+            .take_and_finish(None, Some(finish))?
+            .unwrap_or(OutRows {
+                y0: 0,
+                rows: 0,
+                data: Vec::new(),
+            }))
     }
 
     /// Filtered channel names.
@@ -143,75 +147,266 @@ impl Books {
     }
 }
 
-/// Check a strip's samples (all its channels) for NaN and infinities — refuse
-/// them, or zero and count them — and return the sums of its first
-/// `names.len()` channels (the filtered ones) for the ledger.
-fn ingest(
-    strip: &mut Strip,
-    in_w: usize,
-    names: &[String],
-    data: &[bool],
-    nonfinite: NonFinite,
-    zeroed: &mut [u64],
-    first_nonfinite: &mut Option<(usize, usize, usize)>,
-) -> Result<Sums> {
-    let nall = zeroed.len();
-    let row_len = nall * in_w;
-    let nch = names.len();
-    let is_data = |c: usize| data.get(c).copied().unwrap_or(false);
-    if nonfinite == NonFinite::Zero {
-        // Zero them (counted, first one kept) before anything reads them.
-        for (r, row) in strip.data.chunks_mut(row_len).enumerate() {
+/// A strip for [`Books::take_and_finish`] to take: it must start at row
+/// `next` of `in_h` rows of `in_w` samples.
+pub struct Take<'a> {
+    /// The strip (its non-finite samples zeroed where the policy says).
+    pub strip: &'a mut Strip,
+    /// The row it must start at.
+    pub next: usize,
+    /// Samples per row.
+    pub in_w: usize,
+    /// Rows of the image.
+    pub in_h: usize,
+}
+
+/// Output rows `a..b` for [`Books::take_and_finish`] to finish: `base_rows +
+/// acc` (or `base_rows`), `w` wide, rounded to `precision`; the ledger and
+/// digest take them in row order.
+pub struct Finish<'a> {
+    /// The base rows (the gather).
+    pub base_rows: &'a RowWindow<f64>,
+    /// The accumulator (the spread noise), where the method has one.
+    pub acc: Option<&'a RowWindow<f64>>,
+    /// The first row.
+    pub a: usize,
+    /// The end of the rows.
+    pub b: usize,
+    /// Pixels per row.
+    pub w: usize,
+    /// The output precision, per channel.
+    pub precision: &'a [Precision],
+}
+
+/// The finished rows, with their raw and rounded sums and each row's digest.
+type Finished = (OutRows, Sums, Sums, Vec<u64>);
+
+/// What one loop of the books gave: the strip's sums, and the finished rows.
+struct BooksLoop {
+    input: Result<Sums>,
+    output: Option<Result<Finished>>,
+}
+
+/// A task of that loop: a strip row into the ledger, or an output row.
+enum RowJob<'a> {
+    In(&'a [f32]),
+    Out(usize, &'a mut [f32]),
+}
+
+/// What a task gave.
+enum RowDone {
+    In(std::result::Result<Sums, (usize, usize)>),
+    Out(Result<(Sums, Sums, u64)>),
+}
+
+impl Books {
+    /// Non-finite samples (all the strip's channels but data) refused later
+    /// by the ledger, or with `--nonfinite zero` zeroed and counted (the
+    /// first one kept) here, before anything reads them.
+    fn zero_nonfinite(&mut self, strip: &mut Strip, in_w: usize) {
+        if self.nonfinite != NonFinite::Zero {
+            return;
+        }
+        let nall = self.zeroed.len();
+        let data = &self.data;
+        let is_data = |c: usize| data.get(c).copied().unwrap_or(false);
+        for (r, row) in strip.data.chunks_mut(nall * in_w).enumerate() {
             for c in (0..nall).filter(|&c| !is_data(c)) {
                 for (x, v) in row[c * in_w..(c + 1) * in_w].iter_mut().enumerate() {
                     if !v.is_finite() {
                         *v = 0.0;
-                        zeroed[c] += 1;
-                        first_nonfinite.get_or_insert((x, strip.y0 + r, c));
+                        self.zeroed[c] += 1;
+                        self.first_nonfinite.get_or_insert((x, strip.y0 + r, c));
                     }
                 }
             }
         }
     }
-    // Ledger of the input, row by row in parallel, merged in order.
-    let region = crate::trace::region("ledger in");
-    let sums: Vec<std::result::Result<Sums, (usize, usize)>> = strip
-        .data
-        .par_chunks(row_len)
-        .map(|row| {
-            let _task = region.task("ledger in");
-            let mut s = Sums::new(nch);
-            for c in (0..nall).filter(|&c| !is_data(c)) {
-                let ch = &row[c * in_w..(c + 1) * in_w];
-                // The sum says whether every value was finite: the slice is
-                // searched only when one was not.
-                if !(c < nch && s.add_slice(c, ch)) {
-                    if let Some(x) = ch.iter().position(|v| !v.is_finite()) {
-                        return Err((x, c));
+
+    /// The strip's rows into the ledger and the output rows of `finish`, the
+    /// tasks of one parallel loop, merged in row order.
+    fn run_rows(&self, input: Option<(&Strip, usize)>, finish: Option<&Finish<'_>>) -> BooksLoop {
+        let (nch, nall) = (self.names.len(), self.zeroed.len());
+        let w = finish.map_or(0, |f| f.w);
+        let mut data = finish.map_or_else(Vec::new, |f| vec![0.0f32; (f.b - f.a) * nch * w]);
+        let mut jobs = Vec::new();
+        if let Some((strip, in_w)) = input {
+            jobs.extend(strip.data.chunks(nall * in_w).map(RowJob::In));
+        }
+        if let Some(f) = finish {
+            let rows = data.chunks_mut(nch * w).enumerate();
+            jobs.extend(rows.map(|(k, out)| RowJob::Out(f.a + k, out)));
+        }
+        let done: Vec<RowDone> = if jobs.is_empty() {
+            Vec::new()
+        } else {
+            let region = crate::trace::region(match (input.is_some(), finish.is_some()) {
+                (true, true) => "ledger in, finish rows",
+                (true, false) => "ledger in",
+                _ => "finish rows",
+            });
+            jobs.into_par_iter()
+                .map_init(
+                    || (vec![0.0f64; w], vec![0.0f64; w]),
+                    |scratch, job| match (job, input, finish) {
+                        (RowJob::In(row), Some((_, in_w)), _) => {
+                            let _task = region.task("ledger in");
+                            RowDone::In(self.ledger_row(row, in_w))
+                        }
+                        (RowJob::Out(y, out), _, Some(f)) => {
+                            let _task = region.task("finish rows");
+                            RowDone::Out(self.finish_row(f, y, out, scratch))
+                        }
+                        _ => unreachable!("a row job comes with its side"),
+                    },
+                )
+                .collect()
+        };
+        let mut sums = Sums::new(nch);
+        let mut in_err = None;
+        let (mut raw, mut rounded) = (Sums::new(nch), Sums::new(nch));
+        let mut digests = Vec::new();
+        let mut out_err = None;
+        for (r, d) in done.into_iter().enumerate() {
+            match d {
+                RowDone::In(Ok(s)) => sums.merge(&s),
+                RowDone::In(Err((x, c))) => {
+                    in_err.get_or_insert_with(|| {
+                        let y = input.map_or(0, |(strip, _)| strip.y0) + r;
+                        Error::StreamValue {
+                            side: Side::Input,
+                            reason: format!(
+                                "non-finite input value at sample ({x}, {y}) in channel {} \
+                                 (--nonfinite zero treats such samples as 0 and counts them)",
+                                channel_name(&self.names, c)
+                            ),
+                        }
+                    });
+                }
+                RowDone::Out(Ok((a, b, digest))) => {
+                    raw.merge(&a);
+                    rounded.merge(&b);
+                    digests.push(digest);
+                }
+                RowDone::Out(Err(e)) => {
+                    out_err.get_or_insert(e);
+                }
+            }
+        }
+        BooksLoop {
+            input: in_err.map_or(Ok(sums), Err),
+            output: finish.map(|f| {
+                let out = OutRows {
+                    y0: f.a,
+                    rows: f.b - f.a,
+                    data,
+                };
+                out_err.map_or(Ok((out, raw, rounded, digests)), Err)
+            }),
+        }
+    }
+
+    /// The sums of a strip row's filtered channels, or the first non-finite
+    /// sample (x, channel) of a channel that is not data.
+    fn ledger_row(&self, row: &[f32], in_w: usize) -> std::result::Result<Sums, (usize, usize)> {
+        let (nch, nall) = (self.names.len(), self.zeroed.len());
+        let mut s = Sums::new(nch);
+        for c in (0..nall).filter(|&c| !self.data.get(c).copied().unwrap_or(false)) {
+            let ch = &row[c * in_w..(c + 1) * in_w];
+            // The sum says whether every value was finite: the slice is
+            // searched only when one was not.
+            if !(c < nch && s.add_slice(c, ch)) {
+                if let Some(x) = ch.iter().position(|v| !v.is_finite()) {
+                    return Err((x, c));
+                }
+            }
+        }
+        Ok(s)
+    }
+
+    /// Output row `y` of `f` into `out`: `base_rows + acc` (or `base_rows`),
+    /// rounded to the precision, with its raw and rounded sums and the digest
+    /// of its unrounded values (fold them in row order: the result does not
+    /// depend on batching).
+    ///
+    /// With a [`Coverage`] (`--edge pad`), each value is divided by its
+    /// pixel's coverage before rounding, and both sums weigh values by it:
+    /// the raw sum is that of `base_rows + acc`, as without padding.
+    /// (Long: one pass per channel, from the sum to the rounded sums.)
+    fn finish_row(
+        &self,
+        f: &Finish<'_>,
+        y: usize,
+        out: &mut [f32],
+        (tmp, weighted): &mut (Vec<f64>, Vec<f64>),
+    ) -> Result<(Sums, Sums, u64)> {
+        let (nch, w) = (self.names.len(), f.w);
+        let mut raw = Sums::new(nch);
+        let mut rounded = Sums::new(nch);
+        let mut digest = FNV_OFFSET;
+        for c in 0..nch {
+            let base_row = &f.base_rows.get(y)[c * w..(c + 1) * w];
+            match f.acc {
+                Some(acc) => {
+                    let n = &acc.get(y)[c * w..(c + 1) * w];
+                    for ((v, &b), &n) in tmp.iter_mut().zip(base_row).zip(n) {
+                        *v = b + n;
+                    }
+                }
+                None => tmp.copy_from_slice(base_row),
+            }
+            let is_data = self.data.get(c).copied().unwrap_or(false);
+            if !is_data {
+                raw.add_slice(c, tmp);
+            }
+            if let Some(cov) = &self.coverage {
+                for (x, v) in tmp.iter_mut().enumerate() {
+                    let share = cov.at(x, y);
+                    if share != 1.0 {
+                        *v /= share;
                     }
                 }
             }
-            Ok(s)
-        })
-        .collect();
-    let mut total = Sums::new(nch);
-    for (r, s) in sums.into_iter().enumerate() {
-        match s {
-            Ok(s) => total.merge(&s),
-            Err((x, c)) => {
-                return Err(Error::StreamValue {
-                    side: Side::Input,
+            let dst = &mut out[c * w..(c + 1) * w];
+            let p = f.precision[c];
+            for (x, (d, &val)) in dst.iter_mut().zip(tmp.iter()).enumerate() {
+                // Data passes as it is, infinities included.
+                let r = if is_data && !val.is_finite() {
+                    Some(val as f32)
+                } else {
+                    round(val, p)
+                };
+                let r = r.ok_or_else(|| Error::StreamValue {
+                    side: Side::Output,
                     reason: format!(
-                        "non-finite input value at sample ({x}, {}) in channel {} \
-                         (--nonfinite zero treats such samples as 0 and counts them)",
-                        strip.y0 + r,
-                        channel_name(names, c)
+                        "output value {val:e} at pixel ({x}, {y}) in channel {} does not fit in {}{}",
+                        self.names[c],
+                        p.name(),
+                        if p == Precision::F16 {
+                            " (--pixel-type f32 holds it)"
+                        } else {
+                            ""
+                        }
                     ),
-                })
+                })?;
+                *d = r;
+                digest = fnv(digest, val.to_bits());
+            }
+            match &self.coverage {
+                _ if is_data => {}
+                Some(cov) => {
+                    for (x, (t, &d)) in weighted.iter_mut().zip(dst.iter()).enumerate() {
+                        *t = d as f64 * cov.at(x, y);
+                    }
+                    rounded.add_slice(c, weighted);
+                }
+                None => {
+                    rounded.add_slice(c, dst);
+                }
             }
         }
+        Ok((raw, rounded, digest))
     }
-    Ok(total)
 }
 
 fn channel_name(names: &[String], c: usize) -> String {
@@ -219,121 +414,6 @@ fn channel_name(names: &[String], c: usize) -> String {
         .get(c)
         .cloned()
         .unwrap_or_else(|| format!("#{c} (statistics)"))
-}
-
-/// Output rows `a..b`: `base_rows + acc` (or `base_rows`), rounded to `precision`,
-/// with their raw and rounded sums and each row's digest of its unrounded
-/// values (fold them in row order: the result does not depend on batching).
-///
-/// With a [`Coverage`] (`--edge pad`), each value is divided by its pixel's
-/// coverage before rounding, and both sums weigh values by it: the raw sum
-/// is that of `base_rows + acc`, as without padding.
-fn finish_rows(
-    base_rows: &RowWindow<f64>,
-    acc: Option<&RowWindow<f64>>,
-    (a, b, w): (usize, usize, usize),
-    names: &[String],
-    data_ch: &[bool],
-    precision: &[Precision],
-    coverage: Option<&Coverage>,
-) -> Result<(OutRows, Sums, Sums, Vec<u64>)> {
-    let nch = names.len();
-    let mut data = vec![0.0f32; (b - a) * nch * w];
-    let region = crate::trace::region("finish rows");
-    let sums: Vec<Result<(Sums, Sums, u64)>> = data
-        .par_chunks_mut(nch * w)
-        .enumerate()
-        .map_init(
-            || (vec![0.0f64; w], vec![0.0f64; w]),
-            |(tmp, weighted), (k, out)| {
-                let _task = region.task("finish rows");
-                let y = a + k;
-                let mut raw = Sums::new(nch);
-                let mut rounded = Sums::new(nch);
-                let mut digest = FNV_OFFSET;
-                for c in 0..nch {
-                    let base_row = &base_rows.get(y)[c * w..(c + 1) * w];
-                    match acc {
-                        Some(acc) => {
-                            let n = &acc.get(y)[c * w..(c + 1) * w];
-                            for ((v, &b), &n) in tmp.iter_mut().zip(base_row).zip(n) {
-                                *v = b + n;
-                            }
-                        }
-                        None => tmp.copy_from_slice(base_row),
-                    }
-                    let is_data = data_ch.get(c).copied().unwrap_or(false);
-                    if !is_data {
-                        raw.add_slice(c, tmp);
-                    }
-                    if let Some(cov) = coverage {
-                        for (x, v) in tmp.iter_mut().enumerate() {
-                            let share = cov.at(x, y);
-                            if share != 1.0 {
-                                *v /= share;
-                            }
-                        }
-                    }
-                    let dst = &mut out[c * w..(c + 1) * w];
-                    for (x, (d, &val)) in dst.iter_mut().zip(tmp.iter()).enumerate() {
-                        let p = precision[c];
-                        // Data passes as it is, infinities included.
-                        let r = if is_data && !val.is_finite() {
-                            Some(val as f32)
-                        } else {
-                            round(val, p)
-                        };
-                        let r = r.ok_or_else(|| Error::StreamValue {
-                            side: Side::Output,
-                            reason: format!(
-                                "output value {val:e} at pixel ({x}, {y}) in channel {} does not fit in {}{}",
-                                names[c],
-                                p.name(),
-                                if p == Precision::F16 {
-                                    " (--pixel-type f32 holds it)"
-                                } else {
-                                    ""
-                                }
-                            ),
-                        })?;
-                        *d = r;
-                        digest = fnv(digest, val.to_bits());
-                    }
-                    match coverage {
-                        _ if is_data => {}
-                        Some(cov) => {
-                            for (x, (t, &d)) in weighted.iter_mut().zip(dst.iter()).enumerate() {
-                                *t = d as f64 * cov.at(x, y);
-                            }
-                            rounded.add_slice(c, weighted);
-                        }
-                        None => {
-                            rounded.add_slice(c, dst);
-                        }
-                    }
-                }
-                Ok((raw, rounded, digest))
-            },
-        )
-        .collect();
-    let (mut raw_all, mut rounded_all) = (Sums::new(nch), Sums::new(nch));
-    let mut digest = Vec::with_capacity(b - a);
-    for s in sums {
-        let (raw, rounded, d) = s?;
-        digest.push(d);
-        raw_all.merge(&raw);
-        rounded_all.merge(&rounded);
-    }
-    Ok((
-        OutRows {
-            y0: a,
-            rows: b - a,
-            data,
-        },
-        raw_all,
-        rounded_all,
-        digest,
-    ))
 }
 
 const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;

@@ -12,12 +12,15 @@
 //!  stage.output (base + accumulator) ──▶ books.finish (round, ledger, digest) ──▶ rows out
 //! ```
 //!
+//! The rows a strip makes final are finished when the next strip is taken,
+//! in one parallel loop with its ledger (the last strip's at once).
+//!
 //! The contract that makes the output bit-identical for any strip height: a
 //! stage's decisions may depend only on which rows are in, never on how they
 //! came; every stage's cursors advance to the same targets whatever the
 //! batching (each checks its own "rows final" condition).
 
-use super::books::Books;
+use super::books::{Books, Finish, Take};
 use super::counts::MethodCounts;
 use super::edge::Coverage;
 use super::stage::{Stage, WindowUse};
@@ -54,6 +57,8 @@ pub struct Streamer {
     precision: Vec<Precision>,
     rows_in: usize,
     out_done: usize,
+    /// Output rows before this one are final (finished or not).
+    final_end: usize,
 }
 
 impl Streamer {
@@ -148,13 +153,35 @@ impl Streamer {
             precision,
             rows_in: 0,
             out_done: 0,
+            final_end: 0,
         })
     }
 
     /// Feed the next strip of input rows; returns the output rows it finished.
+    ///
+    /// The rows a push makes final are finished by the next push, in the loop
+    /// that takes its strip into the ledger (one parallel loop's end, one
+    /// wake-up of many cores, fewer a strip: docs/DESIGN.md, "The model's
+    /// join"), and by the last push at once.
     pub fn push(&mut self, mut strip: Strip) -> Result<Option<OutRows>> {
         let (in_w, in_h) = (self.grid.in_w, self.grid.in_h);
-        self.books.take(&mut strip, self.rows_in, in_w, in_h)?;
+        let take = Take {
+            strip: &mut strip,
+            next: self.rows_in,
+            in_w,
+            in_h,
+        };
+        let finish = unfinished(
+            &*self.stage,
+            (self.out_done, self.final_end),
+            self.w,
+            &self.precision,
+        );
+        let out = self.books.take_and_finish(Some(take), finish)?;
+        if out.is_some() {
+            self.out_done = self.final_end;
+            self.stage.release(self.out_done);
+        }
         let a = self.rows_in;
         // The strip's buffer becomes the window's rows (no copy).
         self.input
@@ -165,16 +192,28 @@ impl Streamer {
             .stage
             .advance(&self.input, self.rows_in, self.rows_in == in_h);
         self.input.evict_below(self.stage.input_needed());
-        if end <= self.out_done {
-            return Ok(None);
-        }
-        let (base, acc) = self.stage.output();
-        let out = self
-            .books
-            .finish(base, acc, self.out_done, end, self.w, &self.precision)?;
-        self.out_done = end;
-        self.stage.release(end);
-        Ok(Some(out))
+        self.final_end = self.final_end.max(end);
+        // The last strip: no strip comes to share the loop.
+        let finish = unfinished(
+            &*self.stage,
+            (self.out_done, self.final_end),
+            self.w,
+            &self.precision,
+        );
+        let Some(finish) = finish.filter(|_| self.rows_in == in_h) else {
+            return Ok(out);
+        };
+        let last = self.books.finish(finish)?;
+        self.out_done = self.final_end;
+        self.stage.release(self.out_done);
+        Ok(Some(match out {
+            Some(mut o) => {
+                o.data.extend_from_slice(&last.data);
+                o.rows += last.rows;
+                o
+            }
+            None => last,
+        }))
     }
 
     /// Output rows finished so far.
@@ -207,6 +246,25 @@ impl Streamer {
         v.extend(self.stage.windows());
         v
     }
+}
+
+/// The final rows `a..b` not yet finished, `w` wide, from `stage`'s windows
+/// (none when there are none).
+fn unfinished<'a>(
+    stage: &'a dyn Stage,
+    (a, b): (usize, usize),
+    w: usize,
+    precision: &'a [Precision],
+) -> Option<Finish<'a>> {
+    let (base_rows, acc) = stage.output();
+    (b > a).then_some(Finish {
+        base_rows,
+        acc,
+        a,
+        b,
+        w,
+        precision,
+    })
 }
 
 #[cfg(test)]
