@@ -263,6 +263,10 @@ pub struct FilterOptions {
         help_heading = "Performance"
     )]
     pub threads: usize,
+    /// Run `--threads` even where they are more than this machine's cores
+    /// (slower: to measure memory at a core count the machine lacks).
+    #[arg(long, help_heading = "Performance")]
+    pub oversubscribe: bool,
     /// Refuse jobs estimated to need more memory than this, in MiB [default: half the machine's memory].
     #[arg(long, env = "EPFILT_MAX_MEMORY", help_heading = "Performance")]
     pub max_memory: Option<u64>,
@@ -580,7 +584,11 @@ impl FilterOptions {
         &self,
         cancel: Option<Arc<AtomicBool>>,
     ) -> Result<(PipelineConfig, Option<String>)> {
-        let (threads, warning) = cap_threads(self.threads);
+        let (threads, warning) = if self.oversubscribe {
+            (self.threads, None)
+        } else {
+            cap_threads(self.threads)
+        };
         let nonfinite = match self.nonfinite.as_str() {
             "error" => NonFinite::Error,
             "zero" => NonFinite::Zero,

@@ -955,6 +955,32 @@ fn an_option_the_method_ignores_and_too_many_threads_are_warnings() {
 }
 
 #[test]
+fn oversubscribe_runs_more_threads_than_cores_without_the_warning() {
+    // More than any machine this runs on has: the run uses them all (to
+    // measure memory at a core count the machine lacks).
+    const THREADS: usize = 24;
+    let dir = tmpdir();
+    let inp = input(dir.path());
+    let out = dir.path().join("o.exr");
+    let rep = dir.path().join("r.json");
+    let threads = THREADS.to_string();
+    let o = epfilt(&[
+        "filter",
+        &inp,
+        out.to_str().unwrap(),
+        "-q",
+        "--threads",
+        &threads,
+        "--oversubscribe",
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{o:?}");
+    assert!(o.stderr.is_empty(), "{o:?}");
+    assert_eq!(read_json(&rep)["threads"], THREADS);
+}
+
+#[test]
 fn the_environment_sets_defaults_under_the_flags() {
     let dir = tmpdir();
     let inp = input(dir.path());
