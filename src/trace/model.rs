@@ -91,10 +91,11 @@ const DECODE: usize = 3;
 pub struct Model {
     /// Segments of every lane, each lane's in strip order.
     pub segments: Vec<Segment>,
-    /// Serial seconds by lane, and by region name the tasks' seconds.
+    /// Serial seconds by lane.
     pub serial_by_lane: BTreeMap<String, f64>,
-    /// Seconds in the tasks of each region name.
-    pub parallel_by_region: BTreeMap<String, f64>,
+    /// Seconds in the tasks of each name (a region may hold tasks of two
+    /// loops run side by side, each named for its work).
+    pub parallel_by_task: BTreeMap<String, f64>,
 }
 
 impl Model {
@@ -103,6 +104,7 @@ impl Model {
         let bad = |why: String| Error::Config(format!("trace: {why}"));
         let mut tasks: HashMap<u64, Vec<f64>> = HashMap::new();
         let mut regions: HashMap<u64, Vec<&Event>> = HashMap::new();
+        let mut by_task: BTreeMap<String, f64> = BTreeMap::new();
         for e in events {
             match e.cat.as_str() {
                 "task" => {
@@ -112,6 +114,7 @@ impl Model {
                         .first()
                         .ok_or_else(|| bad("a task without its region".into()))?;
                     tasks.entry(r).or_default().push(e.dur * 1e-6);
+                    *by_task.entry(e.name.clone()).or_default() += e.dur * 1e-6;
                 }
                 "region" => {
                     if let Some(&s) = e.args.deps.first() {
@@ -121,7 +124,10 @@ impl Model {
                 _ => {}
             }
         }
-        let mut model = Model::default();
+        let mut model = Model {
+            parallel_by_task: by_task,
+            ..Model::default()
+        };
         let mut segs: Vec<&Event> = events.iter().filter(|e| e.cat == "segment").collect();
         segs.sort_by(|a, b| a.ts.total_cmp(&b.ts));
         let mut ids = Vec::with_capacity(segs.len());
@@ -146,8 +152,6 @@ impl Model {
                 // What the region took beyond its tasks (handing them out,
                 // joining) stays on the lane.
                 let over = (r.dur * 1e-6 - t.iter().sum::<f64>()).max(0.0);
-                *model.parallel_by_region.entry(r.name.clone()).or_default() +=
-                    t.iter().sum::<f64>();
                 serial += gap + over;
                 phases.push(Phase::Serial(gap + over));
                 phases.push(Phase::Region(t));
@@ -261,7 +265,7 @@ impl Prediction {
             predicted_s: predicted,
             speedup,
             serial_s: m.serial_by_lane.clone(),
-            parallel_s: m.parallel_by_region.clone(),
+            parallel_s: m.parallel_by_task.clone(),
         }
     }
 
