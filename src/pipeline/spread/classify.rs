@@ -4,7 +4,9 @@
 
 use rayon::prelude::*;
 
+use super::scatter::{Accs, Batch, Placed, SearchPlace};
 use super::*;
+use crate::trace::Span;
 
 /// The 5th smallest of eight values (their upper median): what three
 /// outliers on either side cannot move past the others. NaN sorts last.
@@ -323,74 +325,98 @@ impl FindCtx<'_> {
     }
 }
 
-impl GaussianStage {
-    pub(super) fn classify(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
-        let s = self.grid.s;
-        for _ in a * s..b * s {
-            self.hpass.push_stale(0.0); // every value is written below
+/// Work run beside classification's loops (pending samples classified
+/// before: [`GaussianStage::classify_spreading`]): `first` beside the search
+/// for noise, `then`, with what `first` placed, beside the pass (after the
+/// one loop where a row is one task), each given the region of its tasks.
+pub(super) struct Beside<'s> {
+    pub(super) first: Box<Place<'s>>,
+    pub(super) then: Box<Scatter<'s>>,
+}
+
+/// [`Beside`]'s first job: the chunk's samples searched and placed.
+pub(super) type Place<'s> = dyn FnOnce(&Span) -> Vec<Placed> + Send + 's;
+
+/// [`Beside`]'s second job: the parts scattered.
+pub(super) type Scatter<'s> = dyn FnOnce(&[Placed], &Span) + Send + 's;
+
+/// Classify pixel rows `a..` (their input rows' horizontal passes `hrows`,
+/// `S` each), searching a row in `parts` column ranges, with `beside`'s
+/// work in the same loops (two loops' tasks in one region: one join, not
+/// two). Returns what each row found, and what `beside` placed.
+fn classify_rows(
+    ctx: &FindCtx<'_>,
+    mut hrows: Vec<&mut [f64]>,
+    a: usize,
+    parts: usize,
+    beside: Option<Beside<'_>>,
+) -> (Vec<Found>, Option<Vec<Placed>>) {
+    let s = ctx.s;
+    let rows = hrows.len() / s;
+    let (first, then) = match beside {
+        Some(b) => (Some(b.first), Some(b.then)),
+        None => (None, None),
+    };
+    let names = if first.is_some() {
+        ["classify, search and place", "classify pass, scatter"]
+    } else {
+        ["classify", "classify pass"]
+    };
+    let beside_first = |region: &Span| first.map(|f| f(region));
+    let region = crate::trace::region(names[0]);
+    if parts == 1 {
+        // Both phases row by row in one task: the pass reads the rows the
+        // search for noise has just read.
+        let (found, placed) = rayon::join(
+            || {
+                hrows
+                    .par_chunks_mut(s)
+                    .enumerate()
+                    .map_init(
+                        <(FindScratch, Vec<f32>)>::default,
+                        |(scratch, copy), (k, hs)| {
+                            let _task = region.task("classify");
+                            let y = a + k;
+                            let f = ctx.find_cols(scratch, y, 0..ctx.w).found;
+                            ctx.pass(copy, y, hs, &f.0);
+                            f
+                        },
+                    )
+                    .collect::<Vec<Found>>()
+            },
+            || beside_first(&region),
+        );
+        drop(region);
+        if let (Some(then), Some(placed)) = (then, &placed) {
+            then(placed, &crate::trace::region("scatter"));
         }
-        let yview = YView::new(&self.ybox, self.h);
-        let ctx = FindCtx {
-            s,
-            w: self.w,
-            in_w: self.grid.in_w,
-            in_h: self.grid.in_h,
-            h: self.h,
-            nch: self.nch,
-            pad: self.pad,
-            ep: self.ep.as_ref(),
-            view: &yview,
-            lum: &self.lum,
-            modes: &self.modes,
-            cols: &self.cols,
-            support: self.support,
-            pixel_stats: self.pixel_stats.as_ref(),
-            input,
-        };
-        let rows = b - a;
-        let mut hrows = self.hpass.range_mut(a * s, b * s);
-        let region = crate::trace::region("classify");
-        let per_task = match self.classify_samples {
-            0 => FIND_TASK_SAMPLES,
-            n => n,
-        };
-        let parts = self.grid.in_w.div_ceil(per_task).clamp(1, self.w);
-        let found: Vec<Found> = if parts == 1 {
-            // Both phases row by row in one task: the pass reads the rows
-            // the search for noise has just read.
-            hrows
-                .par_chunks_mut(s)
-                .enumerate()
-                .map_init(
-                    <(FindScratch, Vec<f32>)>::default,
-                    |(scratch, copy), (k, hs)| {
-                        let _task = region.task("classify");
-                        let y = a + k;
-                        let f = ctx.find_cols(scratch, y, 0..ctx.w).found;
-                        ctx.pass(copy, y, hs, &f.0);
-                        f
-                    },
-                )
-                .collect()
-        } else {
-            // A wide row: its column ranges searched by tasks of their own,
-            // then each row's pass with what they found, in its order.
-            let span = ctx.w.div_ceil(parts);
-            // No empty range at the end (10 pixels in 6 parts: 5 of 2).
-            let parts = ctx.w.div_ceil(span);
-            let found_parts: Vec<FoundPart> = (0..rows * parts)
+        return (found, placed);
+    }
+    // A wide row: its column ranges searched by tasks of their own, then
+    // each row's pass with what they found, in its order.
+    let span = ctx.w.div_ceil(parts);
+    // No empty range at the end (10 pixels in 6 parts: 5 of 2).
+    let parts = ctx.w.div_ceil(span);
+    let (found_parts, placed) = rayon::join(
+        || {
+            (0..rows * parts)
                 .into_par_iter()
                 .map_init(FindScratch::default, |scratch, t| {
                     let _task = region.task("classify");
                     let x0 = (t % parts) * span;
                     ctx.find_cols(scratch, a + t / parts, x0..(x0 + span).min(ctx.w))
                 })
-                .collect();
-            // Each row's parts merged in the task of its pass: one loop
-            // (one join) less a strip. A loop of its own, so a region of its
-            // own (the model replays a region's tasks as independent).
-            drop(region);
-            let region = crate::trace::region("classify pass");
+                .collect::<Vec<FoundPart>>()
+        },
+        || beside_first(&region),
+    );
+    // Each row's parts merged in the task of its pass: one loop (one join)
+    // less a strip. A loop of its own, so a region of its own (the model
+    // replays a region's tasks as independent).
+    drop(region);
+    let region = crate::trace::region(names[1]);
+    let (found, ()) = rayon::join(
+        || {
             hrows
                 .par_chunks_mut(s)
                 .zip(found_parts.par_chunks(parts))
@@ -401,8 +427,118 @@ impl GaussianStage {
                     ctx.pass(copy, a + k, hs, &f.0);
                     f
                 })
-                .collect()
+                .collect::<Vec<Found>>()
+        },
+        || {
+            if let (Some(then), Some(placed)) = (then, &placed) {
+                then(placed, &region);
+            }
+        },
+    );
+    (found, placed)
+}
+
+impl GaussianStage {
+    /// Classify pixel rows `a..b`: their noisy samples join the pending
+    /// list.
+    pub(super) fn classify(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
+        self.classify_with(input, (a, b), None);
+    }
+
+    /// Classify pixel rows `a..b` while the first chunk of `batch` (samples
+    /// classified before: the caller checks) is searched and placed beside
+    /// the search for noise and scattered beside the pass (the same work in
+    /// the same order as one after the other, in two loops fewer).
+    pub(super) fn classify_spreading(
+        &mut self,
+        input: &RowWindow<f32>,
+        (a, b): (usize, usize),
+        batch: &mut Batch,
+    ) {
+        let c1 = self.chunk_end(batch.bound, batch.next, batch.split);
+        let placed = self.classify_with(input, (a, b), Some((batch, c1)));
+        self.count_placed(&placed.unwrap_or_default());
+    }
+
+    /// Classify pixel rows `a..b`, with the chunk `batch.next..c1` of
+    /// `spread` spread beside it; returns its parts.
+    /// (Long: the stage's fields, borrowed one by one for the two jobs.)
+    fn classify_with(
+        &mut self,
+        input: &RowWindow<f32>,
+        (a, b): (usize, usize),
+        spread: Option<(&mut Batch, usize)>,
+    ) -> Option<Vec<Placed>> {
+        let s = self.grid.s;
+        for _ in a * s..b * s {
+            self.hpass.push_stale(0.0); // every value is written below
+        }
+        let per_task = match self.classify_samples {
+            0 => FIND_TASK_SAMPLES,
+            n => n,
         };
+        let parts = self.grid.in_w.div_ceil(per_task).clamp(1, self.w);
+        let GaussianStage {
+            grid,
+            w,
+            h,
+            nch,
+            pad,
+            inv_s2,
+            tile,
+            support,
+            ref ybox,
+            ref csum,
+            ref mut hpass,
+            ref mut pending,
+            ref pending_v,
+            ref mut acc,
+            ref mut c2,
+            ref mut c4,
+            ref ep,
+            ref lum,
+            ref modes,
+            ref cols,
+            ref pixel_stats,
+            ..
+        } = *self;
+        let yview = YView::new(ybox, h);
+        let ctx = FindCtx {
+            s,
+            w,
+            in_w: grid.in_w,
+            in_h: grid.in_h,
+            h,
+            nch,
+            pad,
+            ep: ep.as_ref(),
+            view: &yview,
+            lum,
+            modes,
+            cols,
+            support,
+            pixel_stats: pixel_stats.as_ref(),
+            input,
+        };
+        let hrows = hpass.range_mut(a * s, b * s);
+        let beside = match (spread, ep.as_ref()) {
+            (Some((batch, c1)), Some(ep)) => {
+                let c0 = batch.next;
+                batch.next = c1;
+                let place =
+                    SearchPlace::new(ep, (ybox, csum.as_ref()), modes, inv_s2, (s, nch), (w, h));
+                let mut accs = Accs::new(ep, (acc, c2, c4), w, nch, tile);
+                let samples = &mut pending[c0..c1];
+                let values = &pending_v[c0 * nch..c1 * nch];
+                let fresh = batch.fresh_mut();
+                Some(Beside {
+                    first: Box::new(move |region| place.run(samples, values, region)),
+                    then: Box::new(move |parts, region| accs.scatter(parts, fresh, region)),
+                })
+            }
+            _ => None,
+        };
+        let (found, placed) = classify_rows(&ctx, hrows, a, parts, beside);
         for (list, vals, kept) in found {
             // Kept samples failed the test too; the spread ones are counted
             // when they are spread.
@@ -411,6 +547,7 @@ impl GaussianStage {
             self.pending.extend(list);
             self.pending_v.extend(vals);
         }
+        placed
     }
 }
 

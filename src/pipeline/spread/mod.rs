@@ -471,22 +471,36 @@ impl GaussianStage {
         } else {
             yb.saturating_sub(self.halo.xbar_reach.max(1))
         };
-        if cls_target > self.classified {
-            self.classify(input, self.classified, cls_target);
-            self.classified = cls_target;
-        }
         // 3. spreading
-        if self.ep.is_some() {
-            let sp_target = if all_in {
-                self.classified
-            } else {
-                self.classified
-                    .min(yb.saturating_sub(self.halo.search_reach))
-            };
-            if sp_target > self.spread_done {
-                self.spread(sp_target);
-                self.spread_done = sp_target;
+        let classified = self.classified.max(cls_target);
+        let sp_target = if all_in {
+            classified
+        } else {
+            classified.min(yb.saturating_sub(self.halo.search_reach))
+        };
+        let spreads = self.ep.is_some() && sp_target > self.spread_done;
+        if cls_target > self.classified && spreads && sp_target <= self.classified {
+            // Every sample to spread was classified before: its first chunk
+            // is spread in classification's loops (two joins fewer a strip:
+            // docs/DESIGN.md, "The model's join"), the rest after.
+            if let Some(mut batch) = self.spread_begin(sp_target) {
+                self.classify_spreading(input, (self.classified, cls_target), &mut batch);
+                if batch.next < batch.split {
+                    self.spread_chunks(&mut batch);
+                }
+                self.spread_end(batch);
             }
+        } else {
+            if cls_target > self.classified {
+                self.classify(input, self.classified, cls_target);
+            }
+            if spreads {
+                self.spread(sp_target);
+            }
+        }
+        self.classified = classified;
+        if spreads {
+            self.spread_done = sp_target;
         }
         // 4. base rows: the vertical gather, as soon as its input rows are
         // classified; the short-lived horizontal-pass rows go, the (S times

@@ -141,7 +141,7 @@ const SEARCH_TASK: usize = 256;
 /// can fold into the arena: what bounds a chunk's memory before its widths
 /// are known.
 #[derive(Clone, Copy, Debug)]
-struct EdgeBound {
+pub(super) struct EdgeBound {
     margin: usize,
     row_len: usize,
 }
@@ -192,7 +192,7 @@ impl GaussianStage {
     /// interior, whose kernels are read in place, takes a whole strip's
     /// samples in one chunk (two loops), and the worst case holds what it
     /// held when every chunk was [`SPREAD_CHUNK`] samples.
-    fn chunk_end(&self, bound: EdgeBound, c0: usize, end: usize) -> usize {
+    pub(super) fn chunk_end(&self, bound: EdgeBound, c0: usize, end: usize) -> usize {
         let per_sample = std::mem::size_of::<Spread>() + self.nch * std::mem::size_of::<f64>();
         let weight = std::mem::size_of::<f64>();
         let chunk = match self.spread_chunk {
@@ -218,128 +218,296 @@ impl GaussianStage {
     /// pending (row-major) order, chunk by chunk: in one loop each sample's
     /// width searched and its kernels placed, in the next the scatter into
     /// the accumulators.
-    /// (Long: one chunk loop places each kernel at one of three resolutions;
-    /// the three lists share the chunk's arena and values.)
     pub(super) fn spread(&mut self, target: usize) {
-        let (s, w, h, nch) = (self.grid.s, self.w, self.h, self.nch);
+        let Some(mut batch) = self.spread_begin(target) else {
+            return;
+        };
+        self.spread_chunks(&mut batch);
+        self.spread_end(batch);
+    }
+
+    /// The batch of pending samples of pixel rows before `target`, with the
+    /// accumulator rows it reaches grown (their new rows not yet filled: the
+    /// first scatter's tasks fill them, a tile each, where a loop of their
+    /// own was a join a strip).
+    pub(super) fn spread_begin(&mut self, target: usize) -> Option<Batch> {
+        let (s, h) = (self.grid.s, self.h);
+        let ep = self.ep.as_ref()?;
         let first = self.pending_first;
         let split = first + self.pending[first..].partition_point(|n| (n.j as usize) / s < target);
-        let Some(ep) = self.ep.as_ref() else { return };
         // Accumulator rows down to the widest reach of this batch, and the
         // coarse rows reaching fine rows below that (and a spare; 4x row K
         // reaches fine rows 4K - 3 ..= 4K + 6).
         let need = (target + self.halo.spread_reach).min(h);
-        let (ncw, coarse_rows) = (w.div_ceil(2), h.div_ceil(2));
-        let (ncw4, coarse_rows4) = (w.div_ceil(4), h.div_ceil(4));
-        // New rows are filled (-0.0 on the accumulator, whose untouched
-        // pixels keep the sign of the base's zero; 0.0 on the coarse grids)
-        // by the first scatter's tasks, a tile each: a loop of their own
-        // was a join a strip.
         let fresh = [
             grow(&mut self.acc, need),
-            grow(&mut self.c2.acc, (need.div_ceil(2) + 1).min(coarse_rows)),
-            grow(&mut self.c4.acc, (need.div_ceil(4) + 1).min(coarse_rows4)),
+            grow(&mut self.c2.acc, (need.div_ceil(2) + 1).min(h.div_ceil(2))),
+            grow(&mut self.c4.acc, (need.div_ceil(4) + 1).min(h.div_ceil(4))),
         ];
-        let fills = [-0.0, 0.0, 0.0];
-        let ctx = PlaceCtx {
-            ep,
-            modes: &self.modes,
-            inv_s2: self.inv_s2,
-            s,
-            nch,
-            fine: (w, h),
-            c2: (ncw, coarse_rows),
-            c4: (ncw4, coarse_rows4),
-        };
-        let bound = EdgeBound::of(ep);
-        let (mut c0, mut fresh) = (first, fresh.map(Some));
+        Some(Batch {
+            next: first,
+            split,
+            fresh: fresh.map(Some),
+            bound: EdgeBound::of(ep),
+        })
+    }
+
+    /// The batch's chunks from its next sample on, each a loop searching
+    /// and placing and a loop scattering.
+    pub(super) fn spread_chunks(&mut self, batch: &mut Batch) {
         loop {
-            let c1 = self.chunk_end(bound, c0, split);
-            let mut view = YView::new(&self.ybox, h);
-            if let Some((csum, block)) = &self.csum {
-                view = view.with_csums(csum, *block);
-            }
-            // Each sample's width searched and its kernels placed (reflected
-            // where they cross an edge) in one task: one loop, one join
-            // (docs/DESIGN.md, "The model's join").
+            let c1 = self.chunk_end(batch.bound, batch.next, batch.split);
+            let (place, samples, values, mut accs) = self.spread_parts(batch.next, c1);
             let region = crate::trace::region("search and place");
-            let parts: Vec<Placed> = self.pending[c0..c1]
-                .par_chunks_mut(SEARCH_TASK)
-                .zip(self.pending_v[c0 * nch..c1 * nch].par_chunks(SEARCH_TASK * nch))
-                .map_init(
-                    <(Folded, Vec<f64>)>::default,
-                    |(fold, tmp), (samples, values)| {
-                        let _task = region.task("search and place");
-                        let mut part = Placed::default();
-                        for (n, x) in samples.iter_mut().zip(values.chunks_exact(nch)) {
-                            let (px, py) = (n.i as usize / s, n.j as usize / s);
-                            let c = ep.search_in(&view, px, py, n.x0, n.xbar0, fold);
-                            n.level = c.level;
-                            n.capped = c.capped;
-                            part.counts.search_cost += c.cost;
-                            part.counts.bounded += u64::from(c.bounded);
-                            ctx.place(n, x, &mut part, tmp);
-                        }
-                        part
-                    },
-                )
-                .collect();
+            let parts = place.run(samples, values, &region);
             drop(region);
-            let mut used = [false; 3];
-            for part in &parts {
-                self.counts += part.counts;
-                for (u, list) in used.iter_mut().zip(&part.lists) {
-                    *u |= !list.is_empty();
-                }
-            }
-            let fine_rows = |l: u16, ph: u16| ep.levels()[l as usize].kernel.row(ph as usize);
-            let coarse_rows = |l: u16, ph: u16| {
-                ep.levels()[l as usize]
-                    .coarse
-                    .as_ref()
-                    .map_or(&[][..], |c| c.kernel.row(ph as usize))
-            };
-            // The 4x grid goes through the 2x one: its rows carry the share.
-            self.c2.used |= used[1] || used[2];
-            self.c4.used |= used[2];
-            // The three grids' tiles in one parallel loop: one join a chunk,
-            // not three (each costs its lane a wake-up; docs/DESIGN.md, "The
-            // model's join"). Each pixel still gets its grid's spreads in
-            // order, from one task.
-            let grids: [(_, _, &KernelRows<'_>, _); 3] = [
-                (&mut self.acc, w, &fine_rows, 1),
-                (&mut self.c2.acc, ncw, &coarse_rows, 2),
-                (&mut self.c4.acc, ncw4, &coarse_rows, 4),
-            ];
-            let grids = grids
-                .into_iter()
-                .enumerate()
-                .filter(|&(k, (ref acc, ..))| used[k] || fresh[k].is_some_and(|f| f < acc.end()))
-                .map(|(k, (acc, w, rows, f))| GridScatter {
-                    acc,
-                    src: SpreadSrc {
-                        parts: &parts,
-                        grid: k,
-                        rows,
-                    },
-                    fresh: fresh[k].map(|from| (from, fills[k])),
-                    w,
-                    tile: (self.tile / f).max(1),
-                })
-                .collect();
-            scatter(grids, nch);
-            fresh = [None; 3];
-            c0 = c1;
-            if c0 >= split {
+            let region = crate::trace::region("scatter");
+            accs.scatter(&parts, &mut batch.fresh, &region);
+            drop(region);
+            self.count_placed(&parts);
+            batch.next = c1;
+            if batch.next >= batch.split {
                 break;
             }
         }
+    }
+
+    /// The batch spread: its samples leave the pending list (dropped from the
+    /// front once they are half of it, so that dropping them moves no more
+    /// than was spread).
+    pub(super) fn spread_end(&mut self, batch: Batch) {
+        let (split, nch) = (batch.split, self.nch);
         self.pending_first = split;
         if 2 * split >= self.pending.len() {
             self.pending.drain(..split);
             self.pending_v.drain(..split * nch);
             self.pending_first = 0;
         }
+    }
+
+    /// What the spread of the pending samples `c0..c1` works with, each
+    /// part a borrow of its own (so that one can run beside other work):
+    /// the search and placement, the samples and their values, and the
+    /// accumulators.
+    pub(super) fn spread_parts(
+        &mut self,
+        c0: usize,
+        c1: usize,
+    ) -> (SearchPlace<'_>, &mut [Noisy], &[f32], Accs<'_>) {
+        let (w, h, nch) = (self.w, self.h, self.nch);
+        let ep = self.ep.as_ref().expect("spread only where ep-gauss is");
+        let place = SearchPlace::new(
+            ep,
+            (&self.ybox, self.csum.as_ref()),
+            &self.modes,
+            self.inv_s2,
+            (self.grid.s, nch),
+            (w, h),
+        );
+        let accs = Accs::new(
+            ep,
+            (&mut self.acc, &mut self.c2, &mut self.c4),
+            w,
+            nch,
+            self.tile,
+        );
+        (
+            place,
+            &mut self.pending[c0..c1],
+            &self.pending_v[c0 * nch..c1 * nch],
+            accs,
+        )
+    }
+
+    /// What the placed parts counted.
+    pub(super) fn count_placed(&mut self, parts: &[Placed]) {
+        for part in parts {
+            self.counts += part.counts;
+        }
+    }
+}
+
+/// A batch of pending samples being spread: the next sample to spread, the
+/// end, the first new row of each grid (fine, 2x, 4x) until the first
+/// scatter fills them, and the bound on a chunk's reflected weights.
+pub(super) struct Batch {
+    pub(super) next: usize,
+    pub(super) split: usize,
+    fresh: [Option<usize>; 3],
+    pub(super) bound: EdgeBound,
+}
+
+impl Batch {
+    /// The first new row of each grid, until the first scatter fills them.
+    pub(super) fn fresh_mut(&mut self) -> &mut [Option<usize>; 3] {
+        &mut self.fresh
+    }
+}
+
+/// What a chunk's width search and placement read.
+pub(super) struct SearchPlace<'a> {
+    view: YView<'a>,
+    ctx: PlaceCtx<'a>,
+}
+
+impl<'a> SearchPlace<'a> {
+    /// The search reads the box luminance (and its summed-area table with
+    /// its block), the placement the channels' modes, the grids' sizes (`w`
+    /// x `h` pixels, S, channels).
+    pub(super) fn new(
+        ep: &'a EpGauss,
+        (ybox, csum): (&'a RowWindow<f32>, Option<&'a (RowWindow<f64>, usize)>),
+        modes: &'a [ChannelMode],
+        inv_s2: f64,
+        (s, nch): (usize, usize),
+        (w, h): (usize, usize),
+    ) -> Self {
+        let mut view = YView::new(ybox, h);
+        if let Some((csum, block)) = csum {
+            view = view.with_csums(csum, *block);
+        }
+        SearchPlace {
+            view,
+            ctx: PlaceCtx {
+                ep,
+                modes,
+                inv_s2,
+                s,
+                nch,
+                fine: (w, h),
+                c2: (w.div_ceil(2), h.div_ceil(2)),
+                c4: (w.div_ceil(4), h.div_ceil(4)),
+            },
+        }
+    }
+
+    /// Each sample's width searched and its kernels placed (reflected where
+    /// they cross an edge) in one task of `region`: one loop, one join
+    /// (docs/DESIGN.md, "The model's join"). The parts in order.
+    pub(super) fn run(
+        &self,
+        samples: &mut [Noisy],
+        values: &[f32],
+        region: &crate::trace::Span,
+    ) -> Vec<Placed> {
+        let (ctx, view) = (&self.ctx, &self.view);
+        let (s, nch, ep) = (ctx.s, ctx.nch, ctx.ep);
+        samples
+            .par_chunks_mut(SEARCH_TASK)
+            .zip(values.par_chunks(SEARCH_TASK * nch))
+            .map_init(
+                <(Folded, Vec<f64>)>::default,
+                |(fold, tmp), (samples, values)| {
+                    let _task = region.task("search and place");
+                    let mut part = Placed::default();
+                    for (n, x) in samples.iter_mut().zip(values.chunks_exact(nch)) {
+                        let (px, py) = (n.i as usize / s, n.j as usize / s);
+                        let c = ep.search_in(view, px, py, n.x0, n.xbar0, fold);
+                        n.level = c.level;
+                        n.capped = c.capped;
+                        part.counts.search_cost += c.cost;
+                        part.counts.bounded += u64::from(c.bounded);
+                        ctx.place(n, x, &mut part, tmp);
+                    }
+                    part
+                },
+            )
+            .collect()
+    }
+}
+
+/// The accumulators a chunk is scattered into: the fine grid's and the
+/// coarse grids'.
+pub(super) struct Accs<'a> {
+    ep: &'a EpGauss,
+    acc: &'a mut RowWindow<f64>,
+    c2: &'a mut CoarseGrid,
+    c4: &'a mut CoarseGrid,
+    w: usize,
+    nch: usize,
+    tile: usize,
+}
+
+impl<'a> Accs<'a> {
+    /// The fine, 2x and 4x grids, `w` pixels wide, `nch` channels, tiles of
+    /// `tile` fine pixels.
+    pub(super) fn new(
+        ep: &'a EpGauss,
+        (acc, c2, c4): (
+            &'a mut RowWindow<f64>,
+            &'a mut CoarseGrid,
+            &'a mut CoarseGrid,
+        ),
+        w: usize,
+        nch: usize,
+        tile: usize,
+    ) -> Self {
+        Accs {
+            ep,
+            acc,
+            c2,
+            c4,
+            w,
+            nch,
+            tile,
+        }
+    }
+
+    /// Scatter `parts` (in order): the three grids' tiles are the tasks of
+    /// one loop (one join a chunk, not three: each costs its lane a wake-up;
+    /// docs/DESIGN.md, "The model's join"), each pixel still getting its
+    /// grid's spreads in order, from one task. The tiles first fill their
+    /// grid's `fresh` rows (-0.0 on the accumulator, whose untouched pixels
+    /// keep the sign of the base's zero; 0.0 on the coarse grids), which
+    /// are then filled.
+    pub(super) fn scatter(
+        &mut self,
+        parts: &[Placed],
+        fresh: &mut [Option<usize>; 3],
+        region: &crate::trace::Span,
+    ) {
+        let ep = self.ep;
+        let mut used = [false; 3];
+        for part in parts {
+            for (u, list) in used.iter_mut().zip(&part.lists) {
+                *u |= !list.is_empty();
+            }
+        }
+        // The 4x grid goes through the 2x one: its rows carry the share.
+        self.c2.used |= used[1] || used[2];
+        self.c4.used |= used[2];
+        let fine_rows = |l: u16, ph: u16| ep.levels()[l as usize].kernel.row(ph as usize);
+        let coarse_rows = |l: u16, ph: u16| {
+            ep.levels()[l as usize]
+                .coarse
+                .as_ref()
+                .map_or(&[][..], |c| c.kernel.row(ph as usize))
+        };
+        let (w, tile) = (self.w, self.tile);
+        let grids: [(_, _, &KernelRows<'_>, _); 3] = [
+            (&mut *self.acc, w, &fine_rows, 1),
+            (&mut self.c2.acc, w.div_ceil(2), &coarse_rows, 2),
+            (&mut self.c4.acc, w.div_ceil(4), &coarse_rows, 4),
+        ];
+        let fills = [-0.0, 0.0, 0.0];
+        let grids = grids
+            .into_iter()
+            .enumerate()
+            .filter(|&(k, (ref acc, ..))| used[k] || fresh[k].is_some_and(|f| f < acc.end()))
+            .map(|(k, (acc, w, rows, f))| GridScatter {
+                acc,
+                src: SpreadSrc {
+                    parts,
+                    grid: k,
+                    rows,
+                },
+                fresh: fresh[k].map(|from| (from, fills[k])),
+                w,
+                tile: (tile / f).max(1),
+            })
+            .collect();
+        scatter(grids, self.nch, region);
+        *fresh = [None; 3];
     }
 }
 
@@ -408,7 +576,7 @@ struct GridScatter<'a, 'k> {
 /// Add each grid's spreads (in order) into its accumulator: every column
 /// tile of every grid is a task of one loop, so each pixel receives its
 /// contributions in the given order from one task, whatever the tile size.
-fn scatter(grids: Vec<GridScatter<'_, '_>>, nch: usize) {
+fn scatter(grids: Vec<GridScatter<'_, '_>>, nch: usize, region: &crate::trace::Span) {
     let mut tasks = Vec::new();
     for g in grids {
         let first = g.acc.first();
@@ -427,7 +595,6 @@ fn scatter(grids: Vec<GridScatter<'_, '_>>, nch: usize) {
     if tasks.is_empty() {
         return;
     }
-    let region = crate::trace::region("scatter");
     tasks.into_par_iter().for_each(|mut job| {
         let _task = region.task("scatter");
         scatter_tile(&mut job, nch);
