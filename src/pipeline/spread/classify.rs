@@ -477,7 +477,12 @@ impl GaussianStage {
             0 => FIND_TASK_SAMPLES,
             n => n,
         };
-        let parts = self.grid.in_w.div_ceil(per_task).clamp(1, self.w);
+        // Without ep-gauss there is no noise to search for: the pass alone,
+        // a task a row (a loop of empty searches was a join a strip).
+        let parts = match self.ep {
+            Some(_) => self.grid.in_w.div_ceil(per_task).clamp(1, self.w),
+            None => 1,
+        };
         let GaussianStage {
             grid,
             w,
