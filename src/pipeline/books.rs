@@ -8,6 +8,7 @@ use rayon::prelude::*;
 
 use super::edge::Coverage;
 use super::ledger::{Ledger, Sums};
+use super::stage::Early;
 use super::stream::OutRows;
 use super::window::RowWindow;
 use super::{NonFinite, Precision, Strip};
@@ -56,41 +57,41 @@ impl Books {
         self.coverage = Some(coverage);
     }
 
-    /// Take the next strip (`take`), and finish the output rows of
-    /// `finish`, in one parallel loop: the strip's rows enter the ledger and
-    /// the output rows are rounded, counted and digested by the tasks of one
-    /// loop, whose end costs many cores one wake-up, not two (docs/DESIGN.md,
-    /// "The model's join"). The strip must start at row `next` of `in_h`
-    /// rows of `in_w` samples; its non-finite samples are refused or zeroed
-    /// first. Returns the finished rows.
+    /// Check the next strip before its rows enter the window: it must start
+    /// at row `next` of `in_h` rows of `in_w` samples; its non-finite
+    /// samples are zeroed and counted here where the policy says so (the
+    /// ledger refuses them otherwise, [`Self::take_and_finish`]).
+    pub fn check(
+        &mut self,
+        strip: &mut Strip,
+        next: usize,
+        in_w: usize,
+        in_h: usize,
+    ) -> Result<()> {
+        let row_len = self.zeroed.len() * in_w;
+        if strip.y0 != next || strip.data.len() != strip.rows * row_len || next + strip.rows > in_h
+        {
+            return Err(Error::Internal(format!(
+                "source delivered rows {}..{} but row {next} was expected (source bug)",
+                strip.y0,
+                strip.y0 + strip.rows,
+            )));
+        }
+        self.zero_nonfinite(strip, in_w);
+        Ok(())
+    }
+
+    /// Take a checked strip's rows (`take`) into the ledger, finish the
+    /// output rows of `finish`, and run a stage's work `beside` them, in one
+    /// parallel loop: its end costs many cores one wake-up, not three
+    /// (docs/DESIGN.md, "The model's join"). Returns the finished rows.
     pub fn take_and_finish(
         &mut self,
         take: Option<Take<'_>>,
         finish: Option<Finish<'_>>,
+        beside: Option<Box<Early<'_>>>,
     ) -> Result<Option<OutRows>> {
-        let mut input = None;
-        if let Some(Take {
-            strip,
-            next,
-            in_w,
-            in_h,
-        }) = take
-        {
-            let row_len = self.zeroed.len() * in_w;
-            if strip.y0 != next
-                || strip.data.len() != strip.rows * row_len
-                || next + strip.rows > in_h
-            {
-                return Err(Error::Internal(format!(
-                    "source delivered rows {}..{} but row {next} was expected (source bug)",
-                    strip.y0,
-                    strip.y0 + strip.rows,
-                )));
-            }
-            self.zero_nonfinite(strip, in_w);
-            input = Some((&*strip, in_w));
-        }
-        let BooksLoop { input, output } = self.run_rows(input, finish.as_ref());
+        let BooksLoop { input, output } = self.run_rows(take.as_ref(), finish.as_ref(), beside);
         self.ledger.input.merge(&input?);
         let Some((out, raw, rounded, digests)) = output.transpose()? else {
             return Ok(None);
@@ -106,7 +107,7 @@ impl Books {
     /// Output rows alone ([`Self::take_and_finish`] without a strip).
     pub fn finish(&mut self, finish: Finish<'_>) -> Result<OutRows> {
         Ok(self
-            .take_and_finish(None, Some(finish))?
+            .take_and_finish(None, Some(finish), None)?
             .unwrap_or(OutRows {
                 y0: 0,
                 rows: 0,
@@ -147,17 +148,15 @@ impl Books {
     }
 }
 
-/// A strip for [`Books::take_and_finish`] to take: it must start at row
-/// `next` of `in_h` rows of `in_w` samples.
+/// A checked strip's rows ([`Books::check`]) for [`Books::take_and_finish`]
+/// to take into the ledger.
 pub struct Take<'a> {
-    /// The strip (its non-finite samples zeroed where the policy says).
-    pub strip: &'a mut Strip,
-    /// The row it must start at.
-    pub next: usize,
+    /// Its rows, every channel of each.
+    pub rows: Vec<&'a [f32]>,
+    /// The first one's row in the image.
+    pub y0: usize,
     /// Samples per row.
     pub in_w: usize,
-    /// Rows of the image.
-    pub in_h: usize,
 }
 
 /// Output rows `a..b` for [`Books::take_and_finish`] to finish: `base_rows +
@@ -224,20 +223,26 @@ impl Books {
     }
 
     /// The strip's rows into the ledger and the output rows of `finish`, the
-    /// tasks of one parallel loop, merged in row order.
-    fn run_rows(&self, input: Option<(&Strip, usize)>, finish: Option<&Finish<'_>>) -> BooksLoop {
-        let (nch, nall) = (self.names.len(), self.zeroed.len());
+    /// tasks of one parallel loop, merged in row order, with `beside` run
+    /// beside them (its tasks in the same region).
+    fn run_rows(
+        &self,
+        input: Option<&Take<'_>>,
+        finish: Option<&Finish<'_>>,
+        beside: Option<Box<Early<'_>>>,
+    ) -> BooksLoop {
+        let nch = self.names.len();
         let w = finish.map_or(0, |f| f.w);
         let mut data = finish.map_or_else(Vec::new, |f| vec![0.0f32; (f.b - f.a) * nch * w]);
         let mut jobs = Vec::new();
-        if let Some((strip, in_w)) = input {
-            jobs.extend(strip.data.chunks(nall * in_w).map(RowJob::In));
+        if let Some(t) = input {
+            jobs.extend(t.rows.iter().map(|r| RowJob::In(r)));
         }
         if let Some(f) = finish {
             let rows = data.chunks_mut(nch * w).enumerate();
             jobs.extend(rows.map(|(k, out)| RowJob::Out(f.a + k, out)));
         }
-        let done: Vec<RowDone> = if jobs.is_empty() {
+        let done: Vec<RowDone> = if jobs.is_empty() && beside.is_none() {
             Vec::new()
         } else {
             let region = crate::trace::region(match (input.is_some(), finish.is_some()) {
@@ -245,22 +250,28 @@ impl Books {
                 (true, false) => "ledger in",
                 _ => "finish rows",
             });
-            jobs.into_par_iter()
-                .map_init(
-                    || (vec![0.0f64; w], vec![0.0f64; w]),
-                    |scratch, job| match (job, input, finish) {
-                        (RowJob::In(row), Some((_, in_w)), _) => {
-                            let _task = region.task("ledger in");
-                            RowDone::In(self.ledger_row(row, in_w))
-                        }
-                        (RowJob::Out(y, out), _, Some(f)) => {
-                            let _task = region.task("finish rows");
-                            RowDone::Out(self.finish_row(f, y, out, scratch))
-                        }
-                        _ => unreachable!("a row job comes with its side"),
-                    },
-                )
-                .collect()
+            let books = || {
+                jobs.into_par_iter()
+                    .map_init(
+                        || (vec![0.0f64; w], vec![0.0f64; w]),
+                        |scratch, job| match (job, input, finish) {
+                            (RowJob::In(row), Some(t), _) => {
+                                let _task = region.task("ledger in");
+                                RowDone::In(self.ledger_row(row, t.in_w))
+                            }
+                            (RowJob::Out(y, out), _, Some(f)) => {
+                                let _task = region.task("finish rows");
+                                RowDone::Out(self.finish_row(f, y, out, scratch))
+                            }
+                            _ => unreachable!("a row job comes with its side"),
+                        },
+                    )
+                    .collect()
+            };
+            match beside {
+                Some(work) => rayon::join(books, || work(&region)).0,
+                None => books(),
+            }
         };
         let mut sums = Sums::new(nch);
         let mut in_err = None;
@@ -272,7 +283,7 @@ impl Books {
                 RowDone::In(Ok(s)) => sums.merge(&s),
                 RowDone::In(Err((x, c))) => {
                     in_err.get_or_insert_with(|| {
-                        let y = input.map_or(0, |(strip, _)| strip.y0) + r;
+                        let y = input.map_or(0, |t| t.y0) + r;
                         Error::StreamValue {
                             side: Side::Input,
                             reason: format!(

@@ -17,6 +17,13 @@ pub struct WindowUse {
     pub row_bytes: usize,
 }
 
+/// The windows of final output rows: a base window and an accumulator added
+/// to it.
+pub type Output<'s> = (&'s RowWindow<f64>, Option<&'s RowWindow<f64>>);
+
+/// Work a stage runs beside the books' loop ([`Stage::beside_books`]).
+pub type Early<'s> = dyn FnOnce(&crate::trace::Span) + Send + 's;
+
 /// A method's work on the rows, behind the skeleton.
 pub trait Stage: Send {
     /// Rows the method reaches beyond the row it works on.
@@ -32,7 +39,20 @@ pub trait Stage: Send {
     fn input_needed(&self) -> usize;
     /// The unrounded values of final output rows: a base window and an
     /// accumulator added to it.
-    fn output(&self) -> (&RowWindow<f64>, Option<&RowWindow<f64>>);
+    fn output(&self) -> Output<'_>;
+    /// Input rows `a..b` have just entered `input`, before the books take
+    /// them: work on them that can run beside the books' loop (their ledger,
+    /// the finishing of final rows), as tasks of the region it is given, and
+    /// the windows the books finish from (one loop's end less a strip: a
+    /// wake-up of many cores, docs/DESIGN.md, "The model's join"). None by
+    /// default.
+    fn beside_books<'s>(
+        &'s mut self,
+        _input: &'s RowWindow<f32>,
+        _rows: (usize, usize),
+    ) -> (Output<'s>, Option<Box<Early<'s>>>) {
+        (self.output(), None)
+    }
     /// Output rows below `y` are written: release them.
     fn release(&mut self, y: usize);
     /// What the stage counted.

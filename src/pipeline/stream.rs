@@ -23,7 +23,7 @@
 use super::books::{Books, Finish, Take};
 use super::counts::MethodCounts;
 use super::edge::Coverage;
-use super::stage::{Stage, WindowUse};
+use super::stage::{Output, Stage, WindowUse};
 use super::window::RowWindow;
 use super::{PipelineConfig, Precision, Strip, StripLayout};
 use crate::error::{Error, Result};
@@ -165,28 +165,31 @@ impl Streamer {
     /// join"), and by the last push at once.
     pub fn push(&mut self, mut strip: Strip) -> Result<Option<OutRows>> {
         let (in_w, in_h) = (self.grid.in_w, self.grid.in_h);
-        let take = Take {
-            strip: &mut strip,
-            next: self.rows_in,
-            in_w,
-            in_h,
-        };
-        let finish = unfinished(
-            &*self.stage,
-            (self.out_done, self.final_end),
-            self.w,
-            &self.precision,
-        );
-        let out = self.books.take_and_finish(Some(take), finish)?;
-        if out.is_some() {
-            self.out_done = self.final_end;
-            self.stage.release(self.out_done);
-        }
+        self.books.check(&mut strip, self.rows_in, in_w, in_h)?;
         let a = self.rows_in;
         // The strip's buffer becomes the window's rows (no copy).
         self.input
             .push_rows(std::mem::take(&mut strip.data), strip.rows);
         self.rows_in += strip.rows;
+        // The new rows' ledger, the rows the last push made final, and the
+        // stage's first work on the new rows, in one loop.
+        let (windows, beside) = self.stage.beside_books(&self.input, (a, self.rows_in));
+        let take = Take {
+            rows: (a..self.rows_in).map(|y| self.input.get(y)).collect(),
+            y0: a,
+            in_w,
+        };
+        let finish = unfinished(
+            windows,
+            (self.out_done, self.final_end),
+            self.w,
+            &self.precision,
+        );
+        let out = self.books.take_and_finish(Some(take), finish, beside)?;
+        if out.is_some() {
+            self.out_done = self.final_end;
+            self.stage.release(self.out_done);
+        }
         self.stage.arrive(&mut self.input, a, self.rows_in);
         let end = self
             .stage
@@ -195,7 +198,7 @@ impl Streamer {
         self.final_end = self.final_end.max(end);
         // The last strip: no strip comes to share the loop.
         let finish = unfinished(
-            &*self.stage,
+            self.stage.output(),
             (self.out_done, self.final_end),
             self.w,
             &self.precision,
@@ -248,15 +251,14 @@ impl Streamer {
     }
 }
 
-/// The final rows `a..b` not yet finished, `w` wide, from `stage`'s windows
+/// The final rows `a..b` not yet finished, `w` wide, from a stage's windows
 /// (none when there are none).
 fn unfinished<'a>(
-    stage: &'a dyn Stage,
+    (base_rows, acc): Output<'a>,
     (a, b): (usize, usize),
     w: usize,
     precision: &'a [Precision],
 ) -> Option<Finish<'a>> {
-    let (base_rows, acc) = stage.output();
     (b > a).then_some(Finish {
         base_rows,
         acc,

@@ -37,7 +37,7 @@ use rayon::prelude::*;
 use coarse::CoarseGrid;
 
 use super::counts::{MethodCounts, SpreadCounts};
-use super::stage::{Stage, WindowUse};
+use super::stage::{Early, Output, Stage, WindowUse};
 use super::window::RowWindow;
 use super::ChannelMode;
 use crate::filter::ep_box::{cluster_count, StatsLayout};
@@ -48,6 +48,7 @@ use crate::filter::kernel::{ColumnTaps, Kernel1d, TentTaps};
 use crate::filter::luminance::Luminance;
 use crate::filter::{Method, ValidParams};
 use crate::geometry::{mirror, Grid, Halo};
+use crate::trace::Span;
 
 /// The memory of a spread chunk: that of this many noisy samples whose every
 /// kernel is reflected at an edge (about 8192 x 1.5 KiB of folded weights at
@@ -184,6 +185,9 @@ pub struct GaussianStage {
     /// The summed-area table of `ybox` (`--bound-from`), one row more above, and
     /// their block; `None` where no width is bounded.
     csum: Option<(RowWindow<f64>, usize)>,
+    /// Rows of the summed-area table added down (the box luminance rows
+    /// may come first, beside the books' loop).
+    csums_done: usize,
     hpass: RowWindow<f64>,
     base_rows: RowWindow<f64>,
     acc: RowWindow<f64>,
@@ -301,6 +305,7 @@ impl GaussianStage {
             tile,
             ybox: RowWindow::new(w + 2 * pad),
             csum,
+            csums_done: 0,
             hpass: RowWindow::new(nch * w),
             base_rows: RowWindow::new(nch * w),
             acc: RowWindow::new(nch * w),
@@ -381,8 +386,22 @@ impl Stage for GaussianStage {
         (self.classified * self.grid.s).saturating_sub(self.support.reach())
     }
 
-    fn output(&self) -> (&RowWindow<f64>, Option<&RowWindow<f64>>) {
+    fn output(&self) -> Output<'_> {
         (&self.base_rows, self.ep.as_ref().map(|_| &self.acc))
+    }
+
+    fn beside_books<'s>(
+        &'s mut self,
+        input: &'s RowWindow<f32>,
+        (_, b): (usize, usize),
+    ) -> (Output<'s>, Option<Box<Early<'s>>>) {
+        // The box luminance of the pixel rows the new input rows complete.
+        let (from, ready) = (self.ybox.end(), b / self.grid.s);
+        if self.ep.is_none() || ready <= from {
+            return (self.output(), None);
+        }
+        let (out, work) = self.ybox_and_output(input, (from, ready));
+        (out, Some(work))
     }
 
     fn release(&mut self, y: usize) {
@@ -455,9 +474,16 @@ impl GaussianStage {
         let ready = rows_in / s;
         let yb = if self.ep.is_some() {
             if ready > self.ybox.end() {
-                self.make_ybox(input, self.ybox.end(), ready);
+                // Not computed beside the books' loop.
+                let work = self.ybox_work(input, (self.ybox.end(), ready));
+                work(&crate::trace::region("box luminance"));
             }
-            self.ybox.end()
+            let (done, end) = (self.csums_done, self.ybox.end());
+            if end > done {
+                self.make_csums(done, end);
+                self.csums_done = end;
+            }
+            end
         } else {
             ready
         };
@@ -545,17 +571,41 @@ impl GaussianStage {
         out_target
     }
 
-    fn make_ybox(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
+    /// Box luminance rows `a..b` pushed, and the loop that computes them
+    /// (with the summed-area table's row sums: one loop, one join, a strip;
+    /// docs/DESIGN.md, "The model's join"), to run now or beside other work;
+    /// the windows the books finish from beside it.
+    fn ybox_work<'s>(
+        &'s mut self,
+        input: &'s RowWindow<f32>,
+        (a, b): (usize, usize),
+    ) -> Box<Early<'s>> {
+        self.ybox_and_output(input, (a, b)).1
+    }
+
+    /// [`Self::ybox_work`], and the output windows beside it.
+    /// (Long: the loop's task, a row's mean, its padding and its sums.)
+    fn ybox_and_output<'s>(
+        &'s mut self,
+        input: &'s RowWindow<f32>,
+        (a, b): (usize, usize),
+    ) -> (Output<'s>, Box<Early<'s>>) {
         let (s, w, pad, in_w) = (self.grid.s, self.w, self.pad, self.grid.in_w);
         let inv = self.inv_s2;
         for _ in a..b {
             self.ybox.push_stale(0.0); // every value is written below
         }
-        let lum = &self.lum;
-        let real_counts = self.real_counts.as_ref();
-        // The summed-area table's row sums in the same task as their row
-        // (one loop, one join, a strip: docs/DESIGN.md, "The model's join").
-        let mut csum_rows: Vec<Option<&mut [f64]>> = match &mut self.csum {
+        let GaussianStage {
+            ref mut ybox,
+            ref mut csum,
+            ref lum,
+            ref real_counts,
+            ref base_rows,
+            ref acc,
+            ref ep,
+            ..
+        } = *self;
+        let mut csum_rows: Vec<Option<&mut [f64]>> = match csum {
             Some((csum, _)) => {
                 for _ in a..b {
                     csum.push_stale(0.0); // every value is written below
@@ -564,48 +614,48 @@ impl GaussianStage {
             }
             None => (a..b).map(|_| None).collect(),
         };
-        let region = crate::trace::region("box luminance");
-        let mut rows = self.ybox.range_mut(a, b);
-        rows.par_iter_mut()
-            .zip(csum_rows.par_iter_mut())
-            .enumerate()
-            .for_each_init(Vec::<f64>::new, |core, (k, (row, csum_row))| {
-                let _task = region.task("box luminance");
-                let y = a + k;
-                // The mean in f64, stored in f32 (`LumRows`).
-                core.clear();
-                core.resize(w, 0.0);
-                for j in y * s..(y + 1) * s {
-                    lum.box_row_add(input.get(j), in_w, s, core);
-                }
-                core.iter_mut().for_each(|v| *v *= inv);
-                // --edge pad: a partial pixel's mean is over its real samples.
-                if let Some((nx, ny)) = real_counts {
-                    for (v, &n) in core.iter_mut().zip(nx) {
-                        let real = n * ny[y];
-                        if real != s * s {
-                            *v *= (s * s) as f64 / real as f64;
+        let mut rows = ybox.range_mut(a, b);
+        let real_counts = real_counts.as_ref();
+        let work = move |region: &Span| {
+            rows.par_iter_mut()
+                .zip(csum_rows.par_iter_mut())
+                .enumerate()
+                .for_each_init(Vec::<f64>::new, |core, (k, (row, csum_row))| {
+                    let _task = region.task("box luminance");
+                    let y = a + k;
+                    // The mean in f64, stored in f32 (`LumRows`).
+                    core.clear();
+                    core.resize(w, 0.0);
+                    for j in y * s..(y + 1) * s {
+                        lum.box_row_add(input.get(j), in_w, s, core);
+                    }
+                    core.iter_mut().for_each(|v| *v *= inv);
+                    // --edge pad: a partial pixel's mean is over its real samples.
+                    if let Some((nx, ny)) = real_counts {
+                        for (v, &n) in core.iter_mut().zip(nx) {
+                            let real = n * ny[y];
+                            if real != s * s {
+                                *v *= (s * s) as f64 / real as f64;
+                            }
                         }
                     }
-                }
-                for (o, &v) in row[pad..pad + w].iter_mut().zip(core.iter()) {
-                    *o = v as f32;
-                }
-                for i in 0..pad {
-                    row[i] = row[pad + mirror(i as i64 - pad as i64, w)];
-                    row[pad + w + i] = row[pad + mirror((w + i) as i64, w)];
-                }
-                if let Some(c) = csum_row {
-                    csum_prefix(row, c);
-                }
-            });
-        drop(rows);
-        drop(csum_rows);
-        self.make_csums(a, b);
+                    for (o, &v) in row[pad..pad + w].iter_mut().zip(core.iter()) {
+                        *o = v as f32;
+                    }
+                    for i in 0..pad {
+                        row[i] = row[pad + mirror(i as i64 - pad as i64, w)];
+                        row[pad + w + i] = row[pad + mirror((w + i) as i64, w)];
+                    }
+                    if let Some(c) = csum_row {
+                        csum_prefix(row, c);
+                    }
+                });
+        };
+        ((base_rows, ep.as_ref().map(|_| acc)), Box::new(work))
     }
 
     /// The summed-area table's rows for the box luminance rows `a..b`
-    /// (`--bound-from`): each row's running sum ([`Self::make_ybox`], in
+    /// (`--bound-from`): each row's running sum ([`Self::ybox_work`], in
     /// its row's task), plus here the row above's where the row is not the
     /// first of its block, on the image's grid of blocks, so the table does
     /// not depend on the strips. The same operations in the same order as
