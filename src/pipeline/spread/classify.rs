@@ -535,7 +535,7 @@ impl GaussianStage {
                 let mut accs = Accs::new(ep, (acc, c2, c4), w, nch, tile);
                 let samples = &mut pending[c0..c1];
                 let values = &pending_v[c0 * nch..c1 * nch];
-                let fresh = batch.fresh_mut();
+                let fresh = &mut batch.fresh;
                 Some(Beside {
                     first: Box::new(move |region| place.run(samples, values, region)),
                     then: Box::new(move |parts, region| accs.scatter(parts, fresh, region)),

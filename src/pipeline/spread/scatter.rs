@@ -333,15 +333,8 @@ impl GaussianStage {
 pub(super) struct Batch {
     pub(super) next: usize,
     pub(super) split: usize,
-    fresh: [Option<usize>; 3],
+    pub(super) fresh: [Option<usize>; 3],
     pub(super) bound: EdgeBound,
-}
-
-impl Batch {
-    /// The first new row of each grid, until the first scatter fills them.
-    pub(super) fn fresh_mut(&mut self) -> &mut [Option<usize>; 3] {
-        &mut self.fresh
-    }
 }
 
 /// What a chunk's width search and placement read.
