@@ -8,9 +8,8 @@ use rayon::prelude::*;
 
 use super::edge::Coverage;
 use super::ledger::{Ledger, Sums};
-use super::stage::Early;
+use super::stage::{Early, Output};
 use super::stream::OutRows;
-use super::window::RowWindow;
 use super::{NonFinite, Precision, Strip};
 use crate::error::{Error, Result, Side};
 
@@ -163,10 +162,8 @@ pub struct Take<'a> {
 /// acc` (or `base_rows`), `w` wide, rounded to `precision`; the ledger and
 /// digest take them in row order.
 pub struct Finish<'a> {
-    /// The base rows (the gather).
-    pub base_rows: &'a RowWindow<f64>,
-    /// The accumulator (the spread noise), where the method has one.
-    pub acc: Option<&'a RowWindow<f64>>,
+    /// The rows (`base + acc`, from row `a`).
+    pub rows: Output<'a>,
     /// The first row.
     pub a: usize,
     /// The end of the rows.
@@ -356,10 +353,11 @@ impl Books {
         let mut rounded = Sums::new(nch);
         let mut digest = FNV_OFFSET;
         for c in 0..nch {
-            let base_row = &f.base_rows.get(y)[c * w..(c + 1) * w];
-            match f.acc {
+            let k = y - f.rows.a;
+            let base_row = &f.rows.base[k][c * w..(c + 1) * w];
+            match &f.rows.acc {
                 Some(acc) => {
-                    let n = &acc.get(y)[c * w..(c + 1) * w];
+                    let n = &acc[k][c * w..(c + 1) * w];
                     for ((v, &b), &n) in tmp.iter_mut().zip(base_row).zip(n) {
                         *v = b + n;
                     }

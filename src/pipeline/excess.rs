@@ -22,7 +22,7 @@
 use rayon::prelude::*;
 
 use super::counts::{ExcessCounts, MethodCounts};
-use super::stage::{Stage, WindowUse};
+use super::stage::{Output, Stage, WindowUse};
 use super::window::RowWindow;
 use super::ChannelMode;
 use crate::error::{Error, Result};
@@ -196,8 +196,8 @@ impl Stage for ExcessStage {
         self.treat_done.saturating_sub(self.passes + GUARD_REACH)
     }
 
-    fn output(&self) -> (&RowWindow<f64>, Option<&RowWindow<f64>>) {
-        (&self.kept, Some(&self.acc))
+    fn output(&self, rows: (usize, usize)) -> Output<'_> {
+        Output::of(&self.kept, Some(&self.acc), rows)
     }
 
     fn release(&mut self, y: usize) {

@@ -9,7 +9,7 @@
 use rayon::prelude::*;
 
 use super::counts::MethodCounts;
-use super::stage::{Stage, WindowUse};
+use super::stage::{Output, Stage, WindowUse};
 use super::window::RowWindow;
 use super::ChannelMode;
 use crate::filter::{Method, ValidParams};
@@ -123,8 +123,8 @@ impl Stage for OrderStage {
         (self.out_done * self.grid.s).saturating_sub(usize::from(self.grid.s == 1))
     }
 
-    fn output(&self) -> (&RowWindow<f64>, Option<&RowWindow<f64>>) {
-        (&self.out, None)
+    fn output(&self, rows: (usize, usize)) -> Output<'_> {
+        Output::of(&self.out, None, rows)
     }
 
     fn release(&mut self, y: usize) {

@@ -17,9 +17,31 @@ pub struct WindowUse {
     pub row_bytes: usize,
 }
 
-/// The windows of final output rows: a base window and an accumulator added
-/// to it.
-pub type Output<'s> = (&'s RowWindow<f64>, Option<&'s RowWindow<f64>>);
+/// Final output rows `a..`, to be finished: each row of a base window, and
+/// of an accumulator added to it.
+pub struct Output<'s> {
+    /// The first row.
+    pub a: usize,
+    /// The base rows, from `a` on.
+    pub base: Vec<&'s [f64]>,
+    /// The accumulator's rows, where the method has one.
+    pub acc: Option<Vec<&'s [f64]>>,
+}
+
+impl<'s> Output<'s> {
+    /// Rows `a..b` of `base` (and `acc`).
+    pub fn of(
+        base: &'s RowWindow<f64>,
+        acc: Option<&'s RowWindow<f64>>,
+        (a, b): (usize, usize),
+    ) -> Self {
+        Output {
+            a,
+            base: (a..b).map(|y| base.get(y)).collect(),
+            acc: acc.map(|acc| (a..b).map(|y| acc.get(y)).collect()),
+        }
+    }
+}
 
 /// Work a stage runs beside the books' loop ([`Stage::beside_books`]).
 pub type Early<'s> = dyn FnOnce(&crate::trace::Span) + Send + 's;
@@ -37,21 +59,20 @@ pub trait Stage: Send {
     fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> usize;
     /// The first input row the stage will still read.
     fn input_needed(&self) -> usize;
-    /// The unrounded values of final output rows: a base window and an
-    /// accumulator added to it.
-    fn output(&self) -> Output<'_>;
-    /// Input rows `a..b` have just entered `input`, before the books take
-    /// them: work on them that can run beside the books' loop (their ledger,
-    /// the finishing of final rows), as tasks of the region it is given, and
-    /// the windows the books finish from (one loop's end less a strip: a
-    /// wake-up of many cores, docs/DESIGN.md, "The model's join"). None by
-    /// default.
+    /// The unrounded values of final output rows `a..b`.
+    fn output(&self, rows: (usize, usize)) -> Output<'_>;
+    /// Input rows `rows` have just entered `input`, before the books take
+    /// them: work that can run beside the books' loop (their ledger, the
+    /// finishing of final rows `finish`), as tasks of the region it is
+    /// given, and those final rows (one loop's end less a strip: a wake-up
+    /// of many cores, docs/DESIGN.md, "The model's join"). None by default.
     fn beside_books<'s>(
         &'s mut self,
         _input: &'s RowWindow<f32>,
         _rows: (usize, usize),
+        finish: (usize, usize),
     ) -> (Output<'s>, Option<Box<Early<'s>>>) {
-        (self.output(), None)
+        (self.output(finish), None)
     }
     /// Output rows below `y` are written: release them.
     fn release(&mut self, y: usize);

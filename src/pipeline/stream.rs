@@ -173,18 +173,16 @@ impl Streamer {
         self.rows_in += strip.rows;
         // The new rows' ledger, the rows the last push made final, and the
         // stage's first work on the new rows, in one loop.
-        let (windows, beside) = self.stage.beside_books(&self.input, (a, self.rows_in));
+        let done = (self.out_done, self.final_end);
+        let (rows, beside) = self
+            .stage
+            .beside_books(&self.input, (a, self.rows_in), done);
         let take = Take {
             rows: (a..self.rows_in).map(|y| self.input.get(y)).collect(),
             y0: a,
             in_w,
         };
-        let finish = unfinished(
-            windows,
-            (self.out_done, self.final_end),
-            self.w,
-            &self.precision,
-        );
+        let finish = unfinished(rows, done, self.w, &self.precision);
         let out = self.books.take_and_finish(Some(take), finish, beside)?;
         if out.is_some() {
             self.out_done = self.final_end;
@@ -197,12 +195,8 @@ impl Streamer {
         self.input.evict_below(self.stage.input_needed());
         self.final_end = self.final_end.max(end);
         // The last strip: no strip comes to share the loop.
-        let finish = unfinished(
-            self.stage.output(),
-            (self.out_done, self.final_end),
-            self.w,
-            &self.precision,
-        );
+        let done = (self.out_done, self.final_end);
+        let finish = unfinished(self.stage.output(done), done, self.w, &self.precision);
         let Some(finish) = finish.filter(|_| self.rows_in == in_h) else {
             return Ok(out);
         };
@@ -251,17 +245,16 @@ impl Streamer {
     }
 }
 
-/// The final rows `a..b` not yet finished, `w` wide, from a stage's windows
-/// (none when there are none).
+/// The final rows `a..b` not yet finished, `w` wide (none when there are
+/// none).
 fn unfinished<'a>(
-    (base_rows, acc): Output<'a>,
+    rows: Output<'a>,
     (a, b): (usize, usize),
     w: usize,
     precision: &'a [Precision],
 ) -> Option<Finish<'a>> {
     (b > a).then_some(Finish {
-        base_rows,
-        acc,
+        rows,
         a,
         b,
         w,

@@ -326,19 +326,53 @@ impl FindCtx<'_> {
 }
 
 /// Work run beside classification's loops (pending samples classified
-/// before: [`GaussianStage::classify_spreading`]): `first` beside the search
-/// for noise, `then`, with what `first` placed, beside the pass (after the
-/// one loop where a row is one task), each given the region of its tasks.
+/// before: [`GaussianStage::classify_spreading`]): the first chunk of a batch
+/// searched and placed beside the search for noise, with the coarse share
+/// the last advance planned (`up`); then scattered beside the pass (after
+/// the one loop where a row is one task).
 pub(super) struct Beside<'s> {
-    pub(super) first: Box<Place<'s>>,
-    pub(super) then: Box<Scatter<'s>>,
+    place: SearchPlace<'s>,
+    samples: &'s mut [Noisy],
+    values: &'s [f32],
+    accs: Accs<'s>,
+    fresh: &'s mut [Option<usize>; 3],
+    up: Option<(usize, usize)>,
 }
 
-/// [`Beside`]'s first job: the chunk's samples searched and placed.
-pub(super) type Place<'s> = dyn FnOnce(&Span) -> Vec<Placed> + Send + 's;
+/// What [`GaussianStage::classify_with`] spreads beside classification: a
+/// batch's samples up to `end`, and the coarse share `up`.
+struct Chunk<'b> {
+    batch: &'b mut Batch,
+    end: usize,
+    up: Option<(usize, usize)>,
+}
 
-/// [`Beside`]'s second job: the parts scattered.
-pub(super) type Scatter<'s> = dyn FnOnce(&[Placed], &Span) + Send + 's;
+impl Beside<'_> {
+    /// The search and placement, and the coarse share, as tasks of
+    /// `region`; the parts placed.
+    fn first(&mut self, region: &Span) -> Vec<Placed> {
+        let Beside {
+            place,
+            samples,
+            values,
+            accs,
+            up,
+            ..
+        } = self;
+        let up = up.take();
+        let upsample = || {
+            if let Some(up) = up {
+                accs.upsample(up, region);
+            }
+        };
+        rayon::join(|| place.run(samples, values, region), upsample).0
+    }
+
+    /// The scatter of `parts`, as tasks of `region`.
+    fn then(&mut self, parts: &[Placed], region: &Span) {
+        self.accs.scatter(parts, self.fresh, region);
+    }
+}
 
 /// Classify pixel rows `a..` (their input rows' horizontal passes `hrows`,
 /// `S` each), searching a row in `parts` column ranges, with `beside`'s
@@ -349,20 +383,16 @@ fn classify_rows(
     mut hrows: Vec<&mut [f64]>,
     a: usize,
     parts: usize,
-    beside: Option<Beside<'_>>,
+    mut beside: Option<Beside<'_>>,
 ) -> (Vec<Found>, Option<Vec<Placed>>) {
     let s = ctx.s;
     let rows = hrows.len() / s;
-    let (first, then) = match beside {
-        Some(b) => (Some(b.first), Some(b.then)),
-        None => (None, None),
-    };
-    let names = if first.is_some() {
+    let names = if beside.is_some() {
         ["classify, search and place", "classify pass, scatter"]
     } else {
         ["classify", "classify pass"]
     };
-    let beside_first = |region: &Span| first.map(|f| f(region));
+    let mut beside_first = |region: &Span| beside.as_mut().map(|b| b.first(region));
     let region = crate::trace::region(names[0]);
     if parts == 1 {
         // Both phases row by row in one task: the pass reads the rows the
@@ -387,8 +417,8 @@ fn classify_rows(
             || beside_first(&region),
         );
         drop(region);
-        if let (Some(then), Some(placed)) = (then, &placed) {
-            then(placed, &crate::trace::region("scatter"));
+        if let (Some(b), Some(placed)) = (&mut beside, &placed) {
+            b.then(placed, &crate::trace::region("scatter"));
         }
         return (found, placed);
     }
@@ -430,8 +460,8 @@ fn classify_rows(
                 .collect::<Vec<Found>>()
         },
         || {
-            if let (Some(then), Some(placed)) = (then, &placed) {
-                then(placed, &region);
+            if let (Some(b), Some(placed)) = (&mut beside, &placed) {
+                b.then(placed, &region);
             }
         },
     );
@@ -454,9 +484,11 @@ impl GaussianStage {
         input: &RowWindow<f32>,
         (a, b): (usize, usize),
         batch: &mut Batch,
+        up: Option<(usize, usize)>,
     ) {
         let c1 = self.chunk_end(batch.bound, batch.next, batch.split);
-        let placed = self.classify_with(input, (a, b), Some((batch, c1)));
+        let chunk = Chunk { batch, end: c1, up };
+        let placed = self.classify_with(input, (a, b), Some(chunk));
         self.count_placed(&placed.unwrap_or_default());
     }
 
@@ -467,7 +499,7 @@ impl GaussianStage {
         &mut self,
         input: &RowWindow<f32>,
         (a, b): (usize, usize),
-        spread: Option<(&mut Batch, usize)>,
+        spread: Option<Chunk<'_>>,
     ) -> Option<Vec<Placed>> {
         let s = self.grid.s;
         for _ in a * s..b * s {
@@ -527,18 +559,18 @@ impl GaussianStage {
         };
         let hrows = hpass.range_mut(a * s, b * s);
         let beside = match (spread, ep.as_ref()) {
-            (Some((batch, c1)), Some(ep)) => {
+            (Some(Chunk { batch, end: c1, up }), Some(ep)) => {
                 let c0 = batch.next;
                 batch.next = c1;
                 let place =
                     SearchPlace::new(ep, (ybox, csum.as_ref()), modes, inv_s2, (s, nch), (w, h));
-                let mut accs = Accs::new(ep, (acc, c2, c4), w, nch, tile);
-                let samples = &mut pending[c0..c1];
-                let values = &pending_v[c0 * nch..c1 * nch];
-                let fresh = &mut batch.fresh;
                 Some(Beside {
-                    first: Box::new(move |region| place.run(samples, values, region)),
-                    then: Box::new(move |parts, region| accs.scatter(parts, fresh, region)),
+                    place,
+                    samples: &mut pending[c0..c1],
+                    values: &pending_v[c0 * nch..c1 * nch],
+                    accs: Accs::new(ep, (acc, c2, c4), w, nch, tile),
+                    fresh: &mut batch.fresh,
+                    up,
                 })
             }
             _ => None,

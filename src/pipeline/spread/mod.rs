@@ -30,11 +30,11 @@
 
 mod classify;
 mod coarse;
+mod rows;
 mod scatter;
 
-use rayon::prelude::*;
-
 use coarse::CoarseGrid;
+use rows::Due;
 
 use super::counts::{MethodCounts, SpreadCounts};
 use super::stage::{Early, Output, Stage, WindowUse};
@@ -213,6 +213,10 @@ pub struct GaussianStage {
     /// the accumulator's, and the output rows it has been added to.
     c2: CoarseGrid,
     up_done: usize,
+    /// What the last advance planned for the next push's loops, and the
+    /// end of the base rows planned.
+    due: Due,
+    base_planned: usize,
     /// The 4x grid, whose rows are upsampled into the 2x grid's: its share
     /// enters a 2x row once, just before that row is upsampled.
     c4: CoarseGrid,
@@ -326,6 +330,8 @@ impl GaussianStage {
             real_counts: None,
             c2: CoarseGrid::new(nch, (w, h), 2, coarse),
             up_done: 0,
+            due: Due::default(),
+            base_planned: 0,
             c4: CoarseGrid::new(nch, (w.div_ceil(2), h.div_ceil(2)), 2, coarse4),
             classify_samples: 0,
             spread_chunk: 0,
@@ -386,22 +392,21 @@ impl Stage for GaussianStage {
         (self.classified * self.grid.s).saturating_sub(self.support.reach())
     }
 
-    fn output(&self) -> Output<'_> {
-        (&self.base_rows, self.ep.as_ref().map(|_| &self.acc))
+    fn output(&self, rows: (usize, usize)) -> Output<'_> {
+        Output::of(&self.base_rows, self.ep.as_ref().map(|_| &self.acc), rows)
     }
 
     fn beside_books<'s>(
         &'s mut self,
         input: &'s RowWindow<f32>,
         (_, b): (usize, usize),
+        finish: (usize, usize),
     ) -> (Output<'s>, Option<Box<Early<'s>>>) {
-        // The box luminance of the pixel rows the new input rows complete.
+        // The box luminance of the pixel rows the new input rows complete,
+        // and what the last advance planned.
         let (from, ready) = (self.ybox.end(), b / self.grid.s);
-        if self.ep.is_none() || ready <= from {
-            return (self.output(), None);
-        }
-        let (out, work) = self.ybox_and_output(input, (from, ready));
-        (out, Some(work))
+        let ybox = (self.ep.is_some() && ready > from).then_some((from, ready));
+        self.books_work(input, ybox, finish)
     }
 
     fn release(&mut self, y: usize) {
@@ -468,6 +473,8 @@ impl GaussianStage {
     /// Advance every cursor as far as `rows_in` input rows allow; returns
     /// the end of the final output rows.
     fn run(&mut self, input: &RowWindow<f32>, rows_in: usize) -> usize {
+        // What the last advance planned and no books' loop took.
+        self.run_due_rows();
         let s = self.grid.s;
         // 1. box luminance
         // (only ep-gauss reads it: the others go by the rows that are in)
@@ -475,8 +482,10 @@ impl GaussianStage {
         let yb = if self.ep.is_some() {
             if ready > self.ybox.end() {
                 // Not computed beside the books' loop.
-                let work = self.ybox_work(input, (self.ybox.end(), ready));
-                work(&crate::trace::region("box luminance"));
+                let ybox = Some((self.ybox.end(), ready));
+                if let (_, Some(work)) = self.books_work(input, ybox, (0, 0)) {
+                    work(&crate::trace::region("box luminance"));
+                }
             }
             let (done, end) = (self.csums_done, self.ybox.end());
             if end > done {
@@ -510,13 +519,17 @@ impl GaussianStage {
             // is spread in classification's loops (two joins fewer a strip:
             // docs/DESIGN.md, "The model's join"), the rest after.
             if let Some(mut batch) = self.spread_begin(sp_target) {
-                self.classify_spreading(input, (self.classified, cls_target), &mut batch);
+                // The coarse share the last advance planned, in the same
+                // loop.
+                let up = self.due.up.take();
+                self.classify_spreading(input, (self.classified, cls_target), &mut batch, up);
                 if batch.next < batch.split {
                     self.spread_chunks(&mut batch);
                 }
                 self.spread_end(batch);
             }
         } else {
+            self.run_due_up();
             if cls_target > self.classified {
                 self.classify(input, self.classified, cls_target);
             }
@@ -537,8 +550,6 @@ impl GaussianStage {
         } else {
             self.classified.saturating_sub(self.halo.base_reach)
         };
-        let base =
-            (base_target > self.base_rows.end()).then(|| (self.base_rows.end(), base_target));
         // 5. output: base plus spread noise, once no later row can reach it.
         let by_spread = match &self.ep {
             Some(_) if self.spread_done < h => {
@@ -546,16 +557,8 @@ impl GaussianStage {
             }
             _ => h,
         };
-        let out_target = base_target.max(self.base_rows.end()).min(by_spread);
-        // The coarse grid's share of final rows (none before it was used:
-        // no coarse spread reaches a row that was final before it).
-        let up = (out_target > self.up_done && self.c2.used).then_some((self.up_done, out_target));
-        self.base_and_upsample(base, up);
-        self.up_done = self.up_done.max(out_target);
-        if base.is_some() {
-            self.hpass
-                .evict_below(base_target.saturating_sub(self.halo.base_reach) * s);
-        }
+        // Planned for the next push's loops (rows.rs); done now at the end.
+        let done = self.plan_rows(base_target, by_spread, all_in);
         let keep = if self.ep.is_some() {
             self.classified
                 .saturating_sub(self.halo.xbar_reach)
@@ -568,90 +571,7 @@ impl GaussianStage {
             // The bound reads the row above its topmost.
             c.evict_below(keep.min(yb).saturating_sub(1));
         }
-        out_target
-    }
-
-    /// Box luminance rows `a..b` pushed, and the loop that computes them
-    /// (with the summed-area table's row sums: one loop, one join, a strip;
-    /// docs/DESIGN.md, "The model's join"), to run now or beside other work;
-    /// the windows the books finish from beside it.
-    fn ybox_work<'s>(
-        &'s mut self,
-        input: &'s RowWindow<f32>,
-        (a, b): (usize, usize),
-    ) -> Box<Early<'s>> {
-        self.ybox_and_output(input, (a, b)).1
-    }
-
-    /// [`Self::ybox_work`], and the output windows beside it.
-    /// (Long: the loop's task, a row's mean, its padding and its sums.)
-    fn ybox_and_output<'s>(
-        &'s mut self,
-        input: &'s RowWindow<f32>,
-        (a, b): (usize, usize),
-    ) -> (Output<'s>, Box<Early<'s>>) {
-        let (s, w, pad, in_w) = (self.grid.s, self.w, self.pad, self.grid.in_w);
-        let inv = self.inv_s2;
-        for _ in a..b {
-            self.ybox.push_stale(0.0); // every value is written below
-        }
-        let GaussianStage {
-            ref mut ybox,
-            ref mut csum,
-            ref lum,
-            ref real_counts,
-            ref base_rows,
-            ref acc,
-            ref ep,
-            ..
-        } = *self;
-        let mut csum_rows: Vec<Option<&mut [f64]>> = match csum {
-            Some((csum, _)) => {
-                for _ in a..b {
-                    csum.push_stale(0.0); // every value is written below
-                }
-                csum.range_mut(a, b).into_iter().map(Some).collect()
-            }
-            None => (a..b).map(|_| None).collect(),
-        };
-        let mut rows = ybox.range_mut(a, b);
-        let real_counts = real_counts.as_ref();
-        let work = move |region: &Span| {
-            rows.par_iter_mut()
-                .zip(csum_rows.par_iter_mut())
-                .enumerate()
-                .for_each_init(Vec::<f64>::new, |core, (k, (row, csum_row))| {
-                    let _task = region.task("box luminance");
-                    let y = a + k;
-                    // The mean in f64, stored in f32 (`LumRows`).
-                    core.clear();
-                    core.resize(w, 0.0);
-                    for j in y * s..(y + 1) * s {
-                        lum.box_row_add(input.get(j), in_w, s, core);
-                    }
-                    core.iter_mut().for_each(|v| *v *= inv);
-                    // --edge pad: a partial pixel's mean is over its real samples.
-                    if let Some((nx, ny)) = real_counts {
-                        for (v, &n) in core.iter_mut().zip(nx) {
-                            let real = n * ny[y];
-                            if real != s * s {
-                                *v *= (s * s) as f64 / real as f64;
-                            }
-                        }
-                    }
-                    for (o, &v) in row[pad..pad + w].iter_mut().zip(core.iter()) {
-                        *o = v as f32;
-                    }
-                    for i in 0..pad {
-                        row[i] = row[pad + mirror(i as i64 - pad as i64, w)];
-                        row[pad + w + i] = row[pad + mirror((w + i) as i64, w)];
-                    }
-                    if let Some(c) = csum_row {
-                        csum_prefix(row, c);
-                    }
-                });
-        };
-        ((base_rows, ep.as_ref().map(|_| acc)), Box::new(work))
+        done
     }
 
     /// The summed-area table's rows for the box luminance rows `a..b`
@@ -677,130 +597,5 @@ impl GaussianStage {
                 csum_add(above[k - 1], below[0]);
             }
         }
-    }
-
-    /// Base rows `base` (the vertical gather of the horizontal pass) and the
-    /// coarse grids' share of final rows `up` ([`Self::upsample`]): rows of
-    /// different windows, read from different ones, so their tasks share
-    /// loops, one where only the 2x grid is used, two with the 4x grid,
-    /// whose share enters the 2x rows first (a loop's end costs many cores
-    /// a wake-up; docs/DESIGN.md, "The model's join").
-    fn base_and_upsample(&mut self, base: Option<(usize, usize)>, up: Option<(usize, usize)>) {
-        let (w, ncw, nch) = (self.w, self.w.div_ceil(2), self.nch);
-        if let Some((a, b)) = base {
-            for _ in a..b {
-                self.base_rows.push_stale(0.0); // every value is written below
-            }
-        }
-        // The 2x rows that take the 4x share before the accumulator reads
-        // them.
-        let four = up.and_then(|(a, b)| self.coarse_rows_read(a, b));
-        let ctx = BaseCtx {
-            base: &self.base,
-            hpass: &self.hpass,
-            modes: &self.modes,
-            w,
-            h: self.h,
-            nch,
-            s: self.grid.s,
-            in_h: self.grid.in_h,
-            inv: self.inv_s2,
-        };
-        let mut jobs: Vec<RowJob<'_>> = Vec::new();
-        if let Some((a, b)) = base {
-            let rows = self.base_rows.range_mut(a, b);
-            jobs.extend(
-                rows.into_iter()
-                    .zip(a..)
-                    .map(|(row, y)| RowJob::Base(y, row)),
-            );
-        }
-        let Some((a, b)) = up else {
-            return run_rows(&ctx, jobs);
-        };
-        if let Some((f, l)) = four {
-            let rows = self.c2.acc.range_mut(f, l);
-            let c4 = &self.c4;
-            jobs.extend(
-                rows.into_iter()
-                    .zip(f..)
-                    .map(|(row, y)| RowJob::Up(c4, ncw, y, row)),
-            );
-            run_rows(&ctx, jobs);
-            jobs = Vec::new();
-        }
-        let (c2, rows) = (&self.c2, self.acc.range_mut(a, b));
-        jobs.extend(
-            rows.into_iter()
-                .zip(a..)
-                .map(|(row, y)| RowJob::Up(c2, w, y, row)),
-        );
-        run_rows(&ctx, jobs);
-    }
-}
-
-/// What a base row's task reads.
-struct BaseCtx<'a> {
-    base: &'a Kernel1d,
-    hpass: &'a RowWindow<f64>,
-    modes: &'a [ChannelMode],
-    w: usize,
-    h: usize,
-    nch: usize,
-    s: usize,
-    in_h: usize,
-    inv: f64,
-}
-
-/// A row task of [`GaussianStage::base_and_upsample`]: a base row, or a row
-/// of a grid that takes a coarse grid's share (the grid, the row's columns
-/// per channel).
-enum RowJob<'a> {
-    Base(usize, &'a mut [f64]),
-    Up(&'a CoarseGrid, usize, usize, &'a mut [f64]),
-}
-
-/// `jobs` as the tasks of one parallel loop (none when there are none).
-fn run_rows(ctx: &BaseCtx<'_>, jobs: Vec<RowJob<'_>>) {
-    if jobs.is_empty() {
-        return;
-    }
-    let region = crate::trace::region("base rows, upsample");
-    jobs.into_par_iter()
-        .for_each_init(
-            <(Vec<f64>, [Vec<f64>; 2])>::default,
-            |(taps, up), job| match job {
-                RowJob::Base(y, row) => {
-                    let _task = region.task("base rows");
-                    base_row(ctx, y, row, taps);
-                }
-                RowJob::Up(grid, n_fine, y, row) => {
-                    let _task = region.task("upsample");
-                    coarse::tent_row(grid, n_fine, y, row, up);
-                }
-            },
-        );
-}
-
-/// Base row `y`: the vertical gather of the horizontal pass (`taps`: the
-/// task's scratch).
-fn base_row(ctx: &BaseCtx<'_>, y: usize, row: &mut [f64], taps: &mut Vec<f64>) {
-    let (w, s) = (ctx.w, ctx.s);
-    let j0 = ctx.base.gather(y, ctx.h, ctx.in_h, taps);
-    for c in 0..ctx.nch {
-        let dst = &mut row[c * w..(c + 1) * w];
-        if ctx.modes[c] == ChannelMode::Nearest {
-            // The centre row's centre sample (horizontal pass).
-            dst.copy_from_slice(&ctx.hpass.get(y * s + (s - 1) / 2)[c * w..(c + 1) * w]);
-            continue;
-        }
-        dst.iter_mut().for_each(|v| *v = -0.0);
-        for (t, &wt) in taps.iter().enumerate() {
-            let src = &ctx.hpass.get(j0 + t)[c * w..(c + 1) * w];
-            for (d, &v) in dst.iter_mut().zip(src) {
-                *d += wt * v;
-            }
-        }
-        dst.iter_mut().for_each(|v| *v *= ctx.inv);
     }
 }

@@ -5,6 +5,7 @@
 
 use rayon::prelude::*;
 
+use super::rows::{run_rows, RowJob};
 use super::*;
 
 /// Where the weights of one axis of a spread are.
@@ -422,6 +423,18 @@ pub(super) struct Accs<'a> {
 }
 
 impl<'a> Accs<'a> {
+    /// The coarse grids' share of the accumulator's final rows `a..b`, a
+    /// task a row of `region` ([`super::coarse::tent_row`]).
+    pub(super) fn upsample(&mut self, (a, b): (usize, usize), region: &crate::trace::Span) {
+        let (c2, w) = (&*self.c2, self.w);
+        let rows = self.acc.range_mut(a, b);
+        let jobs = rows
+            .into_iter()
+            .zip(a..)
+            .map(|(row, y)| RowJob::Up(c2, w, y, row));
+        run_rows(None, jobs.collect(), region);
+    }
+
     /// The fine, 2x and 4x grids, `w` pixels wide, `nch` channels, tiles of
     /// `tile` fine pixels.
     pub(super) fn new(
