@@ -3,7 +3,7 @@
 //! grids' share of final rows), done beside that push's first loops: the
 //! books' loop takes the box luminance, the base rows and the 4x grid's
 //! share of 2x rows; classification's first loop the share of final rows
-//! (docs/DESIGN.md, "Fewer joins, third round"). A row's values are the
+//! (docs/DESIGN.md, "Fewer joins, second round"). A row's values are the
 //! same whichever loop computes them.
 
 use rayon::prelude::*;
@@ -123,12 +123,7 @@ impl GaussianStage {
             );
         }
         if let Some((f, l)) = four {
-            let rows = c2.acc.range_mut(f, l);
-            jobs.extend(
-                rows.into_iter()
-                    .zip(f..)
-                    .map(|(row, y)| RowJob::Up(c4, ncw, y, row)),
-            );
+            jobs.extend(share_jobs(c2.acc.range_mut(f, l), f, c4, ncw));
         }
         let ctx = BaseCtx {
             base: &self.base,
@@ -223,12 +218,7 @@ impl GaussianStage {
             ),
         };
         if let Some((f, l)) = four {
-            let rows = c2.acc.range_mut(f, l);
-            jobs.extend(
-                rows.into_iter()
-                    .zip(f..)
-                    .map(|(row, y)| RowJob::Up(c4, ncw, y, row)),
-            );
+            jobs.extend(share_jobs(c2.acc.range_mut(f, l), f, c4, ncw));
         }
         let out = Output {
             a: finish.0,
@@ -311,6 +301,19 @@ pub(super) struct BaseCtx<'a> {
 pub(super) enum RowJob<'a> {
     Base(usize, &'a mut [f64]),
     Up(&'a CoarseGrid, usize, usize, &'a mut [f64]),
+}
+
+/// Rows `from..` of a grid (`n_fine` columns per channel), each a job taking
+/// `grid`'s share.
+pub(super) fn share_jobs<'a>(
+    rows: Vec<&'a mut [f64]>,
+    from: usize,
+    grid: &'a CoarseGrid,
+    n_fine: usize,
+) -> impl Iterator<Item = RowJob<'a>> {
+    rows.into_iter()
+        .zip(from..)
+        .map(move |(row, y)| RowJob::Up(grid, n_fine, y, row))
 }
 
 /// `jobs` as tasks of `region` in one parallel loop (none when there are

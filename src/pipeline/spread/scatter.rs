@@ -5,7 +5,7 @@
 
 use rayon::prelude::*;
 
-use super::rows::{run_rows, RowJob};
+use super::rows::{run_rows, share_jobs};
 use super::*;
 
 /// Where the weights of one axis of a spread are.
@@ -426,12 +426,7 @@ impl<'a> Accs<'a> {
     /// The coarse grids' share of the accumulator's final rows `a..b`, a
     /// task a row of `region` ([`super::coarse::tent_row`]).
     pub(super) fn upsample(&mut self, (a, b): (usize, usize), region: &crate::trace::Span) {
-        let (c2, w) = (&*self.c2, self.w);
-        let rows = self.acc.range_mut(a, b);
-        let jobs = rows
-            .into_iter()
-            .zip(a..)
-            .map(|(row, y)| RowJob::Up(c2, w, y, row));
+        let jobs = share_jobs(self.acc.range_mut(a, b), a, self.c2, self.w);
         run_rows(None, jobs.collect(), region);
     }
 
