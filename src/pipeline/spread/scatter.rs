@@ -679,3 +679,62 @@ fn scatter_tile(job: &mut TileJob<'_, '_>, nch: usize) {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::filter::FilterParams;
+
+    /// An ep-gauss stage of 400x400 pixels at S = 1, with `n` pending
+    /// samples at pixel `(x, y)`.
+    fn stage_with(n: usize, (x, y): (u32, u32)) -> GaussianStage {
+        let p = FilterParams::new(Method::EpGauss, 1);
+        let grid = Grid {
+            in_w: 400,
+            in_h: 400,
+            s: 1,
+        };
+        let mut st = GaussianStage::new(
+            grid,
+            vec![1.0],
+            vec![ChannelMode::Spread],
+            &p.validated().unwrap(),
+            16,
+            None,
+        );
+        let sample = Noisy {
+            i: x,
+            j: y,
+            x0: 1.0,
+            xbar0: 0.0,
+            level: 0,
+            capped: false,
+        };
+        st.pending = vec![sample; n];
+        st
+    }
+
+    #[test]
+    fn a_chunk_holds_the_memory_of_spread_chunk_samples_at_an_edge() {
+        // Three chunks' worth of samples, more than one chunk's count.
+        let n = 3 * SPREAD_CHUNK;
+        // In the middle no kernel reaches an edge: one chunk.
+        let mid = stage_with(n, (200, 200));
+        let bound = EdgeBound::of(mid.ep.as_ref().unwrap());
+        assert!(bound.margin < 200, "the test's middle is inside");
+        assert_eq!(mid.chunk_end(bound, 0, n), n);
+        // In a corner every kernel may fold on both axes: SPREAD_CHUNK a
+        // chunk, the memory it always had.
+        let corner = stage_with(n, (0, 0));
+        assert_eq!(corner.chunk_end(bound, 0, n), SPREAD_CHUNK);
+        assert_eq!(corner.chunk_end(bound, SPREAD_CHUNK, n), 2 * SPREAD_CHUNK);
+        // A configured chunk still makes progress of one sample at least.
+        let mut tiny = stage_with(4, (0, 0));
+        tiny.set_spread_chunk(1);
+        assert_eq!(tiny.chunk_end(bound, 0, 4), 1);
+        // On one edge, one axis: about twice as many samples.
+        let edge = stage_with(n, (0, 200));
+        let end = edge.chunk_end(bound, 0, n);
+        assert!(end > SPREAD_CHUNK && end < 2 * SPREAD_CHUNK + 64, "{end}");
+    }
+}
