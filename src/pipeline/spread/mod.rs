@@ -17,6 +17,10 @@
 //!    plus the accumulator (all noisy samples of rows `≤ y + spread_reach`
 //!    spread).
 //!
+//! Which parallel loop does a cursor's work may differ (the box luminance and
+//! the base rows run beside the skeleton's books, the spread beside the
+//! classification: `rows.rs`, `classify.rs`), never what it computes.
+//!
 //! Each cursor advances only when what it reads is present, so the result does
 //! not depend on how rows arrive (strip height). Every output value is built
 //! by the same operations in the same order whatever the tile size or thread
@@ -541,9 +545,10 @@ impl GaussianStage {
         if spreads {
             self.spread_done = sp_target;
         }
-        // 4. base rows: the vertical gather, as soon as its input rows are
-        // classified; the short-lived horizontal-pass rows go, the (S times
-        // fewer) base rows wait for the spreading.
+        // 4. base rows: the vertical gather, once its input rows are
+        // classified (made in the next push's first loop, rows.rs); the
+        // short-lived horizontal-pass rows go then, the (S times fewer) base
+        // rows wait for the spreading.
         let h = self.h;
         let base_target = if self.classified == h {
             h
