@@ -70,6 +70,18 @@ mod tests {
     use super::*;
     use crate::filter::FilterParams;
 
+    /// A one-channel stage of `p` on `grid`, tiles of 16.
+    pub(super) fn stage(p: &FilterParams, grid: Grid) -> GaussianStage {
+        GaussianStage::new(
+            grid,
+            vec![1.0],
+            vec![ChannelMode::Spread],
+            &p.validated().unwrap(),
+            16,
+            None,
+        )
+    }
+
     #[test]
     fn halo_from_params_equals_the_stages() {
         for m in [Method::EpGauss, Method::Gauss, Method::Box] {
@@ -86,14 +98,7 @@ mod tests {
                     in_h: 20 * s,
                     s,
                 };
-                let e = GaussianStage::new(
-                    grid,
-                    vec![1.0],
-                    vec![ChannelMode::Spread],
-                    &p.validated().unwrap(),
-                    16,
-                    None,
-                );
+                let e = stage(&p, grid);
                 assert_eq!(
                     e.halo(),
                     crate::filter::halo(&p),

@@ -694,14 +694,7 @@ mod tests {
             in_h: 400,
             s: 1,
         };
-        let mut st = GaussianStage::new(
-            grid,
-            vec![1.0],
-            vec![ChannelMode::Spread],
-            &p.validated().unwrap(),
-            16,
-            None,
-        );
+        let mut st = super::super::tests::stage(&p, grid);
         let sample = Noisy {
             i: x,
             j: y,
