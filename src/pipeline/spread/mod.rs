@@ -415,7 +415,7 @@ impl Stage for GaussianStage {
         // and what the last advance planned.
         let (from, ready) = (self.ybox.end(), b / self.grid.s);
         let ybox = (self.ep.is_some() && ready > from).then_some((from, ready));
-        self.books_work(input, ybox, finish)
+        self.books_work(ybox.map(|r| (r, input)), finish)
     }
 
     fn release(&mut self, y: usize) {
@@ -491,8 +491,8 @@ impl GaussianStage {
         let yb = if self.ep.is_some() {
             if ready > self.ybox.end() {
                 // Not computed beside the books' loop.
-                let ybox = Some((self.ybox.end(), ready));
-                if let (_, Some(work)) = self.books_work(input, ybox, (0, 0)) {
+                let ybox = Some(((self.ybox.end(), ready), input));
+                if let (_, Some(work)) = self.books_work(ybox, (0, 0)) {
                     work(&crate::trace::region("box luminance"));
                 }
             }

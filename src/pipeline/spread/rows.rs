@@ -33,9 +33,9 @@ impl GaussianStage {
         by_spread: usize,
         all_in: bool,
     ) -> usize {
-        // The last plan's work ran in this push's loops.
-        self.run_due_rows();
-        self.run_due_up();
+        // The last plan's work ran in this push's loops (the books' and
+        // classification's, or `run`'s own).
+        debug_assert!(self.due.base.is_none() && self.due.four.is_none() && self.due.up.is_none());
         let done = self.due.out;
         let base = (base_target > self.base_planned).then_some((self.base_planned, base_target));
         self.base_planned = self.base_planned.max(base_target);
@@ -65,14 +65,8 @@ impl GaussianStage {
     /// books' loop took them), and the horizontal-pass rows no base row
     /// reads any more go.
     pub(super) fn run_due_rows(&mut self) {
-        let (base, four) = (self.due.base.take(), self.due.four.take());
-        if base.is_some() || four.is_some() {
-            let (ctx, jobs) = self.due_row_jobs(base, four);
-            run_rows(
-                Some(&ctx),
-                jobs,
-                &crate::trace::region("base rows, upsample"),
-            );
+        if let (_, Some(work)) = self.books_work(None, (0, 0)) {
+            work(&crate::trace::region("base rows, upsample"));
         }
         let keep = self.base_rows.end().saturating_sub(self.halo.base_reach);
         self.hpass.evict_below(keep * self.grid.s);
@@ -94,60 +88,15 @@ impl GaussianStage {
         }
     }
 
-    /// The base rows `base` pushed and the 2x rows `four`, as row jobs, with
-    /// what a base row reads.
-    fn due_row_jobs(
-        &mut self,
-        base: Option<(usize, usize)>,
-        four: Option<(usize, usize)>,
-    ) -> (BaseCtx<'_>, Vec<RowJob<'_>>) {
-        if let Some((a, b)) = base {
-            for _ in a..b {
-                self.base_rows.push_stale(0.0); // every value is written below
-            }
-        }
-        let ncw = self.w.div_ceil(2);
-        let GaussianStage {
-            ref mut base_rows,
-            ref mut c2,
-            ref c4,
-            ..
-        } = *self;
-        let mut jobs = Vec::new();
-        if let Some((a, b)) = base {
-            let rows = base_rows.range_mut(a, b);
-            jobs.extend(
-                rows.into_iter()
-                    .zip(a..)
-                    .map(|(row, y)| RowJob::Base(y, row)),
-            );
-        }
-        if let Some((f, l)) = four {
-            jobs.extend(share_jobs(c2.acc.range_mut(f, l), f, c4, ncw));
-        }
-        let ctx = BaseCtx {
-            base: &self.base,
-            hpass: &self.hpass,
-            modes: &self.modes,
-            w: self.w,
-            h: self.h,
-            nch: self.nch,
-            s: self.grid.s,
-            in_h: self.grid.in_h,
-            inv: self.inv_s2,
-        };
-        (ctx, jobs)
-    }
-
-    /// The books' loop's company: the box luminance of new rows `ybox` (and
-    /// the summed-area table's row sums), the planned base rows and 4x
-    /// share; and the final rows `finish` for the books, read beside them.
+    /// The books' loop's company: the box luminance of new rows (pixel rows
+    /// `a..b` of `input`, and the summed-area table's row sums), the planned
+    /// base rows and 4x share; and the final rows `finish` for the books,
+    /// read beside them.
     /// (Long: every window borrowed one by one for the three jobs, and the
     /// box luminance's task.)
     pub(super) fn books_work<'s>(
         &'s mut self,
-        input: &'s RowWindow<f32>,
-        new_rows: Option<(usize, usize)>,
+        new_rows: Option<((usize, usize), &'s RowWindow<f32>)>,
         finish: (usize, usize),
     ) -> (Output<'s>, Option<Box<Early<'s>>>) {
         let (base, four) = (self.due.base.take(), self.due.four.take());
@@ -156,7 +105,7 @@ impl GaussianStage {
         }
         let (s, w, pad, in_w, inv) = (self.grid.s, self.w, self.pad, self.grid.in_w, self.inv_s2);
         let ncw = w.div_ceil(2);
-        if let Some((a, b)) = new_rows {
+        if let Some(((a, b), _)) = new_rows {
             for _ in a..b {
                 self.ybox.push_stale(0.0); // every value is written below
             }
@@ -190,18 +139,19 @@ impl GaussianStage {
             ..
         } = *self;
         // The box luminance's rows, and the summed-area table's.
-        let luminance = new_rows.map(|(a, b)| {
+        let luminance = new_rows.map(|((a, b), input)| {
             let csum_rows: Vec<Option<&mut [f64]>> = match csum {
                 Some((csum, _)) => csum.range_mut(a, b).into_iter().map(Some).collect(),
                 None => (a..b).map(|_| None).collect(),
             };
-            (a, ybox.range_mut(a, b), csum_rows)
+            (a, input, ybox.range_mut(a, b), csum_rows)
         });
         let real_counts = real_counts.as_ref();
         // The base rows to make, and the rows to finish beside them.
         let (finish_base, mut jobs) = match base {
             Some((a, b)) => {
-                let (f0, f1) = finish;
+                // No rows to finish: none read, from the first made.
+                let (f0, f1) = if finish.1 > finish.0 { finish } else { (a, a) };
                 let mut rows = base_rows.range_mut(f0, b);
                 let made = rows.split_off(a - f0);
                 let read: Vec<&[f64]> = rows.into_iter().take(f1 - f0).map(|r| &*r).collect();
@@ -240,7 +190,7 @@ impl GaussianStage {
         };
         let work = move |region: &Span| {
             let luminance = move || {
-                let Some((a, mut rows, mut csum_rows)) = luminance else {
+                let Some((a, input, mut rows, mut csum_rows)) = luminance else {
                     return;
                 };
                 rows.par_iter_mut()
