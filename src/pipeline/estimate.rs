@@ -57,15 +57,57 @@ pub fn read_ahead_blocks(block_bytes: u64) -> u64 {
     (READ_AHEAD_BYTES / block_bytes.max(1)).max(2)
 }
 
-/// The reader's batches in bytes ([`read_ahead_blocks`], each at most the
-/// whole image of `h` rows of `row` bytes), [`READ_AHEAD_BATCHES`] of them.
-fn read_ahead(row: u64, h: usize, block_bytes: u64) -> u64 {
+/// Blocks the reader's window of blocks decoding ahead holds at the least
+/// where the job's memory allows ([`WINDOW_BUDGET`]): a block decodes on one
+/// core, so the window bounds the cores decoding at once. At 32769 wide
+/// [`READ_AHEAD_BATCHES`] of [`read_ahead_blocks`] are 6 blocks of 6 MiB,
+/// which held box to 7.45x at 16 cores in the scaling model (its decodes
+/// went 6 at a time); 8 give 10.1x, 10 gave 11.8x but box's peak RSS at 16
+/// threads 275-290 MiB (docs/DESIGN.md, "The reader's window from the job's
+/// memory").
+pub const WINDOW_MIN_BLOCKS: u64 = 8;
+
+/// The job's estimate ([`estimate_bytes`]) within which the reader's window
+/// grows to [`WINDOW_MIN_BLOCKS`]: three quarters of the 256 MiB a 32769-wide
+/// job should stay within, the rest for what the estimate does not count
+/// (blocks each worker decodes or compresses, the allocator's arenas). At
+/// 32769 wide box and gauss grow (181 and 185 MiB), ep-gauss does not (275
+/// MiB, its peak RSS already over 256 at 16 threads): its windows of rows
+/// hold the most, and decoding is a smaller share of its work (9.1x at 16
+/// cores in the model with 6 blocks).
+pub const WINDOW_BUDGET: u64 = 192 << 20;
+
+/// Blocks (chunks) of `block_bytes` decoded bytes the reader's window holds
+/// for `job`: [`READ_AHEAD_BATCHES`] batches of [`read_ahead_blocks`], or
+/// [`WINDOW_MIN_BLOCKS`] where that is more and the job's estimate with them
+/// stays within [`WINDOW_BUDGET`].
+pub fn window_blocks(
+    job: &StripLayout,
+    params: &FilterParams,
+    cfg: &PipelineConfig,
+    block_bytes: u64,
+) -> u64 {
+    let floor = READ_AHEAD_BATCHES * read_ahead_blocks(block_bytes);
+    if floor >= WINDOW_MIN_BLOCKS {
+        return floor;
+    }
+    let grown = estimate_with(job, params, cfg, block_bytes, WINDOW_MIN_BLOCKS);
+    if grown <= WINDOW_BUDGET {
+        WINDOW_MIN_BLOCKS
+    } else {
+        floor
+    }
+}
+
+/// The reader's window of `blocks` blocks in bytes (at least
+/// [`READ_AHEAD_BATCHES`] x [`READ_AHEAD_BYTES`], at most as many whole
+/// images of `h` rows of `row` bytes).
+fn read_ahead(row: u64, h: usize, block_bytes: u64, blocks: u64) -> u64 {
     let image = row.saturating_mul(h as u64).max(block_bytes);
-    read_ahead_blocks(block_bytes)
+    blocks
         .saturating_mul(block_bytes)
-        .max(READ_AHEAD_BYTES)
-        .min(image)
-        .saturating_mul(READ_AHEAD_BATCHES)
+        .max(READ_AHEAD_BATCHES * READ_AHEAD_BYTES)
+        .min(image.saturating_mul(READ_AHEAD_BATCHES))
 }
 
 /// Bytes a job will hold at most, from its sizes alone: the strips in flight,
@@ -80,9 +122,21 @@ pub fn estimate_bytes(
     cfg: &PipelineConfig,
     block_bytes: u64,
 ) -> u64 {
+    let blocks = window_blocks(job, params, cfg, block_bytes);
+    estimate_with(job, params, cfg, block_bytes, blocks)
+}
+
+/// [`estimate_bytes`] with a reader's window of `blocks` blocks.
+fn estimate_with(
+    job: &StripLayout,
+    params: &FilterParams,
+    cfg: &PipelineConfig,
+    block_bytes: u64,
+    blocks: u64,
+) -> u64 {
     let halo = crate::filter::halo(params);
     if params.method == Method::EpBox {
-        return estimate_box_bytes(job, cfg, block_bytes, halo);
+        return estimate_box_bytes(job, cfg, (block_bytes, blocks), halo);
     }
     let s = job.grid.s as u64;
     let nch = job.channels.len() as u64;
@@ -127,6 +181,7 @@ pub fn estimate_bytes(
         in_row,
         job.grid.in_h,
         block_bytes,
+        blocks,
     ));
     windows
         .saturating_add(table)
@@ -139,7 +194,7 @@ pub fn estimate_bytes(
 fn estimate_box_bytes(
     job: &StripLayout,
     cfg: &PipelineConfig,
-    block_bytes: u64,
+    (block_bytes, blocks): (u64, u64),
     halo: Halo,
 ) -> u64 {
     let w = job.grid.in_w as u64;
@@ -173,6 +228,7 @@ fn estimate_box_bytes(
             w.saturating_mul(nall * 4),
             job.grid.in_h,
             block_bytes,
+            blocks,
         ))
         .saturating_add(w.saturating_mul(nch * 8 * 16 * 4))
 }
@@ -196,5 +252,45 @@ mod tests {
         // Blocks past the cap: two at the least.
         assert_eq!(read_ahead_blocks(READ_AHEAD_BYTES), 2);
         assert_eq!(read_ahead_blocks(0), READ_AHEAD_BYTES);
+    }
+
+    /// A float RGB job of `in_w` x `in_h` samples at S = 3.
+    fn rgb(in_w: usize, in_h: usize) -> StripLayout {
+        let grid = Grid { in_w, in_h, s: 3 };
+        let names = ["R", "G", "B"].map(String::from).to_vec();
+        StripLayout::new(grid, names, vec![0.2126, 0.7152, 0.0722])
+    }
+
+    #[test]
+    fn the_window_grows_to_eight_blocks_within_the_budget() {
+        let cfg = PipelineConfig::default();
+        let window = |job: &StripLayout, m: Method, block: u64| {
+            let p = FilterParams::new(m, 3);
+            (
+                window_blocks(job, &p, &cfg, block),
+                estimate_bytes(job, &p, &cfg, block),
+            )
+        };
+        // 32769 wide, 16-row ZIP blocks of 6 MiB: the light methods' job fits
+        // the budget with 8 of them (where two batches hold 6), ep-gauss's
+        // does not.
+        let wide = rgb(32769, 3600);
+        let block = 32769 * 3 * 4 * 16;
+        for m in [Method::Box, Method::Gauss] {
+            let (blocks, bytes) = window(&wide, m, block);
+            assert_eq!(blocks, WINDOW_MIN_BLOCKS, "{m:?}");
+            assert!(bytes <= WINDOW_BUDGET, "{m:?}");
+            // Its estimate counts the whole window.
+            assert!(bytes >= WINDOW_MIN_BLOCKS * block, "{m:?}");
+        }
+        let (blocks, bytes) = window(&wide, Method::EpGauss, block);
+        assert_eq!(blocks, READ_AHEAD_BATCHES * read_ahead_blocks(block));
+        assert!(bytes > WINDOW_BUDGET);
+        // Narrower: two batches already hold more than 8 blocks.
+        let narrow = rgb(12288, 12288);
+        let block = 12288 * 3 * 4 * 16;
+        let (blocks, _) = window(&narrow, Method::Box, block);
+        assert_eq!(blocks, READ_AHEAD_BATCHES * read_ahead_blocks(block));
+        assert!(blocks > WINDOW_MIN_BLOCKS);
     }
 }

@@ -54,8 +54,8 @@ pub use stage::{Stage, WindowUse};
 pub use stream::{OutRows, Streamer};
 
 pub use estimate::{
-    auto_strip_rows, estimate_bytes, read_ahead_blocks, READ_AHEAD_BATCHES, READ_AHEAD_BYTES,
-    STRIP_BYTES,
+    auto_strip_rows, estimate_bytes, read_ahead_blocks, window_blocks, READ_AHEAD_BATCHES,
+    READ_AHEAD_BYTES, STRIP_BYTES,
 };
 pub use memory::{filter_in_memory, filter_planar, MemoryRun, MemorySink, MemorySource};
 pub use runner::{mean_luminance, run, thread_pool, Progress};
@@ -75,18 +75,31 @@ pub struct Strip {
 /// its own ([`Source::decoder`]).
 pub type Decoder<'s> = Box<dyn FnOnce() + Send + 's>;
 
+/// How far a decoding source reads ahead ([`Source::decoder`]).
+pub struct ReadAhead<'a> {
+    /// The strips' height.
+    pub strip_rows: usize,
+    /// Blocks of the window for blocks of the given decoded bytes
+    /// ([`window_blocks`]).
+    pub window_blocks: &'a (dyn Fn(u64) -> u64 + Sync),
+}
+
 /// Something that delivers input rows in increasing order.
 pub trait Source: Send {
     /// The next `max_rows` rows (fewer at the end); `None` when done.
     fn next_strip(&mut self, max_rows: usize) -> Result<Option<Strip>>;
 
-    /// For a source that decodes: the loop that decodes its rows ahead, for
-    /// strips of `max_rows`, with `pool`'s threads, to run on a thread of
-    /// its own while the strips are taken (it returns once the rows are
-    /// decoded, on an error, or once the source is dropped). Then call
+    /// For a source that decodes: the loop that decodes its rows ahead, as
+    /// `ahead` says, with `pool`'s threads, to run on a thread of its own
+    /// while the strips are taken (it returns once the rows are decoded, on
+    /// an error, or once the source is dropped). Then call
     /// [`Source::wait_ready`] before each `next_strip`. `None` (the default):
     /// `next_strip` does the work itself.
-    fn decoder<'s>(&mut self, _max_rows: usize, _pool: &'s rayon::ThreadPool) -> Option<Decoder<'s>>
+    fn decoder<'s>(
+        &mut self,
+        _ahead: &ReadAhead<'_>,
+        _pool: &'s rayon::ThreadPool,
+    ) -> Option<Decoder<'s>>
     where
         Self: 's,
     {
@@ -104,13 +117,13 @@ macro_rules! decode_ahead_in_inner {
     () => {
         fn decoder<'s>(
             &mut self,
-            max_rows: usize,
+            ahead: &$crate::pipeline::ReadAhead<'_>,
             pool: &'s rayon::ThreadPool,
         ) -> Option<$crate::pipeline::Decoder<'s>>
         where
             Self: 's,
         {
-            self.inner.decoder(max_rows, pool)
+            self.inner.decoder(ahead, pool)
         }
 
         fn wait_ready(&mut self) {

@@ -78,9 +78,12 @@ pub fn run<S: Source, K: Sink>(
     let pool = &pool;
     let io = io_pool.as_ref().unwrap_or(pool);
     let mut stages = StageSeconds::default();
+    // The reader's window of blocks, from the job's memory.
+    let window = |block_bytes| window_blocks(job, &params, cfg, block_bytes);
+    let ahead: (usize, &(dyn Fn(u64) -> u64 + Sync)) = (strip_rows, &window);
 
     let result = std::thread::scope(|scope| -> Result<()> {
-        let reader = scope.spawn(move || read_strips(source, io, strip_rows, strip_tx));
+        let reader = scope.spawn(move || read_strips(source, io, ahead, strip_tx));
         let writer = scope.spawn(move || write_rows(sink, io, total, row_rx));
         let mut filter_result = Ok(());
         let mut writer_failed = false;
@@ -163,11 +166,15 @@ pub fn run<S: Source, K: Sink>(
 fn read_strips<S: Source>(
     mut source: S,
     pool: &rayon::ThreadPool,
-    strip_rows: usize,
+    (strip_rows, window_blocks): (usize, &(dyn Fn(u64) -> u64 + Sync)),
     tx: crossbeam_channel::Sender<Result<Strip>>,
 ) -> f64 {
     std::thread::scope(|scope| {
-        if let Some(decoder) = source.decoder(strip_rows, pool) {
+        let ahead = ReadAhead {
+            strip_rows,
+            window_blocks,
+        };
+        if let Some(decoder) = source.decoder(&ahead, pool) {
             scope.spawn(decoder);
         }
         let mut busy = 0.0;

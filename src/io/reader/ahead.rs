@@ -9,7 +9,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::source::{decode_rows_into, release_span};
 use super::*;
-use crate::pipeline::{read_ahead_blocks, READ_AHEAD_BATCHES};
 
 /// A decoded block row's values and the file's byte range they came from
 /// (or the error).
@@ -57,31 +56,31 @@ pub(super) struct Ahead {
     pending: Option<(usize, usize)>,
 }
 
-/// Block rows decoded or decoding at once: [`READ_AHEAD_BATCHES`] times
-/// [`read_ahead_blocks`] chunks (the memory the estimate counts), and at
-/// least a strip's rows and one block row more.
-fn window(input: &ExrInput, first: usize, max_rows: usize) -> usize {
+/// Block rows decoded or decoding at once: `blocks` chunks (the memory the
+/// estimate counts, `pipeline::window_blocks`), and at least a strip's rows
+/// and one block row more.
+fn window(input: &ExrInput, first: usize, max_rows: usize, blocks: usize) -> usize {
     let rows = &input.rows[first..];
     let chunks = rows.first().map_or(1, |r| r.chunks.len().max(1));
-    let budget = (READ_AHEAD_BATCHES * read_ahead_blocks(input.block_bytes())) as usize / chunks;
+    let budget = blocks / chunks;
     let lines = rows.iter().map(|r| r.y1 - r.y0).min().unwrap_or(1).max(1);
     budget.max(max_rows.div_ceil(lines) + 1).max(2)
 }
 
-/// Start decoding ahead from block row `first`, for strips of `max_rows` rows
-/// of `row_len` values: the reader's side, and the decoder loop to run on a
-/// thread of its own (it returns once every block row is decoded, after an
-/// error, or once the reader's side is dropped).
+/// Start decoding ahead from block row `first`, rows of `row_len` values, for
+/// strips of `max_rows` rows, `blocks` blocks at once: the reader's side, and
+/// the decoder loop to run on a thread of its own (it returns once every
+/// block row is decoded, after an error, or once the reader's side is
+/// dropped).
 pub(super) fn start<'s>(
     input: &'s ExrInput,
-    first: usize,
-    row_len: usize,
-    max_rows: usize,
+    (first, row_len): (usize, usize),
+    (max_rows, blocks): (usize, usize),
     pool: &'s rayon::ThreadPool,
     released: Option<(usize, usize)>,
 ) -> (Ahead, crate::pipeline::Decoder<'s>) {
     let end = input.rows.len();
-    let slots = window(input, first, max_rows);
+    let slots = window(input, first, max_rows, blocks);
     let (done_tx, done) = crossbeam_channel::unbounded::<Done>();
     let (free, free_rx) = crossbeam_channel::bounded(slots);
     for _ in 0..slots {

@@ -3,8 +3,8 @@
 
 use super::*;
 
-use crate::pipeline::read_ahead_blocks;
 pub use crate::pipeline::READ_AHEAD_BYTES;
+use crate::pipeline::{read_ahead_blocks, ReadAhead};
 
 /// A [`Source`] over an [`ExrInput`].
 pub struct ExrSource<'a> {
@@ -163,12 +163,16 @@ impl Source for InputSource<'_> {
         }
     }
 
-    fn decoder<'s>(&mut self, max_rows: usize, pool: &'s rayon::ThreadPool) -> Option<Decoder<'s>>
+    fn decoder<'s>(
+        &mut self,
+        ahead: &ReadAhead<'_>,
+        pool: &'s rayon::ThreadPool,
+    ) -> Option<Decoder<'s>>
     where
         Self: 's,
     {
         match self {
-            InputSource::Exr(s) => s.decoder(max_rows, pool),
+            InputSource::Exr(s) => s.decoder(ahead, pool),
             InputSource::Rgbe(_) => None,
         }
     }
@@ -231,7 +235,11 @@ impl Source for ExrSource<'_> {
 
     /// The block rows decoded ahead on a thread of its own
     /// ([`super::ahead`]).
-    fn decoder<'s>(&mut self, max_rows: usize, pool: &'s rayon::ThreadPool) -> Option<Decoder<'s>>
+    fn decoder<'s>(
+        &mut self,
+        ahead: &ReadAhead<'_>,
+        pool: &'s rayon::ThreadPool,
+    ) -> Option<Decoder<'s>>
     where
         Self: 's,
     {
@@ -239,11 +247,11 @@ impl Source for ExrSource<'_> {
             return None;
         }
         let released = self.released.take();
+        let blocks = (ahead.window_blocks)(self.input.block_bytes());
         let (ahead, decoder) = super::ahead::start(
             self.input,
-            self.next_row,
-            self.row_len,
-            max_rows,
+            (self.next_row, self.row_len),
+            (ahead.strip_rows, blocks as usize),
             pool,
             released,
         );
