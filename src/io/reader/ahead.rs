@@ -7,12 +7,13 @@
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use super::source::{decode_rows_into, release_span};
+use super::source::{decode_rows, release_span};
 use super::*;
 
-/// A decoded block row's values and the file's byte range they came from
+/// A decoded block row's values, the file's byte range they came from and
+/// where its rows hold their planes in the file's channel order, that order
 /// (or the error).
-type RowValues = Result<(Vec<f32>, (usize, usize))>;
+type RowValues = Result<(Vec<f32>, (usize, usize), Option<Vec<usize>>)>;
 
 /// What a decode task sends back: its block row, what it decoded, and its
 /// trace segment.
@@ -23,6 +24,9 @@ struct Block {
     buf: Vec<f32>,
     rows: usize,
     bytes: (usize, usize),
+    /// The file's index of each channel the rows hold, in the strips'
+    /// order, where their planes are in the file's (`None`: in the strips').
+    order: Option<Vec<usize>>,
     /// The trace segment that decoded it, and whether a read has said it
     /// waited for it.
     decoded_by: u64,
@@ -124,13 +128,14 @@ pub(super) fn start<'s>(
                         // buffer keeps its old values (no clearing pass).
                         buf.truncate(len);
                         buf.resize(len, 0.0);
-                        decode_rows_into(input, r, &mut buf, row_len)
+                        decode_rows(input, r, &mut buf, row_len, true)
                     };
                     drop(segment);
                     if r.is_err() {
                         failed.store(true, Ordering::Relaxed);
                     }
-                    let _ = done.send((i, r.map(|bytes| (buf, bytes)), id));
+                    let r = r.map(|landed| (buf, landed.bytes, landed.order));
+                    let _ = done.send((i, r, id));
                 });
             }
         });
@@ -169,13 +174,14 @@ impl Ahead {
             let row = &input.rows[self.next_index];
             self.next_index += 1;
             match r {
-                Ok((buf, bytes)) => {
+                Ok((buf, bytes, order)) => {
                     let rows = row.y1 - row.y0;
                     self.queued_rows += rows;
                     self.queue.push_back(Ok(Block {
                         buf,
                         rows,
                         bytes,
+                        order,
                         decoded_by: id,
                         waited: false,
                     }));
@@ -243,7 +249,20 @@ impl Ahead {
                 b.waited = true;
             }
             let take = need.min(b.rows - self.front_used);
-            data.extend_from_slice(&b.buf[self.front_used * row_len..][..take * row_len]);
+            let rows = &b.buf[self.front_used * row_len..][..take * row_len];
+            match &b.order {
+                None => data.extend_from_slice(rows),
+                // Each row's planes in the strips' order (as the batch path
+                // puts them in place).
+                Some(order) => {
+                    let w = row_len / order.len();
+                    for row in rows.chunks_exact(row_len) {
+                        for &c in order {
+                            data.extend_from_slice(&row[c * w..][..w]);
+                        }
+                    }
+                }
+            }
             self.front_used += take;
             self.queued_rows -= take;
             need -= take;

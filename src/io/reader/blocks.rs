@@ -348,6 +348,82 @@ pub(crate) fn decode_checked(
     offset: usize,
     chunk: &RawChunk<'_>,
 ) -> Result<BlockBytes> {
+    guarded(path, meta, offset, chunk, |header| {
+        if cfg!(target_endian = "little")
+            && matches!(header.compression, Compression::ZIP1 | Compression::ZIP16)
+        {
+            decompress_zip_chunk(header, chunk)
+        } else {
+            UncompressedBlock::decompress_chunk(chunk.to_chunk(), meta, false).map(|b| BlockBytes {
+                index: b.index,
+                data: b.data,
+                split: false,
+            })
+        }
+    })
+}
+
+/// A ZIP or ZIPS chunk (read at `offset`) decoded straight into `dst`, with
+/// the checks of [`decode_checked`]: the block's bytes in the file's order
+/// (its lines, each the header's channels in turn), on a little-endian
+/// machine; `Ok(None)` (nothing written) where the chunk is of another codec
+/// or `dst` is not its size.
+pub(crate) fn decode_zip_into(
+    path: &Path,
+    meta: &MetaData,
+    offset: usize,
+    chunk: &RawChunk<'_>,
+    dst: &mut [u8],
+) -> Result<Option<exr::block::BlockIndex>> {
+    let header = &meta.headers[chunk.layer_index];
+    if !(cfg!(target_endian = "little")
+        && matches!(header.compression, Compression::ZIP1 | Compression::ZIP16))
+    {
+        return Ok(None);
+    }
+    let at = |e| Error::from_exr(path, e, &format!("chunk at byte {offset}"));
+    let section = header
+        .get_absolute_block_pixel_coordinates(chunk.indices)
+        .map_err(at)?;
+    if section
+        .size
+        .area()
+        .checked_mul(header.channels.bytes_per_pixel)
+        != Some(dst.len())
+    {
+        return Ok(None);
+    }
+    guarded(path, meta, offset, chunk, |header| {
+        let section = header.get_absolute_block_pixel_coordinates(chunk.indices)?;
+        section.validate(Some(header.layer_size))?;
+        let packed = chunk.data;
+        // A block that would not shrink is stored as it is.
+        if packed.len() == dst.len() {
+            dst.copy_from_slice(packed);
+        } else if !crate::io::zip::decode_into(packed, dst) {
+            return Err(exr::error::Error::Invalid(
+                "zlib-compressed data malformed".into(),
+            ));
+        }
+        Ok(Some(exr::block::BlockIndex {
+            layer: chunk.layer_index,
+            pixel_position: section.position.to_usize("data indices start")?,
+            level: chunk.indices.level_index,
+            pixel_size: section.size,
+        }))
+    })
+}
+
+/// Run `decode` on `chunk` (read at `offset`) after checking the sizes it
+/// claims, before a decoder allocates them; a panic inside the codec becomes
+/// an error naming the block.
+fn guarded<T>(
+    path: &Path,
+    meta: &MetaData,
+    offset: usize,
+    chunk: &RawChunk<'_>,
+    decode: impl FnOnce(&Header) -> exr::error::Result<T>,
+) -> Result<T> {
     let header = &meta.headers[chunk.layer_index];
     let at = |e| Error::from_exr(path, e, &format!("chunk at byte {offset}"));
     let found = chunk.indices;
@@ -365,21 +441,8 @@ pub(crate) fn decode_checked(
         chunk.data,
     )
     .map_err(|reason| invalid(path, format!("block at byte {offset}: {reason}")))?;
-    // A panic inside a codec becomes an error naming the block.
     IN_DECODER.with(|f| f.set(true));
-    let block = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        if cfg!(target_endian = "little")
-            && matches!(header.compression, Compression::ZIP1 | Compression::ZIP16)
-        {
-            decompress_zip_chunk(header, chunk)
-        } else {
-            UncompressedBlock::decompress_chunk(chunk.to_chunk(), meta, false).map(|b| BlockBytes {
-                index: b.index,
-                data: b.data,
-                split: false,
-            })
-        }
-    }));
+    let block = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| decode(header)));
     IN_DECODER.with(|f| f.set(false));
     block
         .map_err(|_| {
@@ -468,20 +531,21 @@ pub(super) fn decompress_zip_chunk(
     header: &Header,
     chunk: &RawChunk<'_>,
 ) -> exr::error::Result<BlockBytes> {
+    let mut data = Vec::new();
     let indices = chunk.indices;
     let section = header.get_absolute_block_pixel_coordinates(indices)?;
     section.validate(Some(header.layer_size))?;
     let packed = chunk.data;
     let expected = section.size.area() * header.channels.bytes_per_pixel;
     // A block that would not shrink is stored as it is.
-    let (data, split) = if packed.len() == expected {
-        (packed.to_vec(), false)
-    } else {
-        let t = crate::io::zip::unpredict(packed, expected).ok_or(exr::error::Error::Invalid(
+    let split = packed.len() != expected;
+    if !split {
+        data.extend_from_slice(packed);
+    } else if !crate::io::zip::unpredict(packed, expected, &mut data) {
+        return Err(exr::error::Error::Invalid(
             "zlib-compressed data malformed".into(),
-        ))?;
-        (t, true)
-    };
+        ));
+    }
     Ok(BlockBytes {
         data,
         split,

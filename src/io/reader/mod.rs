@@ -591,8 +591,9 @@ impl ExrInput {
             .par_iter()
             .map(|&(offset, expected)| {
                 let mut rows = Vec::new();
-                let Landed { x0, width, bytes } =
-                    self.decode_chunk(offset, expected, row.y1 - row.y0, Place::Own(&mut rows))?;
+                let Landed {
+                    x0, width, bytes, ..
+                } = self.decode_chunk(offset, expected, row.y1 - row.y0, Place::Own(&mut rows))?;
                 Ok(Decoded {
                     x0,
                     width,
@@ -603,6 +604,19 @@ impl ExrInput {
             .collect()
     }
 
+    /// The file's channel index of each selected channel where a block of
+    /// `lines` lines, `width` samples wide, can be decoded straight into a
+    /// buffer of `len` values as its rows (every channel 32-bit float, each
+    /// selected, the block as wide as the rows): the block's bytes are then
+    /// the rows' values, with the channels in the file's order.
+    fn in_place_order(&self, lines: usize, width: usize, len: usize) -> Option<Vec<usize>> {
+        let channels = &self.header().channels.list;
+        let n = self.selected.len();
+        let all_f32 = channels.iter().all(|c| c.sample_type == SampleType::F32);
+        (all_f32 && n == channels.len() && lines.checked_mul(n * width) == Some(len))
+            .then(|| self.selected.iter().map(|s| s.index).collect())
+    }
+
     /// Read, check and decompress one chunk of `lines` lines into `place`.
     /// Returns (first column, width, consumed byte range).
     fn decode_chunk(
@@ -610,7 +624,7 @@ impl ExrInput {
         offset: usize,
         expected: TileCoordinates,
         lines: usize,
-        place: Place<'_>,
+        mut place: Place<'_>,
     ) -> Result<Landed> {
         let path = &self.path;
         let header = self.header();
@@ -622,6 +636,38 @@ impl ExrInput {
             offset,
             expected,
         )?;
+        if let Place::InPlace {
+            dst,
+            width,
+            file_order,
+        } = &mut place
+        {
+            if let Some(order) = self.in_place_order(lines, *width, dst.len()) {
+                let bytes: &mut [u8] = bytemuck::cast_slice_mut(dst);
+                if let Some(index) = decode_zip_into(path, &self.meta, offset, &chunk, bytes)? {
+                    if index.pixel_position.0 != 0
+                        || (index.pixel_size.0, index.pixel_size.1) != (*width, lines)
+                    {
+                        return Err(invalid(
+                            path,
+                            format!("block at byte {offset} decodes to the wrong size"),
+                        ));
+                    }
+                    let identity = order.iter().enumerate().all(|(k, &c)| k == c);
+                    if !identity && !*file_order {
+                        for line in dst.chunks_exact_mut(order.len() * *width) {
+                            reorder_planes(line, *width, &order);
+                        }
+                    }
+                    return Ok(Landed {
+                        x0: 0,
+                        width: *width,
+                        bytes: (offset, end),
+                        order: (!identity && *file_order).then_some(order),
+                    });
+                }
+            }
+        }
         let block = decode_checked(path, &self.meta, offset, &chunk)?;
         let (bw, bh) = (block.index.pixel_size.0, block.index.pixel_size.1);
         let channels = &header.channels.list;
@@ -641,7 +687,7 @@ impl ExrInput {
         let n = self.selected.len();
         let x0 = block.index.pixel_position.0;
         let (dst, stride, at): (&mut [f32], usize, usize) = match place {
-            Place::InPlace { dst, width } if x0 + bw <= width => (dst, width, x0),
+            Place::InPlace { dst, width, .. } if x0 + bw <= width => (dst, width, x0),
             Place::InPlace { .. } => {
                 return Err(invalid(
                     path,
@@ -670,6 +716,7 @@ impl ExrInput {
             }
         }
         Ok(Landed {
+            order: None,
             x0,
             width: bw,
             bytes: (offset, end),
@@ -677,17 +724,48 @@ impl ExrInput {
     }
 }
 
-/// Where a decoded chunk landed: first column, width, bytes of the file.
-struct Landed {
+/// Put the planes of `line` (each `w` values), in the file's channel order,
+/// in the order of `order` (the file's channel index of each plane wanted):
+/// swapped in place, each plane moved once at most.
+fn reorder_planes(line: &mut [f32], w: usize, order: &[usize]) {
+    // `at[p]`: the file channel now at plane `p`; `pos[c]`: where channel
+    // `c` is now.
+    let mut at: Vec<usize> = (0..order.len()).collect();
+    let mut pos = at.clone();
+    for (k, &c) in order.iter().enumerate() {
+        let p = pos[c];
+        if p != k {
+            let (head, tail) = line.split_at_mut(p * w);
+            head[k * w..(k + 1) * w].swap_with_slice(&mut tail[..w]);
+            let moved = at[k];
+            (at[p], pos[moved]) = (moved, p);
+            (at[k], pos[c]) = (c, k);
+        }
+    }
+}
+
+/// Where a decoded chunk landed: first column, width, bytes of the file,
+/// and where its rows hold their channel planes in the file's order
+/// ([`Place::InPlace`] with `file_order`), the file's index of each channel
+/// in the rows' order.
+pub(super) struct Landed {
     x0: usize,
     width: usize,
-    bytes: (usize, usize),
+    pub(super) bytes: (usize, usize),
+    pub(super) order: Option<Vec<usize>>,
 }
 
 /// Where a decoded block goes.
-enum Place<'a> {
-    /// Into rows of `width` columns, at the block's own columns.
-    InPlace { dst: &'a mut [f32], width: usize },
+pub(super) enum Place<'a> {
+    /// Into rows of `width` columns, at the block's own columns;
+    /// `file_order`: a block decoded straight into them may leave each
+    /// row's channel planes in the file's order ([`Landed::order`]), for the
+    /// caller to take them in its own as it copies them.
+    InPlace {
+        dst: &'a mut [f32],
+        width: usize,
+        file_order: bool,
+    },
     /// Into its own buffer, exactly the block's size.
     Own(&'a mut Vec<f32>),
 }

@@ -49,11 +49,29 @@ pub(super) fn decode_rows_into(
     dst: &mut [f32],
     row_len: usize,
 ) -> Result<(usize, usize)> {
+    Ok(decode_rows(input, r, dst, row_len, false)?.bytes)
+}
+
+/// [`decode_rows_into`], where `file_order` lets a block decoded straight
+/// into the rows leave their channel planes in the file's order
+/// ([`Landed::order`]: the caller takes them in its own as it copies them,
+/// where putting them in order here was a pass over the block more).
+pub(super) fn decode_rows(
+    input: &ExrInput,
+    r: &BlockRow,
+    dst: &mut [f32],
+    row_len: usize,
+    file_order: bool,
+) -> Result<Landed> {
     let (w, _) = input.size();
     let lines = r.y1 - r.y0;
     if let [(offset, expected)] = r.chunks[..] {
-        let place = Place::InPlace { dst, width: w };
-        return Ok(input.decode_chunk(offset, expected, lines, place)?.bytes);
+        let place = Place::InPlace {
+            dst,
+            width: w,
+            file_order,
+        };
+        return input.decode_chunk(offset, expected, lines, place);
     }
     let nch = input.selected.len();
     let mut span = (usize::MAX, 0usize);
@@ -76,7 +94,12 @@ pub(super) fn decode_rows_into(
             }
         }
     }
-    Ok(span)
+    Ok(Landed {
+        x0: 0,
+        width: w,
+        bytes: span,
+        order: None,
+    })
 }
 
 /// Release the file's pages of `span` (consumed), growing the released
