@@ -78,9 +78,12 @@ pub fn run<S: Source, K: Sink>(
     let pool = &pool;
     let io = io_pool.as_ref().unwrap_or(pool);
     let mut stages = StageSeconds::default();
-    // The reader's window of blocks, from the job's memory.
+    // The reader's window of blocks, from the job's memory, and the strips'
+    // buffers back to it.
     let window = |block_bytes| window_blocks(job, &params, cfg, block_bytes);
-    let ahead: (usize, &(dyn Fn(u64) -> u64 + Sync)) = (strip_rows, &window);
+    let (recycle, recycled) = crossbeam_channel::bounded(STRIPS_RECYCLED);
+    streamer.recycle_strips(recycle);
+    let ahead: (usize, &(dyn Fn(u64) -> u64 + Sync), _) = (strip_rows, &window, recycled);
 
     let result = std::thread::scope(|scope| -> Result<()> {
         let reader = scope.spawn(move || read_strips(source, io, ahead, strip_tx));
@@ -159,6 +162,10 @@ pub fn run<S: Source, K: Sink>(
     })
 }
 
+/// Strip buffers waiting to be filled again at most (each one more strip's
+/// memory while it waits).
+const STRIPS_RECYCLED: usize = 2;
+
 /// The reader thread: strips of `strip_rows` from `source` into `tx` (an
 /// error ends them); returns its busy seconds. A source that decodes does so
 /// ahead, on a thread of its own ([`Source::decoder`]), while this one hands
@@ -166,13 +173,18 @@ pub fn run<S: Source, K: Sink>(
 fn read_strips<S: Source>(
     mut source: S,
     pool: &rayon::ThreadPool,
-    (strip_rows, window_blocks): (usize, &(dyn Fn(u64) -> u64 + Sync)),
+    (strip_rows, window_blocks, recycled): (
+        usize,
+        &(dyn Fn(u64) -> u64 + Sync),
+        crossbeam_channel::Receiver<Vec<f32>>,
+    ),
     tx: crossbeam_channel::Sender<Result<Strip>>,
 ) -> f64 {
     std::thread::scope(|scope| {
         let ahead = ReadAhead {
             strip_rows,
             window_blocks,
+            recycled: Some(recycled),
         };
         if let Some(decoder) = source.decoder(&ahead, pool) {
             scope.spawn(decoder);

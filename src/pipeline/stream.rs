@@ -223,6 +223,12 @@ impl Streamer {
         self.stage.halo()
     }
 
+    /// Send each strip's buffer to `tx` once its rows have left the input
+    /// window ([`RowWindow::recycle_strips`]).
+    pub fn recycle_strips(&mut self, tx: crossbeam_channel::Sender<Vec<f32>>) {
+        self.input.recycle_strips(tx);
+    }
+
     /// What the method counted.
     pub fn counts(&self) -> MethodCounts {
         self.stage.counts()

@@ -22,6 +22,9 @@ pub struct RowWindow<T> {
     base: usize,
     spare: Vec<Vec<T>>,
     high_water: usize,
+    /// Where a strip's buffer goes once its rows have left (back to the
+    /// source that filled it, [`RowWindow::recycle_strips`]).
+    recycle: Option<crossbeam_channel::Sender<Vec<T>>>,
 }
 
 impl<T: Copy> RowWindow<T> {
@@ -35,7 +38,15 @@ impl<T: Copy> RowWindow<T> {
             base: 0,
             spare: Vec::new(),
             high_water: 0,
+            recycle: None,
         }
+    }
+
+    /// Send the buffers of strips taken whole ([`RowWindow::push_rows`]) to
+    /// `tx` once their rows have left, for the source to fill again (when
+    /// `tx` is full they are dropped).
+    pub fn recycle_strips(&mut self, tx: crossbeam_channel::Sender<Vec<T>>) {
+        self.recycle = Some(tx);
     }
 
     /// Index of the first row held.
@@ -140,9 +151,12 @@ impl<T: Copy> RowWindow<T> {
             .map_or(self.base + self.blocks.len(), |r| r.0);
         while self.base < keep_from {
             if let Some(v) = self.blocks.pop_front() {
-                // A buffer of one row is kept; a strip's goes.
+                // A buffer of one row is kept; a strip's goes (back to its
+                // source, where there is a way).
                 if v.len() == self.row_len {
                     self.spare.push(v);
+                } else if let Some(tx) = &self.recycle {
+                    let _ = tx.try_send(v);
                 }
             }
             self.base += 1;
@@ -167,6 +181,26 @@ mod tests {
         assert_eq!(w.end(), 6);
         assert_eq!(w.high_water(), 5);
         assert_eq!(w.range_mut(4, 6).len(), 2);
+    }
+
+    #[test]
+    fn strip_buffers_go_back_once_their_last_row_has_left() {
+        let (tx, rx) = crossbeam_channel::bounded(1);
+        let mut w = RowWindow::<u8>::new(2);
+        w.recycle_strips(tx);
+        w.push_rows(vec![0, 0, 1, 1, 2, 2], 3);
+        w.push(3);
+        w.push_rows(vec![4, 4, 5, 5], 2);
+        w.evict_below(2);
+        assert!(rx.try_recv().is_err(), "row 2 is still held");
+        w.evict_below(4);
+        assert_eq!(rx.try_recv().ok(), Some(vec![0, 0, 1, 1, 2, 2]));
+        // The single row's buffer stays for the window's own reuse; a
+        // strip the channel has no room for is dropped.
+        let (tx, rx) = crossbeam_channel::bounded(0);
+        w.recycle_strips(tx);
+        w.evict_below(6);
+        assert_eq!((w.spare.len(), rx.try_recv().ok()), (1, None));
     }
 
     #[test]

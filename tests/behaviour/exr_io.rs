@@ -178,9 +178,9 @@ fn zip_blocks_of_every_sample_type_decode_exactly() {
 
 /// Float-only ZIP and ZIPS scan lines decode straight into the rows, the
 /// block's bytes in place, its channel planes then put in the order filtered
-/// (`R G B` from the file's `B G R`, and beside alpha), by the strips' copy
-/// when decoding ahead or in place when not: every value bit for bit, blocks
-/// short at the bottom, widths of one and more.
+/// (`R G B` from the file's `B G R`, and beside alpha), decoding ahead or not:
+/// every value bit for bit, blocks short at the bottom, widths of one and
+/// more.
 #[test]
 fn float_zip_scan_lines_decode_in_place_in_any_channel_order() {
     let mut seed = 0x2545_f491_4f6c_dd1du64;
@@ -226,8 +226,8 @@ fn float_zip_scan_lines_decode_in_place_in_any_channel_order() {
                 .write()
                 .to_file(&input)
                 .expect("write");
-                // Strips read without decoding ahead (their planes put in
-                // order in place) hold the channels in the reader's order.
+                // Strips read without decoding ahead hold the channels in
+                // the reader's order.
                 let reader = epfilt::io::ExrInput::open(&input, None).expect("open");
                 let order: Vec<usize> = reader
                     .channels()

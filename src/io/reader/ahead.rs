@@ -7,13 +7,12 @@
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use super::source::{decode_rows, release_span};
+use super::source::{decode_rows_into, release_span};
 use super::*;
 
-/// A decoded block row's values, the file's byte range they came from and
-/// where its rows hold their planes in the file's channel order, that order
+/// A decoded block row's values and the file's byte range they came from
 /// (or the error).
-type RowValues = Result<(Vec<f32>, (usize, usize), Option<Vec<usize>>)>;
+type RowValues = Result<(Vec<f32>, (usize, usize))>;
 
 /// What a decode task sends back: its block row, what it decoded, and its
 /// trace segment.
@@ -24,9 +23,6 @@ struct Block {
     buf: Vec<f32>,
     rows: usize,
     bytes: (usize, usize),
-    /// The file's index of each channel the rows hold, in the strips'
-    /// order, where their planes are in the file's (`None`: in the strips').
-    order: Option<Vec<usize>>,
     /// The trace segment that decoded it, and whether a read has said it
     /// waited for it.
     decoded_by: u64,
@@ -58,6 +54,8 @@ pub(super) struct Ahead {
     /// handed over since the last release.
     released: Option<(usize, usize)>,
     pending: Option<(usize, usize)>,
+    /// Strip buffers handed back to fill again.
+    recycled: Option<crossbeam_channel::Receiver<Vec<f32>>>,
 }
 
 /// Block rows decoded or decoding at once: `blocks` chunks (the memory the
@@ -72,7 +70,8 @@ fn window(input: &ExrInput, first: usize, max_rows: usize, blocks: usize) -> usi
 }
 
 /// Start decoding ahead from block row `first`, rows of `row_len` values, for
-/// strips of `max_rows` rows, `blocks` blocks at once: the reader's side, and
+/// strips of `max_rows` rows, `blocks` blocks at once, with `pool`'s threads
+/// (and strip buffers handed back from `recycled`): the reader's side, and
 /// the decoder loop to run on a thread of its own (it returns once every
 /// block row is decoded, after an error, or once the reader's side is
 /// dropped).
@@ -80,7 +79,10 @@ pub(super) fn start<'s>(
     input: &'s ExrInput,
     (first, row_len): (usize, usize),
     (max_rows, blocks): (usize, usize),
-    pool: &'s rayon::ThreadPool,
+    (pool, recycled): (
+        &'s rayon::ThreadPool,
+        Option<crossbeam_channel::Receiver<Vec<f32>>>,
+    ),
     released: Option<(usize, usize)>,
 ) -> (Ahead, crate::pipeline::Decoder<'s>) {
     let end = input.rows.len();
@@ -102,6 +104,7 @@ pub(super) fn start<'s>(
         max_rows,
         released,
         pending: None,
+        recycled,
     };
     let decoder = Box::new(move || {
         let failed = AtomicBool::new(false);
@@ -128,14 +131,13 @@ pub(super) fn start<'s>(
                         // buffer keeps its old values (no clearing pass).
                         buf.truncate(len);
                         buf.resize(len, 0.0);
-                        decode_rows(input, r, &mut buf, row_len, true)
+                        decode_rows_into(input, r, &mut buf, row_len)
                     };
                     drop(segment);
                     if r.is_err() {
                         failed.store(true, Ordering::Relaxed);
                     }
-                    let r = r.map(|landed| (buf, landed.bytes, landed.order));
-                    let _ = done.send((i, r, id));
+                    let _ = done.send((i, r.map(|bytes| (buf, bytes)), id));
                 });
             }
         });
@@ -174,14 +176,13 @@ impl Ahead {
             let row = &input.rows[self.next_index];
             self.next_index += 1;
             match r {
-                Ok((buf, bytes, order)) => {
+                Ok((buf, bytes)) => {
                     let rows = row.y1 - row.y0;
                     self.queued_rows += rows;
                     self.queue.push_back(Ok(Block {
                         buf,
                         rows,
                         bytes,
-                        order,
                         decoded_by: id,
                         waited: false,
                     }));
@@ -238,7 +239,15 @@ impl Ahead {
             };
         }
         let n = max_rows.min(self.queued_rows);
-        let mut data = Vec::with_capacity(n * row_len);
+        // A strip buffer handed back (its pages already in), or a new one.
+        let mut data = match self.recycled.as_ref().and_then(|r| r.try_recv().ok()) {
+            Some(mut v) => {
+                v.clear();
+                v.reserve_exact(n * row_len);
+                v
+            }
+            None => Vec::with_capacity(n * row_len),
+        };
         let mut need = n;
         while need > 0 {
             let Some(Ok(b)) = self.queue.front_mut() else {
@@ -249,20 +258,7 @@ impl Ahead {
                 b.waited = true;
             }
             let take = need.min(b.rows - self.front_used);
-            let rows = &b.buf[self.front_used * row_len..][..take * row_len];
-            match &b.order {
-                None => data.extend_from_slice(rows),
-                // Each row's planes in the strips' order (as the batch path
-                // puts them in place).
-                Some(order) => {
-                    let w = row_len / order.len();
-                    for row in rows.chunks_exact(row_len) {
-                        for &c in order {
-                            data.extend_from_slice(&row[c * w..][..w]);
-                        }
-                    }
-                }
-            }
+            data.extend_from_slice(&b.buf[self.front_used * row_len..][..take * row_len]);
             self.front_used += take;
             self.queued_rows -= take;
             need -= take;

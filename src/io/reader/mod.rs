@@ -591,9 +591,8 @@ impl ExrInput {
             .par_iter()
             .map(|&(offset, expected)| {
                 let mut rows = Vec::new();
-                let Landed {
-                    x0, width, bytes, ..
-                } = self.decode_chunk(offset, expected, row.y1 - row.y0, Place::Own(&mut rows))?;
+                let Landed { x0, width, bytes } =
+                    self.decode_chunk(offset, expected, row.y1 - row.y0, Place::Own(&mut rows))?;
                 Ok(Decoded {
                     x0,
                     width,
@@ -636,12 +635,7 @@ impl ExrInput {
             offset,
             expected,
         )?;
-        if let Place::InPlace {
-            dst,
-            width,
-            file_order,
-        } = &mut place
-        {
+        if let Place::InPlace { dst, width } = &mut place {
             if let Some(order) = self.in_place_order(lines, *width, dst.len()) {
                 let bytes: &mut [u8] = bytemuck::cast_slice_mut(dst);
                 if let Some(index) = decode_zip_into(path, &self.meta, offset, &chunk, bytes)? {
@@ -653,17 +647,16 @@ impl ExrInput {
                             format!("block at byte {offset} decodes to the wrong size"),
                         ));
                     }
-                    let identity = order.iter().enumerate().all(|(k, &c)| k == c);
-                    if !identity && !*file_order {
-                        for line in dst.chunks_exact_mut(order.len() * *width) {
-                            reorder_planes(line, *width, &order);
-                        }
+                    // The planes in the rows' order (in the decoding task:
+                    // in the strips' copy, on the reader's thread, it was
+                    // serial work of every strip).
+                    for line in dst.chunks_exact_mut(order.len() * *width) {
+                        reorder_planes(line, *width, &order);
                     }
                     return Ok(Landed {
                         x0: 0,
                         width: *width,
                         bytes: (offset, end),
-                        order: (!identity && *file_order).then_some(order),
                     });
                 }
             }
@@ -687,7 +680,7 @@ impl ExrInput {
         let n = self.selected.len();
         let x0 = block.index.pixel_position.0;
         let (dst, stride, at): (&mut [f32], usize, usize) = match place {
-            Place::InPlace { dst, width, .. } if x0 + bw <= width => (dst, width, x0),
+            Place::InPlace { dst, width } if x0 + bw <= width => (dst, width, x0),
             Place::InPlace { .. } => {
                 return Err(invalid(
                     path,
@@ -716,7 +709,6 @@ impl ExrInput {
             }
         }
         Ok(Landed {
-            order: None,
             x0,
             width: bw,
             bytes: (offset, end),
@@ -744,28 +736,17 @@ fn reorder_planes(line: &mut [f32], w: usize, order: &[usize]) {
     }
 }
 
-/// Where a decoded chunk landed: first column, width, bytes of the file,
-/// and where its rows hold their channel planes in the file's order
-/// ([`Place::InPlace`] with `file_order`), the file's index of each channel
-/// in the rows' order.
-pub(super) struct Landed {
+/// Where a decoded chunk landed: first column, width, bytes of the file.
+struct Landed {
     x0: usize,
     width: usize,
-    pub(super) bytes: (usize, usize),
-    pub(super) order: Option<Vec<usize>>,
+    bytes: (usize, usize),
 }
 
 /// Where a decoded block goes.
-pub(super) enum Place<'a> {
-    /// Into rows of `width` columns, at the block's own columns;
-    /// `file_order`: a block decoded straight into them may leave each
-    /// row's channel planes in the file's order ([`Landed::order`]), for the
-    /// caller to take them in its own as it copies them.
-    InPlace {
-        dst: &'a mut [f32],
-        width: usize,
-        file_order: bool,
-    },
+enum Place<'a> {
+    /// Into rows of `width` columns, at the block's own columns.
+    InPlace { dst: &'a mut [f32], width: usize },
     /// Into its own buffer, exactly the block's size.
     Own(&'a mut Vec<f32>),
 }

@@ -49,29 +49,11 @@ pub(super) fn decode_rows_into(
     dst: &mut [f32],
     row_len: usize,
 ) -> Result<(usize, usize)> {
-    Ok(decode_rows(input, r, dst, row_len, false)?.bytes)
-}
-
-/// [`decode_rows_into`], where `file_order` lets a block decoded straight
-/// into the rows leave their channel planes in the file's order
-/// ([`Landed::order`]: the caller takes them in its own as it copies them,
-/// where putting them in order here was a pass over the block more).
-pub(super) fn decode_rows(
-    input: &ExrInput,
-    r: &BlockRow,
-    dst: &mut [f32],
-    row_len: usize,
-    file_order: bool,
-) -> Result<Landed> {
     let (w, _) = input.size();
     let lines = r.y1 - r.y0;
     if let [(offset, expected)] = r.chunks[..] {
-        let place = Place::InPlace {
-            dst,
-            width: w,
-            file_order,
-        };
-        return input.decode_chunk(offset, expected, lines, place);
+        let place = Place::InPlace { dst, width: w };
+        return Ok(input.decode_chunk(offset, expected, lines, place)?.bytes);
     }
     let nch = input.selected.len();
     let mut span = (usize::MAX, 0usize);
@@ -94,12 +76,7 @@ pub(super) fn decode_rows(
             }
         }
     }
-    Ok(Landed {
-        x0: 0,
-        width: w,
-        bytes: span,
-        order: None,
-    })
+    Ok(span)
 }
 
 /// Release the file's pages of `span` (consumed), growing the released
@@ -275,7 +252,7 @@ impl Source for ExrSource<'_> {
             self.input,
             (self.next_row, self.row_len),
             (ahead.strip_rows, blocks as usize),
-            pool,
+            (pool, ahead.recycled.clone()),
             released,
         );
         self.ahead = Some(ahead);
