@@ -63,8 +63,8 @@ pub fn read_ahead_blocks(block_bytes: u64) -> u64 {
 /// [`READ_AHEAD_BATCHES`] of [`read_ahead_blocks`] are 6 blocks of 6 MiB,
 /// which held box to 7.45x at 16 cores in the scaling model (its decodes
 /// went 6 at a time); 8 give 10.1x, 10 gave 11.8x but box's peak RSS at 16
-/// threads 275-290 MiB (docs/DESIGN.md, "The reader's window from the job's
-/// memory").
+/// threads 275-290 MiB (docs/DESIGN.md, "Wide rows without page faults, and
+/// the reader's window from the job's memory").
 pub const WINDOW_MIN_BLOCKS: u64 = 8;
 
 /// The job's estimate ([`estimate_bytes`]) within which the reader's window
