@@ -716,26 +716,6 @@ impl ExrInput {
     }
 }
 
-/// Put the planes of `line` (each `w` values), in the file's channel order,
-/// in the order of `order` (the file's channel index of each plane wanted):
-/// swapped in place, each plane moved once at most.
-fn reorder_planes(line: &mut [f32], w: usize, order: &[usize]) {
-    // `at[p]`: the file channel now at plane `p`; `pos[c]`: where channel
-    // `c` is now.
-    let mut at: Vec<usize> = (0..order.len()).collect();
-    let mut pos = at.clone();
-    for (k, &c) in order.iter().enumerate() {
-        let p = pos[c];
-        if p != k {
-            let (head, tail) = line.split_at_mut(p * w);
-            head[k * w..(k + 1) * w].swap_with_slice(&mut tail[..w]);
-            let moved = at[k];
-            (at[p], pos[moved]) = (moved, p);
-            (at[k], pos[c]) = (c, k);
-        }
-    }
-}
-
 /// Where a decoded chunk landed: first column, width, bytes of the file.
 struct Landed {
     x0: usize,
