@@ -255,6 +255,23 @@ pub fn split_byte(split: &[u8], j: usize) -> u8 {
 mod tests {
     use super::*;
 
+    /// `n` bytes: every `every`-th a xorshift draw from `seed`, the rest runs
+    /// of `run` equal bytes (something deflate shrinks, and not all of it).
+    fn test_bytes(n: usize, seed: &mut u64, every: usize, run: usize) -> Vec<u8> {
+        (0..n)
+            .map(|i| {
+                *seed ^= *seed << 13;
+                *seed ^= *seed >> 7;
+                *seed ^= *seed << 17;
+                if i % every == 0 {
+                    (*seed >> 56) as u8
+                } else {
+                    (i / run) as u8
+                }
+            })
+            .collect()
+    }
+
     /// The format as OpenEXR writes it, byte by byte: the reference.
     fn decode_reference(le: &[u8]) -> Vec<u8> {
         let mut t = le.to_vec();
@@ -284,18 +301,7 @@ mod tests {
         // Lengths around the eight-byte runs, odd and even, and a real block.
         let mut seed = 0x2545_f491_4f6c_dd1du64;
         for n in (0..80).chain([1000, 4097, 6 * 1024 + 3]) {
-            let data: Vec<u8> = (0..n)
-                .map(|i| {
-                    seed ^= seed << 13;
-                    seed ^= seed >> 7;
-                    seed ^= seed << 17;
-                    if i % 3 == 0 {
-                        (seed >> 56) as u8
-                    } else {
-                        (i / 7) as u8
-                    }
-                })
-                .collect();
+            let data = test_bytes(n, &mut seed, 3, 7);
             let packed = compress(&data, ZIP_LEVEL);
             if packed.len() == n {
                 continue; // stored raw: the reader takes it as it is
@@ -342,18 +348,7 @@ mod tests {
             100_000,
         ]);
         for n in lengths {
-            let data: Vec<u8> = (0..n)
-                .map(|i| {
-                    seed ^= seed << 13;
-                    seed ^= seed >> 7;
-                    seed ^= seed << 17;
-                    if i % 5 == 0 {
-                        (seed >> 56) as u8
-                    } else {
-                        (i / 11) as u8
-                    }
-                })
-                .collect();
+            let data = test_bytes(n, &mut seed, 5, 11);
             for level in [0, 1, 6] {
                 let packed = compress(&data, level);
                 if packed.len() == n {

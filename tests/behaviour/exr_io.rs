@@ -86,6 +86,16 @@ pub fn read_planar(path: &Path) -> Img {
 /// Write one unnamed layer of `channels` (any order, any sample types) with
 /// the `exr` crate's high-level API.
 pub fn write_flat(path: &Path, size: (usize, usize), channels: Vec<(&str, FlatSamples)>) {
+    write_encoded(path, size, channels, Encoding::FAST_LOSSLESS);
+}
+
+/// [`write_flat`] with `encoding`.
+pub fn write_encoded(
+    path: &Path,
+    size: (usize, usize),
+    channels: Vec<(&str, FlatSamples)>,
+    encoding: Encoding,
+) {
     let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = channels
         .into_iter()
         .map(|(n, v)| AnyChannel::new(n, v))
@@ -93,12 +103,22 @@ pub fn write_flat(path: &Path, size: (usize, usize), channels: Vec<(&str, FlatSa
     Image::from_layer(Layer::new(
         size,
         LayerAttributes::named(""),
-        Encoding::FAST_LOSSLESS,
+        encoding,
         AnyChannels::sort(list),
     ))
     .write()
     .to_file(path)
     .expect("write");
+}
+
+/// A xorshift generator from `seed` (not 0): test values, the same every run.
+fn xorshift(mut seed: u64) -> impl FnMut() -> u64 {
+    move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        seed
+    }
 }
 
 /// ZIP and ZIPS blocks are decoded by epfilt's own `io::zip` (not the `exr`
@@ -109,13 +129,7 @@ pub fn write_flat(path: &Path, size: (usize, usize), channels: Vec<(&str, FlatSa
 fn zip_blocks_of_every_sample_type_decode_exactly() {
     let (w, h) = (37usize, 23usize);
     let n = w * h;
-    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-    let mut next = move || {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
-        seed
-    };
+    let mut next = xorshift(0x9e37_79b9_7f4a_7c15);
     let f16s: Vec<f16> = (0..n)
         .map(|i| match i % 5 {
             0 => f16::from_f32(65504.0),
@@ -135,26 +149,17 @@ fn zip_blocks_of_every_sample_type_decode_exactly() {
     for compression in [Compression::ZIP1, Compression::ZIP16] {
         for blocks in [Blocks::ScanLines, Blocks::Tiles(Vec2(16, 8))] {
             let input = dir.path().join("in.exr");
-            let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = [
-                AnyChannel::new("R", FlatSamples::F16(f16s.clone())),
-                AnyChannel::new("G", FlatSamples::F32(f32s.clone())),
-                AnyChannel::new("B", FlatSamples::U32(u32s.clone())),
-            ]
-            .into_iter()
-            .collect();
-            Image::from_layer(Layer::new(
-                (w, h),
-                LayerAttributes::named(""),
-                Encoding {
-                    compression,
-                    blocks,
-                    line_order: LineOrder::Increasing,
-                },
-                AnyChannels::sort(list),
-            ))
-            .write()
-            .to_file(&input)
-            .expect("write");
+            let channels = vec![
+                ("R", FlatSamples::F16(f16s.clone())),
+                ("G", FlatSamples::F32(f32s.clone())),
+                ("B", FlatSamples::U32(u32s.clone())),
+            ];
+            let encoding = Encoding {
+                compression,
+                blocks,
+                line_order: LineOrder::Increasing,
+            };
+            write_encoded(&input, (w, h), channels, encoding);
             let out = dir.path().join("out.exr");
             filter_file(&job(&input, &out, Method::Box, 1), &|_, _| {}).expect("filter");
             let got = read_planar(&out);
@@ -183,13 +188,7 @@ fn zip_blocks_of_every_sample_type_decode_exactly() {
 /// more.
 #[test]
 fn float_zip_scan_lines_decode_in_place_in_any_channel_order() {
-    let mut seed = 0x2545_f491_4f6c_dd1du64;
-    let mut next = move || {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
-        seed
-    };
+    let mut next = xorshift(0x2545_f491_4f6c_dd1d);
     let dir = tmpdir();
     for (w, h) in [(37usize, 23usize), (1, 40), (300, 17)] {
         let n = w * h;
@@ -208,24 +207,17 @@ fn float_zip_scan_lines_decode_in_place_in_any_channel_order() {
         for names in [&["R", "G", "B"][..], &["R", "G", "B", "A"][..]] {
             for compression in [Compression::ZIP1, Compression::ZIP16] {
                 let input = dir.path().join("in.exr");
-                let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = names
+                let channels = names
                     .iter()
                     .zip(&planes)
-                    .map(|(name, p)| AnyChannel::new(*name, FlatSamples::F32(p.clone())))
+                    .map(|(name, p)| (*name, FlatSamples::F32(p.clone())))
                     .collect();
-                Image::from_layer(Layer::new(
-                    (w, h),
-                    LayerAttributes::named(""),
-                    Encoding {
-                        compression,
-                        blocks: Blocks::ScanLines,
-                        line_order: LineOrder::Increasing,
-                    },
-                    AnyChannels::sort(list),
-                ))
-                .write()
-                .to_file(&input)
-                .expect("write");
+                let encoding = Encoding {
+                    compression,
+                    blocks: Blocks::ScanLines,
+                    line_order: LineOrder::Increasing,
+                };
+                write_encoded(&input, (w, h), channels, encoding);
                 // Strips read without decoding ahead hold the channels in
                 // the reader's order.
                 let reader = epfilt::io::ExrInput::open(&input, None).expect("open");
