@@ -9,6 +9,15 @@ use super::*;
 /// bounds their memory to 16 MiB whatever the width.
 pub const STRIP_BYTES: usize = 4 << 20;
 
+/// Strip buffers held at most: four in flight and [`STRIPS_RECYCLED`] waiting
+/// to be filled again.
+const STRIPS_HELD: u64 = 4 + STRIPS_RECYCLED as u64;
+
+/// Strip buffers the filter hands back to the reader at most, waiting to be
+/// filled again (a new buffer is mapped and faulted in page by page: at 32769
+/// wide, 7 MB a strip, they were most of the reader's page faults).
+pub const STRIPS_RECYCLED: usize = 2;
+
 /// Default strip height: [`STRIP_BYTES`] of f32 rows, between 1 and 96 rows.
 pub fn auto_strip_rows(in_w: usize, channels: usize) -> usize {
     (STRIP_BYTES / (in_w * channels * 4).max(1)).clamp(1, 96)
@@ -68,14 +77,14 @@ pub fn read_ahead_blocks(block_bytes: u64) -> u64 {
 pub const WINDOW_MIN_BLOCKS: u64 = 8;
 
 /// The job's estimate ([`estimate_bytes`]) within which the reader's window
-/// grows to [`WINDOW_MIN_BLOCKS`]: three quarters of the 256 MiB a 32769-wide
-/// job should stay within, the rest for what the estimate does not count
+/// grows to [`WINDOW_MIN_BLOCKS`]: the 256 MiB a 32769-wide job should stay
+/// within, less the 46-49 MiB that 16 threads held beyond the estimate there
 /// (blocks each worker decodes or compresses, the allocator's arenas). At
-/// 32769 wide box and gauss grow (181 and 185 MiB), ep-gauss does not (275
-/// MiB, its peak RSS already over 256 at 16 threads): its windows of rows
-/// hold the most, and decoding is a smaller share of its work (9.1x at 16
-/// cores in the model with 6 blocks).
-pub const WINDOW_BUDGET: u64 = 192 << 20;
+/// 32769 wide box and gauss grow (195 and 199 MiB; peak RSS at 16 threads
+/// 241 and 248 MiB), ep-gauss does not (289 MiB, its peak RSS already over
+/// 256 at 16 threads): its windows of rows hold the most, and decoding is a
+/// smaller share of its work (9.3x at 16 cores in the model with 6 blocks).
+pub const WINDOW_BUDGET: u64 = 208 << 20;
 
 /// Blocks (chunks) of `block_bytes` decoded bytes the reader's window holds
 /// for `job`: [`READ_AHEAD_BATCHES`] batches of [`read_ahead_blocks`], or
@@ -175,7 +184,7 @@ fn estimate_with(
     } else {
         0
     };
-    let strips = in_row.saturating_mul(strip).saturating_mul(4);
+    let strips = in_row.saturating_mul(strip).saturating_mul(STRIPS_HELD);
     // The encoder's blocks, and the reader's batch of decoded blocks.
     let blocks = block_bytes.saturating_mul(3 * 4).saturating_add(read_ahead(
         in_row,
@@ -219,7 +228,9 @@ fn estimate_box_bytes(
     let bands = w
         .saturating_mul(9 + 4)
         .saturating_mul((32 + 2 * p) * threads.max(1));
-    let strips = w.saturating_mul(nall * 4).saturating_mul(strip * 4);
+    let strips = w
+        .saturating_mul(nall * 4)
+        .saturating_mul(strip * STRIPS_HELD);
     windows
         .saturating_add(bands)
         .saturating_add(strips)

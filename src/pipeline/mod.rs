@@ -55,7 +55,7 @@ pub use stream::{OutRows, Streamer};
 
 pub use estimate::{
     auto_strip_rows, estimate_bytes, read_ahead_blocks, window_blocks, READ_AHEAD_BATCHES,
-    READ_AHEAD_BYTES, STRIP_BYTES,
+    READ_AHEAD_BYTES, STRIPS_RECYCLED, STRIP_BYTES,
 };
 pub use memory::{filter_in_memory, filter_planar, MemoryRun, MemorySink, MemorySource};
 pub use runner::{mean_luminance, run, thread_pool, Progress};

@@ -162,10 +162,6 @@ pub fn run<S: Source, K: Sink>(
     })
 }
 
-/// Strip buffers waiting to be filled again at most (each one more strip's
-/// memory while it waits).
-const STRIPS_RECYCLED: usize = 2;
-
 /// The reader thread: strips of `strip_rows` from `source` into `tx` (an
 /// error ends them); returns its busy seconds. A source that decodes does so
 /// ahead, on a thread of its own ([`Source::decoder`]), while this one hands
