@@ -6,7 +6,8 @@ use super::*;
 
 /// Bytes of input one strip should hold by default: four strips are in
 /// flight at most (two queued, one being read, one being filtered), so this
-/// bounds their memory to 16 MiB whatever the width.
+/// bounds their memory to 16 MiB whatever the width (and [`STRIPS_RECYCLED`]
+/// more wait to be filled again).
 pub const STRIP_BYTES: usize = 4 << 20;
 
 /// Strip buffers held at most: four in flight and [`STRIPS_RECYCLED`] waiting

@@ -83,7 +83,11 @@ pub fn run<S: Source, K: Sink>(
     let window = |block_bytes| window_blocks(job, &params, cfg, block_bytes);
     let (recycle, recycled) = crossbeam_channel::bounded(STRIPS_RECYCLED);
     streamer.recycle_strips(recycle);
-    let ahead: (usize, &(dyn Fn(u64) -> u64 + Sync), _) = (strip_rows, &window, recycled);
+    let ahead = ReadAhead {
+        strip_rows,
+        window_blocks: &window,
+        recycled: Some(recycled),
+    };
 
     let result = std::thread::scope(|scope| -> Result<()> {
         let reader = scope.spawn(move || read_strips(source, io, ahead, strip_tx));
@@ -162,26 +166,18 @@ pub fn run<S: Source, K: Sink>(
     })
 }
 
-/// The reader thread: strips of `strip_rows` from `source` into `tx` (an
+/// The reader thread: strips of `ahead.strip_rows` from `source` into `tx` (an
 /// error ends them); returns its busy seconds. A source that decodes does so
 /// ahead, on a thread of its own ([`Source::decoder`]), while this one hands
 /// the strips over.
 fn read_strips<S: Source>(
     mut source: S,
     pool: &rayon::ThreadPool,
-    (strip_rows, window_blocks, recycled): (
-        usize,
-        &(dyn Fn(u64) -> u64 + Sync),
-        crossbeam_channel::Receiver<Vec<f32>>,
-    ),
+    ahead: ReadAhead<'_>,
     tx: crossbeam_channel::Sender<Result<Strip>>,
 ) -> f64 {
+    let strip_rows = ahead.strip_rows;
     std::thread::scope(|scope| {
-        let ahead = ReadAhead {
-            strip_rows,
-            window_blocks,
-            recycled: Some(recycled),
-        };
         if let Some(decoder) = source.decoder(&ahead, pool) {
             scope.spawn(decoder);
         }
