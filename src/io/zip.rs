@@ -60,14 +60,14 @@ pub fn compress(le: &[u8], level: u8) -> Vec<u8> {
 /// peak memory grew from 130 MiB at 2 threads to 345 MiB at 16. Here the
 /// reader takes the samples straight from the split bytes: no second buffer,
 /// and one pass less over the block.
-pub fn unpredict(packed: &[u8], expected: usize, out: &mut Vec<u8>) -> bool {
-    out.resize(expected, 0);
-    let (done, rc) = zlib_rs::decompress_slice(out, packed, zlib_rs::InflateConfig::default());
+pub fn unpredict(packed: &[u8], expected: usize) -> Option<Vec<u8>> {
+    let mut out = vec![0; expected];
+    let (done, rc) = zlib_rs::decompress_slice(&mut out, packed, zlib_rs::InflateConfig::default());
     if rc != zlib_rs::ReturnCode::Ok || done.len() != expected {
-        return false;
+        return None;
     }
-    undo_predictor(out, None);
-    true
+    undo_predictor(&mut out, None);
+    Some(out)
 }
 
 /// Inflate window bits of OpenEXR's zlib streams.
@@ -95,10 +95,9 @@ pub fn decode_into(packed: &[u8], out: &mut [u8]) -> bool {
     let n = out.len();
     if n % 2 == 1 {
         // Never a block of 2- or 4-byte samples: through the split bytes.
-        let mut t = Vec::new();
-        if !unpredict(packed, n, &mut t) {
+        let Some(t) = unpredict(packed, n) else {
             return false;
-        }
+        };
         for (j, o) in out.iter_mut().enumerate() {
             *o = split_byte(&t, j);
         }
@@ -292,8 +291,7 @@ mod tests {
 
     /// The block's bytes in order.
     fn decompress(packed: &[u8], n: usize) -> Option<Vec<u8>> {
-        let mut t = Vec::new();
-        unpredict(packed, n, &mut t).then(|| (0..n).map(|j| split_byte(&t, j)).collect())
+        unpredict(packed, n).map(|t| (0..n).map(|j| split_byte(&t, j)).collect())
     }
 
     #[test]

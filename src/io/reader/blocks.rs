@@ -551,21 +551,20 @@ pub(super) fn decompress_zip_chunk(
     header: &Header,
     chunk: &RawChunk<'_>,
 ) -> exr::error::Result<BlockBytes> {
-    let mut data = Vec::new();
     let indices = chunk.indices;
     let section = header.get_absolute_block_pixel_coordinates(indices)?;
     section.validate(Some(header.layer_size))?;
     let packed = chunk.data;
     let expected = section.size.area() * header.channels.bytes_per_pixel;
     // A block that would not shrink is stored as it is.
-    let split = packed.len() != expected;
-    if !split {
-        data.extend_from_slice(packed);
-    } else if !crate::io::zip::unpredict(packed, expected, &mut data) {
-        return Err(exr::error::Error::Invalid(
+    let (data, split) = if packed.len() == expected {
+        (packed.to_vec(), false)
+    } else {
+        let t = crate::io::zip::unpredict(packed, expected).ok_or(exr::error::Error::Invalid(
             "zlib-compressed data malformed".into(),
-        ));
-    }
+        ))?;
+        (t, true)
+    };
     Ok(BlockBytes {
         data,
         split,
