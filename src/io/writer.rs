@@ -623,43 +623,34 @@ impl ExrOutput {
                 let _task = region.task("compress");
                 let r0 = b * lines;
                 let r1 = ((b + 1) * lines).min(rows);
-                let mut data = Vec::with_capacity((r1 - r0) * row_len * 4);
-                for r in r0..r1 {
-                    for &c in order {
-                        let src = &pending[(r * nch + c) * w..][..w];
-                        match types[c] {
-                            Precision::F32 => src
-                                .iter()
-                                .for_each(|v| data.extend_from_slice(&v.to_ne_bytes())),
-                            Precision::F16 => src.iter().for_each(|v| {
-                                data.extend_from_slice(
-                                    &half::f16::from_f32(*v).to_bits().to_ne_bytes(),
-                                )
-                            }),
-                            // Whole numbers (the pipeline's rounding checked).
-                            Precision::U32 => src
-                                .iter()
-                                .for_each(|v| data.extend_from_slice(&(*v as u32).to_ne_bytes())),
-                        }
-                    }
-                }
-                let y = y0 + r0;
-                let header = &headers[0];
+                let (header, y) = (&headers[0], y0 + r0);
+                let samples = Samples {
+                    pending,
+                    rows: r0..r1,
+                    order,
+                    types,
+                    w,
+                    nch,
+                };
                 if cfg!(target_endian = "little")
                     && matches!(header.compression, Compression::ZIP1 | Compression::ZIP16)
                 {
+                    // The samples go straight into the split bytes ZIP
+                    // deflates.
+                    let per_row: usize = order.iter().map(|&c| types[c].bytes() / 2).sum();
+                    let mut split = super::zip::SplitBlock::new((r1 - r0) * w * per_row);
+                    samples.put(&mut split);
                     let chunk = Chunk {
                         layer_index: 0,
                         compressed_block: CompressedBlock::ScanLine(CompressedScanLineBlock {
                             y_coordinate: y as i32 + header.own_attributes.layer_position.1,
-                            compressed_pixels_le: super::zip::compress(
-                                &data,
-                                super::zip::ZIP_LEVEL,
-                            ),
+                            compressed_pixels_le: split.compress(super::zip::ZIP_LEVEL),
                         }),
                     };
                     return Ok((y / lines, chunk));
                 }
+                let mut data = Vec::with_capacity((r1 - r0) * row_len * 4);
+                samples.put(&mut data);
                 let block = UncompressedBlock {
                     index: BlockIndex {
                         layer: 0,
@@ -740,6 +731,53 @@ impl Sink for ExrOutput {
             t.file().sync_all().ok();
         }
         Ok(())
+    }
+}
+
+/// The rows of one output block, in the file's channel order and types.
+struct Samples<'a> {
+    pending: &'a [f32],
+    rows: std::ops::Range<usize>,
+    order: &'a [usize],
+    types: &'a [Precision],
+    w: usize,
+    nch: usize,
+}
+
+/// Where a block's samples go, each as its native-endian bytes.
+trait SampleSink {
+    fn put<const N: usize>(&mut self, src: &[f32], bytes: impl Fn(f32) -> [u8; N]);
+}
+
+impl SampleSink for Vec<u8> {
+    fn put<const N: usize>(&mut self, src: &[f32], bytes: impl Fn(f32) -> [u8; N]) {
+        src.iter().for_each(|&v| self.extend_from_slice(&bytes(v)));
+    }
+}
+
+impl SampleSink for super::zip::SplitBlock {
+    fn put<const N: usize>(&mut self, src: &[f32], bytes: impl Fn(f32) -> [u8; N]) {
+        self.push(src, bytes);
+    }
+}
+
+impl Samples<'_> {
+    /// Every sample of the block's rows into `sink`, row by row, channel by
+    /// channel.
+    fn put(&self, sink: &mut impl SampleSink) {
+        for r in self.rows.clone() {
+            for &c in self.order {
+                let src = &self.pending[(r * self.nch + c) * self.w..][..self.w];
+                match self.types[c] {
+                    Precision::F32 => sink.put(src, f32::to_ne_bytes),
+                    Precision::F16 => {
+                        sink.put(src, |v| half::f16::from_f32(v).to_bits().to_ne_bytes())
+                    }
+                    // Whole numbers (the pipeline's rounding checked).
+                    Precision::U32 => sink.put(src, |v| (v as u32).to_ne_bytes()),
+                }
+            }
+        }
     }
 }
 

@@ -177,6 +177,14 @@ impl Precision {
             Precision::U32 => "u32",
         }
     }
+
+    /// Bytes a sample takes in the file.
+    pub fn bytes(self) -> usize {
+        match self {
+            Precision::F16 => 2,
+            Precision::F32 | Precision::U32 => 4,
+        }
+    }
 }
 
 /// What to do with NaN and infinite input samples.
