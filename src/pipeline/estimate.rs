@@ -34,15 +34,39 @@ pub fn auto_strip_rows(in_w: usize, channels: usize) -> usize {
 /// 228-237 MiB.
 pub const MIN_STRIP_PIXEL_ROWS: usize = 6;
 
+/// Pixel rows a strip holds where they fit in [`TALL_STRIP_BYTES`]. Each of
+/// a strip's loops (classification, base rows, finishing) has a task a pixel
+/// row, so a strip of fewer pixel rows than cores leaves cores idle in them,
+/// and fewer strips are fewer loops, whose ends cost on many cores. At
+/// 12288x12288 S = 3 (28 input rows, 9.3 pixel rows a strip by default) the
+/// scaling model from 1-thread traces gave at 16 / 32 cores: box 13.6x /
+/// 19.1-19.6x -> 14.3x / 20.8-21.2x, gauss 13.4x / 18.3x -> 14.0x / 21.6x,
+/// ep-gauss 11.5x / 15.2x -> 12.6-12.7x / 18.3-18.6x (docs/DESIGN.md,
+/// "Taller strips where they fit").
+pub const TALL_STRIP_PIXEL_ROWS: usize = 16;
+
+/// The most input bytes a strip grown to [`TALL_STRIP_PIXEL_ROWS`] holds:
+/// twice [`STRIP_BYTES`]. 12288 wide at S = 3: 48 rows of 147 KB; 32769
+/// wide would need 18.9 MB, and keeps its [`MIN_STRIP_PIXEL_ROWS`].
+pub const TALL_STRIP_BYTES: usize = 2 * STRIP_BYTES;
+
 impl StripLayout {
     /// Default strip height of this job: [`auto_strip_rows`], at least
     /// [`MIN_STRIP_PIXEL_ROWS`] pixel rows (whole pixel rows: `S` input rows
     /// each), at most 96 input rows or [`MIN_STRIP_PIXEL_ROWS`] pixel rows,
-    /// whichever is more.
+    /// whichever is more; and [`TALL_STRIP_PIXEL_ROWS`] pixel rows where
+    /// that is more and they fit in [`TALL_STRIP_BYTES`].
     pub fn auto_strip_rows(&self) -> usize {
         let s = self.grid.s.max(1);
-        let min = MIN_STRIP_PIXEL_ROWS * s;
-        auto_strip_rows(self.grid.in_w.max(1), self.strip_channels().max(1)).max(min)
+        let (w, nch) = (self.grid.in_w.max(1), self.strip_channels().max(1));
+        let rows = auto_strip_rows(w, nch).max(MIN_STRIP_PIXEL_ROWS * s);
+        let tall = TALL_STRIP_PIXEL_ROWS * s;
+        let bytes = tall.saturating_mul(w).saturating_mul(nch * 4);
+        if tall > rows && bytes <= TALL_STRIP_BYTES {
+            tall
+        } else {
+            rows
+        }
     }
 }
 
@@ -271,6 +295,26 @@ mod tests {
         let grid = Grid { in_w, in_h, s: 3 };
         let names = ["R", "G", "B"].map(String::from).to_vec();
         StripLayout::new(grid, names, vec![0.2126, 0.7152, 0.0722])
+    }
+
+    #[test]
+    fn strips_grow_to_sixteen_pixel_rows_where_they_fit() {
+        // 12288 wide at S = 3: 28 rows by 4 MiB (9.3 pixel rows); 48 hold
+        // 7.1 MB.
+        let square = rgb(12288, 12288);
+        assert_eq!(square.auto_strip_rows(), TALL_STRIP_PIXEL_ROWS * 3);
+        // 32769 wide: 48 rows would be 18.9 MB; the 6 pixel rows stay.
+        assert_eq!(rgb(32769, 3600).auto_strip_rows(), MIN_STRIP_PIXEL_ROWS * 3);
+        // Narrower: 4 MiB already holds more pixel rows (56 rows).
+        assert_eq!(rgb(6144, 6144).auto_strip_rows(), 56);
+        // The estimate counts the taller strips.
+        let (block, ep) = (12288 * 3 * 4 * 16, FilterParams::new(Method::EpGauss, 3));
+        let short = PipelineConfig {
+            strip_rows: 28,
+            ..PipelineConfig::default()
+        };
+        let tall = estimate_bytes(&square, &ep, &PipelineConfig::default(), block);
+        assert!(tall > estimate_bytes(&square, &ep, &short, block));
     }
 
     #[test]
