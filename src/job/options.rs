@@ -273,8 +273,8 @@ pub struct FilterOptions {
     /// Accumulator tile width in output pixels (does not change the result).
     #[arg(long, default_value_t = 256, help_heading = "Performance")]
     pub tile: usize,
-    /// Input rows per strip, 0 = automatic (about 4 MiB of input, at least 6 pixel rows; does not
-    /// change the result).
+    /// Input rows per strip, 0 = automatic (about 4 MiB of input, at least 6 pixel rows, 16 where
+    /// they fit in 8 MiB; does not change the result).
     #[arg(long, default_value_t = 0, help_heading = "Performance")]
     pub strip_rows: usize,
 }
