@@ -39,10 +39,10 @@ pub const MIN_STRIP_PIXEL_ROWS: usize = 6;
 /// row, so a strip of fewer pixel rows than cores leaves cores idle in them,
 /// and fewer strips are fewer loops, whose ends cost on many cores. At
 /// 12288x12288 S = 3 (28 input rows, 9.3 pixel rows a strip by default) the
-/// scaling model from 1-thread traces gave at 16 / 32 cores: box 13.6x /
-/// 19.1-19.6x -> 14.3x / 20.8-21.2x, gauss 13.4x / 18.3x -> 14.0x / 21.6x,
-/// ep-gauss 11.5x / 15.2x -> 12.6-12.7x / 18.3-18.6x (docs/DESIGN.md,
-/// "Taller strips where they fit").
+/// scaling model from 1-thread traces gave at 16 / 32 cores (medians): box
+/// 13.8x / 19.5x -> 14.3x / 21.0x, gauss 13.4x / 18.3x -> 14.1x / 21.6x,
+/// ep-gauss 11.5x / 15.2x -> 12.6x / 18.2x (docs/DESIGN.md, "Memory at 32769
+/// wide, and taller strips where they fit").
 pub const TALL_STRIP_PIXEL_ROWS: usize = 16;
 
 /// The most input bytes a strip grown to [`TALL_STRIP_PIXEL_ROWS`] holds:

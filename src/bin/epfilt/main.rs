@@ -396,7 +396,7 @@ fn one_line(e: &anyhow::Error) -> String {
 /// 284 -> 223 MiB; 6144^2 runs as fast as without tuning (2.1 s). The trim
 /// threshold was 32 MiB: 16 took the same input's peak at 16 threads 253 ->
 /// 246 MiB (medians of 4) in the same time, with as many page faults; 8 took
-/// it to 251 of 278 MiB but 3% longer at 2 threads.
+/// it to 251 MiB (278 at 32, medians of 5) but ran 3% longer at 2 threads.
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 fn tune_allocator() {
     // SAFETY: mallopt only changes glibc's allocation thresholds; it is called
