@@ -632,9 +632,7 @@ impl ExrOutput {
                     w,
                     nch,
                 };
-                if cfg!(target_endian = "little")
-                    && matches!(header.compression, Compression::ZIP1 | Compression::ZIP16)
-                {
+                if super::zip::codes(header.compression) {
                     // The samples go straight into the split bytes ZIP
                     // deflates.
                     let per_row: usize = order.iter().map(|&c| types[c].bytes() / 2).sum();

@@ -12,6 +12,14 @@
 /// Deflate level used for output ZIP blocks (miniz_oxide, 1 = fastest).
 pub const ZIP_LEVEL: u8 = 1;
 
+/// Whether blocks of `compression` are coded here rather than by `exr`: ZIP
+/// and ZIPS, on a little-endian machine (the samples' bytes as they lie in
+/// memory are the file's).
+pub fn codes(compression: exr::compression::Compression) -> bool {
+    use exr::compression::Compression;
+    cfg!(target_endian = "little") && matches!(compression, Compression::ZIP1 | Compression::ZIP16)
+}
+
 /// Encode the little-endian bytes of one block.
 pub fn compress(le: &[u8], level: u8) -> Vec<u8> {
     let n = le.len();

@@ -349,9 +349,7 @@ pub(crate) fn decode_checked(
     chunk: &RawChunk<'_>,
 ) -> Result<BlockBytes> {
     guarded(path, meta, offset, chunk, |header| {
-        if cfg!(target_endian = "little")
-            && matches!(header.compression, Compression::ZIP1 | Compression::ZIP16)
-        {
+        if crate::io::zip::codes(header.compression) {
             decompress_zip_chunk(header, chunk)
         } else {
             UncompressedBlock::decompress_chunk(chunk.to_chunk(), meta, false).map(|b| BlockBytes {
@@ -376,9 +374,7 @@ pub(crate) fn decode_zip_into(
     dst: &mut [u8],
 ) -> Result<Option<exr::block::BlockIndex>> {
     let header = &meta.headers[chunk.layer_index];
-    if !(cfg!(target_endian = "little")
-        && matches!(header.compression, Compression::ZIP1 | Compression::ZIP16))
-    {
+    if !crate::io::zip::codes(header.compression) {
         return Ok(None);
     }
     let at = |e| Error::from_exr(path, e, &format!("chunk at byte {offset}"));
