@@ -22,8 +22,13 @@ pub struct Report {
     pub method: String,
     /// Super-sampling factor.
     pub supersample: usize,
-    /// The factor was the method's default, not given (`--supersample`).
-    pub supersample_assumed: bool,
+    /// Where S came from: `--supersample`, the file's attribute, or pixel
+    /// resolution by default ([`crate::io::verdict`]).
+    pub supersample_from: String,
+    /// Why this method: `--method`, or what the file holds.
+    pub method_from: String,
+    /// The guide passes used (`none`, or each kind with its channels).
+    pub guides: String,
     /// Input width (samples).
     pub width: usize,
     /// Input height (samples).
@@ -333,7 +338,15 @@ impl Report {
         let mut report = Report {
             input: job.input.display().to_string(),
             output: job.output.display().to_string(),
-            supersample_assumed: job.supersample_assumed,
+            supersample_from: job
+                .verdict
+                .as_ref()
+                .map_or("--supersample".into(), |v| v.supersample_from.clone()),
+            method_from: job
+                .verdict
+                .as_ref()
+                .map_or("--method".into(), |v| v.method_from.clone()),
+            guides: plan.guides.describe(),
             width: g.read_w,
             height: g.read_h,
             out_width: g.w / s,
@@ -409,7 +422,9 @@ impl Report {
             output: "<array>".into(),
             method: params.method.name().into(),
             supersample: g.s,
-            supersample_assumed: false,
+            supersample_from: "given".into(),
+            method_from: "given".into(),
+            guides: "none".into(),
             width: g.in_w,
             height: g.in_h,
             out_width: g.in_w / g.s,
@@ -531,24 +546,33 @@ impl Report {
         s
     }
 
+    /// How S and the method were decided and the guides used, as a line
+    /// of the summary (empty where the user gave both and there are none).
+    fn decided_line(&self) -> String {
+        let given = |f: &str| f == "--supersample" || f == "--method" || f == "given";
+        if given(&self.supersample_from) && given(&self.method_from) && self.guides == "none" {
+            return String::new();
+        }
+        format!(
+            "S: {}; method: {}; guides: {}\n  ",
+            self.supersample_from, self.method_from, self.guides
+        )
+    }
+
     /// This run's (or part's) summary.
     /// (Long: a line per fact, in the order they print.)
     fn own_summary(&self) -> String {
         let mut s = format!(
-            "{} -> {}: {} S={}{} {}x{} -> {}x{}\n  {:.2} s, {:.1} Mpx/s; noisy {} spread {} capped {}{}\n",
+            "{} -> {}: {} S={} {}x{} -> {}x{}\n  {}{:.2} s, {:.1} Mpx/s; noisy {} spread {} capped {}{}\n",
             self.input,
             self.output,
             self.method,
             self.supersample,
-            if self.supersample_assumed {
-                " (assumed: no --supersample given)"
-            } else {
-                ""
-            },
             self.width,
             self.height,
             self.out_width,
             self.out_height,
+            self.decided_line(),
             self.seconds,
             self.megapixels_per_second,
             self.samples_noisy,

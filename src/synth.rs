@@ -588,6 +588,9 @@ pub fn synth(job: &SynthJob, progress: &(dyn Fn(usize, usize) + Sync)) -> Result
                     ));
                 };
                 let strip = crate::pipeline::auto_strip_rows(iw, 3).max(s);
+                // The render says it is super-sampled: `filter` reduces it
+                // S times without being told (crate::io::verdict).
+                let ints = [(crate::io::SUPERSAMPLE_ATTRIBUTES[0], s as i32)];
                 let spec = OutSpec {
                     path: &job.output,
                     format: out_format,
@@ -596,7 +599,7 @@ pub fn synth(job: &SynthJob, progress: &(dyn Fn(usize, usize) + Sync)) -> Result
                     names: &rgb,
                     compression: job.compression,
                     strip,
-                    ints: &[],
+                    ints: &ints,
                 };
                 write_streamed(&spec, |j, n| sc.noisy_rows(s, j, n), progress)?;
                 if let Some(t) = &job.truth {
@@ -606,6 +609,7 @@ pub fn synth(job: &SynthJob, progress: &(dyn Fn(usize, usize) + Sync)) -> Result
                         w: sc.w,
                         h: sc.h,
                         strip: 64,
+                        ints: &[],
                         ..spec
                     };
                     write_streamed(&spec, |y, n| sc.truth_rows(s, y, n), &|_, _| {})?;

@@ -16,6 +16,7 @@ pub mod channels;
 pub mod ep_box;
 pub mod ep_gauss;
 pub mod foils;
+pub mod guides;
 pub mod kernel;
 pub mod luminance;
 
@@ -263,6 +264,14 @@ pub fn halo(p: &FilterParams) -> crate::geometry::Halo {
             base_reach: usize::from(p.supersample == 1),
             ..Default::default()
         },
+        Method::EpGauss if p.supersample == 1 => {
+            let spread = reach(p.max_radius);
+            crate::geometry::Halo {
+                search_reach: (2 * ep_gauss::pixel::BACKGROUND_REACH).max(spread),
+                spread_reach: spread,
+                ..Default::default()
+            }
+        }
         Method::EpGauss => crate::geometry::Halo {
             xbar_reach: shell(p.radius)
                 + if p.supersample == 1 {
@@ -274,11 +283,15 @@ pub fn halo(p: &FilterParams) -> crate::geometry::Halo {
             search_reach: shell(max_rho),
             spread_reach: reach(max_rho),
         },
-        Method::EpBox => crate::geometry::Halo {
-            search_reach: p.ep_box.passes + ep_box::GUARD_REACH + ep_box::CLUSTER_REACH,
-            spread_reach: p.max_radius.max(0.0).floor() as usize,
-            ..Default::default()
-        },
+        Method::EpBox => {
+            let spread = p.max_radius.max(0.0).floor() as usize;
+            crate::geometry::Halo {
+                search_reach: (p.ep_box.passes + ep_box::GUARD_REACH + ep_box::CLUSTER_REACH)
+                    .max(spread),
+                spread_reach: spread,
+                ..Default::default()
+            }
+        }
     }
 }
 
@@ -457,12 +470,14 @@ impl FilterParams {
     pub fn reads(&self, option: &str) -> bool {
         use Method::*;
         let m = self.method;
-        // ep-gauss at S = 1 reads ep-box's statistics for its carriers rule.
-        let carriers = m == EpBox || (m == EpGauss && self.supersample == 1);
+        let carriers = m == EpBox;
+        let px = m == EpGauss && self.supersample == 1;
         match option.replace('-', "_").as_str() {
-            "tolerance" | "support" | "support_ratio" | "support_group" | "support_compact"
-            | "support_over" | "support_region" | "support_level" | "width_step"
-            | "coarse_from" | "bound_from" | "quality" => m == EpGauss,
+            "tolerance" | "width_step" | "quality" => m == EpGauss,
+            "support" | "support_ratio" | "support_group" | "support_compact" | "support_over"
+            | "support_region" | "support_level" | "coarse_from" | "bound_from" => {
+                m == EpGauss && !px
+            }
             "radius" | "cutoff" => matches!(m, EpGauss | Gauss | Clamp),
             "max_radius" => matches!(m, EpGauss | EpBox),
             "clamp" => m == Clamp,
@@ -479,16 +494,12 @@ impl FilterParams {
     pub fn with_quality(mut self, q: Quality) -> Self {
         let k = q.knobs();
         self.quality = q;
-        self.tolerance = scaled_tolerance(k.tolerance, self.supersample);
-        // At S = 1 a neighbour is a whole pixel: a feature one pixel wide (a
-        // caustic's line, a thin highlight) gives each of its pixels at most
-        // two, and the carriers rule tells fireflies apart there
-        // (docs/DESIGN.md): one neighbour is enough.
-        self.support = if self.supersample == 1 {
-            k.support.min(1)
+        self.tolerance = if self.supersample == 1 {
+            ep_gauss::pixel::TOLERANCE
         } else {
-            k.support
+            scaled_tolerance(k.tolerance, self.supersample)
         };
+        self.support = k.support;
         self.support_ratio = k.support_ratio;
         self.support_group = k.support_group;
         self.support_compact = k.support_compact;

@@ -62,6 +62,12 @@ pub struct PartInfo {
     /// Why nothing is filtered by default, when so.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub note: Option<String>,
+    /// How `filter` filters it without --method or --supersample
+    /// ([`crate::io::verdict`]), or why it cannot say.
+    pub verdict: String,
+    /// The guide passes found by name ([`crate::io::guides`]): `none`, or
+    /// each kind with its channels.
+    pub guides: String,
     /// Luminance weights of R, G, B.
     pub luminance: [f64; 3],
     /// Whether they come from the file's chromaticities (else Rec. 709).
@@ -184,6 +190,7 @@ fn describe_part(
         }
     }
     let ch = h.shared_attributes.chromaticities.as_ref();
+    let (verdict, guides) = verdict_and_guides(path, h, &filtered);
     PartInfo {
         index,
         name: h.own_attributes.layer_name.as_ref().map(|n| n.to_string()),
@@ -207,11 +214,41 @@ fn describe_part(
             .map(|t| t.to_string())
             .collect(),
         note,
+        verdict,
+        guides,
         luminance: luminance_weights(ch),
         luminance_from_chromaticities: ch.is_some(),
         pixel_aspect: h.shared_attributes.pixel_aspect,
         attributes,
     }
+}
+
+/// What `filter` decides for a part (header `h`, beauty channels
+/// `filtered`) and the guides it finds there, in words.
+fn verdict_and_guides(
+    path: &Path,
+    h: &exr::meta::header::Header,
+    filtered: &[String],
+) -> (String, String) {
+    let words = |e: crate::Error| {
+        let e = e.to_string();
+        let prefix = format!("{}: ", path.display());
+        e.trim_start_matches(&prefix).to_string()
+    };
+    let verdict = match super::verdict(path, h, &super::StatsRequest::default(), None, None) {
+        Ok(v) => v.line(),
+        Err(e) => format!("none ({})", words(e)),
+    };
+    let beauty: Vec<String> = filtered
+        .iter()
+        .filter(|c| !c.rsplit('.').next().unwrap_or(c).eq_ignore_ascii_case("a"))
+        .cloned()
+        .collect();
+    let guides = match super::find_guides(path, h, &beauty, &super::GuideRequest::default()) {
+        Ok(g) => g.describe(),
+        Err(e) => format!("none ({})", words(e)),
+    };
+    (verdict, guides)
 }
 
 fn describe_rgbe(path: &Path) -> crate::Result<FileInfo> {
@@ -249,6 +286,8 @@ fn describe_rgbe(path: &Path) -> crate::Result<FileInfo> {
         dropped: Vec::new(),
         views: Vec::new(),
         note: None,
+        verdict: verdict_and_guides(path, input.header(), &[]).0,
+        guides: "none".into(),
         luminance: lw,
         luminance_from_chromaticities: r.primaries.is_some(),
         pixel_aspect: 1.0,
@@ -341,6 +380,8 @@ impl FileInfo {
                     }
                 }
             }
+            let _ = writeln!(s, "  filter by default: {}", p.verdict);
+            let _ = writeln!(s, "  guides: {}", p.guides);
             let lw = p.luminance;
             let _ = writeln!(
                 s,
@@ -397,6 +438,7 @@ impl FileInfo {
                 format!("{:?}", r.scale)
             }
         );
+        let _ = writeln!(s, "  filter by default: {}", p.verdict);
         let lw = p.luminance;
         let _ = writeln!(
             s,

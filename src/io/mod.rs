@@ -13,6 +13,8 @@
 //!   records, the band attributes, and the check that an existing output is
 //!   complete; [`views`]: multi-view files, and `--view all`'s output;
 //! * [`info`](mod@info): what a file holds, as text or JSON, and its raw attributes;
+//! * [`verdict`]: how a file is filtered when the user does not say (its
+//!   super-sampling, its method); [`guides`]: its guide passes, by name;
 //! * [`writer`]: a [`crate::pipeline::Sink`] that builds scan-line blocks,
 //!   compresses them in parallel and writes them with the chunk writer into a
 //!   temporary file in the destination directory.
@@ -21,6 +23,7 @@ pub mod bands;
 pub mod chunk_sizes;
 pub mod destination;
 pub mod format;
+pub mod guides;
 pub mod info;
 pub mod mapped;
 pub mod output;
@@ -30,6 +33,7 @@ pub mod reader;
 pub mod rgbe;
 pub mod stdin;
 pub mod variance;
+pub mod verdict;
 pub mod views;
 pub mod writer;
 pub mod zip;
@@ -38,9 +42,11 @@ pub use destination::{write_file, Destination, Staged};
 /// The codecs an EXR output can be written with.
 pub use exr::prelude::Compression;
 pub use format::Format;
+pub use guides::{find_guides, FoundGuides, GuideKind, GuideRequest};
 pub use info::info;
 pub use reader::{ExrInput, PartSelect, Selection, ViewSelect};
 pub use variance::{find_stats, SppFrom, StatsChannels, StatsRequest};
+pub use verdict::{verdict, Verdict, SUPERSAMPLE_ATTRIBUTES};
 pub use writer::{ExrOutput, OutputSettings};
 
 use exr::meta::attribute::Chromaticities;

@@ -29,7 +29,8 @@ pub struct ArrayInput<'a> {
     /// The samples were half floats: with `pixel_type` `same`, the output is
     /// rounded to half floats, as a file of them would be.
     pub half: bool,
-    /// Per-pixel statistics (ep-box; ep-gauss at S = 1).
+    /// Per-pixel statistics (ep-box, the method chosen where they are given
+    /// at S = 1).
     pub stats: Option<ArrayStats<'a>>,
 }
 
@@ -124,7 +125,13 @@ pub fn filter_array(
             if files.len() == 1 { "ies" } else { "y" }
         )));
     }
-    let (params, mut warnings) = opts.params(given)?;
+    // As a file's: ep-box where the variance is given at S = 1, unless
+    // the method is.
+    let s = opts.supersample.unwrap_or(1);
+    let (params, mut warnings) = match (&opts.method, input.stats) {
+        (None, Some(_)) if s == 1 => opts.params_for(Method::EpBox, 1, given)?,
+        _ => opts.params(given)?,
+    };
     let (cfg, capped) = opts.pipeline(cancel)?;
     warnings.extend(capped);
     let (w, h, nch) = (input.width, input.height, input.channels.len());
@@ -186,8 +193,7 @@ pub fn filter_array(
 }
 
 /// The statistics the run reads, appended to the layout's channels (ep-box
-/// needs them; ep-gauss at S = 1 reads them when given, as the carriers
-/// rule reads a file's).
+/// needs them).
 fn stats_layout(
     input: &ArrayInput<'_>,
     opts: &FilterOptions,
@@ -195,8 +201,7 @@ fn stats_layout(
     layout: &mut StripLayout,
     warnings: &mut Vec<String>,
 ) -> Result<Option<StatsChannels>> {
-    let reads = params.method == Method::EpBox
-        || (params.method == Method::EpGauss && params.supersample == 1 && params.support > 0);
+    let reads = params.method == Method::EpBox;
     let Some(st) = input.stats.filter(|_| reads) else {
         if params.method == Method::EpBox {
             return Err(Error::Config(
@@ -337,7 +342,7 @@ mod tests {
             half: false,
             stats: None,
         };
-        let (o, given) = opts(&[]);
+        let (o, given) = opts(&[("supersample", "3")]);
         let out = filter_array(&input, &o, &given, None).unwrap();
         assert_eq!((out.width, out.height), (8, 6));
         assert!(out.report.samples_spread >= 1);
@@ -378,7 +383,11 @@ mod tests {
             half: false,
             stats: None,
         };
+        // An array is at pixel resolution unless told otherwise.
         let (o, given) = opts(&[]);
+        let out = filter_array(&input, &o, &given, None).unwrap();
+        assert_eq!((out.width, out.height), (10, 9));
+        let (o, given) = opts(&[("supersample", "3")]);
         let e = filter_array(&input, &o, &given, None).unwrap_err();
         assert!(e.to_string().contains("crop it to 9x9"), "{e}");
         let short = ArrayInput {

@@ -7,6 +7,7 @@ mod plan;
 mod run;
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 pub use options::{FilterOptions, Setting, StatsOptions};
 pub use plan::FilterPlan;
@@ -14,9 +15,12 @@ pub use run::Outcome;
 
 use crate::error::{Error, Result};
 use crate::filter::channels::{self, RuleOverride};
-use crate::filter::FilterParams;
+use crate::filter::guides::SurfaceRule;
+use crate::filter::{FilterParams, Method};
 use crate::io::provenance::{self, Fingerprint};
-use crate::io::{ExrInput, Format, OutputSettings, PartSelect, StatsRequest, ViewSelect};
+use crate::io::{
+    ExrInput, Format, GuideRequest, OutputSettings, PartSelect, StatsRequest, Verdict, ViewSelect,
+};
 use crate::pipeline::{PipelineConfig, Progress};
 use crate::report::{PartReport, Report};
 
@@ -50,9 +54,17 @@ pub struct FilterJob {
     pub stats: StatsRequest,
     /// What to do with an input whose size is not a multiple of S.
     pub edge: Edge,
-    /// `params.supersample` is a default, not the user's choice: the summary
-    /// says what was assumed, and a size that does not fit says how to fix it.
-    pub supersample_assumed: bool,
+    /// What the user left to the input (`--method`, `--supersample`):
+    /// [`FilterJob::settle`] decides it from the file's header.
+    pub undecided: Undecided,
+    /// How S and the method were decided (set by [`FilterJob::settle`]).
+    pub verdict: Option<Verdict>,
+    /// Warnings from settling (options the method decided does not read).
+    pub notes: Vec<String>,
+    /// Which guide passes to use.
+    pub guides: GuideRequest,
+    /// How alike surface guides must be for a spread to cross them.
+    pub surface_rule: SurfaceRule,
     /// Only band `K` of `N` (1-based) of the output rows, for `merge`.
     pub band: Option<(usize, usize)>,
     /// `--channel-rule`s for the channels beside the beauty (the last that
@@ -66,6 +78,86 @@ pub struct FilterJob {
     /// (each as an image of its own, into one output); `None`: the default
     /// view, the others left out with a warning.
     pub view: Option<ViewSelect>,
+}
+
+/// Builds a job's settings for the method and S its input decides, with
+/// the options the user gave applied ([`FilterJob::settle`]), and the
+/// warnings for options that method does not read.
+pub type Rebuild = Arc<
+    dyn Fn(Method, usize) -> Result<(FilterParams, Vec<String>)>
+        + Send
+        + Sync
+        + std::panic::RefUnwindSafe,
+>;
+
+/// What a job leaves to its input's header.
+#[derive(Clone, Default)]
+pub struct Undecided {
+    /// `--method` was not given.
+    pub method: bool,
+    /// `--supersample` was not given.
+    pub supersample: bool,
+    /// The settings for what the file decides (`None`: `params` as they
+    /// are, whatever the file says).
+    pub rebuild: Option<Rebuild>,
+}
+
+impl std::fmt::Debug for Undecided {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Undecided")
+            .field("method", &self.method)
+            .field("supersample", &self.supersample)
+            .finish()
+    }
+}
+
+impl FilterJob {
+    /// The job with S and the method decided: by the user where given, else
+    /// by the input's header ([`crate::io::verdict`]: the super-sampling
+    /// attribute, else 1; ep-box where the file holds variance at S = 1,
+    /// else ep-gauss), its settings rebuilt for them. Reads the header only.
+    pub fn settle(&self) -> Result<FilterJob> {
+        if self.verdict.is_some() {
+            return Ok(self.clone());
+        }
+        let u = &self.undecided;
+        let given_m = (!u.method).then_some(self.params.method);
+        let given_s = (!u.supersample).then_some(self.params.supersample);
+        let verdict = match (&u.rebuild, given_m, given_s) {
+            (None, _, _) | (_, Some(_), Some(_)) => Verdict {
+                supersample: self.params.supersample,
+                supersample_from: "--supersample".into(),
+                method: self.params.method,
+                method_from: "--method".into(),
+                stats: None,
+            },
+            _ => {
+                let view = match &self.view {
+                    Some(ViewSelect::Name(v)) => Some(v.as_str()),
+                    _ => None,
+                };
+                let input = crate::io::ExrInput::open_view(
+                    &self.input,
+                    self.part.as_ref(),
+                    self.layer.as_deref(),
+                    view,
+                );
+                // A part or view that cannot be opened: the plan says why.
+                let Ok(input) = input else {
+                    return Ok(self.clone());
+                };
+                crate::io::verdict(&self.input, input.header(), &self.stats, given_m, given_s)?
+            }
+        };
+        let mut job = self.clone();
+        if let Some(rebuild) = &u.rebuild {
+            let (params, notes) = rebuild(verdict.method, verdict.supersample)?;
+            job.params = params;
+            job.notes = notes;
+        }
+        job.verdict = Some(verdict);
+        Ok(job)
+    }
 }
 
 /// An input whose width or height is not a multiple of the super-sampling
@@ -124,7 +216,11 @@ impl FilterJob {
             max_memory: None,
             stats: StatsRequest::default(),
             edge: Edge::Exact,
-            supersample_assumed: false,
+            undecided: Undecided::default(),
+            verdict: None,
+            notes: Vec::new(),
+            guides: GuideRequest::default(),
+            surface_rule: SurfaceRule::default(),
             band: None,
             channel_rules: Vec::new(),
             format: None,
@@ -172,7 +268,7 @@ impl FilterJob {
             .map(|r| format!("{}={}", r.pattern(), r.rule.name()))
             .collect();
         Ok(format!(
-            "epfilt {}; {}; format={}; compression={}; pixel_type={:?}; allow_lossy={}; part={:?}; layer={:?}; view={:?}; channel_rules={}; edge={:?}; nonfinite={:?}; stats={:?}",
+            "epfilt {}; {}; format={}; compression={}; pixel_type={:?}; allow_lossy={}; part={:?}; layer={:?}; view={:?}; channel_rules={}; edge={:?}; nonfinite={:?}; stats={:?}; guides={:?}; surface={:?}",
             env!("CARGO_PKG_VERSION"),
             method.join(" "),
             self.output_format()?.name(),
@@ -186,6 +282,8 @@ impl FilterJob {
             self.edge,
             self.pipeline.nonfinite,
             self.stats,
+            self.guides,
+            self.surface_rule,
         ))
     }
 
@@ -217,6 +315,7 @@ pub enum Existing {
 /// the same input with the same settings ([`provenance`]), and the same band
 /// or none.
 pub fn existing_output(job: &FilterJob) -> Result<Existing> {
+    let job = &job.settle()?;
     let out = &job.output;
     if out.as_os_str() == "-" {
         return Ok(Existing::Missing);
@@ -288,6 +387,7 @@ pub fn check_not_same_file(input: &Path, output: &Path) -> Result<()> {
 /// out with a warning. `--part all` filters every part with the same
 /// settings into one multi-part output.
 pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
+    let job = &job.settle()?;
     job.params.validate()?;
     check_not_same_file(&job.input, &job.output)?;
     let job = &FilterJob {

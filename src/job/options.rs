@@ -19,7 +19,8 @@ use crate::io::{parse_compression, Format, OutputSettings, PartSelect, StatsRequ
 use crate::pipeline::{NonFinite, PipelineConfig, Precision};
 use crate::sequence::{parse_frames, FramePattern, SequenceJob, Share, Task};
 
-use super::{Edge, FilterJob};
+use super::{Edge, FilterJob, Undecided};
+use crate::filter::guides::SurfaceRule;
 
 /// Every setting of `epfilt filter` but its files and what it prints: the
 /// input and its channels, the method and its knobs, the output's format,
@@ -28,7 +29,9 @@ use super::{Edge, FilterJob};
 #[derive(Args, Clone, Debug)]
 pub struct FilterOptions {
     // ---- Input ----
-    /// Input samples per output pixel along each axis (1..=8) [default: 3; 1 for ep-box].
+    /// Input samples per output pixel along each axis (1..=8): a super-sampled
+    /// render is reduced S times [default: the file's epfiltSupersample
+    /// attribute, else 1: an image is never reduced unless asked].
     #[arg(long, short = 's', help_heading = "Input")]
     pub supersample: Option<usize>,
     /// Part of a multi-part input, by name or index, or `all` (every part
@@ -48,9 +51,10 @@ pub struct FilterOptions {
     // ---- Method ----
     /// ep-gauss (§5.2), ep-box (§5.1, pixels with variance), gauss (linear
     /// foil), box (S x S average), or the energy-losing foils clamp, median
-    /// and alpha-trim.
-    #[arg(long, default_value = "ep-gauss", help_heading = "Method")]
-    pub method: String,
+    /// and alpha-trim [default: from the file: ep-box where it holds
+    /// per-pixel variance at S = 1, else ep-gauss; `epfilt info` says which].
+    #[arg(long, help_heading = "Method")]
+    pub method: Option<String>,
     /// Base Gaussian radius in output pixels (weight exp(-(d/r)^2)): ep-gauss,
     /// gauss, clamp [default: 0.6; ep-gauss: its --quality's].
     #[arg(long, help_heading = "Method")]
@@ -170,6 +174,31 @@ pub struct FilterOptions {
     /// Confidence of the stderr guard's bound on the excess noise can explain.
     #[arg(long, default_value_t = 0.99, help_heading = "ep-box")]
     pub guard_confidence: f64,
+
+    // ---- Guides ----
+    /// Guide passes: auto (every one found by the names renderers give them:
+    /// emission, albedo, normal, depth; README "Guide passes"), none, or a
+    /// comma list of those that must be found. The emission (the directly
+    /// visible light) is set aside before any test and added back after, so
+    /// a lamp is never spread; albedo, normal and depth keep a spread on its
+    /// source's surface (see --guide-normal).
+    #[arg(long, default_value = "auto", help_heading = "Guides")]
+    pub guides: String,
+    /// KIND=NAME: the layer (depth: the channel) of a guide, e.g.
+    /// emission=ViewLayer.Emit, normal=N, depth=Z (repeatable).
+    #[arg(long = "guide", value_name = "KIND=NAME", help_heading = "Guides")]
+    pub guide: Vec<String>,
+    /// Surface guides: a spread reaches a pixel only where the normals'
+    /// angle is at most this many degrees, ...
+    #[arg(long, default_value_t = 30.0, help_heading = "Guides")]
+    pub guide_normal: f64,
+    /// ... the albedos differ by at most this in every channel, ...
+    #[arg(long, default_value_t = 0.1, help_heading = "Guides")]
+    pub guide_albedo: f64,
+    /// ... and the depths by at most this fraction per pixel of distance;
+    /// each spread's weights are normalised over the pixels it reaches.
+    #[arg(long, default_value_t = 0.05, help_heading = "Guides")]
+    pub guide_depth: f64,
 
     // ---- Channels ----
     /// Layer whose R,G,B (or Y) channels are filtered, e.g. ViewLayer.Combined
@@ -501,10 +530,22 @@ impl FilterOptions {
     /// The method's settings; `given` (the method options the user gave)
     /// yields a warning for each the method does not read.
     pub fn params(&self, given: &[String]) -> Result<(FilterParams, Vec<String>)> {
-        let method = Method::parse(&self.method)?;
-        let s = self
-            .supersample
-            .unwrap_or(if method == Method::EpBox { 1 } else { 3 });
+        let method = match &self.method {
+            Some(m) => Method::parse(m)?,
+            None => Method::EpGauss,
+        };
+        self.params_for(method, self.supersample.unwrap_or(1), given)
+    }
+
+    /// The settings of `method` at S = `s`, the options given applied
+    /// over their defaults; `given` (the method options the user gave)
+    /// yields a warning for each the method does not read.
+    pub fn params_for(
+        &self,
+        method: Method,
+        s: usize,
+        given: &[String],
+    ) -> Result<(FilterParams, Vec<String>)> {
         let mut params = FilterParams::new(method, s);
         if let Some(q) = &self.quality {
             let q = Quality::parse(q)?;
@@ -684,7 +725,22 @@ impl FilterOptions {
         given: &[String],
         cancel: Option<Arc<AtomicBool>>,
     ) -> Result<(FilterJob, Vec<String>)> {
-        let (params, mut warnings) = self.params(given)?;
+        let (params, warnings) = self.params(given)?;
+        let undecided = Undecided {
+            method: self.method.is_none(),
+            supersample: self.supersample.is_none(),
+            rebuild: {
+                let opts = self.clone();
+                let given = given.to_vec();
+                Some(Arc::new(move |m, s| opts.params_for(m, s, &given)))
+            },
+        };
+        // Where the file decides, the warnings come once it has.
+        let mut warnings = if undecided.method || undecided.supersample {
+            Vec::new()
+        } else {
+            warnings
+        };
         let (pipeline, capped) = self.pipeline(cancel)?;
         warnings.extend(capped);
         let compression = match &self.compression {
@@ -694,7 +750,6 @@ impl FilterOptions {
             ),
             None => None,
         };
-        let s = params.supersample;
         let job = FilterJob {
             input,
             output,
@@ -715,7 +770,15 @@ impl FilterOptions {
                 Some(e) => Edge::parse(e)?,
                 None => Edge::Exact,
             },
-            supersample_assumed: self.supersample.is_none() && s > 1,
+            undecided,
+            verdict: None,
+            notes: Vec::new(),
+            guides: crate::io::GuideRequest::parse(&self.guides, &self.guide)?,
+            surface_rule: SurfaceRule {
+                normal_degrees: self.guide_normal,
+                albedo: self.guide_albedo,
+                depth: self.guide_depth,
+            },
             band,
             channel_rules: (self.channel_rule.iter())
                 .map(|r| RuleOverride::parse(r))
@@ -739,10 +802,10 @@ mod tests {
     fn no_settings_are_the_command_lines_defaults() {
         let (o, given) = settings(&[]).unwrap();
         assert!(given.is_empty());
-        assert_eq!(o.method, "ep-gauss");
+        assert_eq!(o.method, None);
         assert_eq!((o.tile, o.strip_rows, o.passes), (256, 0, 8));
         let (p, warnings) = o.params(&given).unwrap();
-        assert_eq!(p, FilterParams::new(Method::EpGauss, 3));
+        assert_eq!(p, FilterParams::new(Method::EpGauss, 1));
         assert!(warnings.is_empty());
     }
 

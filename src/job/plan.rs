@@ -10,7 +10,9 @@ use crate::geometry::Grid;
 use crate::host::{cpu_seconds, default_max_memory};
 use crate::io::output::OutputLayout;
 use crate::io::provenance::Fingerprint;
-use crate::io::{find_stats, ExrInput, Format, StatsChannels, StatsRequest, ViewSelect};
+use crate::io::{
+    find_guides, find_stats, ExrInput, Format, FoundGuides, StatsChannels, ViewSelect,
+};
 use crate::pipeline::stream::MAX_CHANNELS;
 use crate::pipeline::{ChannelMode, StripLayout};
 
@@ -24,8 +26,10 @@ pub struct FilterPlan<'a> {
     /// The job's settings (ep-box's `L_tvis` is settled by the first pass).
     pub(crate) params: FilterParams,
     pub(crate) to_rgbe: bool,
-    /// The statistics channels found (ep-box; ep-gauss at S = 1).
+    /// The statistics channels found (ep-box).
     pub(crate) found: Option<StatsChannels>,
+    /// The guide passes found and used.
+    pub(crate) guides: FoundGuides,
     pub(crate) geometry: Geometry,
     /// The pipeline's channel layout.
     pub(crate) pipe_job: StripLayout,
@@ -93,12 +97,18 @@ impl<'a> FilterPlan<'a> {
             ExrInput::open_view(&job.input, job.part.as_ref(), job.layer.as_deref(), view)?;
         let to_rgbe = job.output_format()? == Format::Rgbe;
         let scope = crate::io::reader::view_scope(&job.input, input.header(), view, exclusive)?;
-        let carried = carry(job, &mut input, &scope, to_rgbe)?;
+        let found_guides = guides(job, &input)?;
+        let carried = carry(job, &mut input, &scope, to_rgbe, &found_guides)?;
         let found = statistics(job, &mut input)?;
-        let mut warnings = super::dropped_warnings(job, &input, &scope, to_rgbe);
+        let guide_layout = found_guides.attach(&mut input)?;
+        let mut warnings = job.notes.clone();
+        warnings.extend(super::dropped_warnings(job, &input, &scope, to_rgbe));
         let geometry = geometry(job, &input, &mut warnings)?;
         let channels = input.channels();
-        let pipe_job = pipeline_job(job, &input, &geometry, found.as_ref().map(|f| &f.1))?;
+        let mut pipe_job = pipeline_job(job, &input, &geometry, found.as_ref().map(|f| &f.1))?;
+        pipe_job.guides = guide_layout;
+        pipe_job.surface_rule = job.surface_rule;
+        pipe_job.aux = input.aux_channels();
         check_memory(job, &input, &pipe_job, carried)?;
         let mut layout = OutputLayout::of(&input, &channels, &job.output_settings);
         if geometry.w != geometry.full_w || geometry.h != input.size().1 {
@@ -120,6 +130,7 @@ impl<'a> FilterPlan<'a> {
             params: job.params.clone(),
             to_rgbe,
             found: found.map(|f| f.0),
+            guides: found_guides,
             geometry,
             pipe_job,
             channels,
@@ -139,11 +150,21 @@ fn carry(
     input: &mut ExrInput,
     scope: &channels::ViewScope,
     to_rgbe: bool,
+    guides: &FoundGuides,
 ) -> Result<usize> {
+    // The emission guide's channels are carried as they are (averaged at
+    // S > 1): the beauty's emission is never spread, nor is the layer.
+    let emission = guides.emission.clone().unwrap_or_default();
     let carried = if to_rgbe {
         Vec::new()
     } else {
-        input.carry_channels(|name, uint| channels::rule_for(name, uint, &job.channel_rules, scope))
+        input.carry_channels(|name, uint| {
+            let given = job.channel_rules.iter().any(|r| r.matches(name));
+            if !given && emission.iter().any(|e| e == name) {
+                return ChannelRule::Average;
+            }
+            channels::rule_for(name, uint, &job.channel_rules, scope)
+        })
     };
     for (name, rule) in &carried {
         if input.is_uint(name) && *rule != ChannelRule::Nearest {
@@ -167,26 +188,37 @@ fn carry(
     Ok(carried.len())
 }
 
-/// The statistics step: ep-box needs them; ep-gauss at S = 1 reads them
-/// when the file has them (the carriers rule), and must find them when asked.
+/// The guide passes `job` asks for, found by name (none for the methods
+/// that spread nothing, or with `--guides none`).
+fn guides(job: &FilterJob, input: &ExrInput) -> Result<FoundGuides> {
+    let p = &job.params;
+    let spreads = matches!(p.method, Method::EpGauss | Method::EpBox);
+    if !spreads || job.guides.none() {
+        return Ok(FoundGuides::default());
+    }
+    let beauty: Vec<String> = (input.channels().into_iter())
+        .zip(input.luminance())
+        .filter(|(_, l)| *l != 0.0)
+        .map(|(c, _)| c)
+        .collect();
+    if p.supersample > 1 {
+        // The spread of a super-sample reads no guides.
+        return Ok(FoundGuides::default());
+    }
+    find_guides(&job.input, input.header(), &beauty, &job.guides)
+}
+
+/// The statistics step: ep-box needs them.
 fn statistics(
     job: &FilterJob,
     input: &mut ExrInput,
 ) -> Result<Option<(StatsChannels, crate::filter::ep_box::StatsLayout)>> {
-    let params = &job.params;
-    let asked = job.stats != StatsRequest::default();
-    let ep_gauss_px = params.method == Method::EpGauss && params.supersample == 1;
-    if !(params.method == Method::EpBox || (ep_gauss_px && params.support > 0)) {
+    if job.params.method != Method::EpBox {
         return Ok(None);
     }
-    match find_stats(&job.input, input.header(), &job.stats) {
-        Ok(found) => {
-            let layout = found.attach(input, &job.input)?;
-            Ok(Some((found, layout)))
-        }
-        Err(_) if params.method == Method::EpGauss && !asked => Ok(None),
-        Err(e) => Err(e),
-    }
+    let found = find_stats(&job.input, input.header(), &job.stats)?;
+    let layout = found.attach(input, &job.input)?;
+    Ok(Some((found, layout)))
 }
 
 /// The samples filtered: the whole data window when its size is a multiple
@@ -252,15 +284,15 @@ fn geometry(job: &FilterJob, input: &ExrInput, warnings: &mut Vec<String>) -> Re
             })
         }
         Edge::Exact => {
-            let hint = if job.supersample_assumed {
-                " If it is at pixel resolution, give --supersample 1."
-            } else {
-                ""
+            let from = match &job.verdict {
+                Some(v) if v.supersample_from != "--supersample" => {
+                    format!(" (from the {})", v.supersample_from)
+                }
+                _ => String::new(),
             };
             Err(Error::Config(format!(
-                "{}: {w}x{h} samples is not a multiple of --supersample {s}{}: give --edge crop to drop the last partial output column and row ({}x{} pixels), or --edge pad to keep them as pixels of fewer samples ({}x{}).{hint}",
+                "{}: {w}x{h} samples is not a multiple of --supersample {s}{from}: give --edge crop to drop the last partial output column and row ({}x{} pixels), or --edge pad to keep them as pixels of fewer samples ({}x{}).",
                 job.input.display(),
-                if job.supersample_assumed { " (assumed: no --supersample given)" } else { "" },
                 cw / s,
                 ch / s,
                 w.div_ceil(s),

@@ -27,6 +27,12 @@ pub struct SpreadCounts {
     pub coarse: u64,
     /// Of those, the samples spread on the 4x coarser grid.
     pub coarse4: u64,
+    /// At S = 1: noisy pixels left as they were because no width within
+    /// the cap spreads their excess within the tolerance.
+    pub beyond: u64,
+    /// Samples whose emission guide set some light aside (never tested,
+    /// never spread).
+    pub emissive: u64,
 }
 
 impl std::ops::AddAssign for SpreadCounts {
@@ -41,6 +47,8 @@ impl std::ops::AddAssign for SpreadCounts {
         self.spread_taps += o.spread_taps;
         self.coarse += o.coarse;
         self.coarse4 += o.coarse4;
+        self.beyond += o.beyond;
+        self.emissive += o.emissive;
     }
 }
 

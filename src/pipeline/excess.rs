@@ -22,6 +22,7 @@
 use rayon::prelude::*;
 
 use super::counts::{ExcessCounts, MethodCounts};
+use super::guided::GuideReader;
 use super::stage::{Output, Stage, WindowUse};
 use super::window::RowWindow;
 use super::ChannelMode;
@@ -30,7 +31,7 @@ use crate::filter::ep_box::{
     cluster_count, colour_fraction, excess, passes::chebyshev_passes, receivers, EpBoxParams,
     Guard, PixelTest, Ring, Spp, StatsLayout, TFactor,
 };
-use crate::filter::luminance::Luminance;
+use crate::filter::guides::{GuideLayout, Surface, SurfaceRule};
 use crate::filter::ValidParams;
 use crate::geometry::Halo;
 
@@ -48,6 +49,9 @@ struct Source {
     /// Where what each in-image pixel of the walk receives is, per channel
     /// (`nch` values in the shares).
     off: usize,
+    /// Its surface guides (with surface guides on: only the pixels of its
+    /// surface receive).
+    surface: Surface,
 }
 
 /// The `ep-box` filter state between strips.
@@ -80,6 +84,7 @@ pub struct ExcessStage {
     acc: RowWindow<f64>,
     treat_done: usize,
     counters: ExcessCounts,
+    guides: GuideReader,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -100,6 +105,7 @@ impl ExcessStage {
         params: &ValidParams,
         ltvis: f64,
         tile: usize,
+        (guides, rule): (GuideLayout, SurfaceRule),
     ) -> Result<Self> {
         let max_radius = params.max_radius;
         let params: &EpBoxParams = &params.ep_box;
@@ -134,6 +140,7 @@ impl ExcessStage {
             )));
         }
         let ring = Ring::new(max_radius);
+        let guides = GuideReader::new(guides, rule, &lum, nch, w)?;
         Ok(ExcessStage {
             w,
             h,
@@ -158,6 +165,7 @@ impl ExcessStage {
             acc: RowWindow::new(nch * w),
             treat_done: 0,
             counters: ExcessCounts::default(),
+            guides,
         })
     }
 
@@ -174,7 +182,7 @@ impl Stage for ExcessStage {
         Halo {
             xbar_reach: 0,
             base_reach: 0,
-            search_reach: self.passes + GUARD_REACH + CLUSTER_REACH,
+            search_reach: self.treat_lag(),
             spread_reach: self.reach,
         }
     }
@@ -193,7 +201,10 @@ impl Stage for ExcessStage {
     }
 
     fn input_needed(&self) -> usize {
-        self.treat_done.saturating_sub(self.passes + GUARD_REACH)
+        // The passes read back to `passes + GUARD_REACH` rows; the spreads'
+        // receivers (their surface guides) `reach` rows.
+        self.treat_done
+            .saturating_sub((self.passes + GUARD_REACH).max(self.reach))
     }
 
     fn output(&self, rows: (usize, usize)) -> Output<'_> {
@@ -245,14 +256,14 @@ impl ExcessStage {
     /// Luminance, what the statistics say ([`RAW_NOISY`], [`RAW_CARRIED`],
     /// [`RAW_FEW`]) and the stderr guard's bound of rows `a..b`.
     fn statistics(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
-        let (w, nch) = (self.w, self.nch);
+        let w = self.w;
         let (lum, stats, dl) = (&self.lum, &self.stats, self.dl);
-        let luminance = &Luminance::new(&lum[..nch.min(lum.len())]);
         let (t, tg) = (&self.t, &self.tg);
         let ys = self.ylum.range_mut(a, b);
         let cs = self.cap.range_mut(a, b);
         let fs = self.raw.range_mut(a, b);
         let params = &self.params;
+        let guides = &self.guides;
         let region = crate::trace::region("ep-box statistics");
         ys.into_par_iter()
             .zip(cs)
@@ -263,10 +274,15 @@ impl ExcessStage {
                 let row = input.get(a + k);
                 let ch = |c: usize, x: usize| row[c * w + x] as f64;
                 for x in 0..w {
-                    let y = luminance.of(|c| ch(c, x));
+                    // What the emission guide leaves: a lamp's own light
+                    // is neither an excess nor a neighbour's mean.
+                    let y = guides.residual_luminance(row, x);
                     yrow[x] = y;
                     let (n, se2) = stats.pixel(lum, y, |c| ch(c, x));
-                    let test = PixelTest::new(y, se2, n, t.get(n), dl, params);
+                    let mut test = PixelTest::new(y, se2, n, t.get(n), dl, params);
+                    if guides.is_light(row, x, y) {
+                        test = PixelTest::default();
+                    }
                     let f = (u8::from(test.noisy) * RAW_NOISY)
                         | (u8::from(test.carried) * RAW_CARRIED)
                         | (u8::from(test.few) * RAW_FEW);
@@ -330,10 +346,12 @@ impl ExcessStage {
                 .evict_below(self.noisy.end().saturating_sub(CLUSTER_REACH));
         }
         let decided = self.noisy.end();
-        let treat_target = if decided == h {
+        let treat_target = if decided == h && rows_in == h {
             h
         } else {
-            decided.saturating_sub(self.passes + GUARD_REACH)
+            // The spreads' receivers are `reach` rows below at most.
+            (decided.saturating_sub(self.passes + GUARD_REACH))
+                .min(rows_in.saturating_sub(self.reach))
         };
         if treat_target > self.treat_done {
             self.treat(input, self.treat_done, treat_target);
@@ -375,6 +393,7 @@ impl ExcessStage {
             ltvis: self.ltvis,
             guard: self.params.guard,
             ring: &self.ring,
+            guides: &self.guides,
         };
         let mut chunks: Vec<(usize, Vec<&mut [f64]>)> = Vec::new();
         let mut rows = kept.into_iter();
@@ -409,14 +428,18 @@ impl ExcessStage {
             k.unresolved += c.unresolved;
             k.passes = k.passes.max(c.passes);
         }
+        let surface = self
+            .guides
+            .chooses_receivers()
+            .then_some((input, &self.guides));
         scatter_ring(
             &mut self.acc,
             &self.ring,
-            &sources,
-            &shares,
+            (&sources, &shares),
             &self.modes,
             (w, h),
             self.tile,
+            surface,
         );
     }
 }
@@ -436,6 +459,7 @@ struct Band<'a> {
     ltvis: f64,
     guard: Guard,
     ring: &'a Ring,
+    guides: &'a GuideReader,
 }
 
 /// Raw flags: noisy by the paper's test (`t S_p > D L_tvis`) ...
@@ -470,6 +494,14 @@ fn compact(
 }
 
 pub use crate::filter::ep_box::{CLUSTER_REACH, COMPACT_MAX, GUARD_REACH};
+
+impl ExcessStage {
+    /// Rows past a row that its treatment reads: the passes', the guards'
+    /// and the cluster look's, and the spreads' receivers'.
+    fn treat_lag(&self) -> usize {
+        (self.passes + GUARD_REACH + CLUSTER_REACH).max(self.reach)
+    }
+}
 
 impl Band<'_> {
     /// The brightest converged pixel within [`GUARD_REACH`] of band row `r`
@@ -539,7 +571,17 @@ impl Band<'_> {
             }
             let yy = ba + r;
             let wanted = receivers(excess, self.ltvis, self.ring.offsets().len());
-            let (m, found) = self.ring.prefix(x, yy, w, h, wanted);
+            let g = self.guides;
+            let src = self.input.get(yy);
+            let surface = g.surface_of(src, x);
+            let (m, found) = if g.chooses_receivers() {
+                let accepts = |tx: usize, ty: usize| {
+                    g.accepts(self.input.get(ty), (tx, ty), (&surface, x, yy))
+                };
+                self.ring.prefix_where(x, yy, (w, h), wanted, accepts)
+            } else {
+                self.ring.prefix(x, yy, w, h, wanted)
+            };
             counters.spread += 1;
             counters.capped += u64::from(found < wanted);
             let off = shares.len();
@@ -548,9 +590,8 @@ impl Band<'_> {
             for c in 0..nch {
                 let mut share = 0.0;
                 if self.modes[c] == ChannelMode::Spread {
-                    let v = &mut row[c * w + x];
-                    let removed = *v * f;
-                    *v -= removed;
+                    let removed = g.residual(src, c, x) * f;
+                    row[c * w + x] -= removed;
                     share = removed / found as f64;
                 }
                 shares.push(share);
@@ -560,6 +601,7 @@ impl Band<'_> {
                 y: yy as u32,
                 m: m as u32,
                 off,
+                surface,
             });
             excess
         };
@@ -584,11 +626,11 @@ impl Band<'_> {
 fn scatter_ring(
     acc: &mut RowWindow<f64>,
     ring: &Ring,
-    sources: &[Source],
-    shares: &[f64],
+    (sources, shares): (&[Source], &[f64]),
     modes: &[ChannelMode],
     (w, h): (usize, usize),
     tile: usize,
+    surface: Option<(&RowWindow<f32>, &GuideReader)>,
 ) {
     let nch = modes.len();
     if sources.is_empty() {
@@ -610,10 +652,16 @@ fn scatter_ring(
                 if tx < x0 as i64 || tx >= x1 as i64 || ty < 0 || ty >= h as i64 {
                     continue;
                 }
-                let r = ty as usize - first;
+                let (tx, ty) = (tx as usize, ty as usize);
+                if let Some((input, g)) = surface {
+                    if !g.accepts(input.get(ty), (tx, ty), (&s.surface, sx, sy)) {
+                        continue;
+                    }
+                }
+                let r = ty - first;
                 // Channels that are not spread keep their bits.
                 for c in (0..nch).filter(|&c| modes[c] == ChannelMode::Spread) {
-                    parts[r * nch + c][tx as usize - x0] += shares[s.off + c];
+                    parts[r * nch + c][tx - x0] += shares[s.off + c];
                 }
             }
         }

@@ -14,6 +14,7 @@
 //! * [`stream`]: the skeleton (input window, cursors, books, precision);
 //! * [`spread`]: the Gaussian family's stage (ep-gauss, gauss, box, clamp);
 //! * [`excess`]: ep-box's stage (§5.1);
+//! * [`pixel`]: ep-gauss's stage at pixel resolution (S = 1);
 //! * [`order`]: the median and alpha-trim foils' stage;
 //! * [`books`], [`ledger`], [`window`]: what every stage shares;
 //! * this file: the contract (strips, sources, sinks, the job, the
@@ -26,9 +27,11 @@ pub mod counts;
 pub mod edge;
 mod estimate;
 pub mod excess;
+mod guided;
 pub mod ledger;
 mod memory;
 pub mod order;
+pub mod pixel;
 mod runner;
 pub mod spread;
 pub mod stage;
@@ -46,6 +49,7 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::filter::channels::ChannelRule;
 use crate::filter::ep_box::StatsLayout;
+use crate::filter::guides::{GuideLayout, SurfaceRule};
 use crate::filter::{FilterParams, Method};
 use crate::geometry::{Grid, Halo};
 pub use counts::{ExcessCounts, MethodCounts, SpreadCounts};
@@ -259,6 +263,10 @@ pub struct StripLayout {
     pub aux: Vec<String>,
     /// Where the statistics are (indices into `channels` then `aux`).
     pub stats: Option<StatsLayout>,
+    /// Where the guide passes are (indices into `channels` then `aux`).
+    pub guides: GuideLayout,
+    /// How alike surface guides must be for a spread to cross them.
+    pub surface_rule: SurfaceRule,
     /// `--edge pad`: the source holds this many samples (columns, rows), and
     /// the grid is that size completed with zero samples to a multiple of S
     /// ([`edge::Padded`], [`edge::Coverage`]).
@@ -281,6 +289,8 @@ impl StripLayout {
             data,
             aux: Vec::new(),
             stats: None,
+            guides: GuideLayout::default(),
+            surface_rule: SurfaceRule::default(),
             padded_from: None,
         }
     }

@@ -3,6 +3,7 @@
 
 use super::excess::ExcessStage;
 use super::order::OrderStage;
+use super::pixel::PixelStage;
 use super::spread::GaussianStage;
 use super::stage::Stage;
 use super::{PipelineConfig, StripLayout};
@@ -39,8 +40,19 @@ pub fn make(
                 params,
                 ltvis,
                 tile,
+                (job.guides.clone(), job.surface_rule),
             )?)
         }
+        Method::EpGauss if grid.s == 1 => Box::new(PixelStage::new(
+            grid.in_w,
+            grid.in_h,
+            job.luminance.clone(),
+            job.modes.clone(),
+            job.guides.clone(),
+            job.surface_rule,
+            params,
+            tile,
+        )?),
         Method::Median | Method::AlphaTrim => {
             Box::new(OrderStage::new(grid, job.modes.clone(), params))
         }

@@ -98,11 +98,12 @@ impl Streamer {
         if cfg.tile == 0 {
             return Err(Error::Config("--tile must be at least 1".into()));
         }
-        let reads_stats =
-            params.method == Method::EpBox || (params.method == Method::EpGauss && s == 1);
-        if !reads_stats && !job.aux.is_empty() {
+        let reads_aux = params.method == Method::EpBox
+            || (params.method == Method::EpGauss && s == 1)
+            || !job.guides.is_empty();
+        if !reads_aux && !job.aux.is_empty() {
             return Err(Error::Config(format!(
-                "{} reads no statistics channels",
+                "{} reads no statistics or guide channels",
                 params.method.name()
             )));
         }
@@ -139,7 +140,20 @@ impl Streamer {
         let nall = job.strip_channels();
         let mut books = Books::new(job.channels.clone(), nall);
         books.set_nonfinite(cfg.nonfinite);
-        books.set_data(job.data.clone());
+        // Guides are data: a sky's depth or a miss's normal may be anything.
+        let mut data = job.data.clone();
+        data.resize(nall, false);
+        let g = &job.guides;
+        let guides = (g.emission.iter().flatten())
+            .chain(g.albedo.iter().flatten())
+            .chain(g.normal.iter().flatten())
+            .chain(g.depth.iter());
+        for &i in guides {
+            if let Some(d) = data.get_mut(i) {
+                *d = true;
+            }
+        }
+        books.set_data(data);
         if let Some(cov) = coverage {
             books.set_coverage(cov);
         }

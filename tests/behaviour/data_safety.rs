@@ -326,19 +326,30 @@ fn a_dropped_view_is_a_warning_even_when_quiet_and_view_all_keeps_every_view() {
     let stereo = d.join("stereo.exr");
     write_stereo(&stereo, 30, 21);
     let out = d.join("out.exr");
-    let o = epfilt(&["filter", s(&stereo), s(&out), "-q"]);
+    let o = epfilt(&["filter", s(&stereo), s(&out), "-q", "-s", "3"]);
     assert!(o.status.success(), "{}", err(&o));
     let e = err(&o);
     assert!(e.contains("warning") && e.contains("right"), "{e}");
     // --view right filters that view; --view all every view, each its own.
     let right = d.join("right.exr");
-    ok(&["filter", s(&stereo), s(&right), "-q", "--view", "right"]);
+    ok(&[
+        "filter",
+        s(&stereo),
+        s(&right),
+        "-q",
+        "-s",
+        "3",
+        "--view",
+        "right",
+    ]);
     let all = d.join("all.exr");
     let rep = d.join("all.json");
     ok(&[
         "filter",
         s(&stereo),
         s(&all),
+        "-s",
+        "3",
         "--view",
         "all",
         "--report",

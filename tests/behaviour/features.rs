@@ -228,29 +228,29 @@ fn ep_box_keeps_tiny_lights_and_spreads_the_fireflies() {
 }
 
 #[test]
-fn ep_gauss_at_pixel_resolution_reads_the_variance() {
-    // At S = 1 a bulb narrower than a pixel is one sample: the support rule
-    // cannot tell it from a firefly, the pixel's variance can (the carriers
-    // rule). Without statistics the paper's rule is all there is, and the
-    // bulbs go.
+fn ep_gauss_at_pixel_resolution_keeps_the_lights_a_neighbour_confirms() {
+    // At S = 1 without variance or guides, a bulb a pixel or more across
+    // lights its neighbours too (the support rule keeps it); the fireflies
+    // of the frame are single pixels, spread. A bulb narrower than a pixel
+    // is one pixel, as a firefly is: the emission guide tells them apart
+    // (pipeline::pixel's tests), nothing in the image can.
     let sc = scene();
     for n in [16usize, 64] {
-        let data = sc.spp_rows(n, 0, H);
-        let rgb = rgb_of(&data);
-        let input = frame(rgb.clone());
+        let input = frame(rgb_of(&sc.spp_rows(n, 0, H)));
         let p = FilterParams::new(Method::EpGauss, 1);
         let cfg = PipelineConfig::default();
-        let (out, stats) = filter_in_memory(data, &box_job(n as f64), &p, &cfg).unwrap();
+        let (out, stats) =
+            filter_in_memory(input.data.clone(), &rgb_job(W, H, 1), &p, &cfg).unwrap();
         assert!(stats.eg().spread > 20, "{n} spp: {:?}", stats.eg());
         assert!(stats.eg().kept > 0, "{n} spp: {:?}", stats.eg());
         assert!(stats.ledger.iter().all(|l| l.rel_error <= ENERGY_TOL));
-        let kept = moved_at(&frame(out), &input, n);
-        assert_eq!(kept, vec![], "{n} spp: lights moved with statistics");
-        let (plain, _) = filter_in_memory(rgb, &rgb_job(W, H, 1), &p, &cfg).unwrap();
-        let lost = moved(&frame(plain), &input);
-        assert!(
-            lost.iter().any(|(_, rel)| *rel < -0.5),
-            "{n} spp: without statistics every light stayed: {lost:?}"
-        );
+        let moved: Vec<(String, f64)> = moved(&frame(out), &input)
+            .into_iter()
+            .filter(|(name, _)| name == "line" || !SUBPIXEL.contains(&name.as_str()))
+            .collect();
+        assert_eq!(moved, vec![], "{n} spp: lights of a pixel or more moved");
     }
 }
+
+/// The bulbs narrower than a pixel (one pixel's light at S = 1).
+const SUBPIXEL: [&str; 3] = ["bulb 0.5 px", "bulb 0.6 px", "bulb 0.8 px"];

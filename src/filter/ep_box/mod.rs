@@ -501,10 +501,28 @@ impl Ring {
             let m = n.min(self.offsets.len());
             return (m, m);
         }
+        self.prefix_where(x, y, (w, h), n, |_, _| true)
+    }
+
+    /// [`Ring::prefix`] counting only the in-image pixels `(tx, ty)` that
+    /// `ok` accepts (the surface guides' receivers).
+    pub fn prefix_where(
+        &self,
+        x: usize,
+        y: usize,
+        (w, h): (usize, usize),
+        n: usize,
+        ok: impl Fn(usize, usize) -> bool,
+    ) -> (usize, usize) {
         let mut found = 0;
         for (k, &(dx, dy)) in self.offsets.iter().enumerate() {
             let (tx, ty) = (x as i64 + dx as i64, y as i64 + dy as i64);
-            if tx >= 0 && ty >= 0 && (tx as usize) < w && (ty as usize) < h {
+            if tx >= 0
+                && ty >= 0
+                && (tx as usize) < w
+                && (ty as usize) < h
+                && ok(tx as usize, ty as usize)
+            {
                 found += 1;
                 if found == n {
                     return (k + 1, found);

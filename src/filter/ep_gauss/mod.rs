@@ -51,6 +51,7 @@ use super::kernel::{Coarse, Kernel1d};
 
 mod bound;
 mod features;
+pub mod pixel;
 mod search;
 pub use bound::{csum_add, csum_block_for, csum_prefix, csum_row, AreaSums, Bound, BOUND_KEEP};
 pub use features::{Carriers, Support, COMPACT_REACH, SUPPORT_REACH};

@@ -91,6 +91,9 @@ mod tests {
                 (2, 0.3, 0.3, 1.0),
                 (1, 2.0, 40.0, 6.0),
             ] {
+                if m == Method::EpGauss && s == 1 {
+                    continue; // the pixel stage's (pixel.rs)
+                }
                 let mut p = FilterParams::new(m, s);
                 (p.radius, p.max_radius, p.cutoff) = (r, mr, cut);
                 let grid = Grid {

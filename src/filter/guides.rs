@@ -1,0 +1,222 @@
+//! Guide passes: what a renderer writes beside the beauty that tells a lamp
+//! from a firefly and one surface from another (the channels are found by
+//! [`crate::io::guides`]).
+//!
+//! * **Emission** (the directly visible emission: a bulb, a neon tube, an
+//!   emissive rim). Per channel, the part `e' = clamp(e, 0, max(x, 0))` of a
+//!   pixel `x` (or super-sample) is set aside before any test and added back
+//!   after, untouched: the rest `x - e'` is filtered as usual. A lamp is
+//!   never spread and never counts as noise; a firefly beside it is tested
+//!   against the room, not the lamp. `x = (x - e') + e'` exactly, so the
+//!   ledger covers both parts. A pixel that is mostly emission
+//!   ([`LIGHT_SHARE`]) is a light and keeps its value whole.
+//! * **Surface** (albedo, normal, depth): a spread reaches only the pixels on
+//!   the same surface as its source ([`Surface::same`]); each spread's
+//!   weights are normalised over the pixels it reaches, so they still sum to
+//!   one. A caustic's firefly on a table is not spread onto the wall behind.
+
+/// Which channels of a strip row hold each guide (indices into the row's
+/// channel list; `None` where there is no such guide).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct GuideLayout {
+    /// Emission R, G, B, in the order of the beauty's colour channels.
+    pub emission: Option<Vec<usize>>,
+    /// Albedo R, G, B.
+    pub albedo: Option<[usize; 3]>,
+    /// Normal X, Y, Z.
+    pub normal: Option<[usize; 3]>,
+    /// Depth.
+    pub depth: Option<usize>,
+}
+
+impl GuideLayout {
+    /// Whether any surface guide is present.
+    pub fn surface(&self) -> bool {
+        self.albedo.is_some() || self.normal.is_some() || self.depth.is_some()
+    }
+
+    /// Whether no guide is present.
+    pub fn is_empty(&self) -> bool {
+        self.emission.is_none() && !self.surface()
+    }
+}
+
+/// How alike two pixels' surface guides must be for a spread to reach from
+/// one to the other (`--guide-normal`, `--guide-albedo`, `--guide-depth`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceRule {
+    /// The largest angle between normals, in degrees.
+    pub normal_degrees: f64,
+    /// The largest difference of albedo, in any channel.
+    pub albedo: f64,
+    /// The largest relative difference of depth, per pixel of distance
+    /// (a slanted floor's depth changes along it; a wall behind a table
+    /// jumps).
+    pub depth: f64,
+}
+
+impl Default for SurfaceRule {
+    /// 30 degrees: a curved object's normals turn by a few degrees a pixel
+    /// (a sphere of 60 pixels across: 2 degrees), a table's edge or the
+    /// floor meeting a wall by 90. Albedo 0.1: one material's texture
+    /// varies less than two materials differ. Depth 5% a pixel: steeper
+    /// than a floor seen at 80 degrees from its normal, shallower than the
+    /// jump from an object to what is behind it.
+    fn default() -> Self {
+        SurfaceRule {
+            normal_degrees: 30.0,
+            albedo: 0.1,
+            depth: 0.05,
+        }
+    }
+}
+
+impl SurfaceRule {
+    /// Check the settings.
+    pub fn validate(&self) -> crate::error::Result<()> {
+        let ok = |v: f64, lo: f64, hi: f64| v.is_finite() && v >= lo && v <= hi;
+        if !ok(self.normal_degrees, 0.0, 180.0) {
+            return Err(crate::error::Error::Config(format!(
+                "--guide-normal must be 0..=180 degrees, got {}",
+                self.normal_degrees
+            )));
+        }
+        if !ok(self.albedo, 0.0, f64::MAX) || !ok(self.depth, 0.0, f64::MAX) {
+            return Err(crate::error::Error::Config(format!(
+                "--guide-albedo and --guide-depth must be finite numbers >= 0, got {} and {}",
+                self.albedo, self.depth
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// One pixel's surface guides (absent ones are zero and compare equal).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Surface {
+    /// Albedo.
+    pub albedo: [f32; 3],
+    /// Normal, unit length (zero where the pixel saw no surface).
+    pub normal: [f32; 3],
+    /// Depth (zero where none).
+    pub depth: f32,
+}
+
+impl Surface {
+    /// The guides of a pixel from its channel values (`ch(i)` reads channel
+    /// `i` of the row), the normal made unit length (a pixel's normal is the
+    /// mean of its samples': shorter than one on an edge).
+    pub fn read(layout: &GuideLayout, ch: impl Fn(usize) -> f32) -> Self {
+        let mut s = Surface::default();
+        if let Some(a) = layout.albedo {
+            s.albedo = a.map(&ch);
+        }
+        if let Some(n) = layout.normal {
+            let v = n.map(&ch);
+            let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            if len.is_finite() && len > 1e-6 {
+                s.normal = v.map(|c| c / len);
+            }
+        }
+        if let Some(d) = layout.depth {
+            let z = ch(d);
+            s.depth = if z.is_finite() { z } else { 0.0 };
+        }
+        s
+    }
+
+    /// Whether `other`, `dist` pixels away, is on the same surface under
+    /// `rule` (with `cos_max` the cosine of its angle, computed once).
+    #[inline]
+    pub fn same(&self, other: &Surface, dist: f32, rule: &SurfaceRule, cos_max: f32) -> bool {
+        let a = &self.albedo;
+        let b = &other.albedo;
+        let albedo = rule.albedo as f32;
+        if (a[0] - b[0]).abs() > albedo
+            || (a[1] - b[1]).abs() > albedo
+            || (a[2] - b[2]).abs() > albedo
+        {
+            return false;
+        }
+        let (n, m) = (&self.normal, &other.normal);
+        let (np, mp) = (n != &[0.0; 3], m != &[0.0; 3]);
+        if np != mp || (np && n[0] * m[0] + n[1] * m[1] + n[2] * m[2] < cos_max) {
+            return false;
+        }
+        let (z, w) = (self.depth, other.depth);
+        (z - w).abs() <= rule.depth as f32 * dist.max(1.0) * z.abs().max(w.abs())
+    }
+}
+
+/// A pixel whose emission holds at least this share of its luminance is a
+/// light seen directly (a bulb, a neon tube, a lamp's edge): it keeps its
+/// value whole, never tested, never spread. What is left of it beside the
+/// emission is a lamp's glow or the wall half seen behind its edge, not a
+/// firefly.
+pub const LIGHT_SHARE: f64 = 0.5;
+
+/// Whether a pixel of luminance `y` whose emission's luminance is `e` is a
+/// light ([`LIGHT_SHARE`]).
+#[inline]
+pub fn is_light(y: f64, e: f64) -> bool {
+    e > 0.0 && e >= LIGHT_SHARE * y
+}
+
+/// The emission part of a channel value `x` whose emission guide reads `e`:
+/// never negative, never more than the value itself (so the rest, `x - e'`,
+/// is never below zero where `x` is not).
+#[inline]
+pub fn emission_part(x: f64, e: f64) -> f64 {
+    if e.is_finite() {
+        e.clamp(0.0, x.max(0.0))
+    } else {
+        0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn surface(albedo: f32, normal: [f32; 3], depth: f32) -> Surface {
+        let layout = GuideLayout {
+            albedo: Some([0, 1, 2]),
+            normal: Some([3, 4, 5]),
+            depth: Some(6),
+            emission: None,
+        };
+        let v = [
+            albedo, albedo, albedo, normal[0], normal[1], normal[2], depth,
+        ];
+        Surface::read(&layout, |i| v[i])
+    }
+
+    #[test]
+    fn a_table_is_not_the_wall_behind_it() {
+        let rule = SurfaceRule::default();
+        let cos = (rule.normal_degrees.to_radians().cos()) as f32;
+        let table = surface(0.5, [0.0, 2.0, 0.0], 3.0); // normal made unit
+        assert_eq!(table.normal, [0.0, 1.0, 0.0]);
+        let table_far = surface(0.52, [0.05, 1.0, 0.0], 3.3);
+        let wall = surface(0.5, [0.0, 0.0, 1.0], 3.0);
+        let behind = surface(0.5, [0.0, 1.0, 0.0], 6.0);
+        let paint = surface(0.8, [0.0, 1.0, 0.0], 3.0);
+        assert!(table.same(&table_far, 4.0, &rule, cos));
+        assert!(!table.same(&wall, 1.0, &rule, cos));
+        assert!(!table.same(&behind, 2.0, &rule, cos));
+        assert!(!table.same(&paint, 1.0, &rule, cos));
+        // Without a hit (zero normal) only other misses match.
+        let sky = surface(0.0, [0.0; 3], 0.0);
+        assert!(sky.same(&sky, 3.0, &rule, cos));
+        assert!(!sky.same(&surface(0.0, [0.0, 1.0, 0.0], 0.0), 1.0, &rule, cos));
+    }
+
+    #[test]
+    fn emission_is_at_most_the_value() {
+        assert_eq!(emission_part(10.0, 4.0), 4.0);
+        assert_eq!(emission_part(3.0, 4.0), 3.0);
+        assert_eq!(emission_part(3.0, -1.0), 0.0);
+        assert_eq!(emission_part(-2.0, 1.0), 0.0);
+        assert_eq!(emission_part(3.0, f64::NAN), 0.0);
+    }
+}

@@ -1,0 +1,761 @@
+//! The stage of ep-gauss at pixel resolution (S = 1; the rules are in
+//! [`crate::filter::ep_gauss::pixel`], the guides' in
+//! [`crate::filter::guides`]).
+//!
+//! Three cursors over pixel rows:
+//!
+//! 1. **luminance** of row `y` on arrival (of what the emission guide leaves:
+//!    a lamp's own light is never tested);
+//! 2. **classification** of row `y` once rows `y + 2` are in: the background
+//!    (the median of the 5 x 5 about a pixel) of each local maximum, and
+//!    whether it is noisy;
+//! 3. **treatment** of row `y` once rows `y + 2` are classified and rows
+//!    `y + R` are in (with guides, the receivers a spread may not reach,
+//!    lights and other surfaces, are read there): the feature rules, the width, the kept row (the pixel less its
+//!    excess), and the spread of each excess into accumulator tiles that own
+//!    columns, sources in row-major order;
+//!
+//! and the **output** of row `y` once every row within the widest reach `R`
+//! has been treated: kept values plus accumulator.
+//!
+//! Each pixel's decision reads only the input within 4 rows and columns of
+//! it (with surface guides, its receivers' guides within `R`), and each
+//! accumulator pixel receives its spreads in source order whatever the
+//! tiles, so the output is bit-identical across `--tile`, `--strip-rows` and
+//! `--threads`. A pixel neither spread nor reached keeps its input bits.
+
+use rayon::prelude::*;
+
+use super::counts::{MethodCounts, SpreadCounts};
+use super::guided::GuideReader;
+use super::stage::{Output, Stage, WindowUse};
+use super::window::RowWindow;
+use super::ChannelMode;
+use crate::error::Result;
+use crate::filter::ep_gauss::pixel::{
+    gaussian_taps, in_range, local_max, median, noisy, supported, Widths, BACKGROUND_REACH,
+    BACKGROUND_SAMPLES,
+};
+use crate::filter::guides::{GuideLayout, Surface, SurfaceRule};
+use crate::filter::ValidParams;
+use crate::geometry::{mirror, Halo};
+
+/// Rows treated per task.
+const TREAT_ROWS: usize = 16;
+
+/// Rows past a row whose classification its treatment reads (the range
+/// rule looks at the flags within [`BACKGROUND_REACH`]).
+const DECIDE_REACH: usize = BACKGROUND_REACH;
+
+/// A pixel whose excess is spread.
+#[derive(Clone, Copy, Debug)]
+struct Source {
+    x: u32,
+    y: u32,
+    /// Its rung on the ladder of widths.
+    k: u32,
+    /// Where its per-channel shares (what one unit of weight carries) are.
+    off: usize,
+    /// Its surface guides (with surface guides on).
+    surface: Surface,
+}
+
+/// ep-gauss's state between strips at S = 1.
+pub struct PixelStage {
+    w: usize,
+    h: usize,
+    nch: usize,
+    modes: Vec<ChannelMode>,
+    guides: GuideReader,
+    tolerance: f64,
+    /// The feature rules (`--guard` other than `none`).
+    features: bool,
+    widths: Widths,
+    /// Unnormalised taps of each rung (`2 reach + 1`).
+    taps: Vec<Vec<f64>>,
+    reach: usize,
+    tile: usize,
+    /// Luminance of what is left after the emission guide.
+    ylum: RowWindow<f64>,
+    /// The background of local maxima (NaN elsewhere).
+    bg: RowWindow<f64>,
+    /// 1 where a pixel is noisy by Rule 1.
+    cand: RowWindow<u8>,
+    /// 1 where the emission guide says a pixel is a light.
+    light: RowWindow<u8>,
+    kept: RowWindow<f64>,
+    acc: RowWindow<f64>,
+    class_done: usize,
+    treat_done: usize,
+    counts: SpreadCounts,
+}
+
+impl PixelStage {
+    /// The stage for a `w x h` image whose strip rows hold `nch` filtered
+    /// channels (luminance weights `lum`, modes `modes`) and then the aux
+    /// channels; `guides` indexes that whole row. Checked by the skeleton:
+    /// the grid, the channels and the tile.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        w: usize,
+        h: usize,
+        lum: Vec<f64>,
+        modes: Vec<ChannelMode>,
+        guides: GuideLayout,
+        rule: SurfaceRule,
+        params: &ValidParams,
+        tile: usize,
+    ) -> Result<Self> {
+        let nch = modes.len();
+        let guides = GuideReader::new(guides, rule, &lum, nch, w)?;
+        let widths = Widths::new(
+            params.radius,
+            params.max_radius,
+            params.width_step,
+            params.cutoff,
+        );
+        let taps = (widths.rho.iter().zip(&widths.reach))
+            .map(|(&r, &k)| gaussian_taps(r, k, params.cutoff))
+            .collect();
+        let reach = widths.max_reach();
+        Ok(PixelStage {
+            w,
+            h,
+            nch,
+            modes,
+            guides,
+            tolerance: params.tolerance,
+            features: params.ep_box.guard != crate::filter::ep_box::Guard::None,
+            widths,
+            taps,
+            reach,
+            tile,
+            ylum: RowWindow::new(w),
+            bg: RowWindow::new(w),
+            cand: RowWindow::new(w),
+            light: RowWindow::new(w),
+            kept: RowWindow::new(nch * w),
+            acc: RowWindow::new(nch * w),
+            class_done: 0,
+            treat_done: 0,
+            counts: SpreadCounts::default(),
+        })
+    }
+}
+
+impl Stage for PixelStage {
+    /// `search_reach`: the rows a treatment reads below its own (the
+    /// classification's and the range rule's, and with surface guides the
+    /// receivers'); `spread_reach`: the widest kernel's.
+    fn halo(&self) -> Halo {
+        Halo {
+            xbar_reach: 0,
+            base_reach: 0,
+            search_reach: self.treat_lag(),
+            spread_reach: self.reach,
+        }
+    }
+
+    fn arrive(&mut self, input: &mut RowWindow<f32>, a: usize, b: usize) {
+        for _ in a..b {
+            self.ylum.push_stale(0.0);
+            self.light.push_stale(0);
+        }
+        let guides = &self.guides;
+        let region = crate::trace::region("pixel luminance");
+        let rows = self.ylum.range_mut(a, b);
+        let lights = self.light.range_mut(a, b);
+        rows.into_par_iter()
+            .zip(lights)
+            .enumerate()
+            .for_each(|(k, (yrow, lrow))| {
+                let _task = region.task("pixel luminance");
+                let row = input.get(a + k);
+                for (x, (y, l)) in yrow.iter_mut().zip(lrow.iter_mut()).enumerate() {
+                    *y = guides.residual_luminance(row, x);
+                    *l = u8::from(guides.is_light(row, x, *y));
+                }
+            });
+    }
+
+    fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, _all_in: bool) -> usize {
+        let h = self.h;
+        let class_target = if rows_in == h {
+            h
+        } else {
+            rows_in.saturating_sub(BACKGROUND_REACH)
+        };
+        if class_target > self.class_done {
+            self.classify(self.class_done, class_target);
+            self.class_done = class_target;
+        }
+        // A treatment reads the flags DECIDE_REACH below its row, and its
+        // spreads' receivers (their surface guides) `reach` below.
+        let treat_target = if rows_in == h && self.class_done == h {
+            h
+        } else {
+            (self.class_done.saturating_sub(DECIDE_REACH)).min(rows_in.saturating_sub(self.reach))
+        };
+        if treat_target > self.treat_done {
+            self.treat(input, self.treat_done, treat_target);
+            self.treat_done = treat_target;
+            let keep = self.treat_done.saturating_sub(2 * BACKGROUND_REACH);
+            self.ylum.evict_below(keep);
+            self.bg.evict_below(keep);
+            self.cand.evict_below(keep);
+            self.light.evict_below(keep);
+        }
+        if self.treat_done == h {
+            h
+        } else {
+            self.treat_done.saturating_sub(self.reach)
+        }
+    }
+
+    fn input_needed(&self) -> usize {
+        self.treat_done.saturating_sub(self.reach)
+    }
+
+    fn output(&self, rows: (usize, usize)) -> Output<'_> {
+        Output::of(&self.kept, Some(&self.acc), rows)
+    }
+
+    fn release(&mut self, y: usize) {
+        self.kept.evict_below(y);
+        self.acc.evict_below(y);
+    }
+
+    fn counts(&self) -> MethodCounts {
+        MethodCounts::EpGauss(self.counts)
+    }
+
+    fn windows(&self) -> Vec<WindowUse> {
+        let (w, nch) = (self.w, self.nch);
+        vec![
+            WindowUse {
+                name: "luminance",
+                rows: self.ylum.high_water(),
+                row_bytes: w * 8,
+            },
+            WindowUse {
+                name: "background",
+                rows: self.bg.high_water(),
+                row_bytes: w * 8,
+            },
+            WindowUse {
+                name: "flags",
+                rows: self.cand.high_water() + self.light.high_water(),
+                row_bytes: w,
+            },
+            WindowUse {
+                name: "kept",
+                rows: self.kept.high_water(),
+                row_bytes: nch * w * 8,
+            },
+            WindowUse {
+                name: "accumulator",
+                rows: self.acc.high_water(),
+                row_bytes: nch * w * 8,
+            },
+        ]
+    }
+}
+
+impl PixelStage {
+    /// Rows past a row that its treatment reads: the same with or without
+    /// surface guides, so that the halo follows from the settings alone
+    /// ([`crate::filter::halo`]).
+    fn treat_lag(&self) -> usize {
+        (BACKGROUND_REACH + DECIDE_REACH).max(self.reach)
+    }
+
+    /// Backgrounds and Rule 1 for rows `a..b` (their luminance rows within
+    /// [`BACKGROUND_REACH`] are in, reflected at the image's edges).
+    fn classify(&mut self, a: usize, b: usize) {
+        for _ in a..b {
+            self.bg.push_stale(f64::NAN);
+            self.cand.push_stale(0);
+        }
+        let (w, h) = (self.w, self.h);
+        let (ylum, light) = (&self.ylum, &self.light);
+        let bgs = self.bg.range_mut(a, b);
+        let cands = self.cand.range_mut(a, b);
+        let region = crate::trace::region("pixel classify");
+        bgs.into_par_iter()
+            .zip(cands)
+            .enumerate()
+            .for_each(|(k, (brow, crow))| {
+                let _task = region.task("pixel classify");
+                let y = a + k;
+                let r = BACKGROUND_REACH as i64;
+                let rows: Vec<&[f64]> = (-r..=r)
+                    .map(|d| ylum.get(mirror(y as i64 + d, h)))
+                    .collect();
+                let mut ring = [0.0f64; BACKGROUND_SAMPLES];
+                let lights = light.get(y);
+                for x in 0..w {
+                    let v = rows[BACKGROUND_REACH][x];
+                    brow[x] = f64::NAN;
+                    crow[x] = 0;
+                    if lights[x] != 0 || !local_max(v, &neighbours8(&rows[1..4], x, w)) {
+                        continue;
+                    }
+                    let mut n = 0;
+                    for (dy, row) in rows.iter().enumerate() {
+                        for dx in -r..=r {
+                            if dy == BACKGROUND_REACH && dx == 0 {
+                                continue;
+                            }
+                            ring[n] = row[mirror(x as i64 + dx, w)];
+                            n += 1;
+                        }
+                    }
+                    let bg = median(&mut ring);
+                    brow[x] = bg;
+                    crow[x] = u8::from(noisy(v, bg));
+                }
+            });
+    }
+
+    /// Treat rows `a..b`: decide each noisy pixel, write the kept rows and
+    /// spread the excess.
+    fn treat(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
+        let (h, nch) = (self.h, self.nch);
+        for _ in a..b {
+            self.kept.push_stale(0.0);
+        }
+        while self.acc.end() < (b + self.reach).min(h) {
+            self.acc.push(-0.0);
+        }
+        // The kept rows are written while the rest of the stage is read.
+        let mut kept_window = std::mem::replace(&mut self.kept, RowWindow::new(0));
+        let kept = kept_window.range_mut(a, b);
+        let mut chunks: Vec<(usize, Vec<&mut [f64]>)> = Vec::new();
+        let mut rows = kept.into_iter();
+        let mut y = a;
+        while y < b {
+            let n = TREAT_ROWS.min(b - y);
+            chunks.push((y, rows.by_ref().take(n).collect()));
+            y += n;
+        }
+        let ctx = Treat { stage: self, input };
+        let region = crate::trace::region("pixel treat");
+        let results: Vec<(Vec<Source>, Vec<f64>, SpreadCounts)> = chunks
+            .into_par_iter()
+            .map(|(y0, rows)| {
+                let _task = region.task("pixel treat");
+                ctx.rows(y0, rows)
+            })
+            .collect();
+        let (mut sources, mut shares) = (Vec::new(), Vec::new());
+        for (s, sh, c) in results {
+            let base = shares.len();
+            sources.extend(s.into_iter().map(|s| Source {
+                off: s.off + base,
+                ..s
+            }));
+            shares.extend(sh);
+            self.counts += c;
+        }
+        self.kept = kept_window;
+        let taps: u64 = sources
+            .iter()
+            .map(|s| (2 * self.widths.reach[s.k as usize] as u64 + 1).pow(2))
+            .sum();
+        self.counts.spread_taps += taps * nch as u64;
+        self.scatter(input, &sources, &shares);
+    }
+
+    /// Add each source's shares to the pixels its kernel reaches (on its
+    /// surface), one task per tile of columns; every pixel receives its
+    /// shares in source order.
+    fn scatter(&mut self, input: &RowWindow<f32>, sources: &[Source], shares: &[f64]) {
+        if sources.is_empty() {
+            return;
+        }
+        let (w, h, nch) = (self.w, self.h, self.nch);
+        let first = self.acc.first();
+        let (taps, widths, modes) = (&self.taps, &self.widths, &self.modes);
+        let guides = &self.guides;
+        let choose = guides.chooses_receivers();
+        let spread: Vec<usize> = (0..nch)
+            .filter(|&c| modes[c] == ChannelMode::Spread)
+            .collect();
+        crate::pipeline::tiles::for_each_tile(&mut self.acc, w, nch, self.tile, |cols, parts| {
+            let (x0, x1) = (cols.start, cols.end);
+            for s in sources {
+                let k = s.k as usize;
+                let r = widths.reach[k];
+                let (sx, sy) = (s.x as usize, s.y as usize);
+                if sx + r < x0 || sx >= x1 + r {
+                    continue;
+                }
+                let g = &taps[k];
+                let (xa, xb) = (sx.saturating_sub(r).max(x0), (sx + r + 1).min(x1));
+                for ty in sy.saturating_sub(r)..(sy + r + 1).min(h) {
+                    let gy = g[ty + r - sy];
+                    if gy == 0.0 {
+                        continue;
+                    }
+                    let row = input.get(ty);
+                    let ri = ty - first;
+                    for tx in xa..xb {
+                        let wgt = gy * g[tx + r - sx];
+                        if wgt == 0.0 {
+                            continue;
+                        }
+                        if choose && !guides.accepts(row, (tx, ty), (&s.surface, sx, sy)) {
+                            continue;
+                        }
+                        for &c in &spread {
+                            parts[ri * nch + c][tx - x0] += shares[s.off + c] * wgt;
+                        }
+                    }
+                }
+            }
+        });
+    }
+}
+
+/// The 8 neighbours of column `x` in `rows` (three rows, the pixel's in the
+/// middle), reflected at the row's ends.
+#[inline]
+fn neighbours8(rows: &[&[f64]], x: usize, w: usize) -> [f64; 8] {
+    let (l, r) = (mirror(x as i64 - 1, w), mirror(x as i64 + 1, w));
+    [
+        rows[0][l], rows[0][x], rows[0][r], rows[1][l], rows[1][r], rows[2][l], rows[2][x],
+        rows[2][r],
+    ]
+}
+
+/// What a treatment task reads.
+struct Treat<'a> {
+    stage: &'a PixelStage,
+    input: &'a RowWindow<f32>,
+}
+
+impl Treat<'_> {
+    /// Treat rows `y0..y0 + kept.len()`: copy them into `kept`, then take
+    /// each noisy pixel's excess out and list it as a source.
+    fn rows(&self, y0: usize, mut kept: Vec<&mut [f64]>) -> (Vec<Source>, Vec<f64>, SpreadCounts) {
+        let st = self.stage;
+        let (w, h, nch) = (st.w, st.h, st.nch);
+        let mut counts = SpreadCounts::default();
+        let (mut sources, mut shares) = (Vec::new(), Vec::new());
+        for (k, out) in kept.iter_mut().enumerate() {
+            let y = y0 + k;
+            let src = self.input.get(y);
+            for (d, &v) in out.iter_mut().zip(&src[..nch * w]) {
+                *d = v as f64;
+            }
+            if st.guides.emission() {
+                counts.emissive += (0..w)
+                    .filter(|&x| {
+                        (0..nch).any(|c| st.guides.residual(src, c, x) != src[c * w + x] as f64)
+                    })
+                    .count() as u64;
+            }
+            let r = BACKGROUND_REACH as i64;
+            let lrows: Vec<&[f64]> = (-1..=1)
+                .map(|d| st.ylum.get(mirror(y as i64 + d, h)))
+                .collect();
+            let cand = st.cand.get(y);
+            let bgrow = st.bg.get(y);
+            for x in (0..w).filter(|&x| cand[x] != 0) {
+                counts.noisy += 1;
+                let (v, bg) = (lrows[1][x], bgrow[x]);
+                if st.features {
+                    let n8 = neighbours8(&lrows, x, w);
+                    let calm = || {
+                        let mut m = f64::NEG_INFINITY;
+                        for yy in (y as i64 - r).max(0)..(y as i64 + r + 1).min(h as i64) {
+                            let (f, l) = (st.cand.get(yy as usize), st.ylum.get(yy as usize));
+                            for xx in (x as i64 - r).max(0)..(x as i64 + r + 1).min(w as i64) {
+                                let xx = xx as usize;
+                                if f[xx] == 0 {
+                                    m = m.max(l[xx]);
+                                }
+                            }
+                        }
+                        m
+                    };
+                    if supported(v, bg, &n8) || in_range(v, calm()) {
+                        counts.kept += 1;
+                        continue;
+                    }
+                }
+                let excess = v - bg;
+                let surface = st.guides.surface_of(src, x);
+                let Some((k, norm)) = self.width(x, y, excess, bg, &surface) else {
+                    counts.beyond += 1;
+                    continue;
+                };
+                counts.spread += 1;
+                let f = excess / v;
+                let off = shares.len();
+                for c in 0..nch {
+                    let mut share = 0.0;
+                    if st.modes[c] == ChannelMode::Spread {
+                        let removed = st.guides.residual(src, c, x) * f;
+                        out[c * w + x] -= removed;
+                        share = removed / norm;
+                    }
+                    shares.push(share);
+                }
+                sources.push(Source {
+                    x: x as u32,
+                    y: y as u32,
+                    k: k as u32,
+                    off,
+                    surface,
+                });
+            }
+        }
+        (sources, shares, counts)
+    }
+
+    /// The first rung, from the ladder's guess up, whose kernel (normalised
+    /// over the in-image pixels it reaches, on the source's surface) gives
+    /// its centre at most `tolerance * bg` of `excess`, and that
+    /// normalisation; `None` when no rung within the cap does.
+    fn width(
+        &self,
+        x: usize,
+        y: usize,
+        excess: f64,
+        bg: f64,
+        surface: &Surface,
+    ) -> Option<(usize, f64)> {
+        let st = self.stage;
+        let first = st.widths.first_within(excess, bg, st.tolerance)?;
+        let limit = st.tolerance * bg;
+        (first..st.widths.rho.len())
+            .map(|k| (k, self.norm(k, x, y, surface)))
+            .find(|&(_, norm)| norm > 0.0 && excess <= limit * norm)
+    }
+
+    /// The sum of rung `k`'s weights over the in-image pixels it reaches
+    /// from `(x, y)` (those on the source's surface, with surface guides).
+    fn norm(&self, k: usize, x: usize, y: usize, surface: &Surface) -> f64 {
+        let st = self.stage;
+        let (w, h) = (st.w, st.h);
+        let r = st.widths.reach[k];
+        let g = &st.taps[k];
+        let (xa, xb) = (x.saturating_sub(r), (x + r + 1).min(w));
+        let (ya, yb) = (y.saturating_sub(r), (y + r + 1).min(h));
+        if !st.guides.chooses_receivers() {
+            let sx: f64 = (xa..xb).map(|tx| g[tx + r - x]).sum();
+            let sy: f64 = (ya..yb).map(|ty| g[ty + r - y]).sum();
+            return sx * sy;
+        }
+        let mut sum = 0.0;
+        for ty in ya..yb {
+            let gy = g[ty + r - y];
+            if gy == 0.0 {
+                continue;
+            }
+            let row = self.input.get(ty);
+            for tx in xa..xb {
+                let wgt = gy * g[tx + r - x];
+                if wgt == 0.0 {
+                    continue;
+                }
+                if st.guides.accepts(row, (tx, ty), (surface, x, y)) {
+                    sum += wgt;
+                }
+            }
+        }
+        sum
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::filter::guides::GuideLayout;
+    use crate::filter::{FilterParams, Method};
+    use crate::geometry::Grid;
+    use crate::pipeline::{filter_in_memory, PipelineConfig, StripLayout};
+
+    /// Rec. 709 luminance weights of R, G, B.
+    const RGB: [f64; 3] = [0.2126, 0.7152, 0.0722];
+
+    /// A `w x h` R, G, B image (planar rows) of a grainy grey ground.
+    fn ground(w: usize, h: usize) -> Vec<f32> {
+        let mut v = Vec::with_capacity(w * h * 3);
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        for _ in 0..h {
+            for c in 0..3 {
+                for _ in 0..w {
+                    s ^= s << 13;
+                    s ^= s >> 7;
+                    s ^= s << 17;
+                    let g = 0.8 + 0.4 * (s >> 11) as f32 / (1u64 << 53) as f32;
+                    v.push(g * [1.0, 0.9, 0.8][c]);
+                }
+            }
+        }
+        v
+    }
+
+    fn set(v: &mut [f32], w: usize, (x, y): (usize, usize), rgb: [f32; 3]) {
+        for c in 0..3 {
+            v[(y * 3 + c) * w + x] = rgb[c];
+        }
+    }
+
+    fn layout(w: usize, h: usize, names: &[&str], lum: &[f64]) -> StripLayout {
+        StripLayout::new(
+            Grid {
+                in_w: w,
+                in_h: h,
+                s: 1,
+            },
+            names.iter().map(|s| s.to_string()).collect(),
+            lum.to_vec(),
+        )
+    }
+
+    #[test]
+    fn the_halo_is_the_settings_halo() {
+        for (mr, cut) in [(16.0, 3.0), (0.6, 3.0), (40.0, 6.0), (2.0, 1.0)] {
+            let mut p = FilterParams::new(Method::EpGauss, 1);
+            (p.max_radius, p.cutoff) = (mr, cut);
+            let v = p.validated().unwrap();
+            let st = PixelStage::new(
+                30,
+                20,
+                RGB.to_vec(),
+                vec![ChannelMode::Spread; 3],
+                GuideLayout::default(),
+                SurfaceRule::default(),
+                &v,
+                16,
+            )
+            .unwrap();
+            assert_eq!(st.halo(), crate::filter::halo(&p), "{mr} {cut}");
+        }
+    }
+
+    #[test]
+    fn a_firefly_gives_its_excess_and_clean_pixels_keep_their_bits() {
+        let (w, h) = (64, 48);
+        let mut img = ground(w, h);
+        set(&mut img, w, (20, 17), [40.0, 40.0, 40.0]);
+        let job = layout(w, h, &["R", "G", "B"], &RGB);
+        let p = FilterParams::new(Method::EpGauss, 1);
+        let (out, stats) =
+            filter_in_memory(img.clone(), &job, &p, &PipelineConfig::default()).unwrap();
+        let counts = stats.ep_gauss().unwrap();
+        assert_eq!((counts.spread, counts.beyond), (1, 0));
+        // The firefly keeps about its background, its neighbours get a share
+        // each, pixels beyond the kernel keep their bits.
+        let at = |v: &[f32], x: usize, y: usize| v[(y * 3 + 1) * w + x];
+        assert!(at(&out, 20, 17) < 2.0 && at(&out, 20, 17) > 0.5);
+        assert!(at(&out, 21, 17) > at(&img, 21, 17));
+        let r = p.cutoff * p.max_radius;
+        for y in 0..h {
+            for x in 0..w {
+                let far = (x as f64 - 20.0).abs() > r || (y as f64 - 17.0).abs() > r;
+                if far {
+                    assert_eq!(at(&out, x, y).to_bits(), at(&img, x, y).to_bits());
+                }
+            }
+        }
+        for e in stats.ledger.iter().map(|l| l.rel_error) {
+            assert!(e.abs() < 1e-12, "{e}");
+        }
+    }
+
+    #[test]
+    fn an_image_without_noise_is_written_bit_for_bit() {
+        let (w, h) = (40, 30);
+        let img = ground(w, h);
+        let job = layout(w, h, &["R", "G", "B"], &RGB);
+        let p = FilterParams::new(Method::EpGauss, 1);
+        let (out, stats) =
+            filter_in_memory(img.clone(), &job, &p, &PipelineConfig::default()).unwrap();
+        assert_eq!(stats.ep_gauss().unwrap().noisy, 0);
+        assert!(out
+            .iter()
+            .zip(&img)
+            .all(|(a, b)| a.to_bits() == b.to_bits()));
+    }
+
+    #[test]
+    fn a_lamp_the_emission_guide_names_stays_a_firefly_beside_it_goes() {
+        let (w, h) = (48, 40);
+        let mut img = ground(w, h);
+        // A one-pixel bulb and, four pixels away, a firefly of the same
+        // brightness: alike without the guide.
+        set(&mut img, w, (20, 20), [60.0, 60.0, 60.0]);
+        set(&mut img, w, (24, 20), [60.0, 60.0, 60.0]);
+        let mut rows = Vec::new();
+        for y in 0..h {
+            rows.extend_from_slice(&img[y * 3 * w..(y + 1) * 3 * w]);
+            for c in 0..3 {
+                for x in 0..w {
+                    let bulb = (x, y) == (20, 20);
+                    rows.push(if bulb { 59.0 + c as f32 * 0.0 } else { 0.0 });
+                }
+            }
+        }
+        let mut job = layout(w, h, &["R", "G", "B"], &RGB);
+        job.aux = ["emission.R", "emission.G", "emission.B"]
+            .map(String::from)
+            .to_vec();
+        job.guides.emission = Some(vec![3, 4, 5]);
+        let p = FilterParams::new(Method::EpGauss, 1);
+        let (out, stats) = filter_in_memory(rows, &job, &p, &PipelineConfig::default()).unwrap();
+        let at = |x: usize, y: usize| out[(y * 3 + 1) * w + x];
+        // The bulb keeps its emission (and whatever spread reaches it).
+        assert!(at(20, 20) >= 59.0, "{}", at(20, 20));
+        assert!(at(24, 20) < 5.0, "{}", at(24, 20));
+        assert_eq!(stats.ep_gauss().unwrap().spread, 1);
+        for e in stats.ledger.iter().map(|l| l.rel_error) {
+            assert!(e.abs() < 1e-12, "{e}");
+        }
+    }
+
+    #[test]
+    fn a_surface_guide_keeps_a_spread_on_its_side_of_an_edge() {
+        let (w, h) = (48, 40);
+        let mut img = ground(w, h);
+        set(&mut img, w, (22, 20), [50.0, 50.0, 50.0]);
+        // Normals: up on the left of x = 24, facing the camera from there.
+        let mut rows = Vec::new();
+        for y in 0..h {
+            rows.extend_from_slice(&img[y * 3 * w..(y + 1) * 3 * w]);
+            for c in 0..3 {
+                for x in 0..w {
+                    let n = if x < 24 {
+                        [0.0, 1.0, 0.0]
+                    } else {
+                        [0.0, 0.0, 1.0]
+                    };
+                    rows.push(n[c]);
+                }
+            }
+        }
+        let mut job = layout(w, h, &["R", "G", "B"], &RGB);
+        job.aux = ["N.X", "N.Y", "N.Z"].map(String::from).to_vec();
+        job.guides.normal = Some([3, 4, 5]);
+        let p = FilterParams::new(Method::EpGauss, 1);
+        let (out, stats) = filter_in_memory(rows, &job, &p, &PipelineConfig::default()).unwrap();
+        assert_eq!(stats.ep_gauss().unwrap().spread, 1);
+        for y in 0..h {
+            for x in 24..w {
+                let k = (y * 3 + 1) * w + x;
+                assert_eq!(out[k].to_bits(), img[k].to_bits(), "({x}, {y})");
+            }
+        }
+        let left: f64 = (0..h)
+            .flat_map(|y| (0..24).map(move |x| (x, y)))
+            .map(|(x, y)| (out[(y * 3 + 1) * w + x] - img[(y * 3 + 1) * w + x]) as f64)
+            .sum();
+        assert!(left.abs() < 1e-3, "{left}");
+        for e in stats.ledger.iter().map(|l| l.rel_error) {
+            assert!(e.abs() < 1e-12, "{e}");
+        }
+    }
+}
