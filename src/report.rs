@@ -66,6 +66,11 @@ pub struct Report {
     /// ep-gauss: noisy samples kept with the base kernel as parts of a
     /// feature (the support rule).
     pub samples_kept: u64,
+    /// ep-gauss at S = 1: noisy pixels left as they were, no width up to
+    /// --max-radius spreading their excess within the tolerance.
+    pub samples_left: u64,
+    /// Samples (pixels) whose emission guide set some light aside.
+    pub samples_emissive: u64,
     /// ep-gauss: the width search's work, the luminance values the widths
     /// it tried need plus average weights applied (0 for the other methods).
     pub search_cost: u64,
@@ -283,6 +288,8 @@ impl Report {
         self.samples_noisy += other.samples_noisy;
         self.samples_spread += other.samples_spread;
         self.samples_capped += other.samples_capped;
+        self.samples_left += other.samples_left;
+        self.samples_emissive += other.samples_emissive;
         self.samples_kept += other.samples_kept;
         self.search_cost += other.search_cost;
         self.search_bounded += other.search_bounded;
@@ -441,6 +448,8 @@ impl Report {
             samples_spread: counts.1,
             samples_capped: counts.2,
             samples_kept: counts.3,
+            samples_left: stats.ep_gauss().map_or(0, |g| g.beyond),
+            samples_emissive: stats.ep_gauss().map_or(0, |g| g.emissive),
             search_cost: stats.ep_gauss().map_or(0, |g| g.search_cost),
             search_bounded: stats.ep_gauss().map_or(0, |g| g.bounded),
             spread_taps: stats.ep_gauss().map_or(0, |g| g.spread_taps),
@@ -579,7 +588,12 @@ impl Report {
             self.samples_spread,
             self.samples_capped,
             if self.method == "ep-gauss" {
-                format!(" kept as features {}", self.samples_kept)
+                let left = if self.supersample == 1 {
+                    format!(" left (beyond --max-radius) {}", self.samples_left)
+                } else {
+                    String::new()
+                };
+                format!(" kept as features {}{left}", self.samples_kept)
             } else {
                 String::new()
             }

@@ -34,10 +34,14 @@
 //! (`renders/<input>.png`: input, linear, methods, reference) into `--out`
 //! (default `docs`), and prints the Markdown.
 //!
+//! `--as-written` measures renders as renderers write them: at final
+//! resolution with and without variance and guides, and super-sampled with
+//! the emission guide (`as_written.rs`, `docs/bench/renders-as-written.md`);
 //! `--sweep` runs ep-gauss over a grid of its knobs (`sweep.rs`);
 //! `--sweep-ep-box` runs ep-box over given settings of its knobs
 //! (`box_sweep.rs`, `scripts/joint-search --method ep-box`).
 
+mod as_written;
 mod box_sweep;
 mod sweep;
 
@@ -461,6 +465,9 @@ fn main() -> Result<()> {
     }
     if argv.iter().any(|a| a == "--sweep-ep-box") {
         return box_sweep::run(&argv);
+    }
+    if argv.iter().any(|a| a == "--as-written") {
+        return as_written::run(&argv);
     }
     let mut dir = PathBuf::from("../shared/renders");
     let mut out_dir = PathBuf::from("docs");

@@ -174,6 +174,48 @@ pub fn emission_part(x: f64, e: f64) -> f64 {
     }
 }
 
+/// The emission guide's parts of the colour channels of planar rows
+/// (`[channel][x]`, `w` samples a channel): which channel pairs with which
+/// emission channel, and the luminance weight of each.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EmissionParts {
+    /// (colour channel, its emission channel, luminance weight).
+    pairs: Vec<(usize, usize, f64)>,
+}
+
+impl EmissionParts {
+    /// The parts of the channels `colour[k]` (weights `weights[k]`), whose
+    /// emission is channel `emission[k]`.
+    pub fn new(colour: &[usize], emission: &[usize], weights: &[f64]) -> Self {
+        EmissionParts {
+            pairs: (colour.iter().zip(emission).zip(weights))
+                .map(|((&c, &e), &l)| (c, e, l))
+                .collect(),
+        }
+    }
+
+    /// The emission part ([`emission_part`]) of channel `c` of sample `i`,
+    /// 0 for a channel without emission.
+    #[inline]
+    pub fn part(&self, row: &[f32], w: usize, c: usize, i: usize) -> f64 {
+        match self.pairs.iter().find(|p| p.0 == c) {
+            Some(&(c, e, _)) => emission_part(row[c * w + i] as f64, row[e * w + i] as f64),
+            None => 0.0,
+        }
+    }
+
+    /// The luminance of sample `i`'s emission parts: what the emission
+    /// guide takes out of its luminance.
+    #[inline]
+    pub fn luminance(&self, row: &[f32], w: usize, i: usize) -> f64 {
+        let mut y = 0.0;
+        for &(c, e, l) in &self.pairs {
+            y += l * emission_part(row[c * w + i] as f64, row[e * w + i] as f64);
+        }
+        y
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

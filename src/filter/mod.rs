@@ -265,7 +265,7 @@ pub fn halo(p: &FilterParams) -> crate::geometry::Halo {
             ..Default::default()
         },
         Method::EpGauss if p.supersample == 1 => {
-            let spread = reach(p.max_radius);
+            let spread = ep_gauss::pixel::reach_of(p.max_radius, p.cutoff);
             crate::geometry::Halo {
                 search_reach: (2 * ep_gauss::pixel::BACKGROUND_REACH).max(spread),
                 spread_reach: spread,

@@ -172,6 +172,11 @@ impl FoundGuides {
             && self.depth.is_none()
     }
 
+    /// Whether a surface guide (albedo, normal, depth) was found.
+    pub fn surface(&self) -> bool {
+        self.albedo.is_some() || self.normal.is_some() || self.depth.is_some()
+    }
+
     /// Every channel found.
     pub fn channels(&self) -> Vec<String> {
         let mut v: Vec<String> = Vec::new();

@@ -70,7 +70,7 @@ pub struct FilterOptions {
     /// What keeps real features from being spread. ep-box: all (default:
     /// carriers + range + stderr), carriers, range, stderr, both (range +
     /// stderr), none (§5.1 as written). ep-gauss: none (§5.2 as written)
-    /// turns off its --support rule (and at S = 1 its carriers rule).
+    /// turns off its --support rule (at S = 1: its feature rules).
     #[arg(long, default_value = "all", help_heading = "Method")]
     pub guard: String,
     /// clamp: the largest sample value kept, per channel (then the base Gaussian).
@@ -87,14 +87,14 @@ pub struct FilterOptions {
           long_help = quality_help())]
     pub quality: Option<String>,
     /// Relation 14 tolerance, at this S [default: --quality's, given at S = 3
-    /// and scaled as 0.25 at 3 is to 0.15 at 4: t*(3/S)^1.776].
+    /// and scaled as 0.25 at 3 is to 0.15 at 4: t*(3/S)^1.776]. At S = 1: the
+    /// most of its background a spread adds to any pixel [default: 0.25].
     #[arg(long, help_heading = "ep-gauss")]
     pub tolerance: Option<f64>,
     /// A noisy sample with at least this many noisy neighbouring
     /// super-samples (within --support-ratio of it) is a feature and keeps the
-    /// base kernel; at S = 1 on a file with variance, so does a pixel whose
-    /// mean enough samples carry (ep-box's carriers rule and --carriers*
-    /// settings). 0 = the paper's rule, neither [default: --quality's].
+    /// base kernel (S > 1; the --support* knobs are S > 1's). 0 = the paper's
+    /// rule [default: --quality's].
     #[arg(long, help_heading = "ep-gauss")]
     pub support: Option<usize>,
     /// Neighbours support a sample when within this factor of its luminance
@@ -312,7 +312,7 @@ pub struct FilterOptions {
 #[derive(Args, Clone, Debug)]
 pub struct StatsOptions {
     /// Variance channel (luminance) or layer with .R/.G/.B [default: found by
-    /// name] (ep-box; ep-gauss at S = 1, whose carriers rule reads it when found).
+    /// name] (ep-box).
     #[arg(long)]
     pub variance_channel: Option<String>,
     /// What the variance holds: sample (of single samples), mean (of the

@@ -97,11 +97,11 @@ impl<'a> FilterPlan<'a> {
             ExrInput::open_view(&job.input, job.part.as_ref(), job.layer.as_deref(), view)?;
         let to_rgbe = job.output_format()? == Format::Rgbe;
         let scope = crate::io::reader::view_scope(&job.input, input.header(), view, exclusive)?;
-        let found_guides = guides(job, &input)?;
+        let mut warnings = job.notes.clone();
+        let found_guides = guides(job, &input, &mut warnings)?;
         let carried = carry(job, &mut input, &scope, to_rgbe, &found_guides)?;
         let found = statistics(job, &mut input)?;
         let guide_layout = found_guides.attach(&mut input)?;
-        let mut warnings = job.notes.clone();
         warnings.extend(super::dropped_warnings(job, &input, &scope, to_rgbe));
         let geometry = geometry(job, &input, &mut warnings)?;
         let channels = input.channels();
@@ -190,7 +190,7 @@ fn carry(
 
 /// The guide passes `job` asks for, found by name (none for the methods
 /// that spread nothing, or with `--guides none`).
-fn guides(job: &FilterJob, input: &ExrInput) -> Result<FoundGuides> {
+fn guides(job: &FilterJob, input: &ExrInput, warnings: &mut Vec<String>) -> Result<FoundGuides> {
     let p = &job.params;
     let spreads = matches!(p.method, Method::EpGauss | Method::EpBox);
     if !spreads || job.guides.none() {
@@ -201,11 +201,28 @@ fn guides(job: &FilterJob, input: &ExrInput) -> Result<FoundGuides> {
         .filter(|(_, l)| *l != 0.0)
         .map(|(c, _)| c)
         .collect();
-    if p.supersample > 1 {
-        // The spread of a super-sample reads no guides.
-        return Ok(FoundGuides::default());
+    let mut found = find_guides(&job.input, input.header(), &beauty, &job.guides)?;
+    if let Some(c) = found.channels().iter().find(|c| input.is_uint(c)) {
+        return Err(Error::Channels {
+            path: job.input.clone(),
+            reason: format!(
+                "the guide channel {c} holds unsigned integers (an id), not a guide's values: name another with --guide KIND=NAME, or give --guides none"
+            ),
+        });
     }
-    find_guides(&job.input, input.header(), &beauty, &job.guides)
+    if p.supersample > 1 && found.surface() {
+        // A super-sample's spread is a separable Gaussian: the emission
+        // guide is read, the surface guides are not.
+        if job.guides.kinds.is_some() || !job.guides.named.is_empty() {
+            warnings.push(format!(
+                "{}: the surface guides (albedo, normal, depth) are read at S = 1 only; at S = {} the emission guide is",
+                job.input.display(),
+                p.supersample
+            ));
+        }
+        (found.albedo, found.normal, found.depth) = (None, None, None);
+    }
+    Ok(found)
 }
 
 /// The statistics step: ep-box needs them.

@@ -392,23 +392,34 @@ impl PixelStage {
                 }
                 let g = &taps[k];
                 let (xa, xb) = (sx.saturating_sub(r).max(x0), (sx + r + 1).min(x1));
+                if xa >= xb {
+                    continue;
+                }
+                let gx = &g[xa + r - sx..xb + r - sx];
                 for ty in sy.saturating_sub(r)..(sy + r + 1).min(h) {
                     let gy = g[ty + r - sy];
                     if gy == 0.0 {
                         continue;
                     }
-                    let row = input.get(ty);
                     let ri = ty - first;
-                    for tx in xa..xb {
-                        let wgt = gy * g[tx + r - sx];
-                        if wgt == 0.0 {
-                            continue;
+                    if choose {
+                        // The receivers the guides allow, one by one.
+                        let row = input.get(ty);
+                        for (tx, &wx) in (xa..xb).zip(gx) {
+                            if wx == 0.0 || !guides.accepts(row, (tx, ty), (&s.surface, sx, sy)) {
+                                continue;
+                            }
+                            for &c in &spread {
+                                parts[ri * nch + c][tx - x0] += shares[s.off + c] * gy * wx;
+                            }
                         }
-                        if choose && !guides.accepts(row, (tx, ty), (&s.surface, sx, sy)) {
-                            continue;
-                        }
-                        for &c in &spread {
-                            parts[ri * nch + c][tx - x0] += shares[s.off + c] * wgt;
+                        continue;
+                    }
+                    for &c in &spread {
+                        let a = shares[s.off + c] * gy;
+                        let dst = &mut parts[ri * nch + c][xa - x0..xb - x0];
+                        for (d, &wx) in dst.iter_mut().zip(gx) {
+                            *d += a * wx;
                         }
                     }
                 }

@@ -9,6 +9,7 @@ use super::stage::Stage;
 use super::{PipelineConfig, StripLayout};
 use crate::error::{Error, Result};
 use crate::filter::ep_box::{Spp, StatsLayout};
+use crate::filter::guides::EmissionParts;
 use crate::filter::{Method, ValidParams};
 
 /// The stage of `params.method` for strips laid out as `job`, its
@@ -83,6 +84,18 @@ pub fn make(
             );
             if let Some(real) = job.padded_from {
                 stage.set_real_size(real);
+            }
+            if let Some(e) = &job.guides.emission {
+                let colour: Vec<usize> = (0..nch).filter(|&c| job.luminance[c] != 0.0).collect();
+                if e.len() != colour.len() {
+                    return Err(Error::Config(format!(
+                        "the emission guide has {} channels, the beauty {}",
+                        e.len(),
+                        colour.len()
+                    )));
+                }
+                let weights: Vec<f64> = colour.iter().map(|&c| job.luminance[c]).collect();
+                stage.set_emission(EmissionParts::new(&colour, e, &weights));
             }
             stage.set_classify_samples(cfg.classify_samples);
             stage.set_spread_chunk(cfg.spread_chunk);

@@ -15,6 +15,7 @@ mod extremes;
 mod farm;
 mod features;
 mod foils;
+mod guides;
 mod invariance;
 mod parts;
 mod reference;

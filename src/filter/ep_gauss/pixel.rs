@@ -120,7 +120,7 @@ pub struct Widths {
     /// `1 / (sum of exp(-(d/rho)^2) over the plane's pixels within the
     /// cut-off)`: the weight of the centre pixel away from any border.
     pub w0: Vec<f64>,
-    /// Pixels either side each radius reaches (`cutoff * rho`, rounded).
+    /// Pixels either side each radius reaches ([`reach_of`]).
     pub reach: Vec<usize>,
 }
 
@@ -135,10 +135,7 @@ impl Widths {
             r *= 1.0 + step;
         }
         rho.push(max_radius);
-        let reach: Vec<usize> = rho
-            .iter()
-            .map(|&r| (cutoff * r + 0.5).floor().max(0.0) as usize)
-            .collect();
+        let reach: Vec<usize> = rho.iter().map(|&r| reach_of(r, cutoff)).collect();
         let w0 = rho
             .iter()
             .zip(&reach)
@@ -163,6 +160,13 @@ impl Widths {
     pub fn max_reach(&self) -> usize {
         self.reach.last().copied().unwrap_or(0)
     }
+}
+
+/// Pixels either side a Gaussian of radius `rho` cut off at `cutoff` radii
+/// reaches: every tap within it is above zero (a pixel a spread does not
+/// reach is not touched, not even by a zero).
+pub fn reach_of(rho: f64, cutoff: f64) -> usize {
+    (cutoff * rho).floor().max(0.0) as usize
 }
 
 /// `exp(-(d/rho)^2)` for `d` in `-reach..=reach`, zero beyond `cutoff * rho`

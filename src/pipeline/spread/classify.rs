@@ -29,9 +29,10 @@ struct FindScratch {
     xbar_h: Vec<f64>,
 }
 
-/// A pixel row's noisy samples (row-major), their values (`nch` each) and
-/// how many noisy samples were kept as features.
-type Found = (Vec<Noisy>, Vec<f32>, u64);
+/// A pixel row's noisy samples (row-major), their values (`nch` each: what
+/// the emission guide leaves of them) and how many noisy samples were kept
+/// as features.
+type Found = (Vec<Noisy>, Vec<f64>, u64);
 
 /// Samples of one input row that one classification task searches for
 /// noise: a pixel row of a wider image is cut into column ranges, searched
@@ -87,6 +88,7 @@ struct FindCtx<'a> {
     support: Support,
     pixel_stats: Option<&'a (StatsLayout, Carriers)>,
     input: &'a RowWindow<f32>,
+    emission: Option<&'a EmissionParts>,
 }
 
 impl FindCtx<'_> {
@@ -129,13 +131,23 @@ impl FindCtx<'_> {
         // This part's samples, `i0..i1` of each row (`n` of them).
         let (i0, i1) = (cols.start * s, cols.end * s);
         let n = i1 - i0;
-        let luma = |row: &[f32], i: usize| lum.of(|c| row[c * in_w + i] as f64);
+        let emission = self.emission;
+        let luma = |row: &[f32], i: usize| {
+            let y = lum.of(|c| row[c * in_w + i] as f64);
+            emission.map_or(y, |e| y - e.luminance(row, in_w, i))
+        };
         // The luminance of the pixel row's samples, a row at a time
         // (the same sum, in the same order, as `luma`).
         lrows.clear();
         lrows.resize(s * n, 0.0f64);
         for (bb, lrow) in lrows.chunks_exact_mut(n).enumerate() {
-            lum.cols_into(input.get(y * s + bb), in_w, i0..i1, lrow);
+            let row = input.get(y * s + bb);
+            lum.cols_into(row, in_w, i0..i1, lrow);
+            if let Some(e) = emission {
+                for (k, l) in lrow.iter_mut().enumerate() {
+                    *l -= e.luminance(row, in_w, i0 + k);
+                }
+            }
         }
         // Which pixels hold a noisy sample: one branch-free test of
         // all their samples first (most hold none).
@@ -204,7 +216,10 @@ impl FindCtx<'_> {
                         continue;
                     }
                     let row = input.get(j);
-                    vals.extend((0..nch).map(|c| row[c * in_w + i]));
+                    vals.extend((0..nch).map(|c| {
+                        let v = row[c * in_w + i] as f64;
+                        emission.map_or(v, |e| v - e.part(row, in_w, c, i))
+                    }));
                     found.push(Noisy {
                         i: i as u32,
                         j: j as u32,
@@ -281,6 +296,7 @@ impl FindCtx<'_> {
             modes,
             cols,
             input,
+            emission,
             ..
         } = *self;
         for (bb, hrow) in hs.iter_mut().enumerate() {
@@ -293,9 +309,12 @@ impl FindCtx<'_> {
                 scratch.extend_from_slice(row);
                 for n in &list[first..last] {
                     // Coverage (alpha) and averaged data are not
-                    // spread: they keep the base kernel.
+                    // spread: they keep the base kernel, as does the
+                    // emission guide's part of the colour.
+                    let i = n.i as usize;
                     for c in (0..nch).filter(|&c| modes[c] == ChannelMode::Spread) {
-                        scratch[c * in_w + n.i as usize] = 0.0;
+                        scratch[c * in_w + i] =
+                            emission.map_or(0.0, |e| e.part(row, in_w, c, i) as f32);
                     }
                 }
                 row = scratch.as_slice();
@@ -333,7 +352,7 @@ impl FindCtx<'_> {
 pub(super) struct Beside<'s> {
     place: SearchPlace<'s>,
     samples: &'s mut [Noisy],
-    values: &'s [f32],
+    values: &'s [f64],
     accs: Accs<'s>,
     fresh: &'s mut [Option<usize>; 3],
     up: Option<(usize, usize)>,
@@ -537,6 +556,7 @@ impl GaussianStage {
             ref modes,
             ref cols,
             ref pixel_stats,
+            ref emission,
             ..
         } = *self;
         let yview = YView::new(ybox, h);
@@ -556,6 +576,7 @@ impl GaussianStage {
             support,
             pixel_stats: pixel_stats.as_ref(),
             input,
+            emission: emission.as_ref(),
         };
         let hrows = hpass.range_mut(a * s, b * s);
         let beside = match (spread, ep.as_ref()) {

@@ -48,6 +48,7 @@ use crate::filter::ep_box::{cluster_count, StatsLayout};
 use crate::filter::ep_gauss::{
     csum_add, csum_prefix, AreaSums, Carriers, EpGauss, Folded, LumRows, Support,
 };
+use crate::filter::guides::EmissionParts;
 use crate::filter::kernel::{ColumnTaps, Kernel1d, TentTaps};
 use crate::filter::luminance::Luminance;
 use crate::filter::{Method, ValidParams};
@@ -204,8 +205,12 @@ pub struct GaussianStage {
     base_rows: RowWindow<f64>,
     acc: RowWindow<f64>,
     pending: Vec<Noisy>,
-    /// The pending samples' values, `nch` each, in the same order.
-    pending_v: Vec<f32>,
+    /// The pending samples' values, `nch` each, in the same order (what
+    /// the emission guide leaves of them).
+    pending_v: Vec<f64>,
+    /// The emission guide: its light is set aside before any test and
+    /// keeps the base kernel.
+    emission: Option<EmissionParts>,
     /// Samples of `pending` before this one are spread (dropped from the
     /// front once they are half of it, so that dropping them moves no more
     /// than was spread: a drain per strip moved every later one).
@@ -327,6 +332,7 @@ impl GaussianStage {
             acc: RowWindow::new(nch * w),
             pending: Vec::new(),
             pending_v: Vec::new(),
+            emission: None,
             pending_first: 0,
             classified: 0,
             spread_done: 0,
@@ -360,6 +366,15 @@ impl GaussianStage {
     /// ([`super::PipelineConfig::spread_chunk`]; 0: automatic).
     pub fn set_spread_chunk(&mut self, n: usize) {
         self.spread_chunk = n;
+    }
+
+    /// The emission guide (ep-gauss): each sample's emission part is set
+    /// aside before any test, keeps the base kernel, and only the rest of a
+    /// noisy sample is spread ([`crate::filter::guides`]).
+    pub fn set_emission(&mut self, parts: EmissionParts) {
+        if self.ep.is_some() {
+            self.emission = Some(parts);
+        }
     }
 
     /// `--edge pad`: the grid's first `real.0` x `real.1` samples are real,

@@ -124,6 +124,7 @@ impl GaussianStage {
             ref mut ybox,
             ref mut csum,
             ref lum,
+            ref emission,
             ref real_counts,
             ref mut base_rows,
             ref hpass,
@@ -204,6 +205,15 @@ impl GaussianStage {
                         core.resize(w, 0.0);
                         for j in y * s..(y + 1) * s {
                             lum.box_row_add(input.get(j), in_w, s, core);
+                            // The emission guide's light is not tested.
+                            if let Some(em) = emission {
+                                let row = input.get(j);
+                                for (px, v) in core.iter_mut().enumerate() {
+                                    for i in px * s..(px + 1) * s {
+                                        *v -= em.luminance(row, in_w, i);
+                                    }
+                                }
+                            }
                         }
                         core.iter_mut().for_each(|v| *v *= inv);
                         // --edge pad: a partial pixel's mean is over its real samples.

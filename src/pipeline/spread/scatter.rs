@@ -79,7 +79,7 @@ impl PlaceCtx<'_> {
     /// Place noisy sample `n` (values `x`) in `out`: its values, and its
     /// kernels on the grid its width goes to (read in place inside the
     /// image, reflected into the arena at an edge).
-    fn place(&self, n: &Noisy, x: &[f32], out: &mut Placed, tmp: &mut Vec<f64>) {
+    fn place(&self, n: &Noisy, x: &[f64], out: &mut Placed, tmp: &mut Vec<f64>) {
         let s = self.s;
         out.counts.noisy += 1;
         out.counts.spread += (n.level > 0) as u64;
@@ -89,7 +89,7 @@ impl PlaceCtx<'_> {
         let voff = out.vals.len();
         out.vals.extend(x.iter().zip(self.modes).map(|(&x, &m)| {
             if m == ChannelMode::Spread {
-                x as f64 * self.inv_s2
+                x * self.inv_s2
             } else {
                 0.0
             }
@@ -294,7 +294,7 @@ impl GaussianStage {
         &mut self,
         c0: usize,
         c1: usize,
-    ) -> (SearchPlace<'_>, &mut [Noisy], &[f32], Accs<'_>) {
+    ) -> (SearchPlace<'_>, &mut [Noisy], &[f64], Accs<'_>) {
         let (w, h, nch) = (self.w, self.h, self.nch);
         let ep = self.ep.as_ref().expect("spread only where ep-gauss is");
         let place = SearchPlace::new(
@@ -381,7 +381,7 @@ impl<'a> SearchPlace<'a> {
     pub(super) fn run(
         &self,
         samples: &mut [Noisy],
-        values: &[f32],
+        values: &[f64],
         region: &crate::trace::Span,
     ) -> Vec<Placed> {
         let (ctx, view) = (&self.ctx, &self.view);
