@@ -1,12 +1,15 @@
 //! Write a super-sampled test render with fireflies, streaming (flat memory):
 //!
-//! `cargo run --release --example fireflies -- OUT.exr WIDTH HEIGHT [FRACTION] [COMPRESSION] [MIN..MAX]`
+//! `cargo run --release --example fireflies -- OUT.exr WIDTH HEIGHT [FRACTION] [COMPRESSION] [MIN..MAX] [--guides]`
 //!
 //! WIDTH x HEIGHT are input samples. A smooth RGB background (0.2..1.0) with
 //! FRACTION (default 0.01) of the samples turned into fireflies MIN..MAX times
 //! brighter (log-uniform; default 10..1000; the paper's "dynamic range of
 //! 10^5": 1e2..1e5), everywhere including borders and corners, float samples,
-//! ZIP by default.
+//! ZIP by default. `--guides` adds the guide passes renderers write: an
+//! emission pass naming a lamp (1000 times the ground) every 97th pixel of
+//! every 97th row, albedo, normals that turn at every 512th column (walls
+//! meeting) and a depth ramp: what the guides cost is measured on it.
 
 use epfilt::io::{parse_compression, ExrOutput};
 use epfilt::pipeline::{Precision, Sink};
@@ -19,7 +22,9 @@ fn hash(i: u64) -> u64 {
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let a: Vec<String> = std::env::args().collect();
+    let all: Vec<String> = std::env::args().collect();
+    let guides = all.iter().any(|x| x == "--guides");
+    let a: Vec<String> = all.into_iter().filter(|x| x != "--guides").collect();
     if a.len() < 4 {
         return Err(
             "usage: fireflies OUT.exr WIDTH HEIGHT [FRACTION] [COMPRESSION] [MIN..MAX]".into(),
@@ -40,7 +45,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         return Err("MIN..MAX must be positive and increasing".into());
     }
     let (l0, span) = (lo.log10(), (hi / lo).log10());
-    let names: Vec<String> = ["R", "G", "B"].iter().map(|s| s.to_string()).collect();
+    let mut names: Vec<&str> = vec!["R", "G", "B"];
+    if guides {
+        names.extend([
+            "emission.R",
+            "emission.G",
+            "emission.B",
+            "albedo.R",
+            "albedo.G",
+            "albedo.B",
+            "N.X",
+            "N.Y",
+            "N.Z",
+            "Z",
+        ]);
+    }
+    let nch = names.len();
+    let names: Vec<String> = names.iter().map(|s| s.to_string()).collect();
     let mut out = ExrOutput::create_new(
         std::path::Path::new(&a[1]),
         w,
@@ -54,7 +75,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut y = 0;
     while y < h {
         let n = rows.min(h - y);
-        let mut data = vec![0.0f32; n * 3 * w];
+        let mut data = vec![0.0f32; n * nch * w];
         for r in 0..n {
             let j = y + r;
             for i in 0..w {
@@ -66,8 +87,25 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 } else {
                     1.0
                 };
+                let lamp = guides && i % 97 == 48 && j % 97 == 48;
+                let mag = if lamp { 1000.0 } else { mag };
                 for (c, tint) in [1.0f32, 0.9, 0.75].iter().enumerate() {
-                    data[(r * 3 + c) * w + i] = base * tint * mag as f32;
+                    data[(r * nch + c) * w + i] = base * tint * mag as f32;
+                }
+                if guides {
+                    let wall = (i / 512) % 2 == 1;
+                    let n = if wall {
+                        [0.0, 0.0, 1.0]
+                    } else {
+                        [0.0, 1.0, 0.0]
+                    };
+                    for c in 0..3 {
+                        let at = |k: usize| (r * nch + k) * w + i;
+                        data[at(3 + c)] = if lamp { data[at(c)] } else { 0.0 };
+                        data[at(6 + c)] = if wall { 0.3 } else { 0.6 };
+                        data[at(9 + c)] = n[c];
+                    }
+                    data[(r * nch + 12) * w + i] = 2.0 + j as f32 / h as f32;
                 }
             }
         }

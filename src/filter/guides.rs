@@ -125,10 +125,10 @@ impl Surface {
         s
     }
 
-    /// Whether `other`, `dist` pixels away, is on the same surface under
-    /// `rule` (with `cos_max` the cosine of its angle, computed once).
+    /// Whether `other`, `sqrt(dist2)` pixels away, is on the same surface
+    /// under `rule` (with `cos_max` the cosine of its angle, computed once).
     #[inline]
-    pub fn same(&self, other: &Surface, dist: f32, rule: &SurfaceRule, cos_max: f32) -> bool {
+    pub fn same(&self, other: &Surface, dist2: f32, rule: &SurfaceRule, cos_max: f32) -> bool {
         let a = &self.albedo;
         let b = &other.albedo;
         let albedo = rule.albedo as f32;
@@ -143,8 +143,10 @@ impl Surface {
         if np != mp || (np && n[0] * m[0] + n[1] * m[1] + n[2] * m[2] < cos_max) {
             return false;
         }
+        // |z - w| <= depth * max(dist, 1) * max(|z|, |w|), squared.
         let (z, w) = (self.depth, other.depth);
-        (z - w).abs() <= rule.depth as f32 * dist.max(1.0) * z.abs().max(w.abs())
+        let (d, m) = (z - w, rule.depth as f32 * z.abs().max(w.abs()));
+        d * d <= m * m * dist2.max(1.0)
     }
 }
 
@@ -243,13 +245,13 @@ mod tests {
         let wall = surface(0.5, [0.0, 0.0, 1.0], 3.0);
         let behind = surface(0.5, [0.0, 1.0, 0.0], 6.0);
         let paint = surface(0.8, [0.0, 1.0, 0.0], 3.0);
-        assert!(table.same(&table_far, 4.0, &rule, cos));
+        assert!(table.same(&table_far, 16.0, &rule, cos));
         assert!(!table.same(&wall, 1.0, &rule, cos));
-        assert!(!table.same(&behind, 2.0, &rule, cos));
+        assert!(!table.same(&behind, 4.0, &rule, cos));
         assert!(!table.same(&paint, 1.0, &rule, cos));
         // Without a hit (zero normal) only other misses match.
         let sky = surface(0.0, [0.0; 3], 0.0);
-        assert!(sky.same(&sky, 3.0, &rule, cos));
+        assert!(sky.same(&sky, 9.0, &rule, cos));
         assert!(!sky.same(&surface(0.0, [0.0, 1.0, 0.0], 0.0), 1.0, &rule, cos));
     }
 

@@ -576,7 +576,7 @@ impl Band<'_> {
             let surface = g.surface_of(src, x);
             let (m, found) = if g.chooses_receivers() {
                 let accepts = |tx: usize, ty: usize| {
-                    g.accepts(self.input.get(ty), (tx, ty), (&surface, x, yy))
+                    g.accepts_in(self.input.get(ty), (tx, ty), (&surface, x, yy))
                 };
                 self.ring.prefix_where(x, yy, (w, h), wanted, accepts)
             } else {
@@ -654,7 +654,7 @@ fn scatter_ring(
                 }
                 let (tx, ty) = (tx as usize, ty as usize);
                 if let Some((input, g)) = surface {
-                    if !g.accepts(input.get(ty), (tx, ty), (&s.surface, sx, sy)) {
+                    if !g.accepts_in(input.get(ty), (tx, ty), (&s.surface, sx, sy)) {
                         continue;
                     }
                 }

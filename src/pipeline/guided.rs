@@ -106,25 +106,43 @@ impl GuideReader {
         Surface::read(&self.layout, |i| row[i * self.w + x])
     }
 
-    /// Whether pixel `(tx, ty)` of `row` may receive a spread from a source
-    /// at `(sx, sy)` on surface `from`: not a light, and on that surface.
+    /// Whether pixel `x` of `row` holds any emission.
+    #[inline]
+    pub fn has_emission(&self, row: &[f32], x: usize) -> bool {
+        (self.emission.iter().flatten()).any(|&e| row[e * self.w + x] > 0.0)
+    }
+
+    /// Whether pixel `(tx, ty)` (a `light`, on surface `q`) may receive a
+    /// spread from a source at `(sx, sy)` on surface `from`: not a light,
+    /// and on that surface.
     #[inline]
     pub fn accepts(
         &self,
-        row: &[f32],
+        (light, q): (bool, &Surface),
         (tx, ty): (usize, usize),
         from: (&Surface, usize, usize),
     ) -> bool {
-        let (surface, sx, sy) = from;
-        if self.emission() && self.is_light(row, tx, self.residual_luminance(row, tx)) {
+        if light {
             return false;
         }
         if !self.surface() {
             return true;
         }
+        let (surface, sx, sy) = from;
         let dx = sx as f32 - tx as f32;
         let dy = sy as f32 - ty as f32;
-        let dist = (dx * dx + dy * dy).sqrt();
-        surface.same(&self.surface_of(row, tx), dist, &self.rule, self.cos_max)
+        surface.same(q, dx * dx + dy * dy, &self.rule, self.cos_max)
+    }
+
+    /// [`GuideReader::accepts`] for pixel `(tx, ty)` read from its `row`.
+    #[inline]
+    pub fn accepts_in(
+        &self,
+        row: &[f32],
+        (tx, ty): (usize, usize),
+        from: (&Surface, usize, usize),
+    ) -> bool {
+        let light = self.emission() && self.is_light(row, tx, self.residual_luminance(row, tx));
+        self.accepts((light, &self.surface_of(row, tx)), (tx, ty), from)
     }
 }

@@ -83,6 +83,11 @@ pub struct PixelStage {
     cand: RowWindow<u8>,
     /// 1 where the emission guide says a pixel is a light.
     light: RowWindow<u8>,
+    /// Each pixel's surface guides (with them), for the rows a spread may
+    /// reach (as `light`).
+    surf: RowWindow<Surface>,
+    /// Pixels whose emission guide set light aside (counted on arrival).
+    emissive: u64,
     kept: RowWindow<f64>,
     acc: RowWindow<f64>,
     class_done: usize,
@@ -134,6 +139,8 @@ impl PixelStage {
             bg: RowWindow::new(w),
             cand: RowWindow::new(w),
             light: RowWindow::new(w),
+            surf: RowWindow::new(w),
+            emissive: 0,
             kept: RowWindow::new(nch * w),
             acc: RowWindow::new(nch * w),
             class_done: 0,
@@ -161,21 +168,42 @@ impl Stage for PixelStage {
             self.ylum.push_stale(0.0);
             self.light.push_stale(0);
         }
+        if self.guides.surface() {
+            for _ in a..b {
+                self.surf.push_stale(Surface::default());
+            }
+            let guides = &self.guides;
+            let rows = self.surf.range_mut(a, b);
+            rows.into_par_iter().enumerate().for_each(|(k, srow)| {
+                let row = input.get(a + k);
+                for (x, q) in srow.iter_mut().enumerate() {
+                    *q = guides.surface_of(row, x);
+                }
+            });
+        }
         let guides = &self.guides;
         let region = crate::trace::region("pixel luminance");
         let rows = self.ylum.range_mut(a, b);
         let lights = self.light.range_mut(a, b);
-        rows.into_par_iter()
+        let emissive: u64 = rows
+            .into_par_iter()
             .zip(lights)
             .enumerate()
-            .for_each(|(k, (yrow, lrow))| {
+            .map(|(k, (yrow, lrow))| {
                 let _task = region.task("pixel luminance");
                 let row = input.get(a + k);
+                let mut emissive = 0;
                 for (x, (y, l)) in yrow.iter_mut().zip(lrow.iter_mut()).enumerate() {
                     *y = guides.residual_luminance(row, x);
-                    *l = u8::from(guides.is_light(row, x, *y));
+                    let light = guides.is_light(row, x, *y);
+                    *l = u8::from(light);
+                    emissive +=
+                        u64::from(guides.emission() && (light || guides.has_emission(row, x)));
                 }
-            });
+                emissive
+            })
+            .sum();
+        self.emissive += emissive;
     }
 
     fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, _all_in: bool) -> usize {
@@ -203,7 +231,10 @@ impl Stage for PixelStage {
             self.ylum.evict_below(keep);
             self.bg.evict_below(keep);
             self.cand.evict_below(keep);
-            self.light.evict_below(keep);
+            // Receivers are read `reach` rows above a treated row.
+            let receivers = self.treat_done.saturating_sub(self.reach);
+            self.light.evict_below(keep.min(receivers));
+            self.surf.evict_below(receivers);
         }
         if self.treat_done == h {
             h
@@ -226,7 +257,10 @@ impl Stage for PixelStage {
     }
 
     fn counts(&self) -> MethodCounts {
-        MethodCounts::EpGauss(self.counts)
+        MethodCounts::EpGauss(SpreadCounts {
+            emissive: self.emissive,
+            ..self.counts
+        })
     }
 
     fn windows(&self) -> Vec<WindowUse> {
@@ -363,20 +397,20 @@ impl PixelStage {
             .map(|s| (2 * self.widths.reach[s.k as usize] as u64 + 1).pow(2))
             .sum();
         self.counts.spread_taps += taps * nch as u64;
-        self.scatter(input, &sources, &shares);
+        self.scatter(&sources, &shares);
     }
 
     /// Add each source's shares to the pixels its kernel reaches (on its
     /// surface), one task per tile of columns; every pixel receives its
     /// shares in source order.
-    fn scatter(&mut self, input: &RowWindow<f32>, sources: &[Source], shares: &[f64]) {
+    fn scatter(&mut self, sources: &[Source], shares: &[f64]) {
         if sources.is_empty() {
             return;
         }
         let (w, h, nch) = (self.w, self.h, self.nch);
         let first = self.acc.first();
         let (taps, widths, modes) = (&self.taps, &self.widths, &self.modes);
-        let guides = &self.guides;
+        let (guides, light, surf) = (&self.guides, &self.light, &self.surf);
         let choose = guides.chooses_receivers();
         let spread: Vec<usize> = (0..nch)
             .filter(|&c| modes[c] == ChannelMode::Spread)
@@ -402,11 +436,16 @@ impl PixelStage {
                         continue;
                     }
                     let ri = ty - first;
-                    if choose {
+                    let lights = choose.then(|| &light.get(ty)[xa..xb]);
+                    let one_by_one =
+                        lights.is_some_and(|l| guides.surface() || l.iter().any(|&l| l != 0));
+                    if let (true, Some(lights)) = (one_by_one, lights) {
                         // The receivers the guides allow, one by one.
-                        let row = input.get(ty);
-                        for (tx, &wx) in (xa..xb).zip(gx) {
-                            if wx == 0.0 || !guides.accepts(row, (tx, ty), (&s.surface, sx, sy)) {
+                        let surfs = guides.surface().then(|| &surf.get(ty)[xa..xb]);
+                        for (k, (tx, &wx)) in (xa..xb).zip(gx).enumerate() {
+                            let q = surfs.map_or(&s.surface, |r| &r[k]);
+                            if !guides.accepts((lights[k] != 0, q), (tx, ty), (&s.surface, sx, sy))
+                            {
                                 continue;
                             }
                             for &c in &spread {
@@ -459,13 +498,6 @@ impl Treat<'_> {
             for (d, &v) in out.iter_mut().zip(&src[..nch * w]) {
                 *d = v as f64;
             }
-            if st.guides.emission() {
-                counts.emissive += (0..w)
-                    .filter(|&x| {
-                        (0..nch).any(|c| st.guides.residual(src, c, x) != src[c * w + x] as f64)
-                    })
-                    .count() as u64;
-            }
             let r = BACKGROUND_REACH as i64;
             let lrows: Vec<&[f64]> = (-1..=1)
                 .map(|d| st.ylum.get(mirror(y as i64 + d, h)))
@@ -497,11 +529,12 @@ impl Treat<'_> {
                 }
                 let excess = v - bg;
                 let surface = st.guides.surface_of(src, x);
-                let Some((k, norm)) = self.width(x, y, excess, bg, &surface) else {
+                let Some((k, norm, capped)) = self.width(x, y, excess, bg, &surface) else {
                     counts.beyond += 1;
                     continue;
                 };
                 counts.spread += 1;
+                counts.capped += u64::from(capped);
                 let f = excess / v;
                 let off = shares.len();
                 for c in 0..nch {
@@ -526,9 +559,10 @@ impl Treat<'_> {
     }
 
     /// The first rung, from the ladder's guess up, whose kernel (normalised
-    /// over the in-image pixels it reaches, on the source's surface) gives
+    /// over the in-image pixels it reaches, those the guides allow) gives
     /// its centre at most `tolerance * bg` of `excess`, and that
-    /// normalisation; `None` when no rung within the cap does.
+    /// normalisation; when no rung within the cap does, the cap (flagged)
+    /// where the guides' receivers alone made it so, else `None`.
     fn width(
         &self,
         x: usize,
@@ -536,13 +570,62 @@ impl Treat<'_> {
         excess: f64,
         bg: f64,
         surface: &Surface,
-    ) -> Option<(usize, f64)> {
+    ) -> Option<(usize, f64, bool)> {
         let st = self.stage;
-        let first = st.widths.first_within(excess, bg, st.tolerance)?;
         let limit = st.tolerance * bg;
-        (first..st.widths.rho.len())
-            .map(|k| (k, self.norm(k, x, y, surface)))
-            .find(|&(_, norm)| norm > 0.0 && excess <= limit * norm)
+        let cap = st.widths.rho.len() - 1;
+        // Even the whole plane's kernel at the cap is too narrow: left.
+        let first = st.widths.first_within(excess, bg, st.tolerance)?;
+        let passes = |norm: f64| norm > 0.0 && excess <= limit * norm;
+        // The sum grows with the rung (every weight does): gallop up from
+        // the ladder's guess (most kernels pass there or a rung or two
+        // above, and a width costs its area), then bisect.
+        let (mut lo, mut step) = (None, 1);
+        let mut k = first;
+        let (mut hi, mut at_hi) = loop {
+            let at = self.norm(k, x, y, surface);
+            if passes(at) {
+                break (k, at);
+            }
+            if k == cap {
+                // The receivers the guides leave out made the kernel too
+                // narrow: a pixel the kernel over every pixel spreads within
+                // the cap is spread at the cap on its receivers (the guides
+                // never leave in place what ep-gauss spreads without them).
+                let plain =
+                    st.guides.chooses_receivers() && excess <= limit * self.plain_norm(cap, x, y);
+                return (plain && at > 0.0).then_some((cap, at, true));
+            }
+            lo = Some(k);
+            k = (k + step).min(cap);
+            step *= 2;
+        };
+        let Some(mut lo) = lo else {
+            return Some((hi, at_hi, false));
+        };
+        while hi - lo > 1 {
+            let mid = (lo + hi) / 2;
+            let at_mid = self.norm(mid, x, y, surface);
+            if passes(at_mid) {
+                (hi, at_hi) = (mid, at_mid);
+            } else {
+                lo = mid;
+            }
+        }
+        Some((hi, at_hi, false))
+    }
+
+    /// The sum of rung `k`'s weights over the in-image pixels it reaches
+    /// from `(x, y)`, every one of them.
+    fn plain_norm(&self, k: usize, x: usize, y: usize) -> f64 {
+        let st = self.stage;
+        let r = st.widths.reach[k];
+        let g = &st.taps[k];
+        let (xa, xb) = (x.saturating_sub(r), (x + r + 1).min(st.w));
+        let (ya, yb) = (y.saturating_sub(r), (y + r + 1).min(st.h));
+        let sx: f64 = (xa..xb).map(|tx| g[tx + r - x]).sum();
+        let sy: f64 = (ya..yb).map(|ty| g[ty + r - y]).sum();
+        sx * sy
     }
 
     /// The sum of rung `k`'s weights over the in-image pixels it reaches
@@ -555,24 +638,26 @@ impl Treat<'_> {
         let (xa, xb) = (x.saturating_sub(r), (x + r + 1).min(w));
         let (ya, yb) = (y.saturating_sub(r), (y + r + 1).min(h));
         if !st.guides.chooses_receivers() {
-            let sx: f64 = (xa..xb).map(|tx| g[tx + r - x]).sum();
-            let sy: f64 = (ya..yb).map(|ty| g[ty + r - y]).sum();
-            return sx * sy;
+            return self.plain_norm(k, x, y);
         }
+        let gx = &g[xa + r - x..xb + r - x];
+        let row_sum: f64 = gx.iter().sum();
         let mut sum = 0.0;
         for ty in ya..yb {
             let gy = g[ty + r - y];
-            if gy == 0.0 {
+            let lights = &st.light.get(ty)[xa..xb];
+            if !st.guides.surface() && !lights.iter().any(|&l| l != 0) {
+                sum += gy * row_sum;
                 continue;
             }
-            let row = self.input.get(ty);
-            for tx in xa..xb {
-                let wgt = gy * g[tx + r - x];
-                if wgt == 0.0 {
-                    continue;
-                }
-                if st.guides.accepts(row, (tx, ty), (surface, x, y)) {
-                    sum += wgt;
+            let surfs = st.guides.surface().then(|| &st.surf.get(ty)[xa..xb]);
+            for (k, (tx, &wx)) in (xa..xb).zip(gx).enumerate() {
+                let q = surfs.map_or(surface, |r| &r[k]);
+                if st
+                    .guides
+                    .accepts((lights[k] != 0, q), (tx, ty), (surface, x, y))
+                {
+                    sum += gy * wx;
                 }
             }
         }

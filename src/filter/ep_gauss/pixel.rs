@@ -15,11 +15,12 @@
 //! * **Noise** (Rule 1): a pixel is noisy when it is a strict local maximum
 //!   of its 8 neighbours and above [`NOISE_RATIO`] times its background.
 //! * **Features** (beyond the paper, with `--guard`): a noisy pixel is kept
-//!   when a neighbour carries at least [`SUPPORT_SHARE`] of its excess (a
-//!   firefly is one sample in one pixel; a bulb, a line or a rim lights the
-//!   pixels beside it too), or when it is no brighter than a calm pixel
-//!   within 2 and at least `1 /` [`RANGE_RATIO`] of it (a light source's
-//!   edge, a highlight's rim beside its core).
+//!   when two neighbours (one, far above the room: [`SUPPORT_BRIGHT`]) carry
+//!   at least [`SUPPORT_SHARE`] of its excess (a firefly is one sample in
+//!   one pixel; a bulb, a line or a rim lights the pixels beside it too), or
+//!   when it is no brighter than a calm pixel within 2 and at least `1 /`
+//!   [`RANGE_RATIO`] of it (a light source's edge, a highlight's rim beside
+//!   its core).
 //! * **Excess**: what the pixel holds above its background, `Y - bg`. The
 //!   pixel keeps `bg` (every channel in proportion, so its colour stays) and
 //!   only the excess is spread: the paper's §5.1 excess, with §5.2's kernel.
@@ -32,7 +33,9 @@
 //!   background the pixel sits in.
 //! * **Reach**: an excess that no radius up to `--max-radius` can spread
 //!   within the tolerance is left where it is (counted): spread wider than it
-//!   may be, a lamp taken for a firefly would light a disc of the room.
+//!   may be, a lamp taken for a firefly would light a disc of the room. With
+//!   an emission guide, which names the lamps, it is spread at the cap
+//!   (counted as capped), as at S > 1.
 //!
 //! Pixels that are not noisy keep their values bit for bit; a pixel changes
 //! only by what it gives away or receives. Every spread's weights sum to one,
@@ -52,16 +55,27 @@ pub const BACKGROUND_REACH: usize = 2;
 /// The neighbours of the 5 x 5 whose median is the background.
 pub const BACKGROUND_SAMPLES: usize = (2 * BACKGROUND_REACH + 1) * (2 * BACKGROUND_REACH + 1) - 1;
 
-/// A pixel is noisy above this many times its background: twice the room
-/// is more than the grain of 16 samples moves a pixel (their relative
-/// standard error is about 0.25 on a lit diffuse wall), and below it the
-/// spread would carry more grain than firefly.
-pub const NOISE_RATIO: f64 = 2.0;
+/// A local maximum is noisy above this many times its background: half as
+/// much again as the room is twice the relative standard error of 16
+/// samples on a lit diffuse wall (about 0.25), and what is spread below it
+/// is grain, which spreading only smooths (on the real renders 2 removed
+/// less error everywhere: `docs/bench/renders-as-written.md`, DESIGN).
+pub const NOISE_RATIO: f64 = 1.5;
 
 /// A neighbour that holds at least this share of a noisy pixel's excess
-/// (above the same background) makes it a feature: one firefly lights one
-/// pixel; a bulb, a line or a rim lights its neighbours too.
+/// (above the same background) supports it: one firefly lights one pixel; a
+/// bulb, a line or a rim lights its neighbours too.
 pub const SUPPORT_SHARE: f64 = 0.5;
+
+/// Supporting neighbours that make a noisy pixel a feature: two (a line's
+/// pixel has two along it, a bulb's corner three), where two fireflies
+/// that touch are common in glossy grain ...
+pub const SUPPORT_NEIGHBOURS: usize = 2;
+
+/// ... and one for a pixel this many times its background: a bulb is tens
+/// to thousands of times its room (a 2-pixel one has one neighbour), two
+/// fireflies that bright that touch are rare.
+pub const SUPPORT_BRIGHT: f64 = 30.0;
 
 /// The `range` rule keeps a noisy pixel no brighter than a calm one within
 /// [`BACKGROUND_REACH`] when it is at least this fraction of it: the edge of
@@ -96,12 +110,19 @@ pub fn noisy(y: f64, bg: f64) -> bool {
     bg > 0.0 && y > NOISE_RATIO * bg
 }
 
-/// Whether a neighbour of `n8` carries [`SUPPORT_SHARE`] of the excess of a
-/// pixel `y` over `bg`.
+/// Whether enough neighbours of `n8` ([`SUPPORT_NEIGHBOURS`], one above
+/// [`SUPPORT_BRIGHT`] times the background) carry [`SUPPORT_SHARE`] of the
+/// excess of a pixel `y` over `bg`.
 #[inline]
 pub fn supported(y: f64, bg: f64, n8: &[f64; 8]) -> bool {
-    let need = (y - bg) * SUPPORT_SHARE;
-    n8.iter().any(|&q| q - bg >= need)
+    let share = (y - bg) * SUPPORT_SHARE;
+    let carry = n8.iter().filter(|&&q| q - bg >= share).count();
+    let need = if y > SUPPORT_BRIGHT * bg {
+        1
+    } else {
+        SUPPORT_NEIGHBOURS
+    };
+    carry >= need
 }
 
 /// The `range` rule: `y` lies between its background and `brightest_calm`,
@@ -199,15 +220,23 @@ mod tests {
     }
 
     #[test]
-    fn a_firefly_is_noisy_and_alone_a_pair_is_not() {
+    fn a_firefly_is_noisy_and_alone_a_line_is_not() {
         let n8 = [1.0; 8];
         assert!(local_max(10.0, &n8) && noisy(10.0, 1.0) && !supported(10.0, 1.0, &n8));
+        // Two neighbours with half the excess: a line's pixel.
+        let mut line = n8;
+        (line[3], line[4]) = (6.0, 5.5);
+        assert!(supported(10.0, 1.0, &line));
+        line[4] = 5.0; // 4/9 of the excess
+        assert!(!supported(10.0, 1.0, &line));
+        // One such neighbour: a pair of fireflies, or a bulb far above the
+        // room.
         let mut pair = n8;
-        pair[3] = 6.0; // holds 5/9 of the excess
-        assert!(supported(10.0, 1.0, &pair));
-        pair[3] = 5.0; // 4/9
+        pair[3] = 6.0;
         assert!(!supported(10.0, 1.0, &pair));
-        assert!(!noisy(1.9, 1.0) && !noisy(5.0, 0.0));
+        pair[3] = 25.0;
+        assert!(supported(40.0, 1.0, &pair));
+        assert!(!noisy(1.4, 1.0) && !noisy(5.0, 0.0));
         assert!(!local_max(1.0, &n8));
     }
 
