@@ -198,15 +198,15 @@ fn default_channels(c: usize) -> PyResult<Vec<String>> {
     Ok(names.iter().map(|s| s.to_string()).collect())
 }
 
-/// Filter super-sampled samples held in a numpy array; see the stub.
+/// Filter samples held in a numpy array; see the stub.
 #[pyfunction]
-#[pyo3(signature = (samples, supersample=None, method="ep-gauss", *, channels=None, variance=None, spp=None, **settings))]
+#[pyo3(signature = (samples, supersample=None, method=None, *, channels=None, variance=None, spp=None, **settings))]
 #[allow(clippy::too_many_arguments)]
 fn filter<'py>(
     py: Python<'py>,
     samples: &Bound<'py, PyAny>,
     supersample: Option<usize>,
-    method: &str,
+    method: Option<&str>,
     channels: Option<Vec<String>>,
     variance: Option<&Bound<'py, PyAny>>,
     spp: Option<&Bound<'py, PyAny>>,
@@ -229,7 +229,9 @@ fn filter<'py>(
         None => default_channels(c)?,
     };
     let mut pairs = settings_of(settings)?;
-    pairs.push(("method".into(), Setting::Value(method.into())));
+    if let Some(m) = method {
+        pairs.push(("method".into(), Setting::Value(m.into())));
+    }
     if let Some(s) = supersample {
         pairs.push(("supersample".into(), Setting::Value(s.to_string())));
     }

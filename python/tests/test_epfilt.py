@@ -92,8 +92,13 @@ def test_ep_box_with_per_pixel_statistics_is_bit_identical_to_the_cli(variance_s
     assert names[:3] == ["R", "G", "B"]
     samples, variance = np.ascontiguousarray(both[:, :, :3]), both[:, :, 3:]
     image, report = epfilt.filter(samples, method="ep-box", variance=variance, spp=16)
+    # Without a method, the variance picks ep-box, as the file's does for the CLI.
+    auto, auto_report = epfilt.filter(samples, variance=variance, spp=16)
+    assert auto_report["method"] == "ep-box" and auto.shape == samples.shape
+    assert_bits_equal(auto, image)
     out = tmp_path / "cli.exr"
-    cli_report = cli_filter(variance_scene, out, "--method", "ep-box")
+    cli_report = cli_filter(variance_scene, out)
+    assert cli_report["method"] == "ep-box"
     want, _ = epfilt.read(out)
     assert_bits_equal(image, want)
     assert report["ep_box"]["l_tvis"] == cli_report["ep_box"]["l_tvis"]
@@ -104,7 +109,7 @@ def test_ep_box_with_per_pixel_statistics_is_bit_identical_to_the_cli(variance_s
 def test_energy_is_exact_for_every_energy_preserving_method(scene):
     samples, _ = epfilt.read(scene)
     for method in EXACT:
-        image, report = epfilt.filter(samples, method=method)
+        image, report = epfilt.filter(samples, supersample=3, method=method)
         total_in = samples.astype(np.float64).sum(axis=(0, 1))
         total_out = image.astype(np.float64).sum(axis=(0, 1)) * 9
         # After rounding to f32 the sums move by about an ulp per pixel.
@@ -117,14 +122,14 @@ def test_strided_and_half_inputs(scene, tmp_path):
     # A view with negative and non-unit strides filters as its copy.
     flipped = samples[::-1, :, ::-1]
     assert not flipped.flags["C_CONTIGUOUS"]
-    a, _ = epfilt.filter(flipped)
-    b, _ = epfilt.filter(np.ascontiguousarray(flipped))
+    a, _ = epfilt.filter(flipped, supersample=3)
+    b, _ = epfilt.filter(np.ascontiguousarray(flipped), supersample=3)
     assert_bits_equal(a, b)
     # float16 in, float16 out, as the CLI does for a half file.
     half_file = tmp_path / "half.exr"
     run("filter", "-q", scene, half_file, "-s", "1", "--method", "box", "--pixel-type", "f16")
     half, _ = epfilt.read(half_file)
-    image, report = epfilt.filter(half.astype(np.float16))
+    image, report = epfilt.filter(half.astype(np.float16), supersample=3)
     assert image.dtype == np.float16 and report["settings"]["pixel_type"] == "f16"
     out = tmp_path / "cli.exr"
     cli_filter(half_file, out, "-s", "3")
@@ -139,7 +144,7 @@ def test_errors_raise_the_right_exceptions(scene, tmp_path):
     with pytest.raises(epfilt.ConfigError, match="shape"):
         epfilt.filter(samples[:, :, 0])
     with pytest.raises(ValueError):  # ConfigError is a ValueError too
-        epfilt.filter(samples[:, :10])
+        epfilt.filter(samples[:, :10], supersample=3)
     with pytest.raises(epfilt.ConfigError, match="float32 or float16"):
         epfilt.filter(samples.astype(np.float64))
     with pytest.raises(epfilt.ConfigError, match='unknown setting "tolerence"'):

@@ -91,13 +91,22 @@ impl SurfaceRule {
     }
 }
 
-/// One pixel's surface guides (absent ones are zero and compare equal).
+/// Steps of a quantised albedo (0..=1) and normal component (-1..=1): far
+/// finer than the rule's thresholds (0.1; 30 degrees), and a pixel's guides
+/// fit in 12 bytes, which every pixel a guided spread reaches is read for.
+const ALBEDO_STEPS: f32 = 255.0;
+const NORMAL_STEPS: f32 = 127.0;
+
+/// One pixel's surface guides, quantised (absent ones are zero and compare
+/// equal).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Surface {
-    /// Albedo.
-    pub albedo: [f32; 3],
-    /// Normal, unit length (zero where the pixel saw no surface).
-    pub normal: [f32; 3],
+    /// Albedo, in 1/255 (clamped to 0..=1).
+    pub albedo: [u8; 3],
+    /// Normal, unit length in 1/127 (zero where the pixel saw no surface).
+    pub normal: [i8; 3],
+    /// The pixel saw a surface (its normal is not zero).
+    pub hit: bool,
     /// Depth (zero where none).
     pub depth: f32,
 }
@@ -109,13 +118,15 @@ impl Surface {
     pub fn read(layout: &GuideLayout, ch: impl Fn(usize) -> f32) -> Self {
         let mut s = Surface::default();
         if let Some(a) = layout.albedo {
-            s.albedo = a.map(&ch);
+            // NaN becomes 0.
+            s.albedo = a.map(|i| (ch(i).clamp(0.0, 1.0) * ALBEDO_STEPS).round() as u8);
         }
         if let Some(n) = layout.normal {
             let v = n.map(&ch);
             let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
             if len.is_finite() && len > 1e-6 {
-                s.normal = v.map(|c| c / len);
+                s.normal = v.map(|c| (c / len * NORMAL_STEPS).round() as i8);
+                s.hit = true;
             }
         }
         if let Some(d) = layout.depth {
@@ -129,24 +140,23 @@ impl Surface {
     /// under `rule` (with `cos_max` the cosine of its angle, computed once).
     #[inline]
     pub fn same(&self, other: &Surface, dist2: f32, rule: &SurfaceRule, cos_max: f32) -> bool {
-        let a = &self.albedo;
-        let b = &other.albedo;
-        let albedo = rule.albedo as f32;
-        if (a[0] - b[0]).abs() > albedo
-            || (a[1] - b[1]).abs() > albedo
-            || (a[2] - b[2]).abs() > albedo
-        {
-            return false;
-        }
+        // Branch-light: this runs for every pixel a guided spread reaches.
+        let (a, b) = (&self.albedo, &other.albedo);
+        let da = a[0]
+            .abs_diff(b[0])
+            .max(a[1].abs_diff(b[1]))
+            .max(a[2].abs_diff(b[2]));
+        // Two misses match; a miss and a hit do not.
         let (n, m) = (&self.normal, &other.normal);
-        let (np, mp) = (n != &[0.0; 3], m != &[0.0; 3]);
-        if np != mp || (np && n[0] * m[0] + n[1] * m[1] + n[2] * m[2] < cos_max) {
-            return false;
-        }
+        let dot = n[0] as i32 * m[0] as i32 + n[1] as i32 * m[1] as i32 + n[2] as i32 * m[2] as i32;
+        let turn = dot as f32 >= cos_max * NORMAL_STEPS * NORMAL_STEPS;
+        let normal = self.hit == other.hit && (turn || !self.hit);
         // |z - w| <= depth * max(dist, 1) * max(|z|, |w|), squared.
         let (z, w) = (self.depth, other.depth);
-        let (d, m) = (z - w, rule.depth as f32 * z.abs().max(w.abs()));
-        d * d <= m * m * dist2.max(1.0)
+        let (d, lim) = (z - w, rule.depth as f32 * z.abs().max(w.abs()));
+        da as f32 <= rule.albedo as f32 * ALBEDO_STEPS
+            && normal
+            && d * d <= lim * lim * dist2.max(1.0)
     }
 }
 
@@ -240,7 +250,7 @@ mod tests {
         let rule = SurfaceRule::default();
         let cos = (rule.normal_degrees.to_radians().cos()) as f32;
         let table = surface(0.5, [0.0, 2.0, 0.0], 3.0); // normal made unit
-        assert_eq!(table.normal, [0.0, 1.0, 0.0]);
+        assert_eq!(table.normal, [0, 127, 0]);
         let table_far = surface(0.52, [0.05, 1.0, 0.0], 3.3);
         let wall = surface(0.5, [0.0, 0.0, 1.0], 3.0);
         let behind = surface(0.5, [0.0, 1.0, 0.0], 6.0);

@@ -56,8 +56,10 @@ struct Source {
     k: u32,
     /// Where its per-channel shares (what one unit of weight carries) are.
     off: usize,
-    /// Its surface guides (with surface guides on).
-    surface: Surface,
+    /// Where the bits of the receivers the guides allow are, in its
+    /// batch's masks (row-major over its kernel's square), when the guides
+    /// choose them.
+    mask: usize,
 }
 
 /// ep-gauss's state between strips at S = 1.
@@ -374,22 +376,24 @@ impl PixelStage {
         }
         let ctx = Treat { stage: self, input };
         let region = crate::trace::region("pixel treat");
-        let results: Vec<(Vec<Source>, Vec<f64>, SpreadCounts)> = chunks
+        let results: Vec<Treated> = chunks
             .into_par_iter()
             .map(|(y0, rows)| {
                 let _task = region.task("pixel treat");
                 ctx.rows(y0, rows)
             })
             .collect();
-        let (mut sources, mut shares) = (Vec::new(), Vec::new());
-        for (s, sh, c) in results {
-            let base = shares.len();
-            sources.extend(s.into_iter().map(|s| Source {
+        let (mut sources, mut shares, mut masks) = (Vec::new(), Vec::new(), Vec::new());
+        for t in results {
+            let (base, mbase) = (shares.len(), masks.len());
+            sources.extend(t.sources.into_iter().map(|s| Source {
                 off: s.off + base,
+                mask: s.mask + mbase,
                 ..s
             }));
-            shares.extend(sh);
-            self.counts += c;
+            shares.extend(t.shares);
+            masks.extend(t.masks);
+            self.counts += t.counts;
         }
         self.kept = kept_window;
         let taps: u64 = sources
@@ -397,21 +401,20 @@ impl PixelStage {
             .map(|s| (2 * self.widths.reach[s.k as usize] as u64 + 1).pow(2))
             .sum();
         self.counts.spread_taps += taps * nch as u64;
-        self.scatter(&sources, &shares);
+        self.scatter(&sources, &shares, &masks);
     }
 
     /// Add each source's shares to the pixels its kernel reaches (on its
     /// surface), one task per tile of columns; every pixel receives its
     /// shares in source order.
-    fn scatter(&mut self, sources: &[Source], shares: &[f64]) {
+    fn scatter(&mut self, sources: &[Source], shares: &[f64], masks: &[u64]) {
         if sources.is_empty() {
             return;
         }
         let (w, h, nch) = (self.w, self.h, self.nch);
         let first = self.acc.first();
         let (taps, widths, modes) = (&self.taps, &self.widths, &self.modes);
-        let (guides, light, surf) = (&self.guides, &self.light, &self.surf);
-        let choose = guides.chooses_receivers();
+        let choose = self.guides.chooses_receivers();
         let spread: Vec<usize> = (0..nch)
             .filter(|&c| modes[c] == ChannelMode::Spread)
             .collect();
@@ -436,16 +439,14 @@ impl PixelStage {
                         continue;
                     }
                     let ri = ty - first;
-                    let lights = choose.then(|| &light.get(ty)[xa..xb]);
-                    let one_by_one =
-                        lights.is_some_and(|l| guides.surface() || l.iter().any(|&l| l != 0));
-                    if let (true, Some(lights)) = (one_by_one, lights) {
-                        // The receivers the guides allow, one by one.
-                        let surfs = guides.surface().then(|| &surf.get(ty)[xa..xb]);
+                    if choose {
+                        // The receivers the guides allow: the bits the
+                        // width's normalisation set.
+                        let side = 2 * r + 1;
+                        let row = s.mask * 64 + (ty + r - sy) * side + xa + r - sx;
                         for (k, (tx, &wx)) in (xa..xb).zip(gx).enumerate() {
-                            let q = surfs.map_or(&s.surface, |r| &r[k]);
-                            if !guides.accepts((lights[k] != 0, q), (tx, ty), (&s.surface, sx, sy))
-                            {
+                            let bit = row + k;
+                            if masks[bit / 64] & (1 << (bit % 64)) == 0 {
                                 continue;
                             }
                             for &c in &spread {
@@ -478,6 +479,15 @@ fn neighbours8(rows: &[&[f64]], x: usize, w: usize) -> [f64; 8] {
     ]
 }
 
+/// What a treatment task found: the sources, their shares and masks, and
+/// what it counted.
+struct Treated {
+    sources: Vec<Source>,
+    shares: Vec<f64>,
+    masks: Vec<u64>,
+    counts: SpreadCounts,
+}
+
 /// What a treatment task reads.
 struct Treat<'a> {
     stage: &'a PixelStage,
@@ -487,11 +497,12 @@ struct Treat<'a> {
 impl Treat<'_> {
     /// Treat rows `y0..y0 + kept.len()`: copy them into `kept`, then take
     /// each noisy pixel's excess out and list it as a source.
-    fn rows(&self, y0: usize, mut kept: Vec<&mut [f64]>) -> (Vec<Source>, Vec<f64>, SpreadCounts) {
+    fn rows(&self, y0: usize, mut kept: Vec<&mut [f64]>) -> Treated {
         let st = self.stage;
         let (w, h, nch) = (st.w, st.h, st.nch);
         let mut counts = SpreadCounts::default();
-        let (mut sources, mut shares) = (Vec::new(), Vec::new());
+        let (mut sources, mut shares, mut masks) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut cur, mut best) = (Vec::new(), Vec::new());
         for (k, out) in kept.iter_mut().enumerate() {
             let y = y0 + k;
             let src = self.input.get(y);
@@ -529,7 +540,9 @@ impl Treat<'_> {
                 }
                 let excess = v - bg;
                 let surface = st.guides.surface_of(src, x);
-                let Some((k, norm, capped)) = self.width(x, y, excess, bg, &surface) else {
+                let scratch = (&mut cur, &mut best);
+                let Some((k, norm, capped)) = self.width((x, y), excess, bg, &surface, scratch)
+                else {
                     counts.beyond += 1;
                     continue;
                 };
@@ -546,16 +559,25 @@ impl Treat<'_> {
                     }
                     shares.push(share);
                 }
+                let mask = masks.len();
+                if st.guides.chooses_receivers() {
+                    masks.extend_from_slice(&best);
+                }
                 sources.push(Source {
                     x: x as u32,
                     y: y as u32,
                     k: k as u32,
                     off,
-                    surface,
+                    mask,
                 });
             }
         }
-        (sources, shares, counts)
+        Treated {
+            sources,
+            shares,
+            masks,
+            counts,
+        }
     }
 
     /// The first rung, from the ladder's guess up, whose kernel (normalised
@@ -565,11 +587,11 @@ impl Treat<'_> {
     /// where the guides' receivers alone made it so, else `None`.
     fn width(
         &self,
-        x: usize,
-        y: usize,
+        (x, y): (usize, usize),
         excess: f64,
         bg: f64,
         surface: &Surface,
+        (cur, best): (&mut Vec<u64>, &mut Vec<u64>),
     ) -> Option<(usize, f64, bool)> {
         let st = self.stage;
         let limit = st.tolerance * bg;
@@ -583,8 +605,9 @@ impl Treat<'_> {
         let (mut lo, mut step) = (None, 1);
         let mut k = first;
         let (mut hi, mut at_hi) = loop {
-            let at = self.norm(k, x, y, surface);
+            let at = self.norm(k, x, y, surface, cur);
             if passes(at) {
+                std::mem::swap(cur, best);
                 break (k, at);
             }
             if k == cap {
@@ -594,6 +617,7 @@ impl Treat<'_> {
                 // never leave in place what ep-gauss spreads without them).
                 let plain =
                     st.guides.chooses_receivers() && excess <= limit * self.plain_norm(cap, x, y);
+                std::mem::swap(cur, best);
                 return (plain && at > 0.0).then_some((cap, at, true));
             }
             lo = Some(k);
@@ -605,8 +629,9 @@ impl Treat<'_> {
         };
         while hi - lo > 1 {
             let mid = (lo + hi) / 2;
-            let at_mid = self.norm(mid, x, y, surface);
+            let at_mid = self.norm(mid, x, y, surface, cur);
             if passes(at_mid) {
+                std::mem::swap(cur, best);
                 (hi, at_hi) = (mid, at_mid);
             } else {
                 lo = mid;
@@ -630,7 +655,7 @@ impl Treat<'_> {
 
     /// The sum of rung `k`'s weights over the in-image pixels it reaches
     /// from `(x, y)` (those on the source's surface, with surface guides).
-    fn norm(&self, k: usize, x: usize, y: usize, surface: &Surface) -> f64 {
+    fn norm(&self, k: usize, x: usize, y: usize, surface: &Surface, mask: &mut Vec<u64>) -> f64 {
         let st = self.stage;
         let (w, h) = (st.w, st.h);
         let r = st.widths.reach[k];
@@ -641,25 +666,27 @@ impl Treat<'_> {
             return self.plain_norm(k, x, y);
         }
         let gx = &g[xa + r - x..xb + r - x];
-        let row_sum: f64 = gx.iter().sum();
+        let side = 2 * r + 1;
+        mask.clear();
+        mask.resize((side * side).div_ceil(64), 0);
         let mut sum = 0.0;
         for ty in ya..yb {
             let gy = g[ty + r - y];
             let lights = &st.light.get(ty)[xa..xb];
-            if !st.guides.surface() && !lights.iter().any(|&l| l != 0) {
-                sum += gy * row_sum;
-                continue;
-            }
             let surfs = st.guides.surface().then(|| &st.surf.get(ty)[xa..xb]);
+            let row = (ty + r - y) * side + xa + r - x;
+            let mut part = 0.0;
             for (k, (tx, &wx)) in (xa..xb).zip(gx).enumerate() {
                 let q = surfs.map_or(surface, |r| &r[k]);
                 if st
                     .guides
                     .accepts((lights[k] != 0, q), (tx, ty), (surface, x, y))
                 {
-                    sum += gy * wx;
+                    part += wx;
+                    mask[(row + k) / 64] |= 1 << ((row + k) % 64);
                 }
             }
+            sum += gy * part;
         }
         sum
     }

@@ -6,7 +6,7 @@ sum to one, so the image's energy is exact, and real features (lamps, rims,
 highlights) are kept.
 
     import numpy as np, epfilt
-    image, report = epfilt.filter(samples, supersample=3)        # (H, W, C) float32/float16
+    image, report = epfilt.filter(samples, supersample=3)        # (H, W, C) float32/float16, 3x3 super-sampled
     report = epfilt.filter_file("render_3x.exr", "out.exr", tolerance=0.08)
 
 Settings are the command line's options with underscores (``support_region=8``,
@@ -48,15 +48,17 @@ class IoError(Error, OSError):
     """Reading or writing a file failed, or the output path cannot be written."""
 
 
-def filter(samples, supersample=None, method="ep-gauss", *, channels=None, variance=None, spp=None, **settings):
-    """Filter super-sampled samples held in memory.
+def filter(samples, supersample=None, method=None, *, channels=None, variance=None, spp=None, **settings):
+    """Filter samples held in memory: a render at final resolution, or a super-sampled one.
 
     samples: numpy array (height, width, channels) of float32 or float16, any strides;
         1 channel is Y, 2 Y A, 3 R G B, 4 R G B A (or name them with ``channels``).
-    supersample: samples per output pixel along each axis (default: 3; ep-box: 1).
-        The height and width must be multiples of it.
-    method: ``ep-gauss`` (default), ``ep-box``, ``gauss``, ``box``, ``clamp``, ``median``, ``alpha-trim``.
-    variance, spp: ep-box's per-pixel statistics (also read by ep-gauss at supersample 1):
+    supersample: samples per output pixel along each axis (default: 1, the array is at pixel
+        resolution and is never reduced unless asked). The height and width must be multiples of it.
+    method: ``ep-gauss``, ``ep-box``, ``gauss``, ``box``, ``clamp``, ``median``, ``alpha-trim``
+        (default: ``ep-box`` where ``variance`` is given at supersample 1, else ``ep-gauss``).
+        Arrays carry no guide passes: write a file with them and use ``filter_file``.
+    variance, spp: ep-box's per-pixel statistics:
         variance an array (height, width) of the luminance's variance or (height, width, 3),
         of single samples unless ``variance_kind`` says ``mean`` or ``moment``; spp a number or
         an array (height, width) of sample counts.
