@@ -190,7 +190,13 @@ fn describe_part(
         }
     }
     let ch = h.shared_attributes.chromaticities.as_ref();
-    let (verdict, guides) = verdict_and_guides(path, h, &filtered);
+    let (verdict, guides, emission) = verdict_and_guides(path, h, &filtered);
+    // The emission guide's channels are carried as they are (filter's plan).
+    for (name, rule) in carried.iter_mut() {
+        if emission.contains(name) {
+            *rule = "average (the emission guide)".into();
+        }
+    }
     PartInfo {
         index,
         name: h.own_attributes.layer_name.as_ref().map(|n| n.to_string()),
@@ -224,12 +230,13 @@ fn describe_part(
 }
 
 /// What `filter` decides for a part (header `h`, beauty channels
-/// `filtered`) and the guides it finds there, in words.
+/// `filtered`) and the guides it finds there, in words, and the emission
+/// guide's channels.
 fn verdict_and_guides(
     path: &Path,
     h: &exr::meta::header::Header,
     filtered: &[String],
-) -> (String, String) {
+) -> (String, String, Vec<String>) {
     let words = |e: crate::Error| {
         let e = e.to_string();
         let prefix = format!("{}: ", path.display());
@@ -244,11 +251,12 @@ fn verdict_and_guides(
         .filter(|c| !c.rsplit('.').next().unwrap_or(c).eq_ignore_ascii_case("a"))
         .cloned()
         .collect();
-    let guides = match super::find_guides(path, h, &beauty, &super::GuideRequest::default()) {
-        Ok(g) => g.describe(),
-        Err(e) => format!("none ({})", words(e)),
-    };
-    (verdict, guides)
+    let (guides, emission) =
+        match super::find_guides(path, h, &beauty, &super::GuideRequest::default()) {
+            Ok(g) => (g.describe(), g.emission.unwrap_or_default()),
+            Err(e) => (format!("none ({})", words(e)), Vec::new()),
+        };
+    (verdict, guides, emission)
 }
 
 fn describe_rgbe(path: &Path) -> crate::Result<FileInfo> {
