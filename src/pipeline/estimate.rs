@@ -169,8 +169,18 @@ fn estimate_with(
     blocks: u64,
 ) -> u64 {
     let halo = crate::filter::halo(params);
-    if params.method == Method::EpBox {
-        return estimate_box_bytes(job, cfg, (block_bytes, blocks), halo);
+    // ep-gauss at S = 1 holds what ep-box holds (input rows, per-pixel
+    // windows, kept and accumulator rows), and the surface guides per pixel.
+    let pixel = params.method == Method::EpGauss && job.grid.s == 1;
+    if params.method == Method::EpBox || pixel {
+        let surfaces = if pixel && job.guides.surface() {
+            let (w, strip) = (job.grid.in_w as u64, job.auto_strip_rows() as u64);
+            w.saturating_mul(12)
+                .saturating_mul(2 * halo.search_reach as u64 + strip + 2)
+        } else {
+            0
+        };
+        return estimate_box_bytes(job, cfg, (block_bytes, blocks), halo).saturating_add(surfaces);
     }
     let s = job.grid.s as u64;
     let nch = job.channels.len() as u64;
