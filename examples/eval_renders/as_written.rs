@@ -101,6 +101,10 @@ struct Row {
     emit: Option<f64>,
     ledger: f64,
     seconds: f64,
+    /// `+ guides` rows: the share of what ep-gauss with the emission guide
+    /// moves that the surface guides send elsewhere (`sum |all - emission|
+    /// / 2 sum |emission - input|`).
+    redirected: Option<f64>,
 }
 
 /// One super-sampled render, ep-gauss without and with the emission guide.
@@ -229,6 +233,7 @@ fn final_resolution(inp: &super::Input, tmp: &Path) -> Result<Vec<Row>> {
         })
         .collect();
     let mut rows = Vec::new();
+    let mut emission_only: Option<Image> = None;
     for st in &SETTINGS {
         if st.guides != "none" && em.is_none() {
             continue; // a file without guides: the row without them is it
@@ -236,6 +241,21 @@ fn final_resolution(inp: &super::Input, tmp: &Path) -> Result<Vec<Row>> {
         let out = tmp.join(format!("{}-{}.exr", inp.name, st.name));
         let (img, report) = filter(&inp.path, &out, (st.method, 1), st.guides)?;
         let out_peaks = peaks(&img, &ls);
+        let redirected = match (st.name, &emission_only) {
+            ("ep-gauss + guides", Some(e)) => {
+                let moved: f64 = (e.data.iter().zip(&input.data))
+                    .map(|(&a, &b)| (a as f64 - b as f64).abs())
+                    .sum();
+                let sent: f64 = (img.data.iter().zip(&e.data))
+                    .map(|(&a, &b)| (a as f64 - b as f64).abs())
+                    .sum();
+                Some(sent / (2.0 * moved).max(f64::MIN_POSITIVE))
+            }
+            _ => None,
+        };
+        if st.name == "ep-gauss + emission" {
+            emission_only = Some(img.clone());
+        }
         let emit = (!lamp.is_empty()).then(|| {
             let (yi, yo) = (luminance(&input), luminance(&img));
             (0..yi.len())
@@ -256,6 +276,7 @@ fn final_resolution(inp: &super::Input, tmp: &Path) -> Result<Vec<Row>> {
             emit,
             ledger: report.energy_rel_error.iter().fold(0.0, |a, &b| a.max(b)),
             seconds: report.seconds,
+            redirected,
         });
     }
     Ok(rows)
@@ -297,12 +318,12 @@ fn super_sampled(inp: &super::Input, tmp: &Path) -> Result<SsRow> {
 
 fn csv(rows: &[Row]) -> String {
     let mut s = String::from(
-        "input,spp,setting,input_rel_mse,rel_mse,ratio,lights_lost,lights,lamps_lost,lamps,emission_change,ledger_rel_error,seconds\n",
+        "input,spp,setting,input_rel_mse,rel_mse,ratio,lights_lost,lights,lamps_lost,lamps,emission_change,ledger_rel_error,seconds,redirected\n",
     );
     for r in rows {
         let _ = writeln!(
             s,
-            "{},{},{},{:.6e},{:.6e},{:.6},{},{},{},{},{},{:.3e},{:.4}",
+            "{},{},{},{:.6e},{:.6e},{:.6},{},{},{},{},{},{:.3e},{:.4},{}",
             r.input,
             r.spp,
             r.setting,
@@ -315,7 +336,8 @@ fn csv(rows: &[Row]) -> String {
             r.lamps,
             r.emit.map_or(String::new(), |e| format!("{e:.6}")),
             r.ledger,
-            r.seconds
+            r.seconds,
+            r.redirected.map_or(String::new(), |v| format!("{v:.4}"))
         );
     }
     s
@@ -358,13 +380,16 @@ fn markdown(rows: &[Row], ss: &[SsRow], dirs: &[PathBuf], argv: &[String]) -> St
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "# Renders at final resolution (S = 1)\n\n{}\n\n\
-         Each render at pixel resolution filtered at S = 1 (`examples/eval_renders/pixel.rs` \
+        "# Renders as renderers write them\n\n{}\n\n## At final resolution (S = 1)\n\n\
+         Each render at pixel resolution filtered at S = 1 (`examples/eval_renders/as_written.rs` \
          defines every measure). **ratio**: relMSE(output) / relMSE(input) against the reference \
          (below 1: less error than the render had); **lost**: lights the input had (peak at least \
-         half the reference's) whose output peak fell below half, of all the reference's lights; \
+         half the reference's) whose output peak fell below half, of all the reference's lights \
+         (lamps: those the emission guide names); \
          **emit**: the largest relative change of a pixel whose emission guide holds at least half \
-         its luminance; **ledger**: the largest relative energy error. `ep-gauss` reads neither the \
+         its luminance; **redirected**: of what ep-gauss with the emission guide moves, the share the \
+         surface guides send elsewhere (what they can change at most); **ledger**: the largest \
+         relative energy error. `ep-gauss` reads neither the \
          variance nor any guide; `+ emission`: the emission guide; `+ guides`: every guide the file \
          has.\n",
         provenance(dirs, argv)
@@ -393,7 +418,9 @@ fn markdown(rows: &[Row], ss: &[SsRow], dirs: &[PathBuf], argv: &[String]) -> St
                         String::new()
                     },
                     r.emit.map_or(String::new(), |e| format!("; emit {:.3}", e))
-                )
+                ) + &r
+                    .redirected
+                    .map_or(String::new(), |v| format!("; redirected {:.1}%", 100.0 * v))
             });
             let _ = write!(s, " {cell} |");
         }

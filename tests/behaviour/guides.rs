@@ -170,50 +170,46 @@ fn at_pixel_resolution_clean_pixels_keep_their_bits() {
     assert!(o["G"][20 * w + 30] < 2.0, "{}", o["G"][20 * w + 30]);
 }
 
+/// The channels of [`guided_room`]'s file.
+const GUIDED_CHANNELS: [&str; 10] = [
+    "R",
+    "G",
+    "B",
+    "emission.R",
+    "emission.G",
+    "emission.B",
+    "N.X",
+    "N.Y",
+    "N.Z",
+    "Z",
+];
+
 /// A room with a one-pixel bulb at (20, 20), named by the emission guide,
 /// and a firefly as bright at (26, 20); normals: up left of x = 40, facing
 /// the camera from there (a floor meeting a wall).
 fn guided_room(path: &Path, w: usize, h: usize, extra: &[(&str, i32)]) {
     let lit = [((20, 20), 40.0), ((26, 20), 40.0), ((37, 30), 30.0)];
     let px = room(&lit);
-    write_named(
-        path,
-        w,
-        h,
-        &[
-            "R",
-            "G",
-            "B",
-            "emission.R",
-            "emission.G",
-            "emission.B",
-            "N.X",
-            "N.Y",
-            "N.Z",
-            "Z",
-        ],
-        extra,
-        |x, y, c| match c {
-            0..=2 => px(x, y),
-            3..=5 => {
-                if (x, y) == (20, 20) {
-                    39.5
-                } else {
-                    0.0
-                }
+    write_named(path, w, h, &GUIDED_CHANNELS, extra, |x, y, c| match c {
+        0..=2 => px(x, y),
+        3..=5 => {
+            if (x, y) == (20, 20) {
+                39.5
+            } else {
+                0.0
             }
-            6..=8 => {
-                let n = if x < 40 {
-                    [0.0, 1.0, 0.0]
-                } else {
-                    [0.0, 0.0, 1.0]
-                };
-                n[c - 6]
-            }
-            _ if y < 2 => f32::INFINITY, // a sky's depth: data, any value
-            _ => 3.0 + 0.01 * y as f32,
-        },
-    );
+        }
+        6..=8 => {
+            let n = if x < 40 {
+                [0.0, 1.0, 0.0]
+            } else {
+                [0.0, 0.0, 1.0]
+            };
+            n[c - 6]
+        }
+        _ if y < 2 => f32::INFINITY, // a sky's depth: data, any value
+        _ => 3.0 + 0.01 * y as f32,
+    });
 }
 
 #[test]
@@ -304,18 +300,7 @@ fn guides_keep_the_output_across_tiles_strips_threads_and_bands() {
             .map(|&g| if g > 5.0 { 400.0 } else { 0.01 })
             .collect();
         let mut list = vec![];
-        for n in [
-            "R",
-            "G",
-            "B",
-            "emission.R",
-            "emission.G",
-            "emission.B",
-            "N.X",
-            "N.Y",
-            "N.Z",
-            "Z",
-        ] {
+        for n in GUIDED_CHANNELS {
             list.push((n, ch(n)));
         }
         for n in ["variance.R", "variance.G", "variance.B"] {
