@@ -196,7 +196,10 @@ pub struct FilterOptions {
     #[arg(long, default_value_t = 0.1, help_heading = "Guides")]
     pub guide_albedo: f64,
     /// ... and the depths by at most this fraction per pixel of distance;
-    /// each spread's weights are normalised over the pixels it reaches.
+    /// each spread's weights are normalised over the pixels it reaches. A
+    /// pixel with less than half its nearest pixels on its surface (an edge,
+    /// a sliver), or too few there to take its excess, keeps clear of lights
+    /// only.
     #[arg(long, default_value_t = 0.05, help_heading = "Guides")]
     pub guide_depth: f64,
 

@@ -23,6 +23,7 @@ use rayon::prelude::*;
 
 use super::counts::{ExcessCounts, MethodCounts};
 use super::guided::GuideReader;
+use super::pixel::SURFACE_SHARE;
 use super::stage::{Output, Stage, WindowUse};
 use super::window::RowWindow;
 use super::ChannelMode;
@@ -50,8 +51,10 @@ struct Source {
     /// (`nch` values in the shares).
     off: usize,
     /// Its surface guides (with surface guides on: only the pixels of its
-    /// surface receive).
+    /// surface receive, where it keeps to it).
     surface: Surface,
+    /// It keeps to its surface (else only clear of lights).
+    on_surface: bool,
 }
 
 /// The `ep-box` filter state between strips.
@@ -574,13 +577,44 @@ impl Band<'_> {
             let g = self.guides;
             let src = self.input.get(yy);
             let surface = g.surface_of(src, x);
-            let (m, found) = if g.chooses_receivers() {
-                let accepts = |tx: usize, ty: usize| {
-                    g.accepts_in(self.input.get(ty), (tx, ty), (&surface, x, yy))
+            let (m, found, on_surface) = if g.chooses_receivers() {
+                let walk = |on: bool| {
+                    let from = on.then_some((&surface, x, yy));
+                    let accepts =
+                        |tx: usize, ty: usize| g.accepts_in(self.input.get(ty), (tx, ty), from);
+                    self.ring.prefix_where(x, yy, (w, h), wanted, accepts)
                 };
-                self.ring.prefix_where(x, yy, (w, h), wanted, accepts)
+                // A source whose nearest receivers are mostly on other
+                // surfaces sits on an edge or a sliver, and one whose
+                // surface has too few within the ring would pile its excess
+                // on them: both keep clear of lights only (pipeline::pixel's
+                // SURFACE_SHARE).
+                let (m0, found0) = walk(false);
+                let kept = g.surface().then(|| walk(true)).filter(|&(_, found)| {
+                    let mine = self.ring.offsets()[..m0]
+                        .iter()
+                        .filter(|&&(dx, dy)| {
+                            let (tx, ty) = (x as i64 + dx as i64, yy as i64 + dy as i64);
+                            tx >= 0
+                                && ty >= 0
+                                && (tx as usize) < w
+                                && (ty as usize) < h
+                                && g.accepts_in(
+                                    self.input.get(ty as usize),
+                                    (tx as usize, ty as usize),
+                                    Some((&surface, x, yy)),
+                                )
+                        })
+                        .count();
+                    found >= found0 && mine as f64 >= SURFACE_SHARE * found0 as f64
+                });
+                match kept {
+                    Some((m, found)) => (m, found, true),
+                    None => (m0, found0, false),
+                }
             } else {
-                self.ring.prefix(x, yy, w, h, wanted)
+                let (m, found) = self.ring.prefix(x, yy, w, h, wanted);
+                (m, found, false)
             };
             counters.spread += 1;
             counters.capped += u64::from(found < wanted);
@@ -602,6 +636,7 @@ impl Band<'_> {
                 m: m as u32,
                 off,
                 surface,
+                on_surface,
             });
             excess
         };
@@ -654,7 +689,8 @@ fn scatter_ring(
                 }
                 let (tx, ty) = (tx as usize, ty as usize);
                 if let Some((input, g)) = surface {
-                    if !g.accepts_in(input.get(ty), (tx, ty), (&s.surface, sx, sy)) {
+                    let from = s.on_surface.then_some((&s.surface, sx, sy));
+                    if !g.accepts_in(input.get(ty), (tx, ty), from) {
                         continue;
                     }
                 }

@@ -114,21 +114,21 @@ impl GuideReader {
 
     /// Whether pixel `(tx, ty)` (a `light`, on surface `q`) may receive a
     /// spread from a source at `(sx, sy)` on surface `from`: not a light,
-    /// and on that surface.
+    /// and on that surface (`None`: a source that keeps clear of lights
+    /// only).
     #[inline]
     pub fn accepts(
         &self,
         (light, q): (bool, &Surface),
         (tx, ty): (usize, usize),
-        from: (&Surface, usize, usize),
+        from: Option<(&Surface, usize, usize)>,
     ) -> bool {
         if light {
             return false;
         }
-        if !self.surface() {
+        let Some((surface, sx, sy)) = from.filter(|_| self.surface()) else {
             return true;
-        }
-        let (surface, sx, sy) = from;
+        };
         let dx = sx as f32 - tx as f32;
         let dy = sy as f32 - ty as f32;
         surface.same(q, dx * dx + dy * dy, &self.rule, self.cos_max)
@@ -140,7 +140,7 @@ impl GuideReader {
         &self,
         row: &[f32],
         (tx, ty): (usize, usize),
-        from: (&Surface, usize, usize),
+        from: Option<(&Surface, usize, usize)>,
     ) -> bool {
         let light = self.emission() && self.is_light(row, tx, self.residual_luminance(row, tx));
         self.accepts((light, &self.surface_of(row, tx)), (tx, ty), from)

@@ -40,6 +40,13 @@ use crate::filter::guides::{GuideLayout, Surface, SurfaceRule};
 use crate::filter::ValidParams;
 use crate::geometry::{mirror, Halo};
 
+/// A source keeps to its surface (with surface guides) when at least this
+/// share of its first kernel lies on it: less, and it sits on an edge or a
+/// sliver, its own guides a mix of its samples', and keeping to them would
+/// pile its excess on the few pixels that match (docs/bench's
+/// renders-as-written.md measures the surface guides with this rule).
+pub(super) const SURFACE_SHARE: f64 = 0.5;
+
 /// Rows treated per task.
 const TREAT_ROWS: usize = 16;
 
@@ -599,37 +606,83 @@ impl Treat<'_> {
         // Even the whole plane's kernel at the cap is too narrow: left.
         let first = st.widths.first_within(excess, bg, st.tolerance)?;
         let passes = |norm: f64| norm > 0.0 && excess <= limit * norm;
-        // The sum grows with the rung (every weight does): gallop up from
-        // the ladder's guess (most kernels pass there or a rung or two
-        // above, and a width costs its area), then bisect.
+        // A source keeps to its surface where the surface has room for it:
+        // one with little of its kernel there sits on an edge or a sliver
+        // (its guides a mix of its samples'), and one whose surface cannot
+        // hold its excess within the tolerance would pile it on the few
+        // pixels that match. Both keep clear of lights only.
+        let mut on_surface = st.guides.surface().then_some(surface);
+        let at_first = self.norm(first, x, y, on_surface, cur);
+        if on_surface.is_some() {
+            if at_first >= SURFACE_SHARE * self.plain_norm(first, x, y) {
+                if let Some(found) =
+                    self.search((x, y), first, at_first, on_surface, passes, (cur, best))
+                {
+                    return Some((found.0, found.1, false));
+                }
+            }
+            on_surface = None;
+        }
+        let at_first = if st.guides.surface() {
+            self.norm(first, x, y, None, cur)
+        } else {
+            at_first
+        };
+        if let Some((k, norm)) =
+            self.search((x, y), first, at_first, on_surface, passes, (cur, best))
+        {
+            return Some((k, norm, false));
+        }
+        // The lights the guides leave out made the kernel too narrow: a
+        // pixel the kernel over every pixel spreads within the cap is spread
+        // at the cap clear of them (the guides never leave in place what
+        // ep-gauss spreads without them). `best` holds the cap's bits.
+        let plain = st.guides.chooses_receivers() && excess <= limit * self.plain_norm(cap, x, y);
+        let at_cap = self.norm(cap, x, y, None, best);
+        (plain && at_cap > 0.0).then_some((cap, at_cap, true))
+    }
+
+    /// The first rung from `first` (whose sum is `at_first`) up to the cap
+    /// whose kernel over the receivers `on_surface` allows `passes`, and its
+    /// sum; its receivers' bits in `best`. The sum grows with the rung
+    /// (every weight does): gallop up from the ladder's guess (most kernels
+    /// pass there or a rung or two above, and a width costs its area), then
+    /// bisect.
+    fn search(
+        &self,
+        (x, y): (usize, usize),
+        first: usize,
+        at_first: f64,
+        on_surface: Option<&Surface>,
+        passes: impl Fn(f64) -> bool,
+        (cur, best): (&mut Vec<u64>, &mut Vec<u64>),
+    ) -> Option<(usize, f64)> {
+        let cap = self.stage.widths.rho.len() - 1;
         let (mut lo, mut step) = (None, 1);
         let mut k = first;
         let (mut hi, mut at_hi) = loop {
-            let at = self.norm(k, x, y, surface, cur);
+            let at = if k == first {
+                at_first
+            } else {
+                self.norm(k, x, y, on_surface, cur)
+            };
             if passes(at) {
                 std::mem::swap(cur, best);
                 break (k, at);
             }
             if k == cap {
-                // The receivers the guides leave out made the kernel too
-                // narrow: a pixel the kernel over every pixel spreads within
-                // the cap is spread at the cap on its receivers (the guides
-                // never leave in place what ep-gauss spreads without them).
-                let plain =
-                    st.guides.chooses_receivers() && excess <= limit * self.plain_norm(cap, x, y);
-                std::mem::swap(cur, best);
-                return (plain && at > 0.0).then_some((cap, at, true));
+                return None;
             }
             lo = Some(k);
             k = (k + step).min(cap);
             step *= 2;
         };
         let Some(mut lo) = lo else {
-            return Some((hi, at_hi, false));
+            return Some((hi, at_hi));
         };
         while hi - lo > 1 {
             let mid = (lo + hi) / 2;
-            let at_mid = self.norm(mid, x, y, surface, cur);
+            let at_mid = self.norm(mid, x, y, on_surface, cur);
             if passes(at_mid) {
                 std::mem::swap(cur, best);
                 (hi, at_hi) = (mid, at_mid);
@@ -637,7 +690,7 @@ impl Treat<'_> {
                 lo = mid;
             }
         }
-        Some((hi, at_hi, false))
+        Some((hi, at_hi))
     }
 
     /// The sum of rung `k`'s weights over the in-image pixels it reaches
@@ -655,7 +708,14 @@ impl Treat<'_> {
 
     /// The sum of rung `k`'s weights over the in-image pixels it reaches
     /// from `(x, y)` (those on the source's surface, with surface guides).
-    fn norm(&self, k: usize, x: usize, y: usize, surface: &Surface, mask: &mut Vec<u64>) -> f64 {
+    fn norm(
+        &self,
+        k: usize,
+        x: usize,
+        y: usize,
+        surface: Option<&Surface>,
+        mask: &mut Vec<u64>,
+    ) -> f64 {
         let st = self.stage;
         let (w, h) = (st.w, st.h);
         let r = st.widths.reach[k];
@@ -673,17 +733,26 @@ impl Treat<'_> {
         for ty in ya..yb {
             let gy = g[ty + r - y];
             let lights = &st.light.get(ty)[xa..xb];
-            let surfs = st.guides.surface().then(|| &st.surf.get(ty)[xa..xb]);
             let row = (ty + r - y) * side + xa + r - x;
             let mut part = 0.0;
-            for (k, (tx, &wx)) in (xa..xb).zip(gx).enumerate() {
-                let q = surfs.map_or(surface, |r| &r[k]);
-                if st
-                    .guides
-                    .accepts((lights[k] != 0, q), (tx, ty), (surface, x, y))
-                {
-                    part += wx;
-                    mask[(row + k) / 64] |= 1 << ((row + k) % 64);
+            match surface {
+                Some(from) => {
+                    let surfs = &st.surf.get(ty)[xa..xb];
+                    for (k, (tx, &wx)) in (xa..xb).zip(gx).enumerate() {
+                        let q = (lights[k] != 0, &surfs[k]);
+                        if st.guides.accepts(q, (tx, ty), Some((from, x, y))) {
+                            part += wx;
+                            mask[(row + k) / 64] |= 1 << ((row + k) % 64);
+                        }
+                    }
+                }
+                None => {
+                    for (k, &wx) in gx.iter().enumerate() {
+                        if lights[k] == 0 {
+                            part += wx;
+                            mask[(row + k) / 64] |= 1 << ((row + k) % 64);
+                        }
+                    }
                 }
             }
             sum += gy * part;
