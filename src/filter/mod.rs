@@ -319,8 +319,8 @@ pub fn uses_bound(p: &FilterParams) -> bool {
 
 /// Default `--coarse-from`: widths from 2 output pixels are spread on the
 /// coarser grid (`docs/tradeoff.md` measures the switch; from 2 rather than 4
-/// px: 29% fewer spread taps, every factor on `../shared/renders` equal or
-/// lower, more pixels untouched).
+/// px: fewer spread taps, no factor on `../shared/renders` higher, more
+/// pixels untouched).
 pub const DEFAULT_COARSE_FROM: f64 = 2.0;
 
 /// Filter settings as asked for; [`FilterParams::validated`] checks them

@@ -781,8 +781,8 @@ impl Samples<'_> {
 
 /// A file whose written pages the kernel starts writing to disk every
 /// [`WRITEBACK_BYTES`], while the filter goes on: the `fsync` before the
-/// output is renamed into place then has only the last pages to wait for
-/// (20 ms of a 1.2 s run on 25 MB, the whole of it, when it waited for all).
+/// output is renamed into place then has only the last pages to wait for,
+/// not the whole file.
 struct Writeback {
     file: std::fs::File,
     unsynced: u64,

@@ -4,10 +4,10 @@
 //! The format is OpenEXR's: little-endian samples, even and odd bytes split
 //! into two halves, a byte-wise delta predictor (`d = b[i] - b[i-1] + 128`),
 //! then zlib. A block that does not shrink is stored raw (readers recognise it
-//! by its size). `exr` compresses at a fixed level 4, about 9x slower than it
-//! decodes; at level 1 the same deflate implementation is several times
-//! faster with files within a few percent in size (measured in the closing
-//! notes of the pipeline issue), and any reader decodes them the same.
+//! by its size). `exr` compresses at a fixed level 4, many times slower than
+//! it decodes; at level 1 the same deflate implementation is several times
+//! faster with files of nearly the same size, and any reader decodes them
+//! the same.
 
 /// Deflate level used for output ZIP blocks (miniz_oxide, 1 = fastest).
 pub const ZIP_LEVEL: u8 = 1;
@@ -60,7 +60,7 @@ fn pack(mut buf: Vec<u8>, level: u8) -> std::result::Result<Vec<u8>, Vec<u8>> {
 /// One block's bytes split as ZIP deflates them, filled sample by sample:
 /// byte `j` of the block at `j / 2` for even `j`, at `half + j / 2` for odd
 /// `j`. The writer's samples go there straight, with no buffer of the
-/// block's bytes in between (at 32769 wide, 2.1 MB a compression task).
+/// block's bytes in between (on wide inputs, megabytes a compression task).
 pub struct SplitBlock {
     buf: Vec<u8>,
     /// Pairs of bytes filled.
@@ -126,9 +126,9 @@ impl SplitBlock {
 ///
 /// `exr` (1.74) interleaves each decoded block back through a per-thread
 /// scratch buffer as large as the largest block that thread has seen, kept
-/// for the life of the thread. At 32769 float RGB samples a block is 6.3 MB,
-/// so every worker (and the reader, filter and writer threads) held one:
-/// peak memory grew from 130 MiB at 2 threads to 345 MiB at 16. Here the
+/// for the life of the thread. On wide inputs a block is megabytes, so every
+/// worker (and the reader, filter and writer threads) held one, and peak
+/// memory grew with the threads. Here the
 /// reader takes the samples straight from the split bytes: no second buffer,
 /// and one pass less over the block.
 pub fn unpredict(packed: &[u8], expected: usize) -> Option<Vec<u8>> {
@@ -157,11 +157,10 @@ const PIECE: usize = 256 << 10;
 /// is inflated into the upper half of `out`; the odd half then arrives
 /// [`PIECE`] bytes at a time and each byte pair is written in place, at `2j`
 /// and `2j + 1`, below the even bytes still to be read (`2j + 1 < half + j +
-/// 1` for every `j < half`). A buffer per block, 6 MB at 32769 float RGB
-/// samples, was mapped, faulted in page by page and unmapped every time
-/// (glibc maps buffers of 4 MiB and more) and held once per block decoding:
-/// 32769-wide ep-gauss spent 0.8 s of its 8 s at one thread in the kernel,
-/// and up to 25 MB more at 16 threads.
+/// 1` for every `j < half`). A buffer per block, megabytes on wide inputs,
+/// was mapped, faulted in page by page and unmapped every time (glibc maps
+/// large buffers) and held once per block decoding: time in the kernel, and
+/// memory that grew with the threads.
 pub fn decode_into(packed: &[u8], out: &mut [u8]) -> bool {
     let n = out.len();
     if n % 2 == 1 {

@@ -305,8 +305,8 @@ pub struct FilterOptions {
     /// Accumulator tile width in output pixels (does not change the result).
     #[arg(long, default_value_t = 256, help_heading = "Performance")]
     pub tile: usize,
-    /// Input rows per strip, 0 = automatic (about 4 MiB of input, at least 6 pixel rows, 16 where
-    /// they fit in 8 MiB; does not change the result).
+    /// Input rows per strip, 0 = automatic (from the input's width; at least 6 pixel rows, 16
+    /// where they fit; does not change the result).
     #[arg(long, default_value_t = 0, help_heading = "Performance")]
     pub strip_rows: usize,
 }
@@ -437,8 +437,8 @@ impl StatsOptions {
     }
 }
 
-/// `threads` above the machine's cores only slows the run down (999
-/// threads ran 50x slower): capped, with a warning to pass on.
+/// `threads` above the machine's cores only slows the run down (each
+/// parallel loop's end wakes them all): capped, with a warning to pass on.
 pub fn cap_threads(n: usize) -> (usize, Option<String>) {
     let cores = std::thread::available_parallelism().map_or(n, |c| c.get());
     if n > cores {

@@ -15,8 +15,8 @@ pub const STRIP_BYTES: usize = 4 << 20;
 const STRIPS_HELD: u64 = 4 + STRIPS_RECYCLED as u64;
 
 /// Strip buffers the filter hands back to the reader at most, waiting to be
-/// filled again (a new buffer is mapped and faulted in page by page: at 32769
-/// wide, 7 MB a strip, they were most of the reader's page faults).
+/// filled again (a new buffer is mapped and faulted in page by page: on wide
+/// inputs they were most of the reader's page faults).
 pub const STRIPS_RECYCLED: usize = 2;
 
 /// Default strip height: [`STRIP_BYTES`] of f32 rows, between 1 and 96 rows.
@@ -26,28 +26,22 @@ pub fn auto_strip_rows(in_w: usize, channels: usize) -> usize {
 
 /// Pixel rows a filtered strip holds at the least: a strip's rows are the
 /// tasks of its parallel loops (classification, base rows, ledger), so a
-/// strip of few pixel rows bounds the speed-up whatever the cores. At 32769
-/// wide [`STRIP_BYTES`] held 10 input rows, 3 pixel rows at S = 3: the scaling
-/// model's span on the filter lane was the longest of three row tasks per
-/// strip. Six, not more, for memory: 8 pixel rows gave ep-gauss 7.1x at 16
-/// cores but 259 MiB at 2 threads (over 256 MiB at 32k); 6 gives 6.4x at
-/// 228-237 MiB.
+/// strip of few pixel rows bounds the speed-up whatever the cores (on the
+/// widest inputs [`STRIP_BYTES`] holds only a few pixel rows at S = 3). Six,
+/// not more, because each pixel row more is paid in memory on those inputs.
 pub const MIN_STRIP_PIXEL_ROWS: usize = 6;
 
 /// Pixel rows a strip holds where they fit in [`TALL_STRIP_BYTES`]. Each of
 /// a strip's loops (classification, base rows, finishing) has a task a pixel
 /// row, so a strip of fewer pixel rows than cores leaves cores idle in them,
-/// and fewer strips are fewer loops, whose ends cost on many cores. At
-/// 12288x12288 S = 3 (28 input rows, 9.3 pixel rows a strip by default) the
-/// scaling model from 1-thread traces gave at 16 / 32 cores (medians): box
-/// 13.8x / 19.5x -> 14.3x / 21.0x, gauss 13.4x / 18.3x -> 14.1x / 21.6x,
-/// ep-gauss 11.5x / 15.2x -> 12.6x / 18.2x (docs/DESIGN.md, "Memory at 32769
-/// wide, and taller strips where they fit").
+/// and fewer strips are fewer loops, whose ends cost on many cores (the
+/// scaling model, `scripts/scaling-model`, predicted every method faster at
+/// 16 and 32 cores with them).
 pub const TALL_STRIP_PIXEL_ROWS: usize = 16;
 
 /// The most input bytes a strip grown to [`TALL_STRIP_PIXEL_ROWS`] holds:
-/// twice [`STRIP_BYTES`]. 12288 wide at S = 3: 48 rows of 147 KB; 32769
-/// wide would need 18.9 MB, and keeps its [`MIN_STRIP_PIXEL_ROWS`].
+/// twice [`STRIP_BYTES`], so the widest inputs keep their
+/// [`MIN_STRIP_PIXEL_ROWS`].
 pub const TALL_STRIP_BYTES: usize = 2 * STRIP_BYTES;
 
 impl StripLayout {
@@ -82,33 +76,26 @@ pub const READ_AHEAD_BYTES: u64 = 24 << 20;
 pub const READ_AHEAD_BATCHES: u64 = 2;
 
 /// Blocks (chunks) of `block_bytes` decoded bytes in a batch of the reader:
-/// [`READ_AHEAD_BYTES`] of them, two at the least. (A floor of 8 blocks within
-/// 64 MiB was needed while batches decoded one after another, each as long as
-/// its longest block; the window of blocks decoding ahead has no such
-/// boundary, and at 32769 wide 10 blocks in it took ep-gauss's peak RSS to 280
-/// MiB at 2 threads, over 256: it holds 6.)
+/// [`READ_AHEAD_BYTES`] of them, two at the least: the window of blocks
+/// decoding ahead has no batch boundary to wait at, so a few blocks keep the
+/// decoders busy, and more are paid in memory on wide inputs.
 pub fn read_ahead_blocks(block_bytes: u64) -> u64 {
     (READ_AHEAD_BYTES / block_bytes.max(1)).max(2)
 }
 
 /// Blocks the reader's window of blocks decoding ahead holds at the least
 /// where the job's memory allows ([`WINDOW_BUDGET`]): a block decodes on one
-/// core, so the window bounds the cores decoding at once. At 32769 wide
-/// [`READ_AHEAD_BATCHES`] of [`read_ahead_blocks`] are 6 blocks of 6 MiB,
-/// which held box to 7.45x at 16 cores in the scaling model (its decodes
-/// went 6 at a time); 8 give 10.1x, 10 gave 11.8x but box's peak RSS at 16
-/// threads 275-290 MiB (docs/DESIGN.md, "Wide rows without page faults, and
-/// the reader's window from the job's memory").
+/// core, so the window bounds the cores decoding at once: on the widest
+/// inputs [`READ_AHEAD_BATCHES`] of [`read_ahead_blocks`] are too few blocks
+/// to keep 16 cores decoding, and each block more costs its decoded size.
 pub const WINDOW_MIN_BLOCKS: u64 = 8;
 
 /// The job's estimate ([`estimate_bytes`]) within which the reader's window
-/// grows to [`WINDOW_MIN_BLOCKS`]: the 256 MiB a 32769-wide job should stay
-/// within, less the 46-49 MiB that 16 threads held beyond the estimate there
-/// (blocks each worker decodes or compresses, the allocator's arenas). At
-/// 32769 wide box and gauss grow (195 and 199 MiB; peak RSS at 16 threads
-/// 241 and 248 MiB), ep-gauss does not (289 MiB, its peak RSS already over
-/// 256 at 16 threads): its windows of rows hold the most, and decoding is a
-/// smaller share of its work (9.3x at 16 cores in the model with 6 blocks).
+/// grows to [`WINDOW_MIN_BLOCKS`]: the 256 MiB a 32769-wide job should
+/// stay within, less what many threads hold beyond the estimate (blocks each
+/// worker decodes or compresses, the allocator's arenas). The light methods
+/// fit it on the widest inputs; ep-gauss, whose windows of rows hold the
+/// most and for which decoding is a smaller share of the work, does not.
 pub const WINDOW_BUDGET: u64 = 208 << 20;
 
 /// Blocks (chunks) of `block_bytes` decoded bytes the reader's window holds
@@ -285,14 +272,14 @@ mod tests {
 
     #[test]
     fn a_batch_counts_bytes_two_blocks_at_the_least() {
-        // 6144 x 3 samples wide, float RGB, 16-row ZIP blocks: 3.5 MB each;
-        // 24 MiB holds 7.
+        // 6144 x 3 samples wide, float RGB, 16-row ZIP blocks: the bytes
+        // hold 7.
         let bench = 18432 * 3 * 4 * 16;
         assert_eq!(read_ahead_blocks(bench), 7);
         // Tiles of 64 x 64: bytes decide.
         let tile = 64 * 64 * 3 * 4;
         assert_eq!(read_ahead_blocks(tile), READ_AHEAD_BYTES / tile);
-        // 32769 wide: 6.3 MB blocks, 3 of them (18.9 MB).
+        // 32769 wide: 3 of its blocks.
         let wide = 32769 * 3 * 4 * 16;
         assert_eq!(read_ahead_blocks(wide), 3);
         // Blocks past the cap: two at the least.
@@ -309,13 +296,13 @@ mod tests {
 
     #[test]
     fn strips_grow_to_sixteen_pixel_rows_where_they_fit() {
-        // 12288 wide at S = 3: 28 rows by 4 MiB (9.3 pixel rows); 48 hold
-        // 7.1 MB.
+        // 12288 wide at S = 3: 28 rows by STRIP_BYTES (9.3 pixel rows); 48
+        // fit in TALL_STRIP_BYTES.
         let square = rgb(12288, 12288);
         assert_eq!(square.auto_strip_rows(), TALL_STRIP_PIXEL_ROWS * 3);
-        // 32769 wide: 48 rows would be 18.9 MB; the 6 pixel rows stay.
+        // 32769 wide: 48 rows would not fit; the 6 pixel rows stay.
         assert_eq!(rgb(32769, 3600).auto_strip_rows(), MIN_STRIP_PIXEL_ROWS * 3);
-        // Narrower: 4 MiB already holds more pixel rows (56 rows).
+        // Narrower: STRIP_BYTES already holds more pixel rows (56 rows).
         assert_eq!(rgb(6144, 6144).auto_strip_rows(), 56);
         // The estimate counts the taller strips.
         let (block, ep) = (12288 * 3 * 4 * 16, FilterParams::new(Method::EpGauss, 3));
@@ -337,7 +324,7 @@ mod tests {
                 estimate_bytes(job, &p, &cfg, block),
             )
         };
-        // 32769 wide, 16-row ZIP blocks of 6 MiB: the light methods' job fits
+        // 32769 wide, 16-row ZIP blocks: the light methods' job fits
         // the budget with 8 of them (where two batches hold 6), ep-gauss's
         // does not.
         let wide = rgb(32769, 3600);

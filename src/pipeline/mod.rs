@@ -84,8 +84,8 @@ pub struct ReadAhead<'a> {
     /// The strips' height.
     pub strip_rows: usize,
     /// Buffers of strips the filter is done with, to fill again (a new
-    /// strip buffer is mapped and faulted in page by page: at 32769 wide
-    /// 7 MB a strip, most of the reader's page faults).
+    /// strip buffer is mapped and faulted in page by page: on wide inputs
+    /// most of the reader's page faults).
     pub recycled: Option<crossbeam_channel::Receiver<Vec<f32>>>,
     /// Blocks of the window for blocks of the given decoded bytes
     /// ([`window_blocks`]).

@@ -16,15 +16,12 @@ pub fn thread_pool(threads: usize) -> Result<rayon::ThreadPool> {
 ///
 /// A thread of a pool that waits for the rest of its parallel loop runs
 /// other tasks of its pool meanwhile, and a block's decode or compression
-/// is a task of 5-15 ms where the filter's are well under one: sharing one
-/// pool, a strip's filtering waited for the decodes its threads picked up,
-/// and the filter lane (one strip at a time) became the run's critical path
-/// (measured on 16 cores, 12288x12288 box: each strip's filtering 1 ms alone
-/// and 10-14 ms with one, 2.4 of the run's 2.7 s). Pools of their own keep the
-/// filter's loops to their own tasks. Both run at the process's priority: a
-/// lower one for this pool (nice +10) was 0-7% faster alone on 16 cores but
-/// 4.5x slower beside two busy processes on this 2-core host (a renderer on
-/// the same node), where decoding then got a tenth of a core's share.
+/// is a task many times longer than the filter's: sharing one pool, a
+/// strip's filtering waited for the decodes its threads picked up, and the
+/// filter lane (one strip at a time) became the run's critical path. Pools
+/// of their own keep the filter's loops to their own tasks. Both run at the
+/// process's priority: a lower one for this pool starves decoding beside
+/// other busy processes (a renderer on the same node).
 pub fn io_pool(threads: usize) -> Result<Option<rayon::ThreadPool>> {
     if threads <= 1 {
         return Ok(None);

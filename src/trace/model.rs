@@ -24,15 +24,11 @@
 //! go to sleep. A 1-thread trace cannot show that, so the replay adds
 //! [`JOIN_S`] `* log2 P` to its lane after every region of the read, filter
 //! and write lanes (the decoding lane's block rows are spawned, not joined).
-//! The constant comes from the one 16-core machine measured: the time the
-//! four runs there took beyond the replay without it, over their regions,
-//! was 0.12-0.34 ms a region (median 0.175 ms, `log2 16 = 4`). With it the
-//! model's error on those runs goes from -41, -36, -9, -31% to -36, +11,
-//! -9, -17% (box and ep-gauss, 12288x12288 then 32769 wide), and on a 2-core
-//! host, which it was not fitted on, the 2-thread error from -3.5..-5.9% to
-//! -1.2..-2.6% (6144x6144) and from -8.4..-9.5% to -6.4..-8.9% (32769
-//! wide); docs/DESIGN.md, "The model's join". How long a wake-up takes
-//! depends on the machine: `--join-us` sets it. [`Model::span`] is the
+//! The constant was fitted on the one 16-core machine measured (the time its
+//! runs took beyond the replay without it, over their regions), and it
+//! brought the model closer to runs it was not fitted on; `scripts/
+//! bench-scaling` prints both. How long a wake-up takes depends on the
+//! machine: `--join-us` sets it. [`Model::span`] is the
 //! replay on unbounded cores without it: the trace's own critical path.
 //!
 //! Not modelled: memory bandwidth and caches (each unit takes on `P` cores
@@ -48,7 +44,7 @@ use super::Event;
 use crate::error::{Error, Result};
 
 /// What the end of a parallel loop costs its lane, in seconds per doubling
-/// of the cores (see the module's header): 44 µs, so 0.175 ms at 16 cores.
+/// of the cores (see the module's header).
 pub const JOIN_S: f64 = 44e-6;
 
 /// Strips the reader may hold ahead of the filter (the strip channel's

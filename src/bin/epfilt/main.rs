@@ -389,14 +389,10 @@ fn one_line(e: &anyhow::Error) -> String {
 }
 
 /// glibc keeps freed multi-megabyte row buffers in per-thread arenas (its
-/// mmap threshold grows with each such free), so at 32k-wide inputs peak RSS
-/// was ~60 MiB above the live heap. Buffers of 4 MiB and more now go straight
-/// back to the system; a 16 MiB trim threshold keeps the heap from shrinking
-/// and regrowing on every strip. Measured (32769-wide S=3, ep-gauss): peak RSS
-/// 284 -> 223 MiB; 6144^2 runs as fast as without tuning (2.1 s). The trim
-/// threshold was 32 MiB: 16 took the same input's peak at 16 threads 253 ->
-/// 246 MiB (medians of 4) in the same time, with as many page faults; 8 took
-/// it to 251 MiB (278 at 32, medians of 5) but ran 3% longer at 2 threads.
+/// mmap threshold grows with each such free), so on wide inputs peak RSS sat
+/// far above the live heap. Large buffers go straight back to the system;
+/// the trim threshold keeps the heap from shrinking and regrowing on every
+/// strip (a smaller one saved little memory and cost time).
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 fn tune_allocator() {
     // SAFETY: mallopt only changes glibc's allocation thresholds; it is called
@@ -407,9 +403,7 @@ fn tune_allocator() {
         libc::mallopt(libc::M_TRIM_THRESHOLD, 16 * 1024 * 1024);
         // glibc gives threads up to 8 arenas per core, each keeping up to
         // the trim threshold of freed memory, so peak memory grew with the
-        // thread count. Four arenas, measured on a 12288x12288 ZIP input at
-        // 16 threads: box 243 -> 163 MiB (62 at 2 threads), no slower on
-        // 2 cores.
+        // thread count. Four arenas bound that, no slower on 2 cores.
         libc::mallopt(libc::M_ARENA_MAX, 4);
     }
 }

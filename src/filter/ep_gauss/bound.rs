@@ -30,11 +30,9 @@ use super::{disc_spans, LumRows};
 /// least; steps are added until it does (at most [`MAX_STEPS`] per axis).
 /// At 0.7 a bound is at most 30% below the exact average where the
 /// luminance is flat, so the width found is about two rungs (at
-/// `--width-step 0.1`) wider at most, and a bound is 16-25 rectangles. On
-/// the 6144x6144 1e2..1e5 bench (`--bound-from 3`, 1 thread): at 0.85 the
-/// search took 0.293 s against 0.336 s exact, at 0.7 0.264 s, and the spread
-/// taps grew 9% and 17%; the real renders' error fell at both (0.1822 ->
-/// 0.1806 at 0.7: their wide spreads gain from being wider).
+/// `--width-step 0.1`) wider at most, and a bound is 16-25 rectangles: the
+/// search is faster than with exact averages, the spreads a little wider,
+/// and the real renders' error no higher (their wide spreads gain from it).
 pub const BOUND_KEEP: f64 = 0.7;
 
 /// At most this many steps per axis (up to `MAX_STEPS^2` rectangles).

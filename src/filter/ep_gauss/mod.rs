@@ -8,7 +8,7 @@
 //! around `p`, each weighted `g(|q - p| / rho)` with `g(u) = exp(-u^2)` over
 //! the disc `dx^2 + dy^2 <= (a rho)^2`, `a = min(cutoff, AVG_CUTOFF)` (a
 //! kernel whose weights over the super-samples sum to one, as Relation 14
-//! requires; the disc of `2.5 rho` holds 99.8% of the Gaussian's weight), so
+//! requires; [`AVG_CUTOFF`] says how much of the Gaussian's weight it holds), so
 //! `xbar = sum_q g * Ybox(q) / sum_q g` and `w0 = 1 / (S^2 * sum_q g)`, where
 //! `Ybox(q)` is the mean luminance of pixel `q`'s `S^2` samples. For
 //! `rho = 0.6`, `S = 3` this gives `w0 = 0.088`: the centre sample's own
@@ -26,23 +26,19 @@
 //! firefly enters the average), so guesses overshoot: until a width passes,
 //! the search climbs at most as many rungs as double the area (a gallop),
 //! which bounds its cost by a few times the area of the width it finds
-//! (measured: 4.1x, against 27x for unbounded guesses then bisection, on 1%
-//! fireflies of 1e2..1e5). There `log D` falls about linearly with the rung,
-//! so once two widths have failed the search follows the line through them
-//! (up to twice the gallop), and once bracketed it interpolates the same
-//! way: 5.8 widths evaluated per search become 4.3, and the search's cost on
-//! the 6144x6144 file of 1e2..1e5 fireflies falls from 585M to 428M
-//! values read and weighed (1715 to 1255 per sample), with the same widths
-//! found. The bracket shrinks at every step, so the search is bounded by the
-//! ladder's length. A sample that still fails at the cap is spread at the cap
+//! (unbounded guesses then bisection cost many times more where fireflies
+//! are dense). There `log D` falls about linearly with the rung, so once two
+//! widths have failed the search follows the line through them (up to twice
+//! the gallop), and once bracketed it interpolates the same way: fewer
+//! widths evaluated, the same widths found. The bracket shrinks at every
+//! step, so the search is bounded by the ladder's length. A sample that still fails at the cap is spread at the cap
 //! and counted.
 //!
 //! The paper sums rings about `p` so that each candidate width costs one 1-D
 //! dot product instead of many `exp()` calls. Here the weights of every width
 //! are tabulated once per job, and the Gaussian is separable, so a candidate
 //! costs one contiguous row dot product per row of its disc, which
-//! vectorize: measured 3.8x faster than our first, ring-sum version (8.1 ->
-//! 2.1 µs for a 1000x firefly).
+//! vectorize (the ring sums do not).
 //!
 //! Samples with `x0 <= 0` or `xbar <= 0` (or non-finite ratios) keep the base
 //! kernel: the test is not defined there.

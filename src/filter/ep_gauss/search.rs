@@ -8,11 +8,9 @@ use super::{dot4, relation14, AreaSums, EpGauss, Level, LumRows};
 /// Entries a quadrant row grows past what the width being tried needs
 /// (within the padding). Each width the search tries is about one entry
 /// wider per row than the last, and starting a row's growth costs more than
-/// its entries: a row grown this far ahead serves the next few widths. On
-/// 6144x6144 S=3 fireflies of 1e2..1e5 the search took 0.36 s growing to the
-/// span, 0.31 s with 12 ahead (0.32 s with 6, 0.30 s with 24, 0.32 s
-/// growing every row to the padding), reading 245 M values where the widths
-/// tried need 138 M: reads in a row are cheap, starting one is not.
+/// its entries: a row grown this far ahead serves the next few widths
+/// (reads in a row are cheap, starting one is not; the search's time is
+/// flat around this value).
 const GROW_AHEAD: usize = 12;
 
 /// Guesses from the background before the search falls back to galloping

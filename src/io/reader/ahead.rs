@@ -152,15 +152,14 @@ pub(super) fn start<'s>(
 }
 
 /// File bytes handed over before their pages are released: each release
-/// interrupts every core the process runs on (a TLB shoot-down), so a block
-/// row at a time cost the 2-thread bench 10% more CPU.
+/// interrupts every core the process runs on (a TLB shoot-down), so
+/// releasing a block row at a time costs measurably more CPU.
 const RELEASE_BYTES: usize = 8 << 20;
 
 /// A decoded block row this large releases its file pages itself, at once:
 /// waiting for its rows to be handed over, a window of wide blocks decoded
-/// ahead held their compressed pages too. At 32769 wide (blocks of about 3.8
-/// MB in the file) the input's resident pages at the peak went 30 -> 7 MiB
-/// and ep-gauss's peak RSS at 16 threads 294 -> 274 MiB, in the same time.
+/// ahead held their compressed pages too, a large share of the peak on the
+/// widest inputs.
 /// Smaller ones go with the reader's releases, [`RELEASE_BYTES`] at a time
 /// (the pages at a row's ends, shared with its neighbours, go there too; a
 /// page released twice is only looked up twice).

@@ -26,8 +26,8 @@ pub struct ExrSource<'a> {
 /// [`read_ahead_blocks`] blocks (READ_AHEAD_BYTES of blocks, two chunks at the
 /// least) whatever the thread
 /// count: several strips' blocks decode in parallel (two per worker made the
-/// reader the critical path: the model's T∞ 0.57 -> 0.31 s on the 6144x6144
-/// bench), memory does not grow with the threads, and a 1-thread run cuts the
+/// reader the critical path), memory does not grow with the threads, and a
+/// 1-thread run cuts the
 /// work as a 16-thread one.
 fn batch_end(input: &ExrInput, from: usize, max_rows: usize) -> usize {
     let want_chunks = read_ahead_blocks(input.block_bytes()) as usize;

@@ -38,13 +38,10 @@ type Found = (Vec<Noisy>, Vec<f64>, u64);
 /// noise: a pixel row of a wider image is cut into column ranges, searched
 /// by tasks of their own, so that one row is not the longest task of its
 /// strip. Rows up to this wide are one task, the search and the pass
-/// together. At 32768 a strip of 12288x12288 had one task per pixel row,
-/// 9.3, and on 16 cores its loop waited for the slowest of them (936 ms of
-/// a 3.7 s ep-gauss run, its tasks summing 6.0 s); at 3072 the search has
-/// 4 tasks a row there: the model's span from a 1-thread trace 1.24 ->
-/// 0.86 s (16 cores 10.8x -> 11.0x, 32 cores 12.4x -> 14.4x), and the
-/// bench's time unchanged at 1 and 2 threads (interleaved medians 2.94 /
-/// 2.93 s and 1.594 / 1.593 s), the same bytes.
+/// together. With a task per pixel row, a strip of a wide image has fewer
+/// tasks than 16 cores and its loop waits for the slowest; a few tasks a
+/// row shorten the span without costing fewer threads anything (the
+/// result does not depend on the cut).
 const FIND_TASK_SAMPLES: usize = 3_072;
 
 /// What [`FindCtx::find_cols`] found in a column range of a pixel row.

@@ -607,9 +607,8 @@ impl GaussianStage {
     /// its row's task), plus here the row above's where the row is not the
     /// first of its block, on the image's grid of blocks, so the table does
     /// not depend on the strips. The same operations in the same order as
-    /// [`csum_row`]. On the calling thread: a strip's additions take about
-    /// 10 µs at 12288 wide, where a parallel loop's end costs many cores
-    /// more (docs/DESIGN.md, "The model's join").
+    /// [`csum_row`]. On the calling thread: a strip's additions cost less
+    /// than a parallel loop's end on many cores.
     fn make_csums(&mut self, a: usize, b: usize) {
         let Some((csum, block)) = &mut self.csum else {
             return;
