@@ -177,7 +177,7 @@ pub struct FilterOptions {
 
     // ---- Guides ----
     /// Guide passes: auto (every one found by the names renderers give them:
-    /// emission, albedo, normal, depth; README "Guide passes"), none, or a
+    /// emission, albedo, normal, depth; README "With guide passes"), none, or a
     /// comma list of those that must be found. The emission (the directly
     /// visible light) is set aside before any test and added back after, so
     /// a lamp is never spread; albedo, normal and depth keep a spread on its

@@ -20,7 +20,7 @@ class IoError(Error, OSError): ...
 def filter(
     samples: _Samples,
     supersample: Optional[int] = None,
-    method: str = "ep-gauss",
+    method: Optional[str] = None,
     *,
     channels: Optional[Sequence[str]] = None,
     variance: Optional[npt.NDArray[Any]] = None,

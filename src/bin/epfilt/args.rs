@@ -21,10 +21,11 @@ interrupted by SIGINT / SIGTERM (unfinished outputs removed).";
 
 /// Examples of `filter`, under its `--help`.
 const FILTER_EXAMPLES: &str = "Examples:
-  epfilt filter render_3x.exr out.exr                     ep-gauss at S = 3, the defaults
+  epfilt filter render.exr out.exr                        at the render's resolution; the file decides the method and guides
+  epfilt filter render_3x.exr out.exr -s 3                3x3 super-samples reduced to pixels (ep-gauss)
   epfilt filter in.exr out.exr -s 4 --tolerance 0.1       a stricter Relation 14
   epfilt filter pt.exr out.exr --method ep-box --d 5      per-pixel variance (§5.1)
-  cat in.hdr | epfilt filter - - > out.hdr                a pipe, as pfilt is used
+  cat in.hdr | epfilt filter - - -s 3 > out.hdr           a pipe, as pfilt is used
   epfilt filter 'in/r.####.exr' 'out/r.####.exr' --skip-existing   a sequence, retried
   epfilt filter huge.exr part.exr --band env --band-count 8         one band of an array job
   epfilt filter stereo.exr out.exr --view all             every view of a stereo file";
@@ -43,7 +44,7 @@ pub struct Cli {
 
 #[derive(Subcommand)]
 pub enum Command {
-    /// Filter a super-sampled EXR (or Radiance picture) into an output-resolution one.
+    /// Filter a render (EXR or Radiance picture) at its own resolution, or reduce super-samples with --supersample.
     #[command(after_long_help = FILTER_EXAMPLES)]
     Filter(Box<FilterArgs>),
     /// Show what an EXR file or Radiance picture holds: size, channels, compression, layout.
