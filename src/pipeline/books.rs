@@ -83,7 +83,7 @@ impl Books {
     /// Take a checked strip's rows (`take`) into the ledger, finish the
     /// output rows of `finish`, and run a stage's work `beside` them, in one
     /// parallel loop: its end costs many cores one wake-up, not three
-    /// (docs/DESIGN.md, "The model's join"). Returns the finished rows.
+    /// (docs/DESIGN.md, "The trace and the scaling model"). Returns the finished rows.
     pub fn take_and_finish(
         &mut self,
         take: Option<Take<'_>>,

@@ -65,7 +65,7 @@ pub trait Stage: Send {
     /// them: work that can run beside the books' loop (their ledger, the
     /// finishing of final rows `finish`), as tasks of the region it is
     /// given, and those final rows (one loop's end less a strip: a wake-up
-    /// of many cores, docs/DESIGN.md, "The model's join"). None by default.
+    /// of many cores, docs/DESIGN.md, "The trace and the scaling model"). None by default.
     fn beside_books<'s>(
         &'s mut self,
         _input: &'s RowWindow<f32>,

@@ -175,8 +175,8 @@ impl Streamer {
     ///
     /// The rows a push makes final are finished by the next push, in the loop
     /// that takes its strip into the ledger (one parallel loop's end, one
-    /// wake-up of many cores, fewer a strip: docs/DESIGN.md, "The model's
-    /// join"), and by the last push at once.
+    /// wake-up of many cores, fewer a strip: docs/DESIGN.md, "The trace and
+    /// the scaling model"), and by the last push at once.
     pub fn push(&mut self, mut strip: Strip) -> Result<Option<OutRows>> {
         let (in_w, in_h) = (self.grid.in_w, self.grid.in_h);
         self.books.check(&mut strip, self.rows_in, in_w, in_h)?;

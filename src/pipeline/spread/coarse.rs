@@ -59,7 +59,7 @@ impl GaussianStage {
     /// [`GaussianStage::base_and_upsample`] then brings them up, a task a
     /// row: each task upsamples the coarse rows it reads across itself (one
     /// or two), then down, where a loop across and one down were two joins a
-    /// grid (docs/DESIGN.md, "The model's join").
+    /// grid (docs/DESIGN.md, "The trace and the scaling model").
     pub(super) fn coarse_rows_read(&mut self, a: usize, b: usize) -> Option<(usize, usize)> {
         let last = self.c2.last_read(a, b);
         self.c2.grow_to(last);

@@ -61,7 +61,7 @@ use crate::trace::Span;
 /// place, holds far more samples in the same memory: at 12288x12288 a strip's
 /// noisy samples are one chunk, two parallel loops (searching and placing,
 /// scattering), where chunks of 8192 samples were 2.4 a strip, and each loop's
-/// end costs a wake-up on many cores (docs/DESIGN.md, "The model's join").
+/// end costs a wake-up on many cores (docs/DESIGN.md, "The trace and the scaling model").
 /// The chunks do not change the result (each pixel takes its contributions
 /// in the batch's order).
 const SPREAD_CHUNK: usize = 8192;
@@ -544,7 +544,7 @@ impl GaussianStage {
         if cls_target > self.classified && spreads && sp_target <= self.classified {
             // Every sample to spread was classified before: its first chunk
             // is spread in classification's loops (two joins fewer a strip:
-            // docs/DESIGN.md, "The model's join"), the rest after.
+            // docs/DESIGN.md, "The trace and the scaling model"), the rest after.
             if let Some(mut batch) = self.spread_begin(sp_target) {
                 // The coarse share the last advance planned, in the same
                 // loop.

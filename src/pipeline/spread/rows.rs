@@ -3,7 +3,7 @@
 //! grids' share of final rows), done beside that push's first loops: the
 //! books' loop takes the box luminance, the base rows and the 4x grid's
 //! share of 2x rows; classification's first loop the share of final rows
-//! (docs/DESIGN.md, "Fewer joins, second round"). A row's values are the
+//! (docs/DESIGN.md, "The trace and the scaling model"). A row's values are the
 //! same whichever loop computes them.
 
 use rayon::prelude::*;

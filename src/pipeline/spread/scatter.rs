@@ -377,7 +377,7 @@ impl<'a> SearchPlace<'a> {
 
     /// Each sample's width searched and its kernels placed (reflected where
     /// they cross an edge) in one task of `region`: one loop, one join
-    /// (docs/DESIGN.md, "The model's join"). The parts in order.
+    /// (docs/DESIGN.md, "The trace and the scaling model"). The parts in order.
     pub(super) fn run(
         &self,
         samples: &mut [Noisy],
@@ -456,7 +456,7 @@ impl<'a> Accs<'a> {
 
     /// Scatter `parts` (in order): the three grids' tiles are the tasks of
     /// one loop (one join a chunk, not three: each costs its lane a wake-up;
-    /// docs/DESIGN.md, "The model's join"), each pixel still getting its
+    /// docs/DESIGN.md, "The trace and the scaling model"), each pixel still getting its
     /// grid's spreads in order, from one task. The tiles first fill their
     /// grid's `fresh` rows (-0.0 on the accumulator, whose untouched pixels
     /// keep the sign of the base's zero; 0.0 on the coarse grids), which
