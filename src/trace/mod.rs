@@ -1,6 +1,6 @@
 //! `--trace FILE`: every unit of work of one run, as Chrome trace-event JSON
-//! (it opens in Perfetto and `chrome://tracing`), and the scaling model that
-//! replays it ([`model`]).
+//! (it opens in Perfetto and `chrome://tracing`); the lab's scaling model
+//! (`lab/src/model.rs`, `scripts/scaling-model`) replays it.
 //!
 //! Three lanes move strips: `read` (the reader thread), `filter` (the
 //! coordinator) and `write` (the writer thread). Each strip is one *segment*
@@ -18,8 +18,6 @@
 //! Off by default, and then a span costs one relaxed atomic load. The
 //! recorder is process-wide (one traced run at a time, as the command line
 //! makes); [`start`] clears it and [`Session::finish`] takes its events.
-
-pub mod model;
 
 use std::cell::Cell;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};

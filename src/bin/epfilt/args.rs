@@ -82,24 +82,6 @@ pub enum Command {
         #[arg(long, short = 'q')]
         quiet: bool,
     },
-    /// Predict a run on more cores from its `filter --trace` file: work T1,
-    /// span T∞, and the wall time and speed-up on each number of cores.
-    ScalingModel {
-        /// The trace (`filter --trace FILE`).
-        trace: PathBuf,
-        /// Numbers of cores to predict.
-        #[arg(long, value_delimiter = ',', default_value = "1,2,4,8,16,32,64")]
-        cores: Vec<usize>,
-        /// What the end of a parallel loop costs its lane, in microseconds per
-        /// doubling of the cores (waking the threads that wait for it; 44 fits
-        /// four runs on a 16-core machine, docs/DESIGN.md). 0: the replay of
-        /// the tasks alone.
-        #[arg(long, default_value_t = epfilt::trace::model::JOIN_S * 1e6, value_parser = join_us)]
-        join_us: f64,
-        /// Print JSON: {"work_s", "span_s", "predicted_s": {"1": .., ...}, ...}.
-        #[arg(long)]
-        json: bool,
-    },
     /// Plan a render from a pilot with variance (§5.1, Eqs. 8-10): L_tvis, the
     /// mean standard error, and the samples per pixel needed for ±D.
     Plan(Box<PlanArgs>),
@@ -254,18 +236,10 @@ pub struct FilterArgs {
     pub report: Option<PathBuf>,
     /// Record every unit of work of the run (reads, filter tasks, writes)
     /// as Chrome trace-event JSON in this file (Perfetto, chrome://tracing);
-    /// `epfilt scaling-model FILE` predicts the run on more cores.
+    /// the lab's `scripts/scaling-model FILE` predicts the run on more cores.
     #[arg(long, help_heading = "Output")]
     pub trace: Option<PathBuf>,
     /// No progress bar and no summary (warnings about data are still printed).
     #[arg(long, short = 'q', help_heading = "Output")]
     pub quiet: bool,
-}
-
-/// `--join-us`: a finite number of microseconds, not negative.
-fn join_us(s: &str) -> Result<f64, String> {
-    match s.parse::<f64>() {
-        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
-        _ => Err(format!("{s:?} is not a number of microseconds (0 or more)")),
-    }
 }

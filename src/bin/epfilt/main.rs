@@ -94,21 +94,6 @@ fn dispatch(cli: Cli, matches: &clap::ArgMatches, cancel: Arc<AtomicBool>) -> Re
                 emit(&plan.table())
             }
         }
-        Command::ScalingModel {
-            trace,
-            cores,
-            join_us,
-            json,
-        } => {
-            let events = epfilt::trace::read(&trace).map_err(fail)?;
-            let model = epfilt::trace::model::Model::from_events(&events).map_err(fail)?;
-            let p = epfilt::trace::model::Prediction::of(&model, &cores, join_us * 1e-6);
-            if json {
-                emit(&(serde_json::to_string_pretty(&p).map_err(fail)? + "\n"))
-            } else {
-                emit(&p.table(&cores))
-            }
-        }
         Command::Merge {
             mut paths,
             format,

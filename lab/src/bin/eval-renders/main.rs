@@ -3,7 +3,7 @@
 //! `../shared/renders`, whose README defines the roles and the measures).
 //!
 //! ```text
-//! cargo run --release --example eval_renders -- [--renders DIR] [--out DIR] [--methods a,b]
+//! cargo run --release -p epfilt-lab --bin eval-renders -- [--renders DIR] [--out DIR] [--methods a,b]
 //!     [--set KEY=VALUE]... [--no-write]
 //! ```
 //!
@@ -688,7 +688,7 @@ fn markdown(rows: &[Row], oracles: &[Oracle], dir: &Path) -> String {
     let _ = writeln!(
         s,
         "# Real renders: every method at its defaults\n\nMade by `scripts/eval-renders` from `{}` \
-         (`examples/eval_renders.rs` says how each figure is measured). **factor**: relMSE against \
+         (`lab/src/bin/eval-renders/main.rs` says how each figure is measured). **factor**: relMSE against \
          the reference over the relMSE the linear filter of the method's family leaves (ep-gauss, \
          clamp: the Gaussian; ep-box, median, alpha-trim: the box, which at S = 1 is the unfiltered \
          input), both against the same linear filter of the reference; below 1 the method removed \

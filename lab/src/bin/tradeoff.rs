@@ -4,7 +4,7 @@
 //! per method, the Pareto front marked) and `tradeoff.md`.
 //!
 //! ```text
-//! cargo run --release --example tradeoff -- [--quick] [--out DIR] [--bin PATH] [--repeat N] [--guards-only]
+//! cargo run --release -p epfilt-lab --bin tradeoff -- [--quick] [--out DIR] [--bin PATH] [--repeat N] [--guards-only]
 //! ```
 //!
 //! Every scene is made twice with the same budget of 9 samples per pixel: as
@@ -23,8 +23,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use plotters::prelude::*;
 
-#[path = "common/canvas.rs"]
-mod canvas;
+use epfilt_lab::canvas;
 use serde_json::Value;
 
 const METHODS: [&str; 7] = [

@@ -381,7 +381,7 @@ fn markdown(rows: &[Row], ss: &[SsRow], dirs: &[PathBuf], argv: &[String]) -> St
     let _ = writeln!(
         s,
         "# Renders as renderers write them\n\n{}\n\n## At final resolution (S = 1)\n\n\
-         Each render at pixel resolution filtered at S = 1 (`examples/eval_renders/as_written.rs` \
+         Each render at pixel resolution filtered at S = 1 (`lab/src/bin/eval-renders/as_written.rs` \
          defines every measure). **ratio**: relMSE(output) / relMSE(input) against the reference \
          (below 1: less error than the render had); **lost**: lights the input had (peak at least \
          half the reference's) whose output peak fell below half, of all the reference's lights \

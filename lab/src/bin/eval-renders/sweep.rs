@@ -28,7 +28,7 @@
 //!   **lights < 0.8**: how many lights, over every input, fell below 0.8
 //!   (the issue's "within 20% of the linear filter's").
 //! * **time**: seconds per input megapixel of ep-gauss on the bench file
-//!   (6144x6144 S=3 float ZIP, 1% fireflies 1e2..1e5, `examples/fireflies`),
+//!   (6144x6144 S=3 float ZIP, 1% fireflies 1e2..1e5, the lab's `fireflies`),
 //!   the median of `--bench-runs` runs interleaved with as many of gauss,
 //!   and the ratio of the medians; without `--bench`, no times.
 //! * `tolerance` in the grid is the value at S = 3; inputs at other S get
@@ -47,8 +47,7 @@ use epfilt::{filter_file, FilterJob, FilterParams, Method};
 
 use super::{inputs, lights, rel_mse, set, Image, Input, ORACLE_OVER};
 
-#[path = "../common/canvas.rs"]
-mod canvas;
+use epfilt_lab::canvas;
 
 /// The grid when none is given: the knobs the issue names, jointly.
 const DEFAULT_GRID: &[(&str, &[&str])] = &[
@@ -592,7 +591,7 @@ fn markdown(a: &Args, prepared: &[Prepared], outcomes: &[Outcome], gauss: &[f64]
     let _ = writeln!(
         s,
         "# ep-gauss: the speed/accuracy trade on real renders\n\nMade by `scripts/eval-renders --sweep` \
-         (`examples/eval_renders/sweep.rs` defines every figure) on {} super-sampled inputs from {}. \
+         (`lab/src/bin/eval-renders/sweep.rs` defines every figure) on {} super-sampled inputs from {}. \
          **factor**: relMSE against the Gaussian of the reference over the relMSE the Gaussian of the \
          same radius leaves (below 1: noise removed); **error**: the geometric mean of a setting's \
          factors over every input; **worst vs old**: the largest ratio of its factor to the old \

@@ -1,7 +1,7 @@
 //! The scaling model: work `T1`, span `T∞` and the wall time on `P` cores,
 //! from replaying a trace's units of work with the pipeline's constraints.
 //!
-//! A trace ([`super`]) is three lanes of segments, one per strip, each a
+//! A trace (`epfilt filter --trace`, [`epfilt::trace`]) is three lanes of segments, one per strip, each a
 //! sequence of serial pieces (run on the lane's own thread) and regions
 //! (parallel loops whose tasks run on any core). The replay keeps:
 //!
@@ -40,8 +40,8 @@
 use std::cmp::Reverse;
 use std::collections::{BTreeMap, BinaryHeap, HashMap, VecDeque};
 
-use super::Event;
-use crate::error::{Error, Result};
+use anyhow::{anyhow, Result};
+use epfilt::trace::Event;
 
 /// What the end of a parallel loop costs its lane, in seconds per doubling
 /// of the cores (see the module's header).
@@ -97,7 +97,7 @@ pub struct Model {
 impl Model {
     /// The model of a trace's events.
     pub fn from_events(events: &[Event]) -> Result<Model> {
-        let bad = |why: String| Error::Config(format!("trace: {why}"));
+        let bad = |why: String| anyhow!("trace: {why}");
         let mut tasks: HashMap<u64, Vec<f64>> = HashMap::new();
         let mut regions: HashMap<u64, Vec<&Event>> = HashMap::new();
         let mut by_task: BTreeMap<String, f64> = BTreeMap::new();

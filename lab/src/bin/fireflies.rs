@@ -1,6 +1,6 @@
 //! Write a super-sampled test render with fireflies, streaming (flat memory):
 //!
-//! `cargo run --release --example fireflies -- OUT.exr WIDTH HEIGHT [FRACTION] [COMPRESSION] [MIN..MAX] [--guides]`
+//! `cargo run --release -p epfilt-lab --bin fireflies -- OUT.exr WIDTH HEIGHT [FRACTION] [COMPRESSION] [MIN..MAX] [--guides]`
 //!
 //! WIDTH x HEIGHT are input samples. A smooth RGB background (0.2..1.0) with
 //! FRACTION (default 0.01) of the samples turned into fireflies MIN..MAX times
