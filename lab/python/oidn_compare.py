@@ -1,0 +1,192 @@
+"""When to use epfilt, Intel OIDN or both, measured on renders at final resolution.
+
+For every `<scene>_px_<res>_spp<N>.exr` beside its `<scene>_ref_<res>.exr` in the folders given:
+
+* **OIDN**: Intel Open Image Denoise (`pyoidn`, the RT filter, HDR, colour only, quality high);
+* **epfilt**: `epfilt.filter_file` with its defaults (the file decides: ep-box where it holds
+  variance, else ep-gauss; the guide passes it finds);
+* **ep-gauss**: the same with `method="ep-gauss"`, what a render without a variance pass gets;
+* **epfilt then OIDN**: OIDN on epfilt's output.
+
+Measures, each against the reference:
+
+* **error**: relMSE(output) / relMSE(input), relMSE = mean (x - ref)^2 / (ref^2 + 1e-2) over
+  pixels and channels (below 1: less error than the render had);
+* **energy**: sum(output) / sum(input) - 1 over every channel (epfilt's ledger makes it 0 before
+  rounding; the input's own energy against the reference's is in the `input` column);
+* **peaks**: over the reference's brightest 0.1% of pixels by luminance, the output's mean
+  luminance over the reference's (1: the brightest features kept at their true values);
+* **blocks**: the largest relative difference, over the 32 x 32 blocks, between the output's
+  energy and the input's (what a lighting study reads off a region).
+
+Writes `oidn.md` and `oidn.csv` into `--out` (default docs/bench) with the command, machine,
+versions and date, and prints the Markdown. Run by `scripts/oidn-compare`.
+"""
+
+import argparse
+import csv
+import importlib.metadata
+import datetime
+import glob
+import io
+import os
+import platform
+import re
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+import pyoidn
+
+import epfilt
+
+# The reference's brightest pixels whose values the peaks measure: 0.1%.
+PEAK_SHARE = 1e-3
+# Blocks whose energy the blocks column compares, in pixels.
+BLOCK = 32
+# relMSE's floor in the denominator, as the renders evaluation has it.
+REL_EPS = 1e-2
+LUM = np.array([0.2126, 0.7152, 0.0722])
+
+
+def rgb(path):
+    samples, names = epfilt.read(path)
+    idx = [names.index(c) for c in ("R", "G", "B")]
+    return np.ascontiguousarray(samples[:, :, idx].astype(np.float32))
+
+
+def rel_mse(x, ref):
+    return float(np.mean((x.astype(np.float64) - ref) ** 2 / (ref.astype(np.float64) ** 2 + REL_EPS)))
+
+
+def block_sums(x):
+    h, w = x.shape[:2]
+    hb, wb = h // BLOCK, w // BLOCK
+    y = x[: hb * BLOCK, : wb * BLOCK].astype(np.float64).sum(axis=2)
+    return y.reshape(hb, BLOCK, wb, BLOCK).sum(axis=(1, 3))
+
+
+def measures(out, inp, ref, top):
+    lum = out.astype(np.float64) @ LUM
+    rlum = ref.astype(np.float64) @ LUM
+    bi, bo = block_sums(inp), block_sums(out)
+    return {
+        "error": rel_mse(out, ref) / rel_mse(inp, ref),
+        "energy": float(out.astype(np.float64).sum() / inp.astype(np.float64).sum() - 1.0),
+        "peaks": float(lum[top].mean() / rlum[top].mean()),
+        "blocks": float(np.max(np.abs(bo - bi) / np.maximum(np.abs(bi), 1e-12))),
+    }
+
+
+def oidn(x):
+    return np.ascontiguousarray(pyoidn.denoise(x, hdr=True, quality="high"), dtype=np.float32)
+
+
+def inputs(folders):
+    found = []
+    for d in folders:
+        for p in sorted(glob.glob(os.path.join(d, "*_px_*_spp*.exr"))):
+            m = re.match(r"(.*)_px_(\d+)_spp(\d+)\.exr$", os.path.basename(p))
+            ref = os.path.join(d, f"{m.group(1)}_ref_{m.group(2)}.exr")
+            if os.path.exists(ref):
+                found.append((p, ref, m.group(1), int(m.group(3))))
+    return found
+
+
+def out(cmd):
+    try:
+        return subprocess.run(cmd, capture_output=True, text=True).stdout.strip()
+    except OSError:
+        return "?"
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--renders", action="append", required=True, help="a folder of renders (repeatable)")
+    ap.add_argument("--out", default="docs/bench")
+    ap.add_argument("--command", default="scripts/oidn-compare")
+    a = ap.parse_args()
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for path, ref_path, scene, spp in inputs(a.renders):
+            inp, ref = rgb(path), rgb(ref_path)
+            rlum = ref.astype(np.float64) @ LUM
+            k = max(1, int(round(PEAK_SHARE * rlum.size)))
+            top = np.unravel_index(np.argsort(rlum, axis=None)[-k:], rlum.shape)
+            filtered = os.path.join(tmp, "ep.exr")
+            report = epfilt.filter_file(path, filtered)
+            ep = rgb(filtered)
+            epfilt.filter_file(path, filtered, method="ep-gauss")
+            gauss = rgb(filtered)
+            row = {"input": os.path.basename(path)[:-4], "spp": spp, "method": report["method"],
+                   "input_rel_mse": rel_mse(inp, ref),
+                   "input_energy_vs_ref": float(inp.astype(np.float64).sum() / ref.astype(np.float64).sum() - 1),
+                   "input_peaks": measures(inp, inp, ref, top)["peaks"]}
+            for name, img in (("oidn", oidn(inp)), ("epfilt", ep), ("ep_gauss", gauss),
+                              ("epfilt_oidn", oidn(ep))):
+                for key, v in measures(img, inp, ref, top).items():
+                    row[f"{name}_{key}"] = v
+            rows.append(row)
+            print(f"{row['input']}: done", file=sys.stderr)
+    os.makedirs(a.out, exist_ok=True)
+    with open(os.path.join(a.out, "oidn.csv"), "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
+        w.writeheader()
+        w.writerows(rows)
+    md = io.StringIO()
+    cpu = next((l.split(":", 1)[1].strip() for l in open("/proc/cpuinfo") if l.startswith("model name")),
+               platform.processor())
+    print("# When to use epfilt, OIDN or both\n", file=md)
+    print(f"Made by `{a.command}` ({', '.join(a.renders)}) on {cpu} ({os.cpu_count()} cores), epfilt "
+          f"{epfilt.__version__} ({out(['git', 'rev-parse', '--short', 'HEAD'])}), OIDN through pyoidn "
+          f"{importlib.metadata.version('pyoidn')}, numpy {np.__version__}, Python {platform.python_version()}, "
+          f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC. "
+          "`lab/python/oidn_compare.py` defines every measure.\n", file=md)
+    print("**error**: relMSE(output) / relMSE(input) against the reference (below 1: less error than the "
+          "render had); **energy**: the output's total over the input's, less 1; **peaks**: the mean "
+          "luminance of the reference's brightest 0.1% of pixels, output over reference (1: kept at their "
+          "true values; the input's own in its column); **blocks**: the largest relative change of a 32 x 32 "
+          "block's energy against the input. OIDN: colour only, HDR, quality high. epfilt: `filter_file` "
+          "at its defaults (method and guides from the file; the method is named beside each input); "
+          "ep-gauss: the same without the variance, as a render without a variance pass gets.\n", file=md)
+    names = (("oidn", "OIDN"), ("epfilt", "epfilt"), ("ep_gauss", "ep-gauss"),
+             ("epfilt_oidn", "epfilt then OIDN"))
+    formats = {"error": "{:.3f}", "energy": "{:+.3%}", "peaks": "{:.2f}", "blocks": "{:.1%}"}
+    for key, title in (("error", "Error (relMSE over the input's)"), ("energy", "Energy moved"),
+                       ("peaks", "The brightest 0.1%, over the reference's"),
+                       ("blocks", "The most a 32 x 32 block's energy moved")):
+        print(f"## {title}\n", file=md)
+        extra = {"error": "relMSE in", "energy": "input over reference", "peaks": "input",
+                 "blocks": ""}[key]
+        head = ["input"] + ([extra] if extra else []) + [label for _, label in names]
+        print("| " + " | ".join(head) + " |", file=md)
+        print("|" + "---|" * len(head), file=md)
+        for r in rows:
+            lead = {"error": f"{r['input_rel_mse']:.4f}", "energy": f"{r['input_energy_vs_ref']:+.2%}",
+                    "peaks": f"{r['input_peaks']:.2f}", "blocks": None}[key]
+            cells = [r["input"] + (f" ({r['method']})" if key == "error" else "")]
+            cells += [lead] if lead is not None else []
+            cells += [formats[key].format(r[f"{n}_{key}"]) for n, _ in names]
+            print("| " + " | ".join(cells) + " |", file=md)
+        print("", file=md)
+    print("", file=md)
+
+    def summary(n):
+        e = [r[n + "_error"] for r in rows]
+        en = [abs(r[n + "_energy"]) for r in rows]
+        pk = [abs(r[n + "_peaks"] - 1) for r in rows]
+        bl = [r[n + "_blocks"] for r in rows]
+        return (f"error {min(e):.3f} to {max(e):.3f} (geometric mean {np.exp(np.mean(np.log(e))):.3f}); "
+                f"energy moved up to {max(en):.2%}; peaks off by up to {max(pk):.0%}; blocks up to {max(bl):.1%}")
+    print(f"Over {len(rows)} renders:\n", file=md)
+    for n, label in names:
+        print(f"* **{label}**: {summary(n)}.", file=md)
+    text = md.getvalue()
+    with open(os.path.join(a.out, "oidn.md"), "w") as f:
+        f.write(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
