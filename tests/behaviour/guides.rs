@@ -283,6 +283,68 @@ fn a_surface_guide_keeps_a_spread_on_its_side_of_an_edge() {
     assert_eq!(right(&planes(&out)), 0, "with them it stays on the floor");
 }
 
+/// ep-box on a surface one pixel wide (a sliver of other normals down
+/// column 30): the noisy pixel's nearest receivers are mostly off its
+/// surface, so it keeps clear of lights only (`SURFACE_SHARE`) and shares
+/// its excess with its nearest pixels, where keeping to the column (which
+/// has receivers enough for it) would hand it all to pixels up and down the
+/// sliver.
+#[test]
+fn ep_box_on_a_sliver_shares_with_its_nearest_pixels() {
+    let dir = tmpdir();
+    let d = dir.path();
+    let (w, h) = (60, 48);
+    let noisy = (30, 20);
+    // A flat room, and an excess small enough that the column alone has
+    // receivers for it within --max-radius.
+    let px = |x: usize, y: usize| if (x, y) == noisy { 0.56 } else { 0.5 };
+    let input = d.join("in.exr");
+    let f = |n: &str| -> Vec<f32> {
+        (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .map(|(x, y)| match n {
+                "R" | "G" | "B" => px(x, y),
+                "N.X" => f32::from(x == 30),
+                "N.Z" => f32::from(x != 30),
+                "N.Y" => 0.0,
+                _ if (x, y) == noisy => 4.0,
+                _ => 1e-4,
+            })
+            .collect()
+    };
+    let names = [
+        "R",
+        "G",
+        "B",
+        "N.X",
+        "N.Y",
+        "N.Z",
+        "variance.R",
+        "variance.G",
+        "variance.B",
+    ];
+    let list = names
+        .iter()
+        .map(|&n| (n, exr::prelude::FlatSamples::F32(f(n))))
+        .collect();
+    write_flat(&input, (w, h), list);
+    let out = d.join("out.exr");
+    let r = filter(&[s(&input), s(&out), "--spp", "16"], d);
+    assert_eq!(r["method"], "ep-box", "{r}");
+    assert!(r["guides"].as_str().unwrap().contains("normal"), "{r}");
+    let (i, o) = (planes(&input), planes(&out));
+    let gained = |on: bool| -> f64 {
+        (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .filter(|&(x, y)| (x == 30) == on && (x, y) != noisy)
+            .map(|(x, y)| f64::from(o["G"][y * w + x] - i["G"][y * w + x]))
+            .sum()
+    };
+    let (on, off) = (gained(true), gained(false));
+    // Most of it lands off the sliver (keeping to it would leave none there).
+    assert!(off > on, "on the sliver {on}, off it {off}");
+}
+
 #[test]
 fn guides_keep_the_output_across_tiles_strips_threads_and_bands() {
     let dir = tmpdir();

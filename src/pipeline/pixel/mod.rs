@@ -636,6 +636,53 @@ mod tests {
         }
     }
 
+    /// A firefly on a surface one pixel wide (a sliver of other normals
+    /// down column 22): its kernel is mostly off its surface, so it keeps
+    /// clear of lights only ([`SURFACE_SHARE`]) and most of its excess
+    /// lands off the sliver, where keeping to its surface (which could take
+    /// it) would pile all of it on the column.
+    #[test]
+    fn a_firefly_on_a_sliver_spreads_clear_of_lights_only() {
+        let (w, h) = (48, 40);
+        let mut img = ground(w, h);
+        // Faint enough that the column alone could take it within the cap.
+        set(&mut img, w, (22, 20), [6.0, 6.0, 6.0]);
+        let mut rows = Vec::new();
+        for y in 0..h {
+            rows.extend_from_slice(&img[y * 3 * w..(y + 1) * 3 * w]);
+            for c in 0..3 {
+                for x in 0..w {
+                    let n = if x == 22 {
+                        [1.0, 0.0, 0.0]
+                    } else {
+                        [0.0, 0.0, 1.0]
+                    };
+                    rows.push(n[c]);
+                }
+            }
+        }
+        let mut job = layout(w, h, &["R", "G", "B"], &RGB);
+        job.aux = ["N.X", "N.Y", "N.Z"].map(String::from).to_vec();
+        job.guides.normal = Some([3, 4, 5]);
+        let p = FilterParams::new(Method::EpGauss, 1);
+        let (out, stats) = filter_in_memory(rows, &job, &p, &PipelineConfig::default()).unwrap();
+        assert_eq!(stats.ep_gauss().unwrap().spread, 1);
+        let moved = |on: bool| -> f64 {
+            (0..h)
+                .flat_map(|y| (0..w).map(move |x| (x, y)))
+                .filter(|&(x, y)| (x == 22) == on && (x, y) != (22, 20))
+                .map(|(x, y)| (out[(y * 3 + 1) * w + x] - img[(y * 3 + 1) * w + x]) as f64)
+                .sum()
+        };
+        let (on, off) = (moved(true), moved(false));
+        // Most of it lands off the sliver (keeping to it would leave none
+        // there).
+        assert!(off > on, "on the sliver {on}, off it {off}");
+        for e in stats.ledger.iter().map(|l| l.rel_error) {
+            assert!(e.abs() < 1e-12, "{e}");
+        }
+    }
+
     #[test]
     fn a_surface_guide_keeps_a_spread_on_its_side_of_an_edge() {
         let (w, h) = (48, 40);
