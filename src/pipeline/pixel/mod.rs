@@ -535,6 +535,28 @@ mod tests {
         )
     }
 
+    /// `img` (R, G, B planar rows) with a normal pass `normal(x)` beside it,
+    /// run through ep-gauss at S = 1 with the normals as guides: the output
+    /// and the run's figures.
+    fn filtered_with_normals(
+        img: &[f32],
+        (w, h): (usize, usize),
+        normal: impl Fn(usize) -> [f32; 3],
+    ) -> (Vec<f32>, crate::pipeline::RunStats) {
+        let mut rows = Vec::new();
+        for y in 0..h {
+            rows.extend_from_slice(&img[y * 3 * w..(y + 1) * 3 * w]);
+            for c in 0..3 {
+                rows.extend((0..w).map(|x| normal(x)[c]));
+            }
+        }
+        let mut job = layout(w, h, &["R", "G", "B"], &RGB);
+        job.aux = ["N.X", "N.Y", "N.Z"].map(String::from).to_vec();
+        job.guides.normal = Some([3, 4, 5]);
+        let p = FilterParams::new(Method::EpGauss, 1);
+        filter_in_memory(rows, &job, &p, &PipelineConfig::default()).unwrap()
+    }
+
     #[test]
     fn the_halo_is_the_settings_halo() {
         for (mr, cut) in [(16.0, 3.0), (0.6, 3.0), (40.0, 6.0), (2.0, 1.0)] {
@@ -647,25 +669,13 @@ mod tests {
         let mut img = ground(w, h);
         // Faint enough that the column alone could take it within the cap.
         set(&mut img, w, (22, 20), [6.0, 6.0, 6.0]);
-        let mut rows = Vec::new();
-        for y in 0..h {
-            rows.extend_from_slice(&img[y * 3 * w..(y + 1) * 3 * w]);
-            for c in 0..3 {
-                for x in 0..w {
-                    let n = if x == 22 {
-                        [1.0, 0.0, 0.0]
-                    } else {
-                        [0.0, 0.0, 1.0]
-                    };
-                    rows.push(n[c]);
-                }
+        let (out, stats) = filtered_with_normals(&img, (w, h), |x| {
+            if x == 22 {
+                [1.0, 0.0, 0.0]
+            } else {
+                [0.0, 0.0, 1.0]
             }
-        }
-        let mut job = layout(w, h, &["R", "G", "B"], &RGB);
-        job.aux = ["N.X", "N.Y", "N.Z"].map(String::from).to_vec();
-        job.guides.normal = Some([3, 4, 5]);
-        let p = FilterParams::new(Method::EpGauss, 1);
-        let (out, stats) = filter_in_memory(rows, &job, &p, &PipelineConfig::default()).unwrap();
+        });
         assert_eq!(stats.ep_gauss().unwrap().spread, 1);
         let moved = |on: bool| -> f64 {
             (0..h)
@@ -689,25 +699,13 @@ mod tests {
         let mut img = ground(w, h);
         set(&mut img, w, (22, 20), [50.0, 50.0, 50.0]);
         // Normals: up on the left of x = 24, facing the camera from there.
-        let mut rows = Vec::new();
-        for y in 0..h {
-            rows.extend_from_slice(&img[y * 3 * w..(y + 1) * 3 * w]);
-            for c in 0..3 {
-                for x in 0..w {
-                    let n = if x < 24 {
-                        [0.0, 1.0, 0.0]
-                    } else {
-                        [0.0, 0.0, 1.0]
-                    };
-                    rows.push(n[c]);
-                }
+        let (out, stats) = filtered_with_normals(&img, (w, h), |x| {
+            if x < 24 {
+                [0.0, 1.0, 0.0]
+            } else {
+                [0.0, 0.0, 1.0]
             }
-        }
-        let mut job = layout(w, h, &["R", "G", "B"], &RGB);
-        job.aux = ["N.X", "N.Y", "N.Z"].map(String::from).to_vec();
-        job.guides.normal = Some([3, 4, 5]);
-        let p = FilterParams::new(Method::EpGauss, 1);
-        let (out, stats) = filter_in_memory(rows, &job, &p, &PipelineConfig::default()).unwrap();
+        });
         assert_eq!(stats.ep_gauss().unwrap().spread, 1);
         for y in 0..h {
             for x in 24..w {
