@@ -91,9 +91,10 @@ pub fn read_ahead_blocks(block_bytes: u64) -> u64 {
 pub const WINDOW_MIN_BLOCKS: u64 = 8;
 
 /// The job's estimate ([`estimate_bytes`]) within which the reader's window
-/// grows to [`WINDOW_MIN_BLOCKS`]: the 256 MiB a 32769-wide job should
-/// stay within, less what many threads hold beyond the estimate (blocks each
-/// worker decodes or compresses, the allocator's arenas). The light methods
+/// grows to [`WINDOW_MIN_BLOCKS`]: what a job of the widest inputs should
+/// stay within on a small server, less what many threads hold beyond the
+/// estimate (blocks each worker decodes or compresses, the allocator's
+/// arenas). The light methods
 /// fit it on the widest inputs; ep-gauss, whose windows of rows hold the
 /// most and for which decoding is a smaller share of the work, does not.
 pub const WINDOW_BUDGET: u64 = 208 << 20;
