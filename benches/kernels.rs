@@ -58,7 +58,7 @@ fn search(c: &mut Criterion) {
         })
     });
     // The same with wide widths on the coarse grid (the default).
-    let ep = ep.with_coarse(epfilt::filter::DEFAULT_COARSE_FROM);
+    let ep = ep.with_coarse(FilterParams::new(Method::EpGauss, 3).coarse_from);
     g.bench_function("dense 1e2..1e5 coarse", |b| {
         let mut fold = Folded::default();
         b.iter(|| {

@@ -19,8 +19,9 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::filter::ep_box::{self, EpBoxParams, StatsLayout, VarianceKind};
+use crate::filter::ep_box::{self, StatsLayout, VarianceKind};
 use crate::filter::luminance::Luminance;
+use crate::filter::ValidParams;
 use crate::io::{find_stats, ExrInput, PartSelect, StatsRequest};
 use crate::pipeline::ledger::CompensatedSum;
 use crate::pipeline::Source;
@@ -125,16 +126,16 @@ impl Plan {
     }
 }
 
-/// Plan from the pilot at `path`.
+/// Plan from the pilot at `path` with ep-box's settings in `params`.
 pub fn plan_file(
     path: &Path,
     part: Option<&PartSelect>,
     layer: Option<&str>,
     req: &StatsRequest,
-    params: &EpBoxParams,
+    params: &ValidParams,
     lmax: Option<f64>,
 ) -> Result<Plan> {
-    params.validate()?;
+    let params = &params.ep_box;
     let mut input = ExrInput::open_layer(path, part, layer)?;
     let found = find_stats(path, input.header(), req)?;
     let layout = found.attach(&mut input, path)?;

@@ -3,8 +3,9 @@
 //! the GIL while it works; Ctrl-C stops it (no output is left); the
 //! library's errors become `epfilt.Error` subclasses, with its message.
 //!
-//! The settings are the command line's options, named with underscores, and
-//! parsed by the same parser ([`FilterOptions::from_settings`]).
+//! The settings are the command line's options, named with underscores:
+//! keyword arguments become the library's named settings, which
+//! [`FilterOptions::from_settings`] types, defaults and checks for both.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};

@@ -64,33 +64,6 @@ pub struct ArrayOutput {
     pub report: Report,
 }
 
-/// Options that name files or their layout, which an array has none of.
-fn file_only(o: &FilterOptions) -> Vec<&'static str> {
-    let set = [
-        ("part", o.part.is_some()),
-        ("layer", o.layer.is_some()),
-        ("view", o.view.is_some()),
-        ("edge", o.edge.is_some()),
-        ("channel_rule", !o.channel_rule.is_empty()),
-        ("format", o.format.is_some()),
-        ("compression", o.compression.is_some()),
-        ("allow_lossy", o.allow_lossy),
-        ("frames", o.frames.is_some()),
-        ("task_index", o.task_index.is_some()),
-        ("task_count", o.task_count.is_some()),
-        ("skip_existing", o.skip_existing),
-        ("fail_fast", o.fail_fast),
-        ("keep_going", o.keep_going),
-        ("band", o.band.is_some()),
-        ("band_index", o.band_index.is_some()),
-        ("band_count", o.band_count.is_some()),
-        ("variance_channel", o.stats.variance_channel.is_some()),
-        ("spp_channel", o.stats.spp_channel.is_some()),
-        ("max_memory", o.max_memory.is_some()),
-    ];
-    set.iter().filter(|(_, on)| *on).map(|(n, _)| *n).collect()
-}
-
 /// Each channel's luminance weight, as a file's reader gives it (Rec. 709
 /// primaries, no chromaticities attribute); names other than the beauty's
 /// are refused.
@@ -117,7 +90,7 @@ pub fn filter_array(
     given: &[String],
     cancel: Option<Arc<AtomicBool>>,
 ) -> Result<ArrayOutput> {
-    let files = file_only(opts);
+    let files = opts.files_only_given();
     if !files.is_empty() {
         return Err(Error::Config(format!(
             "{} appl{} to files: use filter_file",
@@ -158,7 +131,7 @@ pub fn filter_array(
     let mut layout = StripLayout::new(grid, input.channels.to_vec(), luminance);
     let found = stats_layout(input, opts, &params, &mut layout, &mut warnings)?;
     let planar = planar_rows(input, found.as_ref().and(input.stats));
-    let precision = opts.precision()?.unwrap_or(if input.half {
+    let precision = opts.precision().unwrap_or(if input.half {
         Precision::F16
     } else {
         Precision::F32
@@ -231,10 +204,7 @@ fn stats_layout(
             st.variance.len()
         )));
     }
-    let kind = match &opts.stats.variance_kind {
-        Some(k) => VarianceKind::parse(k)?,
-        None => VarianceKind::Sample,
-    };
+    let kind = opts.variance_kind.unwrap_or(VarianceKind::Sample);
     let nch = layout.channels.len();
     let names: Vec<String> = match nv {
         1 => vec!["variance".into()],
@@ -244,7 +214,7 @@ fn stats_layout(
             .collect(),
     };
     layout.aux = names.clone();
-    let spp = match (st.spp, opts.stats.spp) {
+    let spp = match (st.spp, opts.spp) {
         (Some(counts), _) => {
             if counts.len() != pixels {
                 return Err(Error::Config(format!(

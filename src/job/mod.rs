@@ -9,7 +9,7 @@ mod run;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-pub use options::{FilterOptions, Setting, StatsOptions};
+pub use options::{FilterOptions, PixelType, Setting};
 pub use plan::FilterPlan;
 pub use run::Outcome;
 

@@ -1,20 +1,24 @@
-//! The filter's settings as one value: what `epfilt filter`'s options say
-//! (the command line flattens [`FilterOptions`] into its own arguments) and
-//! what the Python bindings' keyword arguments say ([`FilterOptions::from_settings`],
-//! through the same parser: the same names, defaults, checks and messages),
-//! turned into a [`FilterJob`] or the [`FilterParams`] of an in-memory run.
+//! The filter's settings as one value, without a command-line parser:
+//! [`FilterOptions`], typed, built from named settings
+//! ([`FilterOptions::from_settings`]: what the command line and the Python
+//! bindings' keyword arguments both give) and turned into a [`FilterJob`]
+//! or the [`FilterParams`] of an in-memory run.
+//!
+//! [`OPTIONS`] defines every option that is not a method's setting (those
+//! are [`crate::filter::settings::KNOBS`]): its name, help, heading, default
+//! and parser. The command line builds its arguments from both tables.
 
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
-use clap::parser::ValueSource;
-use clap::{ArgMatches, Args, FromArgMatches};
+use exr::prelude::Compression;
 
 use crate::error::{Error, Result};
 use crate::filter::channels::RuleOverride;
-use crate::filter::ep_box::{EpBoxParams, Guard, VarianceKind};
-use crate::filter::{FilterParams, Method, Quality};
+use crate::filter::ep_box::{Guard, VarianceKind};
+use crate::filter::settings::{self, Knob};
+use crate::filter::{FilterParams, Method};
 use crate::io::{parse_compression, Format, OutputSettings, PartSelect, StatsRequest, ViewSelect};
 use crate::pipeline::{NonFinite, PipelineConfig, Precision};
 use crate::sequence::{parse_frames, FramePattern, SequenceJob, Share, Task};
@@ -22,373 +26,7 @@ use crate::sequence::{parse_frames, FramePattern, SequenceJob, Share, Task};
 use super::{Edge, FilterJob, Undecided};
 use crate::filter::guides::SurfaceRule;
 
-/// Every setting of `epfilt filter` but its files and what it prints: the
-/// input and its channels, the method and its knobs, the output's format,
-/// the farm's share and the performance knobs (none of which change the
-/// result).
-#[derive(Args, Clone, Debug)]
-pub struct FilterOptions {
-    // ---- Input ----
-    /// Input samples per output pixel along each axis (1..=8): a super-sampled
-    /// render is reduced S times [default: the file's epfiltSupersample
-    /// attribute, else 1: an image is never reduced unless asked].
-    #[arg(long, short = 's', help_heading = "Input")]
-    pub supersample: Option<usize>,
-    /// Part of a multi-part input, by name or index, or `all` (every part
-    /// filtered into one multi-part output). With one part, at S = 1 the
-    /// others are copied bit for bit; at S > 1 they are left out, with a warning.
-    #[arg(long, help_heading = "Input")]
-    pub part: Option<String>,
-    /// A size that is not a multiple of S: crop drops the last partial output
-    /// column and row; pad keeps them as pixels of fewer samples, each kernel
-    /// normalised over what exists, energy exact [default: refuse, naming the options].
-    #[arg(long, help_heading = "Input")]
-    pub edge: Option<String>,
-    /// NaN and infinite input samples: error (refuse, naming the first) or zero (count them).
-    #[arg(long, default_value = "error", help_heading = "Input")]
-    pub nonfinite: String,
-
-    // ---- Method ----
-    /// ep-gauss (§5.2), ep-box (§5.1, pixels with variance), gauss (linear
-    /// foil), box (S x S average), or the energy-losing foils clamp, median
-    /// and alpha-trim [default: from the file: ep-box where it holds
-    /// per-pixel variance at S = 1, else ep-gauss; `epfilt info` says which].
-    #[arg(long, help_heading = "Method")]
-    pub method: Option<String>,
-    /// Base Gaussian radius in output pixels (weight exp(-(d/r)^2)): ep-gauss,
-    /// gauss, clamp [default: 0.6; ep-gauss: its --quality's].
-    #[arg(long, help_heading = "Method")]
-    pub radius: Option<f64>,
-    /// Largest Gaussian radius a noisy sample may get, in output pixels
-    /// (ep-box: the largest spread radius, in pixels) [default: ep-gauss: its
-    /// --quality's; ep-box: 8].
-    #[arg(long, help_heading = "Method")]
-    pub max_radius: Option<f64>,
-    /// Kernel cut-off in radii [default: 3; ep-gauss: its --quality's].
-    #[arg(long, help_heading = "Method")]
-    pub cutoff: Option<f64>,
-    /// What keeps real features from being spread. ep-box: all (default:
-    /// carriers + range + stderr), carriers, range, stderr, both (range +
-    /// stderr), none (§5.1 as written). ep-gauss: none (§5.2 as written)
-    /// turns off its --support rule (at S = 1: its feature rules).
-    #[arg(long, default_value = "all", help_heading = "Method")]
-    pub guard: String,
-    /// clamp: the largest sample value kept, per channel (then the base Gaussian).
-    #[arg(long, default_value_t = 10.0, help_heading = "Method")]
-    pub clamp: f64,
-    /// alpha-trim: the fraction of the sorted samples trimmed from each end (0..0.5).
-    #[arg(long, default_value_t = 0.25, help_heading = "Method")]
-    pub alpha: f64,
-
-    // ---- ep-gauss ----
-    /// A point on ep-gauss's speed/accuracy front (docs/pareto.md): a set of
-    /// the knob values below, which each given option overrides.
-    #[arg(long, value_name = "fast|default|best", help_heading = "ep-gauss",
-          long_help = quality_help())]
-    pub quality: Option<String>,
-    /// Relation 14 tolerance, at this S [default: --quality's, given at S = 3
-    /// and scaled as 0.25 at 3 is to 0.15 at 4: t*(3/S)^1.776]. At S = 1: the
-    /// most of its background a spread adds to any pixel [default: 0.25].
-    #[arg(long, help_heading = "ep-gauss")]
-    pub tolerance: Option<f64>,
-    /// A noisy sample with at least this many noisy neighbouring
-    /// super-samples (within --support-ratio of it) is a feature and keeps the
-    /// base kernel (S > 1; the --support* knobs are S > 1's). 0 = the paper's
-    /// rule [default: --quality's].
-    #[arg(long, help_heading = "ep-gauss")]
-    pub support: Option<usize>,
-    /// Neighbours support a sample when within this factor of its luminance
-    /// [default: --quality's].
-    #[arg(long, help_heading = "ep-gauss")]
-    pub support_ratio: Option<f64>,
-    /// A sample with fewer than --support supporting neighbours is kept when
-    /// its group (the samples joined to it through supporting neighbours,
-    /// within 2 super-samples) holds at least this many: the runs of hits
-    /// along a thin line or a rim (0 = off) [default: --quality's].
-    #[arg(long, help_heading = "ep-gauss")]
-    pub support_group: Option<usize>,
-    /// A sample with one supporting neighbour (fewer than --support) is kept
-    /// when at most this many super-samples within 2 of it fail the test: a
-    /// compact pair, a bulb a fraction of a pixel wide (0 = off) [default:
-    /// --quality's].
-    #[arg(long, help_heading = "ep-gauss")]
-    pub support_compact: Option<usize>,
-    /// ... and when it is at least this many times the median box luminance
-    /// of the eight pixels about its own: a bulb is hundreds of times its
-    /// room, two fireflies that touch rarely are (0 = any) [default:
-    /// --quality's].
-    #[arg(long, help_heading = "ep-gauss")]
-    pub support_over: Option<f64>,
-    /// A bright sample with fewer than --support noisy neighbours is kept too
-    /// when at least this many super-samples within 2 of it are comparable:
-    /// above its pixel's average and within --support-level of it (grain
-    /// inside a glossy highlight, not a firefly on a dark ground; 0 = off)
-    /// [default: --quality's].
-    #[arg(long, help_heading = "ep-gauss")]
-    pub support_region: Option<usize>,
-    /// See --support-region: comparable is within this factor of the sample,
-    /// which is itself at most this many times its pixel's average
-    /// [default: --quality's].
-    #[arg(long, help_heading = "ep-gauss")]
-    pub support_level: Option<f64>,
-    /// Relative step of the ladder of widths the search picks from (its
-    /// precision) [default: --quality's].
-    #[arg(long, help_heading = "ep-gauss")]
-    pub width_step: Option<f64>,
-    /// Spread widths of this radius (output pixels) and more on a 2x coarser
-    /// grid, and from twice it on a 4x coarser grid, brought back with a tent
-    /// per halving: a quarter (a sixteenth) of the taps, energy exact, no
-    /// pixel given more than the full-resolution kernel would; 0 = off.
-    #[arg(long, default_value_t = crate::filter::DEFAULT_COARSE_FROM, help_heading = "ep-gauss")]
-    pub coarse_from: f64,
-    /// Check widths of this radius (output pixels) and more against a lower
-    /// bound of their average read from a summed-area table, a few entries instead of
-    /// every row of the average's disc: conservative (a width that passes on
-    /// the bound passes on the average), at most about a rung wider; 0 =
-    /// the exact average always [default: --quality's].
-    #[arg(long, help_heading = "ep-gauss")]
-    pub bound_from: Option<f64>,
-
-    // ---- ep-box ----
-    // ep-box's statistics and noise test (shared with `epfilt plan`).
-    #[allow(missing_docs)]
-    #[command(flatten, next_help_heading = "ep-box")]
-    pub stats: StatsOptions,
-    /// The visibility threshold L_tvis [default: mean luminance / N_MID, Eq. 9].
-    #[arg(long, help_heading = "ep-box")]
-    pub ltvis: Option<f64>,
-    /// Most passes over clusters of noisy pixels.
-    #[arg(long, default_value_t = 8, help_heading = "ep-box")]
-    pub passes: usize,
-    /// Carriers guard: a pixel whose mean rests on at least this many samples
-    /// (n Y^2 / (var + Y^2)) is not noise...
-    #[arg(long, default_value_t = 16.0, help_heading = "ep-box")]
-    pub carriers: f64,
-    /// ... nor one whose mean rests on at least this fraction of its samples
-    /// and whose relative standard error is at most --carriers-rse.
-    #[arg(long, default_value_t = 0.2, help_heading = "ep-box")]
-    pub carriers_fraction: f64,
-    /// See --carriers-fraction.
-    #[arg(long, default_value_t = 0.5, help_heading = "ep-box")]
-    pub carriers_rse: f64,
-    /// Confidence of the stderr guard's bound on the excess noise can explain.
-    #[arg(long, default_value_t = 0.99, help_heading = "ep-box")]
-    pub guard_confidence: f64,
-
-    // ---- Guides ----
-    /// Guide passes: auto (every one found by the names renderers give them:
-    /// emission, albedo, normal, depth; README "With guide passes"), none, or a
-    /// comma list of those that must be found. The emission (the directly
-    /// visible light) is set aside before any test and added back after, so
-    /// a lamp is never spread; albedo, normal and depth keep a spread on its
-    /// source's surface (see --guide-normal).
-    #[arg(long, default_value = "auto", help_heading = "Guides")]
-    pub guides: String,
-    /// KIND=NAME: the layer (depth: the channel) of a guide, e.g.
-    /// emission=ViewLayer.Emit, normal=N, depth=Z (repeatable).
-    #[arg(long = "guide", value_name = "KIND=NAME", help_heading = "Guides")]
-    pub guide: Vec<String>,
-    /// Surface guides: a spread reaches a pixel only where the normals'
-    /// angle is at most this many degrees, ...
-    #[arg(long, default_value_t = 30.0, help_heading = "Guides")]
-    pub guide_normal: f64,
-    /// ... the albedos differ by at most this in every channel, ...
-    #[arg(long, default_value_t = 0.1, help_heading = "Guides")]
-    pub guide_albedo: f64,
-    /// ... and the depths by at most this fraction per pixel of distance;
-    /// each spread's weights are normalised over the pixels it reaches. A
-    /// pixel with less than half its nearest pixels on its surface (an edge,
-    /// a sliver), or too few there to take its excess, keeps clear of lights
-    /// only.
-    #[arg(long, default_value_t = 0.05, help_heading = "Guides")]
-    pub guide_depth: f64,
-
-    // ---- Channels ----
-    /// Layer whose R,G,B (or Y) channels are filtered, e.g. ViewLayer.Combined
-    /// [default: the unlayered channels, else a beauty-named layer, else the only one].
-    #[arg(long, help_heading = "Channels")]
-    pub layer: Option<String>,
-    /// A multi-view (stereo) file: the view to filter, or all (each view
-    /// filtered as an image of its own, into one output) [default: the first
-    /// view; the others are left out, with a warning].
-    #[arg(long, help_heading = "Channels")]
-    pub view: Option<String>,
-    /// What a channel beside the beauty gets, PATTERN=RULE (glob on the full name; repeatable, the
-    /// last match wins): additive (spread with the beauty's kernels: light AOVs that sum to it),
-    /// average (the base filter; copied at S = 1: depth, normals, albedo), nearest (the centre
-    /// sample: ids, masks), drop [default: by name; `epfilt info` shows each channel's rule].
-    #[arg(
-        long = "channel-rule",
-        value_name = "PATTERN=RULE",
-        help_heading = "Channels"
-    )]
-    pub channel_rule: Vec<String>,
-
-    // ---- Output ----
-    /// The output's format where its name does not say (- or a name without
-    /// an image extension): exr or hdr [default for -: the input's].
-    #[arg(long, help_heading = "Output")]
-    pub format: Option<String>,
-    /// Output compression (none rle zips zip piz pxr24 b44 b44a dwaa dwab) [default: as input, but zip
-    /// where the input's is lossy].
-    #[arg(long, help_heading = "Output")]
-    pub compression: Option<String>,
-    /// Accept a lossy output compression (dwaa, dwab; b44, b44a for f16; pxr24 for f32): the energy on
-    /// disk is then measured by decoding the file, and reported.
-    #[arg(long, help_heading = "Output")]
-    pub allow_lossy: bool,
-    /// Output sample type: same (each channel its input type: f16 stays f16,
-    /// the others f32), f32 or f16 for all (f16 refuses values it cannot hold).
-    #[arg(long, default_value = "same", help_heading = "Output")]
-    pub pixel_type: String,
-
-    // ---- Farm ----
-    /// Sequence: the frames to filter, e.g. 1-240, 1-100x2, 3,4,10-20x5
-    /// [default: the input frames on disk].
-    #[arg(long, help_heading = "Farm")]
-    pub frames: Option<String>,
-    /// Sequence: this task's 0-based index; it filters the index-th of
-    /// --task-count contiguous chunks of the frames [default: from the
-    /// environment: SLURM_ARRAY_TASK_ID, JOB_COMPLETION_INDEX, AWS_BATCH_JOB_ARRAY_INDEX].
-    #[arg(long, help_heading = "Farm")]
-    pub task_index: Option<usize>,
-    /// Sequence: how many tasks share the frames [default: SLURM_ARRAY_TASK_COUNT,
-    /// AWS_BATCH_JOB_ARRAY_SIZE; needed for Kubernetes Indexed Jobs].
-    #[arg(long, help_heading = "Farm")]
-    pub task_count: Option<usize>,
-    /// Leave outputs that are already complete outputs of their input and
-    /// these settings (a retried farm task redoes only what is missing or
-    /// unfinished; anything else at an output's name is redone, saying why).
-    #[arg(long, help_heading = "Farm")]
-    pub skip_existing: bool,
-    /// Sequence: stop at the first failed frame.
-    #[arg(long, conflicts_with = "keep_going", help_heading = "Farm")]
-    pub fail_fast: bool,
-    /// Sequence: go on past a failed frame and exit 1 at the end (the default).
-    #[arg(long, help_heading = "Farm")]
-    pub keep_going: bool,
-    /// Filter only band K of N of the output rows (K from 1: 3/8 is the
-    /// third of eight), reading the input rows they need; `epfilt merge` puts
-    /// the bands together, identical to one run. `env`: K and N from the
-    /// array job's environment (as --task-index). A sequence's band files are
-    /// named NAME.bandKofN.exr, never a frame's name.
-    #[arg(long, help_heading = "Farm")]
-    pub band: Option<String>,
-    /// The band's 0-based index, as --task-index counts (with --band-count).
-    #[arg(long, help_heading = "Farm")]
-    pub band_index: Option<usize>,
-    /// How many bands; without --band-index, the index comes from the array
-    /// job's environment (SLURM_ARRAY_TASK_ID, ...).
-    #[arg(long, help_heading = "Farm")]
-    pub band_count: Option<usize>,
-
-    // ---- Performance ----
-    /// Worker threads, 0 = one per core (does not change the result; more
-    /// than the machine's cores are capped, with a warning). From 2, as many
-    /// again decode and compress blocks, beside the filter's: under a CPU
-    /// quota (Slurm, cgroups, taskset) they share its N cores; on idle cores
-    /// the run may use up to about 1.5 N.
-    #[arg(
-        long,
-        default_value_t = 0,
-        env = "EPFILT_THREADS",
-        help_heading = "Performance"
-    )]
-    pub threads: usize,
-    /// Run `--threads` even where they are more than this machine's cores
-    /// (slower: to measure memory at a core count the machine lacks).
-    #[arg(long, help_heading = "Performance")]
-    pub oversubscribe: bool,
-    /// Refuse jobs estimated to need more memory than this, in MiB [default: half the machine's memory].
-    #[arg(long, env = "EPFILT_MAX_MEMORY", help_heading = "Performance")]
-    pub max_memory: Option<u64>,
-    /// Accumulator tile width in output pixels (does not change the result).
-    #[arg(long, default_value_t = 256, help_heading = "Performance")]
-    pub tile: usize,
-    /// Input rows per strip, 0 = automatic (from the input's width; at least 6 pixel rows, 16
-    /// where they fit; does not change the result).
-    #[arg(long, default_value_t = 0, help_heading = "Performance")]
-    pub strip_rows: usize,
-}
-
-/// Statistics and noise test of ep-box, shared by `filter` and `plan`.
-#[derive(Args, Clone, Debug)]
-pub struct StatsOptions {
-    /// Variance channel (luminance) or layer with .R/.G/.B [default: found by
-    /// name] (ep-box).
-    #[arg(long)]
-    pub variance_channel: Option<String>,
-    /// What the variance holds: sample (of single samples), mean (of the
-    /// pixel mean) or moment (E[Y^2]) [default: guessed from the name].
-    #[arg(long)]
-    pub variance_kind: Option<String>,
-    /// Samples per pixel [default: the header's spp/samples attribute].
-    #[arg(long)]
-    pub spp: Option<u32>,
-    /// Channel holding each pixel's sample count.
-    #[arg(long)]
-    pub spp_channel: Option<String>,
-    /// Allowed interval ±D, in units of L_tvis.
-    #[arg(long, default_value_t = 5.0)]
-    pub d: f64,
-    /// N_MID, the display level the mean luminance maps to (Eq. 9).
-    #[arg(long, default_value_t = 128.0)]
-    pub nmid: f64,
-    /// Confidence of the noise test (0.8, 80 or 80%).
-    #[arg(long, default_value = "80%")]
-    pub confidence: String,
-}
-
-/// `--quality`'s long help: every preset's knob values.
-fn quality_help() -> String {
-    let mut s = String::from(
-        "A point on ep-gauss's speed/accuracy front, chosen on real renders \
-         (scripts/eval-renders --sweep, docs/pareto.md): a set of knob values, which each \
-         option given overrides. The report records the preset and the values used.",
-    );
-    for q in Quality::ALL {
-        s.push_str(&format!("\n  {:<8} {}", q.name(), q.describe()));
-    }
-    s
-}
-
-/// The ids of the options that decide a method's settings (the ones a
-/// method may ignore, and warned about when it does), as clap names them.
-pub const METHOD_OPTIONS: &[&str] = &[
-    "quality",
-    "support_group",
-    "support_compact",
-    "support_over",
-    "support_region",
-    "support_level",
-    "radius",
-    "max_radius",
-    "cutoff",
-    "guard",
-    "clamp",
-    "alpha",
-    "tolerance",
-    "support",
-    "support_ratio",
-    "width_step",
-    "coarse_from",
-    "bound_from",
-    "variance_channel",
-    "variance_kind",
-    "spp",
-    "spp_channel",
-    "d",
-    "nmid",
-    "confidence",
-    "ltvis",
-    "passes",
-    "carriers",
-    "carriers_fraction",
-    "carriers_rse",
-    "guard_confidence",
-];
-
-/// One keyword setting ([`FilterOptions::from_settings`]).
+/// One named setting, as the command line or a keyword argument gives it.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Setting {
     /// A switch (`allow_lossy=True`); false leaves it off.
@@ -399,42 +37,407 @@ pub enum Setting {
     List(Vec<String>),
 }
 
-impl StatsOptions {
-    /// Where ep-box's statistics are, as the options name them.
-    pub fn request(&self) -> Result<StatsRequest> {
-        Ok(StatsRequest {
-            variance_channel: self.variance_channel.clone(),
-            kind: self
-                .variance_kind
-                .as_deref()
-                .map(VarianceKind::parse)
-                .transpose()?,
-            spp: self.spp,
-            spp_channel: self.spp_channel.clone(),
-        })
+/// How an option takes its value.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    /// A switch.
+    Flag,
+    /// One value (the last given wins).
+    Value,
+    /// Repeatable: every value given, in order.
+    List,
+}
+
+/// One option of [`OPTIONS`].
+#[derive(Debug)]
+pub struct OptionDef {
+    /// The field's name; the option is `--` and this with `-` for `_`.
+    pub name: &'static str,
+    /// A one-letter form (`-s`).
+    pub short: Option<char>,
+    /// The help heading.
+    pub heading: &'static str,
+    /// The help text (one paragraph).
+    help: &'static str,
+    /// What the option's value is, for `--help` (empty: its name).
+    pub value_name: &'static str,
+    /// How it takes its value.
+    pub kind: Kind,
+    /// The value it has when not given.
+    pub default: Option<&'static str>,
+    /// The environment variable read when it is not given.
+    pub env: Option<&'static str>,
+    /// It names files or their layout: an in-memory array has none.
+    pub files_only: bool,
+    /// Read only by ep-box (warned about when given to another method).
+    pub ep_box_only: bool,
+}
+
+impl OptionDef {
+    /// The option's long name (`strip-rows`).
+    pub fn option(&self) -> String {
+        self.name.replace('_', "-")
     }
 
-    /// ep-box's noise test (the confidence as 0.8, 80 or 80%).
-    pub fn ep_box_params(&self) -> Result<EpBoxParams> {
-        let c = self.confidence.trim();
-        let (num, pct) = match c.strip_suffix('%') {
-            Some(n) => (n, true),
-            None => (c, false),
-        };
-        let v: f64 = num
-            .trim()
-            .parse()
-            .map_err(|_| Error::Config(format!("--confidence {c:?} is not a number")))?;
-        let confidence = if pct || v > 1.0 { v / 100.0 } else { v };
-        let p = EpBoxParams {
-            d: self.d,
-            nmid: self.nmid,
-            confidence,
-            ..Default::default()
-        };
-        p.validate()?;
-        Ok(p)
+    /// The help text as one paragraph.
+    pub fn help(&self) -> String {
+        one_paragraph(self.help)
     }
+}
+
+/// Doc-comment lines as one paragraph.
+fn one_paragraph(doc: &str) -> String {
+    doc.lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// `raw` as a number for `--option`.
+fn number<T: std::str::FromStr>(option: &str, raw: &str) -> Result<T> {
+    raw.trim().parse().map_err(|_| {
+        Error::Config(format!(
+            "--{} {raw:?} is not a {}",
+            option.replace('_', "-"),
+            if std::any::type_name::<T>().starts_with('f') {
+                "number"
+            } else {
+                "whole number >= 0"
+            }
+        ))
+    })
+}
+
+/// `raw` as it is.
+fn text(_: &str, raw: &str) -> Result<String> {
+    Ok(raw.to_string())
+}
+
+/// What `--pixel-type` asks for.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PixelType {
+    /// Each channel its input's type (f16 stays f16, the others f32).
+    #[default]
+    Same,
+    /// Every channel this type.
+    All(Precision),
+}
+
+impl PixelType {
+    /// `same`, `f32` (`float`) or `f16` (`half`).
+    pub fn parse(s: &str) -> Result<Self> {
+        match s {
+            "same" => Ok(PixelType::Same),
+            "f32" | "float" => Ok(PixelType::All(Precision::F32)),
+            "f16" | "half" => Ok(PixelType::All(Precision::F16)),
+            other => Err(Error::Config(format!(
+                "--pixel-type must be same, f32 or f16, not {other:?}"
+            ))),
+        }
+    }
+}
+
+/// A field an option's one value sets: an `Option` becomes `Some`.
+trait Field {
+    /// What the option's parser gives.
+    type Inner;
+    /// Set the field to `v`.
+    fn put(&mut self, v: Self::Inner);
+}
+
+impl<T> Field for Option<T> {
+    type Inner = T;
+    fn put(&mut self, v: T) {
+        *self = Some(v);
+    }
+}
+
+macro_rules! plain_fields {
+    ($($t:ty),*) => {$(
+        impl Field for $t {
+            type Inner = $t;
+            fn put(&mut self, v: $t) {
+                *self = v;
+            }
+        }
+    )*};
+}
+plain_fields!(usize, f64, String, NonFinite, PixelType);
+
+/// The help headings of [`OPTIONS`] (the method's settings have theirs in
+/// [`settings`]).
+const INPUT: &str = "Input";
+const GUIDES: &str = "Guides";
+const CHANNELS: &str = "Channels";
+const OUTPUT: &str = "Output";
+const FARM: &str = "Farm";
+const PERFORMANCE: &str = "Performance";
+
+/// Defines [`FilterOptions`]'s fields and [`OPTIONS`]: per option, its doc
+/// (the help), name and type, and `{ kind, heading, parse, ... }`: `parse`
+/// is `fn(option, raw) -> Result<T>` (a field of type `Option<T>` is set to
+/// `Some`, a list field gets every value, a flag needs none); `default`,
+/// `env`, `short`, `value_name`, `files_only` and `ep_box_only` as in
+/// [`OptionDef`].
+macro_rules! options {
+    ($(
+        $(#[doc = $doc:literal])*
+        $name:ident: $ty:ty {
+            $kind:ident, $heading:expr $(, parse: $parse:expr)?
+            $(, default: $default:literal)?
+            $(, env: $env:literal)?
+            $(, short: $short:literal)?
+            $(, value_name: $value_name:literal)?
+            $(, files_only: $files_only:literal)?
+            $(, ep_box_only: $ep_box_only:literal)?
+        }
+    )*) => {
+        /// Every setting of `epfilt filter` but its files and what it prints
+        /// ([`OPTIONS`] says what each is), and the method's settings given
+        /// ([`crate::filter::settings::KNOBS`]).
+        #[derive(Clone, Debug, Default)]
+        pub struct FilterOptions {
+            $(
+                $(#[doc = $doc])*
+                pub $name: $ty,
+            )*
+            /// The method's settings given, in the order given (the last of
+            /// one name wins), as the command line spells their values.
+            pub knobs: Vec<(&'static Knob, String)>,
+            /// Every option and setting given, by name.
+            pub given: Vec<&'static str>,
+        }
+
+        /// Every option of `epfilt filter` that is not a method's setting.
+        pub static OPTIONS: &[OptionDef] = &[$(
+            OptionDef {
+                name: stringify!($name),
+                short: options!(@opt $($short)?),
+                heading: $heading,
+                help: concat!($($doc, "\n"),*),
+                value_name: options!(@or "" $(, $value_name)?),
+                kind: Kind::$kind,
+                default: options!(@opt $($default)?),
+                env: options!(@opt $($env)?),
+                files_only: options!(@or false $(, $files_only)?),
+                ep_box_only: options!(@or false $(, $ep_box_only)?),
+            },
+        )*];
+
+        impl FilterOptions {
+            /// Set the option `name` from `value`; `false` when no option
+            /// has that name.
+            fn set_option(&mut self, name: &str, value: Setting) -> Result<bool> {
+                match name {
+                    $(stringify!($name) => {
+                        options!(@set self.$name, $kind, name, value $(, $parse)?);
+                        Ok(true)
+                    })*
+                    _ => Ok(false),
+                }
+            }
+        }
+    };
+    (@opt) => { None };
+    (@opt $v:expr) => { Some($v) };
+    (@or $d:expr) => { $d };
+    (@or $d:expr, $v:expr) => { $v };
+    (@set $field:expr, Flag, $name:ident, $value:ident) => {
+        $field = match $value {
+            Setting::Flag(on) => on,
+            _ => return Err(Error::Config(format!(
+                "setting {} is a switch: give True or False", $name
+            ))),
+        }
+    };
+    (@set $field:expr, Value, $name:ident, $value:ident, $parse:expr) => {
+        match $value {
+            Setting::Value(raw) => Field::put(&mut $field, ($parse)($name, raw.as_str())?),
+            _ => return Err(Error::Config(format!(
+                "setting {} takes a value, not a true/false switch or a list", $name
+            ))),
+        }
+    };
+    (@set $field:expr, List, $name:ident, $value:ident, $parse:expr) => {
+        match $value {
+            Setting::List(raws) => {
+                for raw in raws {
+                    $field.push(($parse)($name, raw.as_str())?);
+                }
+            }
+            Setting::Value(raw) => $field.push(($parse)($name, raw.as_str())?),
+            Setting::Flag(_) => return Err(Error::Config(format!(
+                "setting {} takes values, not a true/false switch", $name
+            ))),
+        }
+    };
+}
+
+options! {
+    /// Input samples per output pixel along each axis (1..=8): a super-sampled
+    /// render is reduced S times [default: the file's epfiltSupersample
+    /// attribute, else 1: an image is never reduced unless asked].
+    supersample: Option<usize> { Value, INPUT, parse: number, short: 's' }
+    /// Part of a multi-part input, by name or index, or `all` (every part
+    /// filtered into one multi-part output). With one part, at S = 1 the
+    /// others are copied bit for bit; at S > 1 they are left out, with a warning.
+    part: Option<PartSelect> {
+        Value, INPUT, parse: |_, s| Ok::<_, Error>(PartSelect::parse(s)), files_only: true
+    }
+    /// A size that is not a multiple of S: crop drops the last partial output
+    /// column and row; pad keeps them as pixels of fewer samples, each kernel
+    /// normalised over what exists, energy exact [default: refuse, naming the options].
+    edge: Option<Edge> { Value, INPUT, parse: |_, s| Edge::parse(s), files_only: true }
+    /// NaN and infinite input samples: error (refuse, naming the first) or zero (count them).
+    nonfinite: NonFinite {
+        Value, INPUT, parse: |_, s| match s {
+            "error" => Ok(NonFinite::Error),
+            "zero" => Ok(NonFinite::Zero),
+            other => Err(Error::Config(format!(
+                "--nonfinite must be error or zero, not {other:?}"
+            ))),
+        },
+        default: "error"
+    }
+    /// ep-gauss (§5.2), ep-box (§5.1, pixels with variance), gauss (linear
+    /// foil), box (S x S average), or the energy-losing foils clamp, median
+    /// and alpha-trim [default: from the file: ep-box where it holds
+    /// per-pixel variance at S = 1, else ep-gauss; `epfilt info` says which].
+    method: Option<Method> { Value, settings::METHOD, parse: |_, s| Method::parse(s) }
+    /// ep-box: the variance channel (luminance) or layer with .R/.G/.B
+    /// [default: found by name].
+    variance_channel: Option<String> {
+        Value, settings::EP_BOX, parse: text, files_only: true, ep_box_only: true
+    }
+    /// ep-box: what the variance holds: sample (of single samples), mean (of
+    /// the pixel mean) or moment (E[Y^2]) [default: guessed from the name].
+    variance_kind: Option<VarianceKind> {
+        Value, settings::EP_BOX, parse: |_, s| VarianceKind::parse(s), ep_box_only: true
+    }
+    /// ep-box: samples per pixel [default: the header's spp/samples attribute].
+    spp: Option<u32> { Value, settings::EP_BOX, parse: number, ep_box_only: true }
+    /// ep-box: the channel holding each pixel's sample count.
+    spp_channel: Option<String> {
+        Value, settings::EP_BOX, parse: text, files_only: true, ep_box_only: true
+    }
+    /// Guide passes: auto (every one found by the names renderers give them:
+    /// emission, albedo, normal, depth; README "With guide passes"), none, or a
+    /// comma list of those that must be found. The emission (the directly
+    /// visible light) is set aside before any test and added back after, so
+    /// a lamp is never spread; albedo, normal and depth keep a spread on its
+    /// source's surface (see --guide-normal).
+    guides: String { Value, GUIDES, parse: text, default: "auto" }
+    /// KIND=NAME: the layer (depth: the channel) of a guide, e.g.
+    /// emission=ViewLayer.Emit, normal=N, depth=Z (repeatable).
+    guide: Vec<String> { List, GUIDES, parse: text, value_name: "KIND=NAME" }
+    /// Surface guides: a spread reaches a pixel only where the normals'
+    /// angle is at most this many degrees, ...
+    guide_normal: f64 { Value, GUIDES, parse: number, default: "30" }
+    /// ... the albedos differ by at most this in every channel, ...
+    guide_albedo: f64 { Value, GUIDES, parse: number, default: "0.1" }
+    /// ... and the depths by at most this fraction per pixel of distance;
+    /// each spread's weights are normalised over the pixels it reaches. A
+    /// pixel with less than half its nearest pixels on its surface (an edge,
+    /// a sliver), or too few there to take its excess, keeps clear of lights
+    /// only.
+    guide_depth: f64 { Value, GUIDES, parse: number, default: "0.05" }
+    /// Layer whose R,G,B (or Y) channels are filtered, e.g. ViewLayer.Combined
+    /// [default: the unlayered channels, else a beauty-named layer, else the only one].
+    layer: Option<String> { Value, CHANNELS, parse: text, files_only: true }
+    /// A multi-view (stereo) file: the view to filter, or all (each view
+    /// filtered as an image of its own, into one output) [default: the first
+    /// view; the others are left out, with a warning].
+    view: Option<ViewSelect> {
+        Value, CHANNELS, parse: |_, s| Ok::<_, Error>(ViewSelect::parse(s)), files_only: true
+    }
+    /// What a channel beside the beauty gets, PATTERN=RULE (glob on the full
+    /// name; repeatable, the last match wins): additive (spread with the
+    /// beauty's kernels: light AOVs that sum to it), average (the base
+    /// filter; copied at S = 1: depth, normals, albedo), nearest (the centre
+    /// sample: ids, masks), drop [default: by name; `epfilt info` shows each
+    /// channel's rule].
+    channel_rule: Vec<RuleOverride> {
+        List, CHANNELS, parse: |_, s| RuleOverride::parse(s), value_name: "PATTERN=RULE",
+        files_only: true
+    }
+    /// The output's format where its name does not say (- or a name without
+    /// an image extension): exr or hdr [default for -: the input's].
+    format: Option<Format> { Value, OUTPUT, parse: |_, s| Format::parse(s), files_only: true }
+    /// Output compression (none rle zips zip piz pxr24 b44 b44a dwaa dwab)
+    /// [default: as input, but zip where the input's is lossy].
+    compression: Option<Compression> {
+        Value, OUTPUT, parse: |_, c| parse_compression(c)
+            .ok_or_else(|| Error::Config(format!("unknown --compression {c:?}"))),
+        files_only: true
+    }
+    /// Accept a lossy output compression (dwaa, dwab; b44, b44a for f16;
+    /// pxr24 for f32): the energy on disk is then measured by decoding the
+    /// file, and reported.
+    allow_lossy: bool { Flag, OUTPUT, files_only: true }
+    /// Output sample type: same (each channel its input type: f16 stays f16,
+    /// the others f32), f32 or f16 for all (f16 refuses values it cannot hold).
+    pixel_type: PixelType { Value, OUTPUT, parse: |_, s| PixelType::parse(s), default: "same" }
+    /// Sequence: the frames to filter, e.g. 1-240, 1-100x2, 3,4,10-20x5
+    /// [default: the input frames on disk].
+    frames: Option<Vec<i64>> { Value, FARM, parse: |_, s| parse_frames(s), files_only: true }
+    /// Sequence: this task's 0-based index; it filters the index-th of
+    /// --task-count contiguous chunks of the frames [default: from the
+    /// environment: SLURM_ARRAY_TASK_ID, JOB_COMPLETION_INDEX, AWS_BATCH_JOB_ARRAY_INDEX].
+    task_index: Option<usize> { Value, FARM, parse: number, files_only: true }
+    /// Sequence: how many tasks share the frames [default: SLURM_ARRAY_TASK_COUNT,
+    /// AWS_BATCH_JOB_ARRAY_SIZE; needed for Kubernetes Indexed Jobs].
+    task_count: Option<usize> { Value, FARM, parse: number, files_only: true }
+    /// Leave outputs that are already complete outputs of their input and
+    /// these settings (a retried farm task redoes only what is missing or
+    /// unfinished; anything else at an output's name is redone, saying why).
+    skip_existing: bool { Flag, FARM, files_only: true }
+    /// Sequence: stop at the first failed frame.
+    fail_fast: bool { Flag, FARM, files_only: true }
+    /// Sequence: go on past a failed frame and exit 1 at the end (the default).
+    keep_going: bool { Flag, FARM, files_only: true }
+    /// Filter only band K of N of the output rows (K from 1: 3/8 is the
+    /// third of eight), reading the input rows they need; `epfilt merge` puts
+    /// the bands together, identical to one run. `env`: K and N from the
+    /// array job's environment (as --task-index). A sequence's band files are
+    /// named NAME.bandKofN.exr, never a frame's name.
+    band: Option<String> { Value, FARM, parse: text, files_only: true }
+    /// The band's 0-based index, as --task-index counts (with --band-count).
+    band_index: Option<usize> { Value, FARM, parse: number, files_only: true }
+    /// How many bands; without --band-index, the index comes from the array
+    /// job's environment (SLURM_ARRAY_TASK_ID, ...).
+    band_count: Option<usize> { Value, FARM, parse: number, files_only: true }
+    /// Worker threads, 0 = one per core (does not change the result; more
+    /// than the machine's cores are capped, with a warning). From 2, as many
+    /// again decode and compress blocks, beside the filter's: under a CPU
+    /// quota (Slurm, cgroups, taskset) they share its N cores; on idle cores
+    /// the run may use up to about 1.5 N.
+    threads: usize { Value, PERFORMANCE, parse: number, default: "0", env: "EPFILT_THREADS" }
+    /// Run `--threads` even where they are more than this machine's cores
+    /// (slower: to measure memory at a core count the machine lacks).
+    oversubscribe: bool { Flag, PERFORMANCE }
+    /// Refuse jobs estimated to need more memory than this, in MiB [default:
+    /// half the machine's memory].
+    max_memory: Option<u64> {
+        Value, PERFORMANCE, parse: number, env: "EPFILT_MAX_MEMORY", files_only: true
+    }
+    /// Accumulator tile width in output pixels (does not change the result).
+    tile: usize { Value, PERFORMANCE, parse: number, default: "256" }
+    /// Input rows per strip, 0 = automatic (from the input's width; at least
+    /// 6 pixel rows, 16 where they fit; does not change the result).
+    strip_rows: usize { Value, PERFORMANCE, parse: number, default: "0" }
+}
+
+/// `--quality`'s long help: every preset's knob values.
+pub fn quality_help() -> String {
+    let mut s = settings::knob("quality")
+        .map(Knob::help)
+        .unwrap_or_default();
+    s.push_str(" The report records the preset and the values used (here the tolerance at S = 3).");
+    for q in crate::filter::Quality::ALL {
+        s.push_str(&format!("\n  {:<8} {}", q.name(), q.describe()));
+    }
+    s
 }
 
 /// `threads` above the machine's cores only slows the run down (each
@@ -450,71 +453,105 @@ pub fn cap_threads(n: usize) -> (usize, Option<String>) {
 }
 
 impl FilterOptions {
-    /// The method options given (on the command line or in the
-    /// environment) in `m`, which holds these options.
-    pub fn given(m: &ArgMatches) -> Vec<String> {
-        METHOD_OPTIONS
-            .iter()
-            .filter(|id| {
-                matches!(
-                    m.value_source(id),
-                    Some(ValueSource::CommandLine | ValueSource::EnvVariable)
-                )
-            })
-            .map(|id| id.to_string())
-            .collect()
-    }
-
-    /// The options from keyword settings (names as the fields spell them,
-    /// `support_region`; `support-region` is taken too), through the command
-    /// line's parser: its defaults, checks and messages. Also returns the
-    /// method options given ([`FilterOptions::given`]). An unknown name is a
-    /// configuration error that lists the known ones.
+    /// The options from named settings (names as the fields spell them,
+    /// `support_region`; `support-region` is taken too), over the defaults
+    /// and the environment variables of [`OPTIONS`]. Also returns the method
+    /// settings given, for the warnings of [`FilterOptions::params`]. An
+    /// unknown name is a configuration error that lists the known ones; a
+    /// value its option cannot take is one that names the option.
     pub fn from_settings(
         settings: impl IntoIterator<Item = (String, Setting)>,
     ) -> Result<(FilterOptions, Vec<String>)> {
-        let cmd = FilterOptions::augment_args(clap::Command::new("epfilt").no_binary_name(true));
-        let mut argv: Vec<String> = Vec::new();
+        let mut o = FilterOptions::default();
+        for def in OPTIONS {
+            if let Some(d) = def.default {
+                o.set_option(def.name, Setting::Value(d.to_string()))?;
+            }
+        }
+        let settings: Vec<(String, Setting)> = settings
+            .into_iter()
+            .map(|(name, v)| (name.replace('-', "_"), v))
+            .collect();
+        for def in OPTIONS {
+            let given = settings.iter().any(|(n, _)| n == def.name);
+            if let (false, Some(var)) = (given, def.env) {
+                if let Ok(v) = std::env::var(var) {
+                    o.set_option(def.name, Setting::Value(v))?;
+                    o.given.push(def.name);
+                }
+            }
+        }
+        // A scratch copy of the settings checks each knob's value as it is
+        // given: the error names the option before any file is read.
+        let mut scratch = FilterParams::new(Method::EpGauss, 1);
         for (name, value) in settings {
-            let id = name.replace('-', "_");
-            let Some(arg) = cmd.get_arguments().find(|a| a.get_id().as_str() == id) else {
-                let mut known: Vec<&str> =
-                    cmd.get_arguments().map(|a| a.get_id().as_str()).collect();
+            if let Some(def) = OPTIONS.iter().find(|d| d.name == name) {
+                o.set_option(def.name, value)?;
+                o.given.push(def.name);
+            } else if let Some(k) = settings::knob(&name) {
+                let Setting::Value(raw) = value else {
+                    return Err(Error::Config(format!(
+                        "setting {name} takes a value, not a true/false switch or a list"
+                    )));
+                };
+                k.set(&mut scratch, &raw)?;
+                o.knobs.push((k, raw));
+                o.given.push(k.name);
+            } else {
+                let mut known: Vec<&str> = (OPTIONS.iter().map(|d| d.name))
+                    .chain(settings::KNOBS.iter().map(|k| k.name))
+                    .collect();
                 known.sort_unstable();
                 return Err(Error::Config(format!(
                     "unknown setting {name:?}; the settings are: {}",
                     known.join(", ")
                 )));
-            };
-            let long = arg.get_long().unwrap_or(arg.get_id().as_str()).to_string();
-            let takes_value = arg.get_action().takes_values();
-            match (value, takes_value) {
-                (Setting::Flag(true), false) => argv.push(format!("--{long}")),
-                (Setting::Flag(false), false) => {}
-                (Setting::Flag(_), true) => {
-                    return Err(Error::Config(format!(
-                        "setting {id} takes a value, not a true/false switch"
-                    )))
-                }
-                (Setting::Value(v), true) => argv.push(format!("--{long}={v}")),
-                (Setting::List(vs), true) => {
-                    argv.extend(vs.iter().map(|v| format!("--{long}={v}")))
-                }
-                (_, false) => {
-                    return Err(Error::Config(format!(
-                        "setting {id} is a switch: give True or False"
-                    )))
-                }
             }
         }
-        let m = cmd.try_get_matches_from(argv).map_err(|e| {
-            let text = e.to_string();
-            let line = text.lines().next().unwrap_or("invalid settings");
-            Error::Config(line.trim_start_matches("error: ").to_string())
-        })?;
-        let opts = FilterOptions::from_arg_matches(&m).map_err(|e| Error::Config(e.to_string()))?;
-        let given = FilterOptions::given(&m);
-        Ok((opts, given))
+        if o.fail_fast && o.keep_going {
+            return Err(Error::Config(
+                "--fail-fast and --keep-going cannot be given together".into(),
+            ));
+        }
+        let mut given: Vec<String> = Vec::new();
+        for (k, _) in &o.knobs {
+            if !given.iter().any(|g| g == k.name) {
+                given.push(k.name.to_string());
+            }
+        }
+        for def in OPTIONS.iter().filter(|d| d.ep_box_only) {
+            if o.given.contains(&def.name) {
+                given.push(def.name.to_string());
+            }
+        }
+        Ok((o, given))
+    }
+
+    /// The value given for the method's setting `name`, the last if given
+    /// more than once.
+    pub fn knob(&self, name: &str) -> Option<&str> {
+        (self.knobs.iter().rev())
+            .find(|(k, _)| k.name == name)
+            .map(|(_, v)| v.as_str())
+    }
+
+    /// Where ep-box's statistics are, as the options name them.
+    pub fn stats_request(&self) -> StatsRequest {
+        StatsRequest {
+            variance_channel: self.variance_channel.clone(),
+            kind: self.variance_kind,
+            spp: self.spp,
+            spp_channel: self.spp_channel.clone(),
+        }
+    }
+
+    /// The options given that name files or their layout, which an array
+    /// has none of.
+    pub fn files_only_given(&self) -> Vec<&'static str> {
+        (OPTIONS.iter())
+            .filter(|d| d.files_only && self.given.contains(&d.name))
+            .map(|d| d.name)
+            .collect()
     }
 
     /// The farm's share these options name: the band, and a sequence's
@@ -533,16 +570,14 @@ impl FilterOptions {
     /// The method's settings; `given` (the method options the user gave)
     /// yields a warning for each the method does not read.
     pub fn params(&self, given: &[String]) -> Result<(FilterParams, Vec<String>)> {
-        let method = match &self.method {
-            Some(m) => Method::parse(m)?,
-            None => Method::EpGauss,
-        };
+        let method = self.method.unwrap_or_default();
         self.params_for(method, self.supersample.unwrap_or(1), given)
     }
 
-    /// The settings of `method` at S = `s`, the options given applied
-    /// over their defaults; `given` (the method options the user gave)
-    /// yields a warning for each the method does not read.
+    /// The settings of `method` at S = `s`, the settings given applied over
+    /// their defaults (`--quality` first, then the others over its preset);
+    /// `given` (the method options the user gave) yields a warning for each
+    /// the method does not read.
     pub fn params_for(
         &self,
         method: Method,
@@ -550,26 +585,20 @@ impl FilterOptions {
         given: &[String],
     ) -> Result<(FilterParams, Vec<String>)> {
         let mut params = FilterParams::new(method, s);
-        if let Some(q) = &self.quality {
-            let q = Quality::parse(q)?;
-            if method == Method::EpGauss {
-                params = params.with_quality(q);
-            }
+        if let Some(q) = self.knob("quality") {
+            params.set("quality", q)?;
         }
-        params.ep_box = EpBoxParams {
-            ltvis: self.ltvis,
-            passes: self.passes,
-            guard: Guard::parse(&self.guard)?,
-            guard_confidence: self.guard_confidence,
-            carriers: self.carriers,
-            carriers_fraction: self.carriers_fraction,
-            carriers_rse: self.carriers_rse,
-            ..self.stats.ep_box_params()?
-        };
-        self.set_knobs(&mut params);
+        for (k, raw) in self.knobs.iter().filter(|(k, _)| k.name != "quality") {
+            k.set(&mut params, raw)?;
+        }
+        // §5.2 as written: ep-gauss's feature rule off too.
+        if params.ep_box.guard == Guard::None {
+            params.support = 0;
+        }
         params.validate()?;
+        let ep_box_only = |o: &str| OPTIONS.iter().any(|d| d.name == o && d.ep_box_only);
         let warnings = (given.iter())
-            .filter(|o| !params.reads(o))
+            .filter(|o| !params.reads(o) || (ep_box_only(o) && method != Method::EpBox))
             .map(|option| {
                 format!(
                     "--{} has no effect with --method {}{}",
@@ -586,42 +615,6 @@ impl FilterOptions {
         Ok((params, warnings))
     }
 
-    /// The knobs given, over the method's (and its `--quality`'s) defaults.
-    fn set_knobs(&self, params: &mut FilterParams) {
-        let set = |field: &mut f64, v: Option<f64>| {
-            if let Some(v) = v {
-                *field = v;
-            }
-        };
-        set(&mut params.radius, self.radius);
-        set(&mut params.cutoff, self.cutoff);
-        set(&mut params.support_ratio, self.support_ratio);
-        set(&mut params.support_over, self.support_over);
-        set(&mut params.support_level, self.support_level);
-        set(&mut params.max_radius, self.max_radius);
-        set(&mut params.width_step, self.width_step);
-        set(&mut params.tolerance, self.tolerance);
-        set(&mut params.bound_from, self.bound_from);
-        if let Some(n) = self.support {
-            params.support = n;
-        }
-        if self.guard == "none" {
-            params.support = 0;
-        }
-        if let Some(n) = self.support_group {
-            params.support_group = n;
-        }
-        if let Some(n) = self.support_compact {
-            params.support_compact = n;
-        }
-        if let Some(n) = self.support_region {
-            params.support_region = n;
-        }
-        params.clamp = self.clamp;
-        params.alpha = self.alpha;
-        params.coarse_from = self.coarse_from;
-    }
-
     /// How the work is cut (`cancel` stops it); a warning when the threads
     /// asked for are more than the machine's cores.
     pub fn pipeline(
@@ -633,15 +626,7 @@ impl FilterOptions {
         } else {
             cap_threads(self.threads)
         };
-        let nonfinite = match self.nonfinite.as_str() {
-            "error" => NonFinite::Error,
-            "zero" => NonFinite::Zero,
-            other => {
-                return Err(Error::Config(format!(
-                    "--nonfinite must be error or zero, not {other:?}"
-                )))
-            }
-        };
+        let nonfinite = self.nonfinite;
         let cfg = PipelineConfig {
             tile: self.tile,
             strip_rows: self.strip_rows,
@@ -656,14 +641,10 @@ impl FilterOptions {
 
     /// The output sample type `--pixel-type` asks for (`None`: each
     /// channel its input's).
-    pub fn precision(&self) -> Result<Option<Precision>> {
-        match self.pixel_type.as_str() {
-            "same" => Ok(None),
-            "f32" | "float" => Ok(Some(Precision::F32)),
-            "f16" | "half" => Ok(Some(Precision::F16)),
-            other => Err(Error::Config(format!(
-                "--pixel-type must be same, f32 or f16, not {other:?}"
-            ))),
+    pub fn precision(&self) -> Option<Precision> {
+        match self.pixel_type {
+            PixelType::Same => None,
+            PixelType::All(p) => Some(p),
         }
     }
 
@@ -703,7 +684,7 @@ impl FilterOptions {
             )));
         }
         let frames = match &self.frames {
-            Some(spec) => parse_frames(spec)?,
+            Some(frames) => frames.clone(),
             None => input.on_disk()?,
         };
         Ok(Some(SequenceJob {
@@ -746,33 +727,23 @@ impl FilterOptions {
         };
         let (pipeline, capped) = self.pipeline(cancel)?;
         warnings.extend(capped);
-        let compression = match &self.compression {
-            Some(c) => Some(
-                parse_compression(c)
-                    .ok_or_else(|| Error::Config(format!("unknown --compression {c:?}")))?,
-            ),
-            None => None,
-        };
         let job = FilterJob {
             input,
             output,
             params,
             pipeline,
             output_settings: OutputSettings {
-                compression,
-                precision: self.precision()?,
+                compression: self.compression,
+                precision: self.precision(),
                 allow_lossy: self.allow_lossy,
                 provenance: None,
                 extra: Vec::new(),
             },
-            part: self.part.as_deref().map(PartSelect::parse),
+            part: self.part.clone(),
             layer: self.layer.clone(),
             max_memory: self.max_memory.map(|m| m.saturating_mul(1 << 20)),
-            stats: self.stats.request()?,
-            edge: match &self.edge {
-                Some(e) => Edge::parse(e)?,
-                None => Edge::Exact,
-            },
+            stats: self.stats_request(),
+            edge: self.edge.unwrap_or_default(),
             undecided,
             verdict: None,
             notes: Vec::new(),
@@ -783,11 +754,9 @@ impl FilterOptions {
                 depth: self.guide_depth,
             },
             band,
-            channel_rules: (self.channel_rule.iter())
-                .map(|r| RuleOverride::parse(r))
-                .collect::<Result<_>>()?,
-            format: self.format.as_deref().map(Format::parse).transpose()?,
-            view: self.view.as_deref().map(ViewSelect::parse),
+            channel_rules: self.channel_rule.clone(),
+            format: self.format,
+            view: self.view.clone(),
         };
         Ok((job, warnings))
     }
@@ -806,7 +775,8 @@ mod tests {
         let (o, given) = settings(&[]).unwrap();
         assert!(given.is_empty());
         assert_eq!(o.method, None);
-        assert_eq!((o.tile, o.strip_rows, o.passes), (256, 0, 8));
+        assert_eq!((o.tile, o.strip_rows, o.guides.as_str()), (256, 0, "auto"));
+        assert!(o.knobs.is_empty());
         let (p, warnings) = o.params(&given).unwrap();
         assert_eq!(p, FilterParams::new(Method::EpGauss, 1));
         assert!(warnings.is_empty());
@@ -825,11 +795,11 @@ mod tests {
             ("radius", Setting::Value("-1".into())),
         ])
         .unwrap();
-        assert_eq!(o.tolerance, Some(0.1));
-        assert_eq!(o.support_region, Some(0));
+        assert_eq!(o.knob("tolerance"), Some("0.1"));
+        assert_eq!(o.knob("support_region"), Some("0"));
         assert!(o.allow_lossy);
-        assert_eq!(o.channel_rule, ["Z=drop", "id=nearest"]);
-        assert_eq!(given, ["support_region", "radius", "tolerance"]);
+        assert_eq!(o.channel_rule.len(), 2);
+        assert_eq!(given, ["tolerance", "support_region", "radius"]);
         // A negative radius reaches the library's check, not the parser's.
         assert!(matches!(o.params(&given), Err(Error::Config(_))));
     }

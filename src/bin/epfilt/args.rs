@@ -3,8 +3,8 @@
 
 use std::path::PathBuf;
 
+use crate::options::{FilterOptionArgs, StatsArgs};
 use clap::{Args, Parser, Subcommand};
-use epfilt::job::{FilterOptions, StatsOptions};
 
 /// The exit statuses, in every `--help`.
 pub const EXIT_HELP: &str =
@@ -208,7 +208,7 @@ pub struct PlanArgs {
     /// Pilot render with variance (e.g. 100x100 at 16 samples per pixel).
     pub input: PathBuf,
     #[command(flatten)]
-    pub stats: StatsOptions,
+    pub stats: StatsArgs,
     /// Largest radiance, for Purgathofer's worst case (Eq. 8) [default: the pilot's brightest pixel].
     #[arg(long)]
     pub lmax: Option<f64>,
@@ -230,7 +230,7 @@ pub struct FilterArgs {
     pub output: PathBuf,
     /// Every setting (the library's, shared with the Python bindings).
     #[command(flatten)]
-    pub opts: FilterOptions,
+    pub opts: FilterOptionArgs,
     /// Write the summary as JSON to this file (- for standard output).
     #[arg(long, help_heading = "Output")]
     pub report: Option<PathBuf>,

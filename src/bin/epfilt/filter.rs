@@ -5,7 +5,7 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use anyhow::Result;
-use epfilt::job::Existing;
+use epfilt::job::{Existing, FilterOptions};
 use epfilt::sequence::{FramePattern, FrameStatus, SequenceJob};
 use epfilt::FilterJob;
 
@@ -13,22 +13,23 @@ use crate::args::FilterArgs;
 use crate::{check_binary_stdout, fail, progress_bar, usage, warn, write_report, Exit};
 
 /// Run `filter`: one file, or a frame sequence.
-pub fn run(a: FilterArgs, given: &[String], cancel: Arc<AtomicBool>) -> Result<(), Exit> {
+pub fn run(a: FilterArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
+    let (opts, given) = FilterOptions::from_settings(a.opts.settings.clone()).map_err(usage)?;
     let env = |k: &str| std::env::var(k).ok();
     if a.trace.is_some() && FramePattern::parse(&a.input).map_err(usage)?.is_some() {
         return Err(usage(anyhow::anyhow!(
             "--trace records the run of one file: filter one frame with it, not a sequence"
         )));
     }
-    let epfilt::sequence::Share { band, task } = a.opts.share(&env).map_err(usage)?;
-    let template = filter_job(&a, band, given, cancel).map_err(usage)?;
-    match a.opts.sequence(template.clone(), task).map_err(usage)? {
+    let epfilt::sequence::Share { band, task } = opts.share(&env).map_err(usage)?;
+    let template = filter_job(&a, &opts, band, &given, cancel).map_err(usage)?;
+    match opts.sequence(template.clone(), task).map_err(usage)? {
         Some(job) => sequence(&a, job),
-        None => one_file(&a, template),
+        None => one_file(&a, opts.skip_existing, template),
     }
 }
 
-fn one_file(a: &FilterArgs, job: FilterJob) -> Result<(), Exit> {
+fn one_file(a: &FilterArgs, skip_existing: bool, job: FilterJob) -> Result<(), Exit> {
     check_binary_stdout(&a.output)?;
     // The output's name and folder, and the report's, now: not after a long run.
     epfilt::io::Destination::resolve(&a.output).map_err(fail)?;
@@ -36,7 +37,7 @@ fn one_file(a: &FilterArgs, job: FilterJob) -> Result<(), Exit> {
     for path in a.report.iter().chain(&a.trace) {
         epfilt::io::Destination::resolve(path).map_err(fail)?;
     }
-    if a.opts.skip_existing {
+    if skip_existing {
         match epfilt::job::existing_output(&job).map_err(fail)? {
             Existing::Done => {
                 if !a.quiet {
@@ -86,6 +87,7 @@ fn one_file(a: &FilterArgs, job: FilterJob) -> Result<(), Exit> {
 /// options the method does not read are warned about.
 fn filter_job(
     a: &FilterArgs,
+    opts: &FilterOptions,
     band: Option<(usize, usize)>,
     given: &[String],
     cancel: Arc<AtomicBool>,
@@ -93,9 +95,7 @@ fn filter_job(
     if a.output.as_os_str() == "-" && a.report.as_deref() == Some(std::path::Path::new("-")) {
         anyhow::bail!("the output and --report cannot both be standard output");
     }
-    let (job, warnings) =
-        a.opts
-            .job(a.input.clone(), a.output.clone(), band, given, Some(cancel))?;
+    let (job, warnings) = opts.job(a.input.clone(), a.output.clone(), band, given, Some(cancel))?;
     for w in &warnings {
         warn(w);
     }

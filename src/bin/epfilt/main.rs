@@ -6,6 +6,7 @@
 
 mod args;
 mod filter;
+mod options;
 
 use std::io::{IsTerminal, Write};
 use std::path::Path;
@@ -29,7 +30,7 @@ fn main() {
     // clap prints usage errors itself and exits with status 2.
     let matches = Cli::command().get_matches();
     let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
-    let code = match dispatch(cli, &matches, cancel) {
+    let code = match dispatch(cli, cancel) {
         Ok(()) => 0,
         // The reader of standard output went away: what it wanted it has.
         Err(Exit::Failure(e)) | Err(Exit::Usage(e)) if is_broken_pipe(&e) => 0,
@@ -51,15 +52,9 @@ fn main() {
     std::process::exit(code);
 }
 
-fn dispatch(cli: Cli, matches: &clap::ArgMatches, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
+fn dispatch(cli: Cli, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
     match cli.command {
-        Command::Filter(args) => {
-            let given = matches
-                .subcommand_matches("filter")
-                .map(epfilt::job::FilterOptions::given)
-                .unwrap_or_default();
-            filter::run(*args, &given, cancel)
-        }
+        Command::Filter(args) => filter::run(*args, cancel),
         Command::Info {
             input,
             json,
@@ -76,8 +71,12 @@ fn dispatch(cli: Cli, matches: &clap::ArgMatches, cancel: Arc<AtomicBool>) -> Re
         Command::Compare(a) => compare(*a),
         Command::Preview(a) => preview(*a),
         Command::Plan(a) => {
-            let request = a.stats.request().map_err(usage)?;
-            let params = a.stats.ep_box_params().map_err(usage)?;
+            let (opts, _) =
+                epfilt::job::FilterOptions::from_settings(a.stats.settings).map_err(usage)?;
+            let request = opts.stats_request();
+            let (params, _) = (opts.params_for(epfilt::Method::EpBox, 1, &[]))
+                .and_then(|(p, w)| Ok((p.validated()?, w)))
+                .map_err(usage)?;
             let select = selection(&a.select);
             let plan = epfilt::plan::plan_file(
                 &a.input,

@@ -31,7 +31,7 @@ use statrs::distribution::{ContinuousCDF, StudentsT};
 use crate::error::{Error, Result};
 
 /// What keeps a real bright feature from being spread as noise.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum Guard {
     /// The paper's rule as written (§5.1).
     None,
@@ -59,6 +59,7 @@ pub enum Guard {
     /// samples is reliable, however bright.
     Carriers,
     /// `Carriers`, `Range` and `StdError` together.
+    #[default]
     All,
 }
 
@@ -164,98 +165,31 @@ pub const COMPACT_CARRIERS: f64 = 3.0;
 /// noise, are comparable; faint fireflies around a bulb are not.
 pub const COMPACT_RATIO: f64 = 16.0;
 
-/// Settings of the `ep-box` filter (and of `epfilt plan`).
-#[derive(Clone, Debug, PartialEq)]
+/// Settings of the `ep-box` filter (and of `epfilt plan`); their defaults
+/// and checks are in [`crate::filter::settings`] (`Default` is all zeros:
+/// take `FilterParams::new(Method::EpBox, 1).ep_box` for the defaults).
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct EpBoxParams {
-    /// Allowed interval `±D` in units of `L_tvis`.
+    /// `--d`: the allowed interval `±D`, in units of `L_tvis`.
     pub d: f64,
-    /// `N_MID` of Eq. 9: the display level the mean luminance maps to.
+    /// `--nmid`: `N_MID` of Eq. 9.
     pub nmid: f64,
-    /// Confidence `α` of the noise test, in (0, 1).
+    /// `--confidence`: the noise test's `α`, in (0, 1).
     pub confidence: f64,
-    /// `L_tvis` given directly instead of `L_ave / N_MID`.
+    /// `--ltvis`: `L_tvis` given, instead of `L_ave / N_MID`.
     pub ltvis: Option<f64>,
-    /// Most passes over noisy clusters (the reach of the neighbour rule).
+    /// `--passes`: the most passes over noisy clusters.
     pub passes: usize,
-    /// Guard against spreading real features.
+    /// `--guard`: what keeps real features from being spread.
     pub guard: Guard,
-    /// Confidence of the `stderr` guard's bound on what noise can explain.
+    /// `--guard-confidence`: the `stderr` guard's bound's.
     pub guard_confidence: f64,
-    /// The `carriers` guard: a pixel whose mean rests on at least this many
-    /// samples ([`carriers`]) is not noise...
+    /// `--carriers`: see [`carriers`].
     pub carriers: f64,
-    /// ... nor one whose mean rests on at least this fraction of its samples
-    /// and whose relative standard error is at most `carriers_rse`.
+    /// `--carriers-fraction`: see [`carriers_needed`].
     pub carriers_fraction: f64,
-    /// See `carriers_fraction`.
+    /// `--carriers-rse`: see [`carriers_needed`].
     pub carriers_rse: f64,
-}
-
-impl Default for EpBoxParams {
-    /// `D = 5`, `N_MID = 128`, 80% confidence (the paper's and Purgathofer's
-    /// figures), 8 passes, both guards with a 99% bound (see
-    /// `docs/tradeoff.md`: the one setting that never left an image worse
-    /// than its input, from 4 to 256 samples per pixel).
-    fn default() -> Self {
-        EpBoxParams {
-            d: 5.0,
-            nmid: 128.0,
-            confidence: 0.8,
-            ltvis: None,
-            passes: 8,
-            guard: Guard::All,
-            guard_confidence: 0.99,
-            carriers: 16.0,
-            carriers_fraction: 0.2,
-            carriers_rse: 0.5,
-        }
-    }
-}
-
-impl EpBoxParams {
-    /// Check every field.
-    pub fn validate(&self) -> Result<()> {
-        let bad = |m: String| Err(Error::Config(m));
-        if !(self.d.is_finite() && self.d >= 0.0) {
-            return bad(format!("--d must be a finite number >= 0, got {}", self.d));
-        }
-        if !(self.nmid.is_finite() && self.nmid > 0.0) {
-            return bad(format!("--nmid must be > 0, got {}", self.nmid));
-        }
-        if !(self.confidence > 0.0 && self.confidence < 1.0) {
-            return bad(format!(
-                "--confidence must be in (0, 1) (e.g. 0.8), got {}",
-                self.confidence
-            ));
-        }
-        if !(self.guard_confidence > 0.0 && self.guard_confidence < 1.0) {
-            return bad(format!(
-                "--guard-confidence must be in (0, 1) (e.g. 0.99), got {}",
-                self.guard_confidence
-            ));
-        }
-        if let Some(l) = self.ltvis {
-            if !(l.is_finite() && l > 0.0) {
-                return bad(format!("--ltvis must be a finite number > 0, got {l}"));
-            }
-        }
-        if !(self.carriers.is_finite() && self.carriers >= 1.0) {
-            return bad(format!(
-                "--carriers must be a number >= 1, got {}",
-                self.carriers
-            ));
-        }
-        if !(self.carriers_fraction > 0.0 && self.carriers_fraction <= 1.0) {
-            return bad(format!(
-                "--carriers-fraction must be in (0, 1], got {}",
-                self.carriers_fraction
-            ));
-        }
-        if !(1..=64).contains(&self.passes) {
-            return bad(format!("--passes must be 1..=64, got {}", self.passes));
-        }
-        Ok(())
-    }
 }
 
 /// `L_tvis = L_ave / N_MID` (Eq. 9).

@@ -286,7 +286,9 @@ mod tests {
 
     #[test]
     fn the_carriers_rule_at_its_edges() {
-        let c = Carriers::new(&ep_box::EpBoxParams::default());
+        let c = Carriers::new(
+            &crate::filter::FilterParams::new(crate::filter::Method::EpBox, 1).ep_box,
+        );
         let none = || 1usize;
         let many = || 9usize;
         // One sample of 16 carries the mean (a firefly): spread. Its sample

@@ -392,39 +392,9 @@ fn linear_of(m: Method) -> Method {
 }
 
 fn set(params: &mut FilterParams, key: &str, value: &str) -> Result<()> {
-    let f = || -> Result<f64> { Ok(value.parse()?) };
-    match key {
-        "tolerance" => params.tolerance = f()?,
-        "radius" => params.radius = f()?,
-        "max_radius" => params.max_radius = f()?,
-        "cutoff" => params.cutoff = f()?,
-        "width_step" => params.width_step = f()?,
-        "d" => params.ep_box.d = f()?,
-        "nmid" => params.ep_box.nmid = f()?,
-        "passes" => params.ep_box.passes = value.parse()?,
-        "confidence" => params.ep_box.confidence = f()?,
-        "carriers" => params.ep_box.carriers = f()?,
-        "carriers_fraction" => params.ep_box.carriers_fraction = f()?,
-        "carriers_rse" => params.ep_box.carriers_rse = f()?,
-        "guard_confidence" => params.ep_box.guard_confidence = f()?,
-        "support" => params.support = value.parse()?,
-        "support_ratio" => params.support_ratio = f()?,
-        "support_group" => params.support_group = value.parse()?,
-        "support_compact" => params.support_compact = value.parse()?,
-        "support_over" => params.support_over = f()?,
-        "support_level" => params.support_level = f()?,
-        "support_region" => params.support_region = value.parse()?,
-        "coarse_from" => params.coarse_from = f()?,
-        "bound_from" => params.bound_from = f()?,
-        "guard" => params.ep_box.guard = epfilt::filter::ep_box::Guard::parse(value)?,
-        "quality" => {
-            *params = params
-                .clone()
-                .with_quality(epfilt::filter::Quality::parse(value)?)
-        }
-        other => bail!("--set {other}: unknown setting"),
-    }
-    Ok(())
+    params
+        .set(key, value)
+        .map_err(|e| anyhow::anyhow!("--set {key}={value}: {e}"))
 }
 
 struct Ctx {

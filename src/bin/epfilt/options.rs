@@ -1,0 +1,196 @@
+//! `filter`'s and `plan`'s options as clap arguments, built from the
+//! library's tables ([`OPTIONS`], [`KNOBS`]): clap parses the command line
+//! into named settings, and the library's [`FilterOptions::from_settings`]
+//! (which the Python bindings call too) gives them their types, defaults
+//! and checks.
+
+use clap::parser::ValueSource;
+use clap::{Arg, ArgAction, ArgMatches, Args, Command, FromArgMatches};
+use epfilt::filter::settings::{self, KNOBS};
+use epfilt::job::options::{quality_help, Kind, OPTIONS};
+use epfilt::job::Setting;
+
+/// One argument: its id (the setting's name), and how clap should read it.
+struct Spec {
+    name: &'static str,
+    short: Option<char>,
+    heading: &'static str,
+    help: String,
+    long_help: Option<String>,
+    value_name: &'static str,
+    kind: Kind,
+    default: Option<String>,
+    env: Option<&'static str>,
+}
+
+impl Spec {
+    fn arg(&self, headings: bool) -> Arg {
+        // As clap's derive shows a doc comment: no full stop at the end.
+        let help = self
+            .help
+            .strip_suffix('.')
+            .unwrap_or(&self.help)
+            .to_string();
+        let mut a = Arg::new(self.name)
+            .long(self.name.replace('_', "-"))
+            .help(help);
+        if headings {
+            a = a.help_heading(self.heading);
+        }
+        if let Some(c) = self.short {
+            a = a.short(c);
+        }
+        if let Some(l) = &self.long_help {
+            a = a.long_help(l.clone());
+        }
+        a = match self.kind {
+            Kind::Flag => a.action(ArgAction::SetTrue),
+            Kind::Value => a.action(ArgAction::Set),
+            Kind::List => a.action(ArgAction::Append),
+        };
+        if self.kind != Kind::Flag {
+            a = a.value_name(match self.value_name {
+                "" => self.name.to_uppercase(),
+                v => v.to_string(),
+            });
+        }
+        // Shown in --help; the library applies the same default itself.
+        if let Some(d) = &self.default {
+            a = a.default_value(d.clone());
+        }
+        if let Some(e) = self.env {
+            a = a.env(e);
+        }
+        a.allow_hyphen_values(self.kind != Kind::Flag)
+    }
+
+    /// The setting the user gave, if any (a default is not one).
+    fn given(&self, m: &ArgMatches) -> Option<(String, Setting)> {
+        if !matches!(
+            m.value_source(self.name),
+            Some(ValueSource::CommandLine | ValueSource::EnvVariable)
+        ) {
+            return None;
+        }
+        let value = match self.kind {
+            Kind::Flag => Setting::Flag(m.get_flag(self.name)),
+            Kind::Value => Setting::Value(m.get_one::<String>(self.name)?.clone()),
+            Kind::List => Setting::List(m.get_many::<String>(self.name)?.cloned().collect()),
+        };
+        Some((self.name.to_string(), value))
+    }
+}
+
+/// Every option and setting, in `--help`'s order: the input and the method
+/// first, then each method's settings, then the rest.
+fn specs() -> Vec<Spec> {
+    let option = |d: &'static epfilt::job::options::OptionDef| Spec {
+        name: d.name,
+        short: d.short,
+        heading: d.heading,
+        help: d.help(),
+        long_help: None,
+        value_name: d.value_name,
+        kind: d.kind,
+        default: d.default.map(str::to_string),
+        env: d.env,
+    };
+    let knob = |k: &'static settings::Knob| Spec {
+        name: k.name,
+        short: None,
+        heading: k.heading,
+        help: k.help(),
+        long_help: (k.name == "quality").then(quality_help),
+        value_name: k.value_name,
+        kind: Kind::Value,
+        default: k.fixed_default(),
+        env: None,
+    };
+    let first = |h: &str| h == "Input" || h == settings::METHOD;
+    let mut v: Vec<Spec> = (OPTIONS.iter().filter(|d| first(d.heading)))
+        .map(option)
+        .collect();
+    for heading in [settings::METHOD, settings::EP_GAUSS, settings::EP_BOX] {
+        v.extend(KNOBS.iter().filter(|k| k.heading == heading).map(knob));
+    }
+    v.extend(OPTIONS.iter().filter(|d| !first(d.heading)).map(option));
+    v
+}
+
+/// `epfilt filter`'s settings, as named settings for the library.
+#[derive(Clone, Debug, Default)]
+pub struct FilterOptionArgs {
+    /// The settings given, in the tables' order.
+    pub settings: Vec<(String, Setting)>,
+}
+
+/// ep-box's statistics and noise test, which `epfilt plan` reads.
+#[derive(Clone, Debug, Default)]
+pub struct StatsArgs {
+    /// See [`FilterOptionArgs::settings`].
+    pub settings: Vec<(String, Setting)>,
+}
+
+/// The names `plan` takes.
+const STATS: &[&str] = &[
+    "variance_channel",
+    "variance_kind",
+    "spp",
+    "spp_channel",
+    "d",
+    "nmid",
+    "confidence",
+];
+
+fn given(m: &ArgMatches, keep: impl Fn(&str) -> bool) -> Vec<(String, Setting)> {
+    (specs().iter())
+        .filter(|s| keep(s.name))
+        .filter_map(|s| s.given(m))
+        .collect()
+}
+
+impl FromArgMatches for FilterOptionArgs {
+    fn from_arg_matches(m: &ArgMatches) -> Result<Self, clap::Error> {
+        Ok(FilterOptionArgs {
+            settings: given(m, |_| true),
+        })
+    }
+    fn update_from_arg_matches(&mut self, m: &ArgMatches) -> Result<(), clap::Error> {
+        *self = Self::from_arg_matches(m)?;
+        Ok(())
+    }
+}
+
+impl Args for FilterOptionArgs {
+    fn augment_args(cmd: Command) -> Command {
+        cmd.args(specs().iter().map(|s| s.arg(true)))
+    }
+    fn augment_args_for_update(cmd: Command) -> Command {
+        Self::augment_args(cmd)
+    }
+}
+
+impl FromArgMatches for StatsArgs {
+    fn from_arg_matches(m: &ArgMatches) -> Result<Self, clap::Error> {
+        Ok(StatsArgs {
+            settings: given(m, |n| STATS.contains(&n)),
+        })
+    }
+    fn update_from_arg_matches(&mut self, m: &ArgMatches) -> Result<(), clap::Error> {
+        *self = Self::from_arg_matches(m)?;
+        Ok(())
+    }
+}
+
+impl Args for StatsArgs {
+    fn augment_args(cmd: Command) -> Command {
+        cmd.args(
+            (specs().iter())
+                .filter(|s| STATS.contains(&s.name))
+                .map(|s| s.arg(false)),
+        )
+    }
+    fn augment_args_for_update(cmd: Command) -> Command {
+        Self::augment_args(cmd)
+    }
+}
