@@ -581,7 +581,7 @@ knobs! {
         heading: EP_BOX, value_name: "F", preset: false,
         default: |d| 0.5,
         reads: |m, s| m == EpBox,
-        record: |m, n| None,
+        record: |m, n| (m == EpBox).then_some(n),
         check: |v| need(v.is_finite() && v >= 0.0, "a finite number >= 0"),
     }
     /// alpha-trim: the fraction of the sorted samples trimmed from each end

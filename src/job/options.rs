@@ -12,14 +12,14 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
-use exr::prelude::Compression;
-
 use crate::error::{Error, Result};
 use crate::filter::channels::RuleOverride;
 use crate::filter::ep_box::{Guard, VarianceKind};
 use crate::filter::settings::{self, Knob};
 use crate::filter::{FilterParams, Method};
-use crate::io::{parse_compression, Format, OutputSettings, PartSelect, StatsRequest, ViewSelect};
+use crate::io::{
+    parse_compression, Compression, Format, OutputSettings, PartSelect, StatsRequest, ViewSelect,
+};
 use crate::pipeline::{NonFinite, PipelineConfig, Precision};
 use crate::sequence::{parse_frames, FramePattern, SequenceJob, Share, Task};
 
