@@ -95,6 +95,12 @@ pub struct Report {
     pub tile: usize,
     /// Input rows per strip.
     pub strip_rows: usize,
+    /// Blocks the reader decodes ahead at most where `--max-memory` set
+    /// them (`None`: as many as the job's default window).
+    pub window_blocks: Option<usize>,
+    /// What the run was estimated to hold, with the strips and window
+    /// chosen (checked against `--max-memory`; 0 where not estimated).
+    pub memory_estimate_bytes: u64,
     /// Worker threads.
     pub threads: usize,
     /// Peak resident set size, where the platform tells it.
@@ -336,7 +342,7 @@ impl Report {
             .collect();
         let run = RunFacts {
             layout: pipe_job,
-            cfg: &job.pipeline,
+            cfg: &plan.pipeline,
             params: &plan.params,
             stats,
             found: plan.found.as_ref(),
@@ -370,6 +376,7 @@ impl Report {
         };
         // The file's ledger: after rounding, what the file holds (a lossy
         // codec's decoded, a picture's RGBE), not the run's.
+        report.memory_estimate_bytes = plan.memory_bytes;
         report.set_ledger(&outcome.ledger);
         report
     }
@@ -464,6 +471,8 @@ impl Report {
                 0 => layout.auto_strip_rows(),
                 n => n,
             },
+            window_blocks: (run.cfg.window_blocks > 0).then_some(run.cfg.window_blocks),
+            memory_estimate_bytes: 0,
             threads: match run.cfg.threads {
                 0 => rayon::current_num_threads(),
                 n => n,

@@ -416,8 +416,12 @@ options! {
     /// Run `--threads` even where they are more than this machine's cores
     /// (slower: to measure memory at a core count the machine lacks).
     oversubscribe: bool { Flag, PERFORMANCE }
-    /// Refuse jobs estimated to need more memory than this, in MiB [default:
-    /// half the machine's memory].
+    /// Memory the job may use, in MiB, by its estimate: where the default
+    /// strips and blocks read ahead need more, it runs with shorter strips
+    /// and fewer blocks (the same result, `--report` says which); refused
+    /// only below the floor it names. The measured peak is some tens of MiB
+    /// above the estimate (docs/bench/memory.md) [default: half the
+    /// machine's memory].
     max_memory: Option<u64> {
         Value, PERFORMANCE, parse: number, env: "EPFILT_MAX_MEMORY", files_only: true
     }
@@ -633,8 +637,7 @@ impl FilterOptions {
             threads,
             cancel,
             nonfinite,
-            classify_samples: 0,
-            spread_chunk: 0,
+            ..PipelineConfig::default()
         };
         Ok((cfg, warning))
     }

@@ -33,6 +33,11 @@ pub struct FilterPlan<'a> {
     pub(crate) geometry: Geometry,
     /// The pipeline's channel layout.
     pub(crate) pipe_job: StripLayout,
+    /// How the work is cut: the job's, with shorter strips and fewer blocks
+    /// read ahead where its memory asks ([`crate::pipeline::fit_memory`]).
+    pub(crate) pipeline: crate::pipeline::PipelineConfig,
+    /// What the run is estimated to hold with it.
+    pub(crate) memory_bytes: u64,
     pub(crate) channels: Vec<String>,
     pub(crate) layout: OutputLayout,
     pub(crate) band: Option<BandPlan>,
@@ -109,7 +114,9 @@ impl<'a> FilterPlan<'a> {
         pipe_job.guides = guide_layout;
         pipe_job.surface_rule = job.surface_rule;
         pipe_job.aux = input.aux_channels();
-        check_memory(job, &input, &pipe_job, carried)?;
+        let pipeline = fit_memory(job, &input, &pipe_job, carried)?;
+        let memory_bytes =
+            crate::pipeline::estimate_bytes(&pipe_job, &job.params, &pipeline, input.block_bytes());
         let mut layout = OutputLayout::of(&input, &channels, &job.output_settings);
         if geometry.w != geometry.full_w || geometry.h != input.size().1 {
             layout.crop(geometry.w, geometry.h);
@@ -133,6 +140,8 @@ impl<'a> FilterPlan<'a> {
             guides: found_guides,
             geometry,
             pipe_job,
+            pipeline,
+            memory_bytes,
             channels,
             layout,
             band,
@@ -356,19 +365,26 @@ fn pipeline_job(
     Ok(pipe_job)
 }
 
-/// Refuse a run that would need more memory than `--max-memory` allows.
-fn check_memory(
+/// How the job runs within `--max-memory` ([`crate::pipeline::fit_memory`]):
+/// refused only where even its shortest strips and fewest blocks read ahead
+/// would need more.
+fn fit_memory(
     job: &FilterJob,
     input: &ExrInput,
     pipe_job: &StripLayout,
     carried: usize,
-) -> Result<()> {
-    let need =
-        crate::pipeline::estimate_bytes(pipe_job, &job.params, &job.pipeline, input.block_bytes());
+) -> Result<crate::pipeline::PipelineConfig> {
     let limit = job.max_memory.unwrap_or_else(default_max_memory);
-    if need <= limit {
-        return Ok(());
-    }
+    let floor = match crate::pipeline::fit_memory(
+        pipe_job,
+        &job.params,
+        &job.pipeline,
+        input.block_bytes(),
+        limit,
+    ) {
+        Ok(cfg) => return Ok(cfg),
+        Err(floor) => floor,
+    };
     let hint = if carried == 0 {
         String::new()
     } else {
@@ -379,9 +395,9 @@ fn check_memory(
     };
     let (w, h) = (pipe_job.grid.in_w, pipe_job.grid.in_h);
     Err(Error::Config(format!(
-        "{}: filtering this {w}x{h} image needs about {} MiB, more than the {} MiB allowed (--max-memory){hint}",
+        "{}: filtering this {w}x{h} image needs at least about {} MiB (the kernels' rows and one strip), more than the {} MiB allowed (--max-memory){hint}",
         job.input.display(),
-        need >> 20,
+        floor.div_ceil(1 << 20),
         limit >> 20
     )))
 }

@@ -98,7 +98,7 @@ impl FilterPlan<'_> {
         let mean = crate::pipeline::mean_luminance(
             self.source(),
             &self.pipe_job,
-            self.job.pipeline.strip_rows,
+            self.pipeline.strip_rows,
         )?;
         let l = crate::filter::ep_box::ltvis(mean, ep.nmid);
         if !(l.is_finite() && l > 0.0) {
@@ -205,7 +205,7 @@ impl FilterPlan<'_> {
                 output,
                 &self.pipe_job,
                 &self.params,
-                &self.job.pipeline,
+                &self.pipeline,
                 progress,
             )?;
             return Ok((stats, None));
@@ -269,7 +269,7 @@ impl FilterPlan<'_> {
             &mut sink,
             &window_job,
             &self.params,
-            &self.job.pipeline,
+            &self.pipeline,
             progress,
         )?;
         let energy_out_owned: Vec<f64> = sink.sums().iter().map(|v| v * s2).collect();

@@ -124,11 +124,16 @@ pub fn window_blocks(
 /// The reader's window of `blocks` blocks in bytes (at least
 /// [`READ_AHEAD_BATCHES`] x [`READ_AHEAD_BYTES`], at most as many whole
 /// images of `h` rows of `row` bytes).
-fn read_ahead(row: u64, h: usize, block_bytes: u64, blocks: u64) -> u64 {
+fn read_ahead(row: u64, h: usize, block_bytes: u64, blocks: u64, fixed: bool) -> u64 {
     let image = row.saturating_mul(h as u64).max(block_bytes);
+    let floor = if fixed {
+        0
+    } else {
+        READ_AHEAD_BATCHES * READ_AHEAD_BYTES
+    };
     blocks
         .saturating_mul(block_bytes)
-        .max(READ_AHEAD_BATCHES * READ_AHEAD_BYTES)
+        .max(floor)
         .min(image.saturating_mul(READ_AHEAD_BATCHES))
 }
 
@@ -144,8 +149,64 @@ pub fn estimate_bytes(
     cfg: &PipelineConfig,
     block_bytes: u64,
 ) -> u64 {
-    let blocks = window_blocks(job, params, cfg, block_bytes);
+    let blocks = match cfg.window_blocks {
+        0 => window_blocks(job, params, cfg, block_bytes),
+        n => n as u64,
+    };
     estimate_with(job, params, cfg, block_bytes, blocks)
+}
+
+/// Blocks the reader decodes ahead at the least ([`fit_memory`]): one being
+/// handed over while the next decodes.
+pub const FEWEST_WINDOW_BLOCKS: usize = 2;
+
+/// How `cfg` runs `job` within `limit` bytes ([`estimate_bytes`]): as it is
+/// where it fits; else with shorter strips (halved down to one pixel row,
+/// unless `--strip-rows` gave them) and the reader's window down to
+/// [`FEWEST_WINDOW_BLOCKS`], the first that fits, tallest strips first. None
+/// of it changes the result. `Err` holds what the smallest of them needs
+/// (the halo's rows and one strip: the floor the job cannot go below).
+pub fn fit_memory(
+    job: &StripLayout,
+    params: &FilterParams,
+    cfg: &PipelineConfig,
+    block_bytes: u64,
+    limit: u64,
+) -> std::result::Result<PipelineConfig, u64> {
+    if estimate_bytes(job, params, cfg, block_bytes) <= limit {
+        return Ok(cfg.clone());
+    }
+    let s = job.grid.s.max(1);
+    let mut strips = Vec::new();
+    match cfg.strip_rows {
+        0 => {
+            let mut rows = job.auto_strip_rows();
+            loop {
+                strips.push(rows);
+                if rows <= s {
+                    break;
+                }
+                rows = (rows / 2 / s * s).max(s);
+            }
+        }
+        n => strips.push(n),
+    }
+    let mut floor = u64::MAX;
+    for &strip_rows in &strips {
+        for window_blocks in [cfg.window_blocks, FEWEST_WINDOW_BLOCKS] {
+            let c = PipelineConfig {
+                strip_rows,
+                window_blocks,
+                ..cfg.clone()
+            };
+            let need = estimate_bytes(job, params, &c, block_bytes);
+            if need <= limit {
+                return Ok(c);
+            }
+            floor = floor.min(need);
+        }
+    }
+    Err(floor)
 }
 
 /// [`estimate_bytes`] with a reader's window of `blocks` blocks.
@@ -214,6 +275,7 @@ fn estimate_with(
         job.grid.in_h,
         block_bytes,
         blocks,
+        cfg.window_blocks > 0,
     ));
     windows
         .saturating_add(table)
@@ -263,6 +325,7 @@ fn estimate_box_bytes(
             job.grid.in_h,
             block_bytes,
             blocks,
+            cfg.window_blocks > 0,
         ))
         .saturating_add(w.saturating_mul(nch * 8 * 16 * 4))
 }
@@ -346,5 +409,53 @@ mod tests {
         let (blocks, _) = window(&narrow, Method::Box, block);
         assert_eq!(blocks, READ_AHEAD_BATCHES * read_ahead_blocks(block));
         assert!(blocks > WINDOW_MIN_BLOCKS);
+    }
+
+    #[test]
+    fn a_smaller_budget_runs_shorter_strips_and_fewer_blocks_down_to_a_floor() {
+        let job = rgb(6144, 6144);
+        let block = 6144 * 3 * 4 * 16;
+        let cfg = PipelineConfig::default();
+        for m in [Method::EpGauss, Method::Box] {
+            let p = FilterParams::new(m, 3);
+            let full = estimate_bytes(&job, &p, &cfg, block);
+            // Within the default estimate: nothing changes.
+            let same = fit_memory(&job, &p, &cfg, block, full).unwrap();
+            assert_eq!((same.strip_rows, same.window_blocks), (0, 0), "{m:?}");
+            // The floor: strips of one pixel row, the fewest blocks.
+            let floor = fit_memory(&job, &p, &cfg, block, 0).unwrap_err();
+            assert!(floor < full, "{m:?}: {floor} vs {full}");
+            let at_floor = fit_memory(&job, &p, &cfg, block, floor).unwrap();
+            assert_eq!(at_floor.strip_rows, 3, "{m:?}");
+            assert_eq!(at_floor.window_blocks, FEWEST_WINDOW_BLOCKS, "{m:?}");
+            // Between: whatever is chosen fits, and a larger budget never
+            // gets shorter strips.
+            let mut last = 0;
+            for k in 0..=8 {
+                let limit = floor + (full - floor) * k / 8;
+                let c = fit_memory(&job, &p, &cfg, block, limit).unwrap();
+                assert!(estimate_bytes(&job, &p, &c, block) <= limit, "{m:?} {k}");
+                let rows = if c.strip_rows == 0 {
+                    job.auto_strip_rows()
+                } else {
+                    c.strip_rows
+                };
+                assert!(rows >= last, "{m:?} {k}: {rows} after {last}");
+                last = rows;
+            }
+        }
+        // Strips the user set stay as set.
+        let given = PipelineConfig {
+            strip_rows: 12,
+            ..PipelineConfig::default()
+        };
+        let p = FilterParams::new(Method::EpGauss, 3);
+        let floor = fit_memory(&job, &p, &given, block, 0).unwrap_err();
+        assert_eq!(
+            fit_memory(&job, &p, &given, block, floor)
+                .unwrap()
+                .strip_rows,
+            12
+        );
     }
 }

@@ -58,8 +58,8 @@ pub use stage::{Stage, WindowUse};
 pub use stream::{OutRows, Streamer};
 
 pub use estimate::{
-    auto_strip_rows, estimate_bytes, read_ahead_blocks, window_blocks, READ_AHEAD_BATCHES,
-    READ_AHEAD_BYTES, STRIPS_RECYCLED, STRIP_BYTES,
+    auto_strip_rows, estimate_bytes, fit_memory, read_ahead_blocks, window_blocks,
+    READ_AHEAD_BATCHES, READ_AHEAD_BYTES, STRIPS_RECYCLED, STRIP_BYTES,
 };
 pub use memory::{filter_in_memory, filter_planar, MemoryRun, MemorySink, MemorySource};
 pub use runner::{mean_luminance, run, thread_pool, Progress};
@@ -210,6 +210,9 @@ pub struct PipelineConfig {
     pub strip_rows: usize,
     /// Worker threads (0: one per core).
     pub threads: usize,
+    /// Blocks the reader decodes ahead at most (0: automatic,
+    /// [`window_blocks`]; [`fit_memory`] sets fewer under a small budget).
+    pub window_blocks: usize,
     /// Set to stop the run early (e.g. on SIGINT).
     pub cancel: Option<Arc<AtomicBool>>,
     /// NaN and infinite input samples.
@@ -230,6 +233,7 @@ impl Default for PipelineConfig {
             tile: 256,
             strip_rows: 0,
             threads: 0,
+            window_blocks: 0,
             cancel: None,
             nonfinite: NonFinite::Error,
             classify_samples: 0,

@@ -157,3 +157,68 @@ fn dense_wide_fireflies_give_one_answer_and_keep_energy() {
         );
     }
 }
+
+/// A run under a smaller `--max-memory` takes shorter strips and fewer
+/// blocks read ahead, says so in its report, and writes the same bytes; below
+/// its floor it is refused, naming the floor.
+#[test]
+fn a_smaller_memory_budget_runs_smaller_and_gives_the_same_bytes() {
+    use epfilt::{filter_file, FilterJob, FilterParams};
+    let dir = crate::exr_io::tmpdir();
+    let input = dir.path().join("in.exr");
+    // Wide and short: strips and the reader's window are most of what it holds.
+    let path = |name: &str| dir.path().join(name);
+    let p = |name: &str| path(name).display().to_string();
+    epfilt_ok(&[
+        "synth",
+        "-q",
+        "--scene",
+        "mixed",
+        "--size",
+        "1024x40",
+        "-s",
+        "3",
+        "-o",
+        &p("in.exr"),
+    ]);
+    for m in [Method::EpGauss, Method::Box, Method::Gauss] {
+        let job = |out: &str, limit: Option<u64>| {
+            let mut j = FilterJob::new(&input, path(out), FilterParams::new(m, 3));
+            j.max_memory = limit;
+            j
+        };
+        let full = filter_file(&job("full.exr", None), &|_, _| {}).expect("default run");
+        assert_eq!(full.window_blocks, None, "{m:?}");
+        let floor = filter_file(&job("none.exr", Some(1)), &|_, _| {}).unwrap_err();
+        let text = floor.to_string();
+        assert!(
+            text.contains("--max-memory") && text.contains("at least about"),
+            "{text}"
+        );
+        assert!(
+            !path("none.exr").exists(),
+            "{m:?}: nothing written when refused"
+        );
+        // Budgets from the default estimate down: each run fits its budget
+        // by the estimate, and every one writes the default run's bytes.
+        let mut smallest = full.strip_rows;
+        for k in 1..=6 {
+            let limit = full.memory_estimate_bytes * (7 - k) / 7;
+            let out = format!("b{k}.exr");
+            match filter_file(&job(&out, Some(limit)), &|_, _| {}) {
+                Ok(r) => {
+                    assert!(r.memory_estimate_bytes <= limit, "{m:?} {k}");
+                    assert!(r.strip_rows <= smallest, "{m:?} {k}");
+                    smallest = r.strip_rows;
+                    assert_eq!(r.digest, full.digest, "{m:?} {k}");
+                    assert_eq!(image_bytes(&path(&out)), image_bytes(&path("full.exr")));
+                }
+                Err(e) => assert!(e.to_string().contains("at least about"), "{m:?} {k}: {e}"),
+            }
+        }
+        assert!(
+            smallest < full.strip_rows,
+            "{m:?}: some budget shortened the strips"
+        );
+    }
+}
