@@ -430,6 +430,9 @@ options! {
     /// Input rows per strip, 0 = automatic (from the input's width; at least
     /// 6 pixel rows, 16 where they fit; does not change the result).
     strip_rows: usize { Value, PERFORMANCE, parse: number, default: "0" }
+    /// Blocks (chunks) the reader decodes ahead at most, 0 = automatic (from
+    /// the threads and the memory allowed; does not change the result).
+    window_blocks: usize { Value, PERFORMANCE, parse: number, default: "0" }
 }
 
 /// `--quality`'s long help: every preset's knob values.
@@ -635,6 +638,7 @@ impl FilterOptions {
             tile: self.tile,
             strip_rows: self.strip_rows,
             threads,
+            window_blocks: self.window_blocks,
             cancel,
             nonfinite,
             ..PipelineConfig::default()
