@@ -102,38 +102,44 @@ pub const WINDOW_BUDGET: u64 = 208 << 20;
 /// Blocks (chunks) of `block_bytes` decoded bytes the reader's window holds
 /// for `job`: [`READ_AHEAD_BATCHES`] batches of [`read_ahead_blocks`], or
 /// [`WINDOW_MIN_BLOCKS`] where that is more and the job's estimate with them
-/// stays within [`WINDOW_BUDGET`].
+/// stays within [`WINDOW_BUDGET`]; at most [`WINDOW_BLOCKS_PER_THREAD`] a
+/// worker thread.
 pub fn window_blocks(
     job: &StripLayout,
     params: &FilterParams,
     cfg: &PipelineConfig,
     block_bytes: u64,
 ) -> u64 {
+    let threads = match cfg.threads {
+        0 => rayon::current_num_threads(),
+        n => n,
+    } as u64;
+    let by_threads = (WINDOW_BLOCKS_PER_THREAD * threads).max(FEWEST_WINDOW_BLOCKS as u64);
     let floor = READ_AHEAD_BATCHES * read_ahead_blocks(block_bytes);
     if floor >= WINDOW_MIN_BLOCKS {
-        return floor;
+        return floor.min(by_threads);
     }
     let grown = estimate_with(job, params, cfg, block_bytes, WINDOW_MIN_BLOCKS);
     if grown <= WINDOW_BUDGET {
-        WINDOW_MIN_BLOCKS
+        WINDOW_MIN_BLOCKS.min(by_threads)
     } else {
-        floor
+        floor.min(by_threads)
     }
 }
 
-/// The reader's window of `blocks` blocks in bytes (at least
-/// [`READ_AHEAD_BATCHES`] x [`READ_AHEAD_BYTES`], at most as many whole
-/// images of `h` rows of `row` bytes).
-fn read_ahead(row: u64, h: usize, block_bytes: u64, blocks: u64, fixed: bool) -> u64 {
+/// Blocks the reader's window holds per worker thread at most: a block
+/// decodes on one core, and with two a worker's next block is queued while
+/// it decodes one; fewer were slower on 4 and 16 cores and more only held
+/// memory (docs/bench/windows.md). A run on few threads no longer pays for a
+/// window sized for many.
+pub const WINDOW_BLOCKS_PER_THREAD: u64 = 2;
+
+/// The reader's window of `blocks` blocks in bytes (at most
+/// [`READ_AHEAD_BATCHES`] whole images of `h` rows of `row` bytes).
+fn read_ahead(row: u64, h: usize, block_bytes: u64, blocks: u64) -> u64 {
     let image = row.saturating_mul(h as u64).max(block_bytes);
-    let floor = if fixed {
-        0
-    } else {
-        READ_AHEAD_BATCHES * READ_AHEAD_BYTES
-    };
     blocks
         .saturating_mul(block_bytes)
-        .max(floor)
         .min(image.saturating_mul(READ_AHEAD_BATCHES))
 }
 
@@ -275,7 +281,6 @@ fn estimate_with(
         job.grid.in_h,
         block_bytes,
         blocks,
-        cfg.window_blocks > 0,
     ));
     windows
         .saturating_add(table)
@@ -325,7 +330,6 @@ fn estimate_box_bytes(
             job.grid.in_h,
             block_bytes,
             blocks,
-            cfg.window_blocks > 0,
         ))
         .saturating_add(w.saturating_mul(nch * 8 * 16 * 4))
 }
@@ -380,7 +384,11 @@ mod tests {
 
     #[test]
     fn the_window_grows_to_eight_blocks_within_the_budget() {
-        let cfg = PipelineConfig::default();
+        // On 16 threads (the window's blocks follow the threads).
+        let cfg = PipelineConfig {
+            threads: 16,
+            ..PipelineConfig::default()
+        };
         let window = |job: &StripLayout, m: Method, block: u64| {
             let p = FilterParams::new(m, 3);
             (
@@ -457,5 +465,28 @@ mod tests {
                 .strip_rows,
             12
         );
+    }
+
+    #[test]
+    fn the_window_holds_two_blocks_a_thread_at_most() {
+        let job = rgb(6144, 6144);
+        let block = 6144 * 3 * 4 * 16;
+        let p = FilterParams::new(Method::EpGauss, 3);
+        let at = |threads| {
+            let cfg = PipelineConfig {
+                threads,
+                ..PipelineConfig::default()
+            };
+            (
+                window_blocks(&job, &p, &cfg, block),
+                estimate_bytes(&job, &p, &cfg, block),
+            )
+        };
+        let by_bytes = READ_AHEAD_BATCHES * read_ahead_blocks(block);
+        assert_eq!(at(1).0, 2);
+        assert_eq!(at(2).0, 4);
+        assert_eq!(at(64).0, by_bytes);
+        // Fewer blocks are less memory, by the blocks' bytes.
+        assert_eq!(at(64).1 - at(1).1, (by_bytes - 2) * block);
     }
 }
