@@ -23,7 +23,7 @@ pub struct Report {
     /// Super-sampling factor.
     pub supersample: usize,
     /// Where S came from: `--supersample`, the file's attribute, or pixel
-    /// resolution by default ([`crate::io::verdict`]).
+    /// resolution by default ([`crate::io::verdict()`]).
     pub supersample_from: String,
     /// Why this method: `--method`, or what the file holds.
     pub method_from: String,

@@ -63,7 +63,7 @@ pub struct PartInfo {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub note: Option<String>,
     /// How `filter` filters it without --method or --supersample
-    /// ([`crate::io::verdict`]), or why it cannot say.
+    /// ([`crate::io::verdict()`]), or why it cannot say.
     pub verdict: String,
     /// The guide passes found by name ([`crate::io::guides`]): `none`, or
     /// each kind with its channels.

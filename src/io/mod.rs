@@ -13,7 +13,7 @@
 //!   records, the band attributes, and the check that an existing output is
 //!   complete; [`views`]: multi-view files, and `--view all`'s output;
 //! * [`info`](mod@info): what a file holds, as text or JSON, and its raw attributes;
-//! * [`verdict`]: how a file is filtered when the user does not say (its
+//! * [`verdict`](mod@verdict): how a file is filtered when the user does not say (its
 //!   super-sampling, its method); [`guides`]: its guide passes, by name;
 //! * [`writer`]: a [`crate::pipeline::Sink`] that builds scan-line blocks,
 //!   compresses them in parallel and writes them with the chunk writer into a

@@ -155,7 +155,7 @@ const PIECE: usize = 256 << 10;
 ///
 /// The stream holds the block's even bytes, then its odd ones. The even half
 /// is inflated into the upper half of `out`; the odd half then arrives
-/// [`PIECE`] bytes at a time and each byte pair is written in place, at `2j`
+/// `PIECE` bytes at a time and each byte pair is written in place, at `2j`
 /// and `2j + 1`, below the even bytes still to be read (`2j + 1 < half + j +
 /// 1` for every `j < half`). A buffer per block, megabytes on wide inputs,
 /// was mapped, faulted in page by page and unmapped every time (glibc maps

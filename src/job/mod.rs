@@ -113,7 +113,7 @@ impl std::fmt::Debug for Undecided {
 
 impl FilterJob {
     /// The job with S and the method decided: by the user where given, else
-    /// by the input's header ([`crate::io::verdict`]: the super-sampling
+    /// by the input's header ([`crate::io::verdict()`]: the super-sampling
     /// attribute, else 1; ep-box where the file holds variance at S = 1,
     /// else ep-gauss), its settings rebuilt for them. Reads the header only.
     pub fn settle(&self) -> Result<FilterJob> {

@@ -1,6 +1,6 @@
 //! The books the skeleton keeps beside the stages' windows: the channel names, the
 //! energy ledger, the digest of the unrounded output, and the non-finite
-//! policy with its counts. Strips come in through [`Books::take`] (checked,
+//! policy with its counts. Strips come in through [`Books::take_and_finish`] (checked,
 //! counted) and output rows go out through [`Books::finish`] (rounded,
 //! counted), so every method accounts the same way.
 

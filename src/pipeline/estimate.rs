@@ -31,7 +31,7 @@ pub fn auto_strip_rows(in_w: usize, channels: usize) -> usize {
 /// not more, because each pixel row more is paid in memory on those inputs.
 pub const MIN_STRIP_PIXEL_ROWS: usize = 6;
 
-/// Pixel rows a strip holds where they fit in [`TALL_STRIP_BYTES`]. Each of
+/// Pixel rows a strip holds where they fit in `TALL_STRIP_BYTES`. Each of
 /// a strip's loops (classification, base rows, finishing) has a task a pixel
 /// row, so a strip of fewer pixel rows than cores leaves cores idle in them,
 /// and fewer strips are fewer loops, whose ends cost on many cores (the
@@ -39,17 +39,17 @@ pub const MIN_STRIP_PIXEL_ROWS: usize = 6;
 /// 16 and 32 cores with them).
 pub const TALL_STRIP_PIXEL_ROWS: usize = 16;
 
-/// The most input bytes a strip grown to [`TALL_STRIP_PIXEL_ROWS`] holds:
+/// The most input bytes a strip grown to `TALL_STRIP_PIXEL_ROWS` holds:
 /// twice [`STRIP_BYTES`], so the widest inputs keep their
-/// [`MIN_STRIP_PIXEL_ROWS`].
+/// `MIN_STRIP_PIXEL_ROWS`.
 pub const TALL_STRIP_BYTES: usize = 2 * STRIP_BYTES;
 
 impl StripLayout {
     /// Default strip height of this job: [`auto_strip_rows`], at least
-    /// [`MIN_STRIP_PIXEL_ROWS`] pixel rows (whole pixel rows: `S` input rows
-    /// each), at most 96 input rows or [`MIN_STRIP_PIXEL_ROWS`] pixel rows,
-    /// whichever is more; and [`TALL_STRIP_PIXEL_ROWS`] pixel rows where
-    /// that is more and they fit in [`TALL_STRIP_BYTES`].
+    /// `MIN_STRIP_PIXEL_ROWS` pixel rows (whole pixel rows: `S` input rows
+    /// each), at most 96 input rows or `MIN_STRIP_PIXEL_ROWS` pixel rows,
+    /// whichever is more; and `TALL_STRIP_PIXEL_ROWS` pixel rows where
+    /// that is more and they fit in `TALL_STRIP_BYTES`.
     pub fn auto_strip_rows(&self) -> usize {
         let s = self.grid.s.max(1);
         let (w, nch) = (self.grid.in_w.max(1), self.strip_channels().max(1));
@@ -84,14 +84,14 @@ pub fn read_ahead_blocks(block_bytes: u64) -> u64 {
 }
 
 /// Blocks the reader's window of blocks decoding ahead holds at the least
-/// where the job's memory allows ([`WINDOW_BUDGET`]): a block decodes on one
+/// where the job's memory allows (`WINDOW_BUDGET`): a block decodes on one
 /// core, so the window bounds the cores decoding at once: on the widest
 /// inputs [`READ_AHEAD_BATCHES`] of [`read_ahead_blocks`] are too few blocks
 /// to keep 16 cores decoding, and each block more costs its decoded size.
 pub const WINDOW_MIN_BLOCKS: u64 = 8;
 
 /// The job's estimate ([`estimate_bytes`]) within which the reader's window
-/// grows to [`WINDOW_MIN_BLOCKS`]: what a job of the widest inputs should
+/// grows to `WINDOW_MIN_BLOCKS`: what a job of the widest inputs should
 /// stay within on a small server, less what many threads hold beyond the
 /// estimate (blocks each worker decodes or compresses, the allocator's
 /// arenas). The light methods
@@ -101,8 +101,8 @@ pub const WINDOW_BUDGET: u64 = 208 << 20;
 
 /// Blocks (chunks) of `block_bytes` decoded bytes the reader's window holds
 /// for `job`: [`READ_AHEAD_BATCHES`] batches of [`read_ahead_blocks`], or
-/// [`WINDOW_MIN_BLOCKS`] where that is more and the job's estimate with them
-/// stays within [`WINDOW_BUDGET`]; at most [`WINDOW_BLOCKS_PER_THREAD`] a
+/// `WINDOW_MIN_BLOCKS` where that is more and the job's estimate with them
+/// stays within `WINDOW_BUDGET`; at most `WINDOW_BLOCKS_PER_THREAD` a
 /// worker thread.
 pub fn window_blocks(
     job: &StripLayout,
@@ -169,7 +169,7 @@ pub const FEWEST_WINDOW_BLOCKS: usize = 2;
 /// How `cfg` runs `job` within `limit` bytes ([`estimate_bytes`]): as it is
 /// where it fits; else with shorter strips (halved down to one pixel row,
 /// unless `--strip-rows` gave them) and the reader's window down to
-/// [`FEWEST_WINDOW_BLOCKS`], the first that fits, tallest strips first. None
+/// `FEWEST_WINDOW_BLOCKS`, the first that fits, tallest strips first. None
 /// of it changes the result. `Err` holds what the smallest of them needs
 /// (the halo's rows and one strip: the floor the job cannot go below).
 pub fn fit_memory(

@@ -27,7 +27,7 @@
 use super::{disc_spans, LumRows};
 
 /// The share of a width's weight (on a flat field) its bound keeps at
-/// least; steps are added until it does (at most [`MAX_STEPS`] per axis).
+/// least; steps are added until it does (at most `MAX_STEPS` per axis).
 /// At 0.7 a bound is at most 30% below the exact average where the
 /// luminance is flat, so the width found is about two rungs (at
 /// `--width-step 0.1`) wider at most, and a bound is 16-25 rectangles: the

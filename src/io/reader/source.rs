@@ -234,7 +234,7 @@ impl Source for ExrSource<'_> {
     }
 
     /// The block rows decoded ahead on a thread of its own
-    /// ([`super::ahead`]).
+    /// (`super::ahead`).
     fn decoder<'s>(
         &mut self,
         ahead: &ReadAhead<'_>,
