@@ -473,10 +473,7 @@ impl Report {
             },
             window_blocks: (run.cfg.window_blocks > 0).then_some(run.cfg.window_blocks),
             memory_estimate_bytes: 0,
-            threads: match run.cfg.threads {
-                0 => rayon::current_num_threads(),
-                n => n,
-            },
+            threads: run.cfg.workers(),
             peak_rss_bytes: peak_rss_bytes(),
             windows: stats.windows.clone(),
             window_bytes: stats.window_bytes(),

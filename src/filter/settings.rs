@@ -71,19 +71,24 @@ impl Value for f64 {
     }
 }
 
-impl Value for usize {
-    fn parse(raw: &str) -> Result<Self, String> {
-        raw.trim()
-            .parse()
-            .map_err(|_| format!("{raw:?} is not a whole number >= 0"))
-    }
-    fn json(&self) -> Json {
-        Json::from(*self)
-    }
-    fn show(&self) -> String {
-        self.to_string()
-    }
+macro_rules! whole_numbers {
+    ($($t:ty),*) => {$(
+        impl Value for $t {
+            fn parse(raw: &str) -> Result<Self, String> {
+                raw.trim()
+                    .parse()
+                    .map_err(|_| format!("{raw:?} is not a whole number >= 0"))
+            }
+            fn json(&self) -> Json {
+                Json::from(*self)
+            }
+            fn show(&self) -> String {
+                self.to_string()
+            }
+        }
+    )*};
 }
+whole_numbers!(usize, u32, u64);
 
 /// A number that may be absent (derived from the image when it is).
 impl Value for Option<f64> {
@@ -100,10 +105,7 @@ impl Value for Option<f64> {
 
 impl Value for Quality {
     fn parse(raw: &str) -> Result<Self, String> {
-        Quality::ALL
-            .into_iter()
-            .find(|q| q.name() == raw.trim())
-            .ok_or_else(|| format!("{raw:?} is not fast, default or best"))
+        Quality::parse(raw.trim()).map_err(|_| format!("{raw:?} is not fast, default or best"))
     }
     fn json(&self) -> Json {
         Json::from(self.name())

@@ -94,19 +94,9 @@ fn one_paragraph(doc: &str) -> String {
         .join(" ")
 }
 
-/// `raw` as a number for `--option`.
-fn number<T: std::str::FromStr>(option: &str, raw: &str) -> Result<T> {
-    raw.trim().parse().map_err(|_| {
-        Error::Config(format!(
-            "--{} {raw:?} is not a {}",
-            option.replace('_', "-"),
-            if std::any::type_name::<T>().starts_with('f') {
-                "number"
-            } else {
-                "whole number >= 0"
-            }
-        ))
-    })
+/// `raw` as a number for `--option` (the method settings' parser).
+fn number<T: settings::Value>(option: &str, raw: &str) -> Result<T> {
+    T::parse(raw).map_err(|e| Error::Config(format!("--{} {e}", option.replace('_', "-"))))
 }
 
 /// `raw` as it is.

@@ -114,9 +114,7 @@ impl<'a> FilterPlan<'a> {
         pipe_job.guides = guide_layout;
         pipe_job.surface_rule = job.surface_rule;
         pipe_job.aux = input.aux_channels();
-        let pipeline = fit_memory(job, &input, &pipe_job, carried)?;
-        let memory_bytes =
-            crate::pipeline::estimate_bytes(&pipe_job, &job.params, &pipeline, input.block_bytes());
+        let (pipeline, memory_bytes) = fit_memory(job, &input, &pipe_job, carried)?;
         let mut layout = OutputLayout::of(&input, &channels, &job.output_settings);
         if geometry.w != geometry.full_w || geometry.h != input.size().1 {
             layout.crop(geometry.w, geometry.h);
@@ -373,7 +371,7 @@ fn fit_memory(
     input: &ExrInput,
     pipe_job: &StripLayout,
     carried: usize,
-) -> Result<crate::pipeline::PipelineConfig> {
+) -> Result<(crate::pipeline::PipelineConfig, u64)> {
     let limit = job.max_memory.unwrap_or_else(default_max_memory);
     let floor = match crate::pipeline::fit_memory(
         pipe_job,
@@ -382,7 +380,7 @@ fn fit_memory(
         input.block_bytes(),
         limit,
     ) {
-        Ok(cfg) => return Ok(cfg),
+        Ok(fit) => return Ok(fit),
         Err(floor) => floor,
     };
     let hint = if carried == 0 {

@@ -110,10 +110,7 @@ pub fn window_blocks(
     cfg: &PipelineConfig,
     block_bytes: u64,
 ) -> u64 {
-    let threads = match cfg.threads {
-        0 => rayon::current_num_threads(),
-        n => n,
-    } as u64;
+    let threads = cfg.workers() as u64;
     let by_threads = (WINDOW_BLOCKS_PER_THREAD * threads).max(FEWEST_WINDOW_BLOCKS as u64);
     let floor = READ_AHEAD_BATCHES * read_ahead_blocks(block_bytes);
     if floor >= WINDOW_MIN_BLOCKS {
@@ -178,9 +175,10 @@ pub fn fit_memory(
     cfg: &PipelineConfig,
     block_bytes: u64,
     limit: u64,
-) -> std::result::Result<PipelineConfig, u64> {
-    if estimate_bytes(job, params, cfg, block_bytes) <= limit {
-        return Ok(cfg.clone());
+) -> std::result::Result<(PipelineConfig, u64), u64> {
+    let need = estimate_bytes(job, params, cfg, block_bytes);
+    if need <= limit {
+        return Ok((cfg.clone(), need));
     }
     let s = job.grid.s.max(1);
     let mut strips = Vec::new();
@@ -207,7 +205,7 @@ pub fn fit_memory(
             };
             let need = estimate_bytes(job, params, &c, block_bytes);
             if need <= limit {
-                return Ok(c);
+                return Ok((c, need));
             }
             floor = floor.min(need);
         }
@@ -303,11 +301,7 @@ fn estimate_box_bytes(
         n => n,
     } as u64;
     let (p, r) = (halo.search_reach as u64, halo.spread_reach as u64);
-    let threads = if cfg.threads == 0 {
-        rayon::current_num_threads()
-    } else {
-        cfg.threads
-    } as u64;
+    let threads = cfg.workers() as u64;
     // Input rows with their luminance, guard bound, raw flags and decision;
     // kept and accumulator rows; each task's band arrays; strips in flight;
     // the codec's blocks.
@@ -428,12 +422,12 @@ mod tests {
             let p = FilterParams::new(m, 3);
             let full = estimate_bytes(&job, &p, &cfg, block);
             // Within the default estimate: nothing changes.
-            let same = fit_memory(&job, &p, &cfg, block, full).unwrap();
+            let same = fit_memory(&job, &p, &cfg, block, full).unwrap().0;
             assert_eq!((same.strip_rows, same.window_blocks), (0, 0), "{m:?}");
             // The floor: strips of one pixel row, the fewest blocks.
             let floor = fit_memory(&job, &p, &cfg, block, 0).unwrap_err();
             assert!(floor < full, "{m:?}: {floor} vs {full}");
-            let at_floor = fit_memory(&job, &p, &cfg, block, floor).unwrap();
+            let at_floor = fit_memory(&job, &p, &cfg, block, floor).unwrap().0;
             assert_eq!(at_floor.strip_rows, 3, "{m:?}");
             assert_eq!(at_floor.window_blocks, FEWEST_WINDOW_BLOCKS, "{m:?}");
             // Between: whatever is chosen fits, and a larger budget never
@@ -441,7 +435,7 @@ mod tests {
             let mut last = 0;
             for k in 0..=8 {
                 let limit = floor + (full - floor) * k / 8;
-                let c = fit_memory(&job, &p, &cfg, block, limit).unwrap();
+                let c = fit_memory(&job, &p, &cfg, block, limit).unwrap().0;
                 assert!(estimate_bytes(&job, &p, &c, block) <= limit, "{m:?} {k}");
                 let rows = if c.strip_rows == 0 {
                     job.auto_strip_rows()
@@ -462,6 +456,7 @@ mod tests {
         assert_eq!(
             fit_memory(&job, &p, &given, block, floor)
                 .unwrap()
+                .0
                 .strip_rows,
             12
         );

@@ -227,6 +227,16 @@ pub struct PipelineConfig {
     pub spread_chunk: usize,
 }
 
+impl PipelineConfig {
+    /// The worker threads a run gets: `threads`, or one per core.
+    pub fn workers(&self) -> usize {
+        match self.threads {
+            0 => rayon::current_num_threads(),
+            n => n,
+        }
+    }
+}
+
 impl Default for PipelineConfig {
     fn default() -> Self {
         PipelineConfig {
