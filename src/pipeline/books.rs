@@ -1,6 +1,6 @@
 //! The books the skeleton keeps beside the stages' windows: the channel names, the
 //! energy ledger, the digest of the unrounded output, and the non-finite
-//! policy with its counts. Strips come in through [`Books::take_and_finish`] (checked,
+//! policy with its counts. Strips come in through [`Books::take`] (checked,
 //! counted) and output rows go out through [`Books::finish`] (rounded,
 //! counted), so every method accounts the same way.
 
@@ -8,7 +8,7 @@ use rayon::prelude::*;
 
 use super::edge::Coverage;
 use super::ledger::{Ledger, Sums};
-use super::stage::{Early, Output};
+use super::stage::Output;
 use super::stream::OutRows;
 use super::{NonFinite, Precision, Strip};
 use crate::error::{Error, Result, Side};
@@ -59,7 +59,7 @@ impl Books {
     /// Check the next strip before its rows enter the window: it must start
     /// at row `next` of `in_h` rows of `in_w` samples; its non-finite
     /// samples are zeroed and counted here where the policy says so (the
-    /// ledger refuses them otherwise, [`Self::take_and_finish`]).
+    /// ledger refuses them otherwise, [`Self::take`]).
     pub fn check(
         &mut self,
         strip: &mut Strip,
@@ -80,17 +80,20 @@ impl Books {
         Ok(())
     }
 
-    /// Take a checked strip's rows (`take`) into the ledger, finish the
-    /// output rows of `finish`, and run a stage's work `beside` them, in one
-    /// parallel loop: its end costs many cores one wake-up, not three
-    /// (docs/DESIGN.md, "The trace and the scaling model"). Returns the finished rows.
-    pub fn take_and_finish(
+    /// Take a checked strip's rows into the ledger.
+    pub fn take(&mut self, take: Take<'_>) -> Result<()> {
+        self.take_and_finish(Some(take), None).map(|_| ())
+    }
+
+    /// Take a checked strip's rows (`take`) into the ledger and finish the
+    /// output rows of `finish`, row tasks of one parallel loop. Returns the
+    /// finished rows.
+    fn take_and_finish(
         &mut self,
         take: Option<Take<'_>>,
         finish: Option<Finish<'_>>,
-        beside: Option<Box<Early<'_>>>,
     ) -> Result<Option<OutRows>> {
-        let BooksLoop { input, output } = self.run_rows(take.as_ref(), finish.as_ref(), beside);
+        let BooksLoop { input, output } = self.run_rows(take.as_ref(), finish.as_ref());
         self.ledger.input.merge(&input?);
         let Some((out, raw, rounded, digests)) = output.transpose()? else {
             return Ok(None);
@@ -103,10 +106,10 @@ impl Books {
         Ok(Some(out))
     }
 
-    /// Output rows alone ([`Self::take_and_finish`] without a strip).
+    /// Finish output rows: rounded, into the ledger and the digest.
     pub fn finish(&mut self, finish: Finish<'_>) -> Result<OutRows> {
         Ok(self
-            .take_and_finish(None, Some(finish), None)?
+            .take_and_finish(None, Some(finish))?
             .unwrap_or(OutRows {
                 y0: 0,
                 rows: 0,
@@ -147,7 +150,7 @@ impl Books {
     }
 }
 
-/// A checked strip's rows ([`Books::check`]) for [`Books::take_and_finish`]
+/// A checked strip's rows ([`Books::check`]) for [`Books::take`]
 /// to take into the ledger.
 pub struct Take<'a> {
     /// Its rows, every channel of each.
@@ -158,7 +161,7 @@ pub struct Take<'a> {
     pub in_w: usize,
 }
 
-/// Output rows `a..b` for [`Books::take_and_finish`] to finish: `base_rows +
+/// Output rows `a..b` for [`Books::finish`] to finish: `base_rows +
 /// acc` (or `base_rows`), `w` wide, rounded to `precision`; the ledger and
 /// digest take them in row order.
 pub struct Finish<'a> {
@@ -220,14 +223,8 @@ impl Books {
     }
 
     /// The strip's rows into the ledger and the output rows of `finish`, the
-    /// tasks of one parallel loop, merged in row order, with `beside` run
-    /// beside them (its tasks in the same region).
-    fn run_rows(
-        &self,
-        input: Option<&Take<'_>>,
-        finish: Option<&Finish<'_>>,
-        beside: Option<Box<Early<'_>>>,
-    ) -> BooksLoop {
+    /// tasks of one parallel loop, merged in row order.
+    fn run_rows(&self, input: Option<&Take<'_>>, finish: Option<&Finish<'_>>) -> BooksLoop {
         let nch = self.names.len();
         let w = finish.map_or(0, |f| f.w);
         let mut data = finish.map_or_else(Vec::new, |f| vec![0.0f32; (f.b - f.a) * nch * w]);
@@ -239,7 +236,7 @@ impl Books {
             let rows = data.chunks_mut(nch * w).enumerate();
             jobs.extend(rows.map(|(k, out)| RowJob::Out(f.a + k, out)));
         }
-        let done: Vec<RowDone> = if jobs.is_empty() && beside.is_none() {
+        let done: Vec<RowDone> = if jobs.is_empty() {
             Vec::new()
         } else {
             let region = crate::trace::region(match (input.is_some(), finish.is_some()) {
@@ -247,28 +244,22 @@ impl Books {
                 (true, false) => "ledger in",
                 _ => "finish rows",
             });
-            let books = || {
-                jobs.into_par_iter()
-                    .map_init(
-                        || (vec![0.0f64; w], vec![0.0f64; w]),
-                        |scratch, job| match (job, input, finish) {
-                            (RowJob::In(row), Some(t), _) => {
-                                let _task = region.task("ledger in");
-                                RowDone::In(self.ledger_row(row, t.in_w))
-                            }
-                            (RowJob::Out(y, out), _, Some(f)) => {
-                                let _task = region.task("finish rows");
-                                RowDone::Out(self.finish_row(f, y, out, scratch))
-                            }
-                            _ => unreachable!("a row job comes with its side"),
-                        },
-                    )
-                    .collect()
-            };
-            match beside {
-                Some(work) => rayon::join(books, || work(&region)).0,
-                None => books(),
-            }
+            jobs.into_par_iter()
+                .map_init(
+                    || (vec![0.0f64; w], vec![0.0f64; w]),
+                    |scratch, job| match (job, input, finish) {
+                        (RowJob::In(row), Some(t), _) => {
+                            let _task = region.task("ledger in");
+                            RowDone::In(self.ledger_row(row, t.in_w))
+                        }
+                        (RowJob::Out(y, out), _, Some(f)) => {
+                            let _task = region.task("finish rows");
+                            RowDone::Out(self.finish_row(f, y, out, scratch))
+                        }
+                        _ => unreachable!("a row job comes with its side"),
+                    },
+                )
+                .collect()
         };
         let mut sums = Sums::new(nch);
         let mut in_err = None;

@@ -43,9 +43,6 @@ impl<'s> Output<'s> {
     }
 }
 
-/// Work a stage runs beside the books' loop ([`Stage::beside_books`]).
-pub type Early<'s> = dyn FnOnce(&crate::trace::Span) + Send + 's;
-
 /// A method's work on the rows, behind the skeleton.
 pub trait Stage: Send {
     /// Rows the method reaches beyond the row it works on.
@@ -61,19 +58,6 @@ pub trait Stage: Send {
     fn input_needed(&self) -> usize;
     /// The unrounded values of final output rows `a..b`.
     fn output(&self, rows: (usize, usize)) -> Output<'_>;
-    /// Input rows `rows` have just entered `input`, before the books take
-    /// them: work that can run beside the books' loop (their ledger, the
-    /// finishing of final rows `finish`), as tasks of the region it is
-    /// given, and those final rows (one loop's end less a strip: a wake-up
-    /// of many cores, docs/DESIGN.md, "The trace and the scaling model"). None by default.
-    fn beside_books<'s>(
-        &'s mut self,
-        _input: &'s RowWindow<f32>,
-        _rows: (usize, usize),
-        finish: (usize, usize),
-    ) -> (Output<'s>, Option<Box<Early<'s>>>) {
-        (self.output(finish), None)
-    }
     /// Output rows below `y` are written: release them.
     fn release(&mut self, y: usize);
     /// What the stage counted.

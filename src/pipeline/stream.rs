@@ -12,9 +12,6 @@
 //!  stage.output (base + accumulator) ──▶ books.finish (round, ledger, digest) ──▶ rows out
 //! ```
 //!
-//! The rows a strip makes final are finished when the next strip is taken,
-//! in one parallel loop with its ledger (the last strip's at once).
-//!
 //! The contract that makes the output bit-identical for any strip height: a
 //! stage's decisions may depend only on which rows are in, never on how they
 //! came; every stage's cursors advance to the same targets whatever the
@@ -57,8 +54,6 @@ pub struct Streamer {
     precision: Vec<Precision>,
     rows_in: usize,
     out_done: usize,
-    /// Output rows before this one are final (finished or not).
-    final_end: usize,
 }
 
 impl Streamer {
@@ -167,16 +162,14 @@ impl Streamer {
             precision,
             rows_in: 0,
             out_done: 0,
-            final_end: 0,
         })
     }
 
     /// Feed the next strip of input rows; returns the output rows it finished.
     ///
-    /// The rows a push makes final are finished by the next push, in the loop
-    /// that takes its strip into the ledger (one parallel loop's end, one
-    /// wake-up of many cores, fewer a strip: docs/DESIGN.md, "The trace and
-    /// the scaling model"), and by the last push at once.
+    /// A push is three steps, each its own parallel loop or loops: the new
+    /// rows into the ledger, the stage's advance, and the rows it made final
+    /// finished (rounded, into the ledger and the digest).
     pub fn push(&mut self, mut strip: Strip) -> Result<Option<OutRows>> {
         let (in_w, in_h) = (self.grid.in_w, self.grid.in_h);
         self.books.check(&mut strip, self.rows_in, in_w, in_h)?;
@@ -185,46 +178,25 @@ impl Streamer {
         self.input
             .push_rows(std::mem::take(&mut strip.data), strip.rows);
         self.rows_in += strip.rows;
-        // The new rows' ledger, the rows the last push made final, and the
-        // stage's first work on the new rows, in one loop.
-        let done = (self.out_done, self.final_end);
-        let (rows, beside) = self
-            .stage
-            .beside_books(&self.input, (a, self.rows_in), done);
-        let take = Take {
+        self.books.take(Take {
             rows: (a..self.rows_in).map(|y| self.input.get(y)).collect(),
             y0: a,
             in_w,
-        };
-        let finish = unfinished(rows, done, self.w, &self.precision);
-        let out = self.books.take_and_finish(Some(take), finish, beside)?;
-        if out.is_some() {
-            self.out_done = self.final_end;
-            self.stage.release(self.out_done);
-        }
+        })?;
         self.stage.arrive(&mut self.input, a, self.rows_in);
         let end = self
             .stage
             .advance(&self.input, self.rows_in, self.rows_in == in_h);
         self.input.evict_below(self.stage.input_needed());
-        self.final_end = self.final_end.max(end);
-        // The last strip: no strip comes to share the loop.
-        let done = (self.out_done, self.final_end);
-        let finish = unfinished(self.stage.output(done), done, self.w, &self.precision);
-        let Some(finish) = finish.filter(|_| self.rows_in == in_h) else {
-            return Ok(out);
+        let done = (self.out_done, end.max(self.out_done));
+        let rows = self.stage.output(done);
+        let Some(finish) = unfinished(rows, done, self.w, &self.precision) else {
+            return Ok(None);
         };
-        let last = self.books.finish(finish)?;
-        self.out_done = self.final_end;
+        let out = self.books.finish(finish)?;
+        self.out_done = done.1;
         self.stage.release(self.out_done);
-        Ok(Some(match out {
-            Some(mut o) => {
-                o.data.extend_from_slice(&last.data);
-                o.rows += last.rows;
-                o
-            }
-            None => last,
-        }))
+        Ok(Some(out))
     }
 
     /// Output rows finished so far.

@@ -4,9 +4,7 @@
 
 use rayon::prelude::*;
 
-use super::scatter::{Accs, Batch, Placed, SearchPlace};
 use super::*;
-use crate::trace::Span;
 
 /// The 5th smallest of eight values (their upper median): what three
 /// outliers on either side cannot move past the others. NaN sorts last.
@@ -70,22 +68,10 @@ fn merge_parts(parts: &[FoundPart], s: usize, nch: usize) -> Found {
 /// What classification reads, shared by its tasks.
 #[derive(Clone, Copy)]
 struct FindCtx<'a> {
-    s: usize,
-    w: usize,
-    in_w: usize,
-    in_h: usize,
-    h: usize,
-    nch: usize,
-    pad: usize,
-    ep: Option<&'a EpGauss>,
+    shape: &'a Shape,
+    rules: &'a Rules,
     view: &'a YView<'a>,
-    lum: &'a Luminance,
-    modes: &'a [ChannelMode],
-    cols: &'a ColumnTaps,
-    support: Support,
-    pixel_stats: Option<&'a (StatsLayout, Carriers)>,
     input: &'a RowWindow<f32>,
-    emission: Option<&'a EmissionParts>,
 }
 
 impl FindCtx<'_> {
@@ -95,17 +81,13 @@ impl FindCtx<'_> {
     /// (`nch` each, in the same order) and how many were kept.
     fn find_cols(&self, sc: &mut FindScratch, y: usize, cols: std::ops::Range<usize>) -> FoundPart {
         let FindCtx {
-            s,
-            in_w,
-            in_h,
-            nch,
-            ep,
+            shape,
+            rules,
             view: yview,
-            lum,
-            support,
             input,
-            ..
         } = *self;
+        let (s, in_w, in_h, nch) = (shape.grid.s, shape.grid.in_w, shape.grid.in_h, shape.nch);
+        let (ep, lum, support) = (rules.ep.as_ref(), &rules.lum, rules.support);
         let FindScratch {
             lrows,
             flagged,
@@ -128,7 +110,7 @@ impl FindCtx<'_> {
         // This part's samples, `i0..i1` of each row (`n` of them).
         let (i0, i1) = (cols.start * s, cols.end * s);
         let n = i1 - i0;
-        let emission = self.emission;
+        let emission = rules.emission.as_ref();
         let luma = |row: &[f32], i: usize| {
             let y = lum.of(|c| row[c * in_w + i] as f64);
             emission.map_or(y, |e| y - e.luminance(row, in_w, i))
@@ -245,7 +227,7 @@ impl FindCtx<'_> {
             let row = self.view.row(y as i64 + dy);
             for dx in -1i64..=1 {
                 if dx != 0 || dy != 0 {
-                    ring[k] = row[(self.pad as i64 + px as i64 + dx) as usize] as f64;
+                    ring[k] = row[(self.shape.pad as i64 + px as i64 + dx) as usize] as f64;
                     k += 1;
                 }
             }
@@ -257,16 +239,19 @@ impl FindCtx<'_> {
     /// bright sample `x0` at input `(i, j)`, pixel column `px` (the sample is
     /// the pixel).
     fn carried(&self, ep: &EpGauss, x0: f64, (i, j): (usize, usize), px: usize) -> bool {
-        let Some((st, carriers)) = self.pixel_stats else {
+        let Some((st, carriers)) = &self.rules.pixel_stats else {
             return false;
         };
-        let (view, pad, in_w, y) = (self.view, self.pad, self.in_w, j);
+        let Shape {
+            grid, w, h, pad, ..
+        } = *self.shape;
+        let (view, in_w, y) = (self.view, grid.in_w, j);
         let row = self.input.get(j);
-        let (n, se2) = st.pixel(self.lum.weights(), x0, |c| row[c * in_w + i] as f64);
+        let (n, se2) = st.pixel(self.rules.lum.weights(), x0, |c| row[c * in_w + i] as f64);
         let hot = || {
             cluster_count(
                 (px, y),
-                (self.w, self.h),
+                (w, h),
                 x0,
                 |xx, yy| view.row(yy as i64)[pad + xx] as f64,
                 |xx, yy| {
@@ -286,16 +271,14 @@ impl FindCtx<'_> {
     /// (zeroed in a copy of their row, `scratch`).
     fn pass(&self, scratch: &mut Vec<f32>, y: usize, hs: &mut [&mut [f64]], list: &[Noisy]) {
         let FindCtx {
-            s,
-            w,
-            in_w,
-            nch,
-            modes,
-            cols,
+            shape,
+            rules,
             input,
-            emission,
             ..
         } = *self;
+        let Shape { grid, w, nch, .. } = *shape;
+        let (s, in_w) = (grid.s, grid.in_w);
+        let (modes, cols, emission) = (&rules.modes, &rules.cols, rules.emission.as_ref());
         for (bb, hrow) in hs.iter_mut().enumerate() {
             let j = y * s + bb;
             let mut row = input.get(j);
@@ -341,268 +324,101 @@ impl FindCtx<'_> {
     }
 }
 
-/// Work run beside classification's loops (pending samples classified
-/// before: [`GaussianStage::classify_spreading`]): the first chunk of a batch
-/// searched and placed beside the search for noise, with the coarse share
-/// the last advance planned (`up`); then scattered beside the pass (after
-/// the one loop where a row is one task).
-pub(super) struct Beside<'s> {
-    place: SearchPlace<'s>,
-    samples: &'s mut [Noisy],
-    values: &'s [f64],
-    accs: Accs<'s>,
-    fresh: &'s mut [Option<usize>; 3],
-    up: Option<(usize, usize)>,
-}
-
-/// What [`GaussianStage::classify_with`] spreads beside classification: a
-/// batch's samples up to `end`, and the coarse share `up`.
-struct Chunk<'b> {
-    batch: &'b mut Batch,
-    end: usize,
-    up: Option<(usize, usize)>,
-}
-
-impl Beside<'_> {
-    /// The search and placement, and the coarse share, as tasks of
-    /// `region`; the parts placed.
-    fn first(&mut self, region: &Span) -> Vec<Placed> {
-        let Beside {
-            place,
-            samples,
-            values,
-            accs,
-            up,
-            ..
-        } = self;
-        let up = up.take();
-        let upsample = || {
-            if let Some(up) = up {
-                accs.upsample(up, region);
-            }
-        };
-        rayon::join(|| place.run(samples, values, region), upsample).0
-    }
-
-    /// The scatter of `parts`, as tasks of `region`.
-    fn then(&mut self, parts: &[Placed], region: &Span) {
-        self.accs.scatter(parts, self.fresh, region);
-    }
-}
-
 /// Classify pixel rows `a..` (their input rows' horizontal passes `hrows`,
-/// `S` each), searching a row in `parts` column ranges, with `beside`'s
-/// work in the same loops (two loops' tasks in one region: one join, not
-/// two). Returns what each row found, and what `beside` placed.
+/// `S` each), searching a row in `parts` column ranges. Returns what each
+/// row found.
 fn classify_rows(
     ctx: &FindCtx<'_>,
     mut hrows: Vec<&mut [f64]>,
     a: usize,
     parts: usize,
-    mut beside: Option<Beside<'_>>,
-) -> (Vec<Found>, Option<Vec<Placed>>) {
-    let s = ctx.s;
+) -> Vec<Found> {
+    let Shape { grid, w, nch, .. } = *ctx.shape;
+    let s = grid.s;
     let rows = hrows.len() / s;
-    let names = if beside.is_some() {
-        ["classify, search and place", "classify pass, scatter"]
-    } else {
-        ["classify", "classify pass"]
-    };
-    let mut beside_first = |region: &Span| beside.as_mut().map(|b| b.first(region));
-    let region = crate::trace::region(names[0]);
+    let region = crate::trace::region("classify");
     if parts == 1 {
         // Both phases row by row in one task: the pass reads the rows the
         // search for noise has just read.
-        let (found, placed) = rayon::join(
-            || {
-                hrows
-                    .par_chunks_mut(s)
-                    .enumerate()
-                    .map_init(
-                        <(FindScratch, Vec<f32>)>::default,
-                        |(scratch, copy), (k, hs)| {
-                            let _task = region.task("classify");
-                            let y = a + k;
-                            let f = ctx.find_cols(scratch, y, 0..ctx.w).found;
-                            ctx.pass(copy, y, hs, &f.0);
-                            f
-                        },
-                    )
-                    .collect::<Vec<Found>>()
-            },
-            || beside_first(&region),
-        );
-        drop(region);
-        if let (Some(b), Some(placed)) = (&mut beside, &placed) {
-            b.then(placed, &crate::trace::region("scatter"));
-        }
-        return (found, placed);
+        return hrows
+            .par_chunks_mut(s)
+            .enumerate()
+            .map_init(
+                <(FindScratch, Vec<f32>)>::default,
+                |(scratch, copy), (k, hs)| {
+                    let _task = region.task("classify");
+                    let y = a + k;
+                    let f = ctx.find_cols(scratch, y, 0..w).found;
+                    ctx.pass(copy, y, hs, &f.0);
+                    f
+                },
+            )
+            .collect();
     }
     // A wide row: its column ranges searched by tasks of their own, then
     // each row's pass with what they found, in its order.
-    let span = ctx.w.div_ceil(parts);
+    let span = w.div_ceil(parts);
     // No empty range at the end (10 pixels in 6 parts: 5 of 2).
-    let parts = ctx.w.div_ceil(span);
-    let (found_parts, placed) = rayon::join(
-        || {
-            (0..rows * parts)
-                .into_par_iter()
-                .map_init(FindScratch::default, |scratch, t| {
-                    let _task = region.task("classify");
-                    let x0 = (t % parts) * span;
-                    ctx.find_cols(scratch, a + t / parts, x0..(x0 + span).min(ctx.w))
-                })
-                .collect::<Vec<FoundPart>>()
-        },
-        || beside_first(&region),
-    );
-    // Each row's parts merged in the task of its pass: one loop (one join)
-    // less a strip. A loop of its own, so a region of its own (the model
-    // replays a region's tasks as independent).
+    let parts = w.div_ceil(span);
+    let found_parts = (0..rows * parts)
+        .into_par_iter()
+        .map_init(FindScratch::default, |scratch, t| {
+            let _task = region.task("classify");
+            let x0 = (t % parts) * span;
+            ctx.find_cols(scratch, a + t / parts, x0..(x0 + span).min(w))
+        })
+        .collect::<Vec<FoundPart>>();
     drop(region);
-    let region = crate::trace::region(names[1]);
-    let (found, ()) = rayon::join(
-        || {
-            hrows
-                .par_chunks_mut(s)
-                .zip(found_parts.par_chunks(parts))
-                .enumerate()
-                .map_init(Vec::new, |copy, (k, (hs, row))| {
-                    let _task = region.task("classify pass");
-                    let f = merge_parts(row, s, ctx.nch);
-                    ctx.pass(copy, a + k, hs, &f.0);
-                    f
-                })
-                .collect::<Vec<Found>>()
-        },
-        || {
-            if let (Some(b), Some(placed)) = (&mut beside, &placed) {
-                b.then(placed, &region);
-            }
-        },
-    );
-    (found, placed)
+    let region = crate::trace::region("classify pass");
+    hrows
+        .par_chunks_mut(s)
+        .zip(found_parts.par_chunks(parts))
+        .enumerate()
+        .map_init(Vec::new, |copy, (k, (hs, row))| {
+            let _task = region.task("classify pass");
+            let f = merge_parts(row, s, nch);
+            ctx.pass(copy, a + k, hs, &f.0);
+            f
+        })
+        .collect()
 }
 
 impl GaussianStage {
     /// Classify pixel rows `a..b`: their noisy samples join the pending
-    /// list.
+    /// list, and their input rows' horizontal passes are made.
     pub(super) fn classify(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
-        self.classify_with(input, (a, b), None);
-    }
-
-    /// Classify pixel rows `a..b` while the first chunk of `batch` (samples
-    /// classified before: the caller checks) is searched and placed beside
-    /// the search for noise and scattered beside the pass (the same work in
-    /// the same order as one after the other, in two loops fewer).
-    pub(super) fn classify_spreading(
-        &mut self,
-        input: &RowWindow<f32>,
-        (a, b): (usize, usize),
-        batch: &mut Batch,
-        up: Option<(usize, usize)>,
-    ) {
-        let c1 = self.chunk_end(batch.bound, batch.next, batch.split);
-        let chunk = Chunk { batch, end: c1, up };
-        let placed = self.classify_with(input, (a, b), Some(chunk));
-        self.count_placed(&placed.unwrap_or_default());
-    }
-
-    /// Classify pixel rows `a..b`, with the chunk `batch.next..c1` of
-    /// `spread` spread beside it; returns its parts.
-    /// (Long: the stage's fields, borrowed one by one for the two jobs.)
-    fn classify_with(
-        &mut self,
-        input: &RowWindow<f32>,
-        (a, b): (usize, usize),
-        spread: Option<Chunk<'_>>,
-    ) -> Option<Vec<Placed>> {
-        let s = self.grid.s;
+        let Shape { grid, w, h, .. } = self.shape;
+        let s = grid.s;
+        let Windows { ybox, hpass, .. } = &mut self.win;
         for _ in a * s..b * s {
-            self.hpass.push_stale(0.0); // every value is written below
+            hpass.push_stale(0.0); // every value is written below
         }
         let per_task = match self.classify_samples {
             0 => FIND_TASK_SAMPLES,
             n => n,
         };
         // Without ep-gauss there is no noise to search for: the pass alone,
-        // a task a row (a loop of empty searches was a join a strip).
-        let parts = match self.ep {
-            Some(_) => self.grid.in_w.div_ceil(per_task).clamp(1, self.w),
+        // a task a row.
+        let parts = match self.rules.ep {
+            Some(_) => grid.in_w.div_ceil(per_task).clamp(1, w),
             None => 1,
         };
-        let GaussianStage {
-            grid,
-            w,
-            h,
-            nch,
-            pad,
-            inv_s2,
-            tile,
-            support,
-            ref ybox,
-            ref csum,
-            ref mut hpass,
-            ref mut pending,
-            ref pending_v,
-            ref mut acc,
-            ref mut c2,
-            ref mut c4,
-            ref ep,
-            ref lum,
-            ref modes,
-            ref cols,
-            ref pixel_stats,
-            ref emission,
-            ..
-        } = *self;
         let yview = YView::new(ybox, h);
         let ctx = FindCtx {
-            s,
-            w,
-            in_w: grid.in_w,
-            in_h: grid.in_h,
-            h,
-            nch,
-            pad,
-            ep: ep.as_ref(),
+            shape: &self.shape,
+            rules: &self.rules,
             view: &yview,
-            lum,
-            modes,
-            cols,
-            support,
-            pixel_stats: pixel_stats.as_ref(),
             input,
-            emission: emission.as_ref(),
         };
-        let hrows = hpass.range_mut(a * s, b * s);
-        let beside = match (spread, ep.as_ref()) {
-            (Some(Chunk { batch, end: c1, up }), Some(ep)) => {
-                let c0 = batch.next;
-                batch.next = c1;
-                let place =
-                    SearchPlace::new(ep, (ybox, csum.as_ref()), modes, inv_s2, (s, nch), (w, h));
-                Some(Beside {
-                    place,
-                    samples: &mut pending[c0..c1],
-                    values: &pending_v[c0 * nch..c1 * nch],
-                    accs: Accs::new(ep, (acc, c2, c4), w, nch, tile),
-                    fresh: &mut batch.fresh,
-                    up,
-                })
-            }
-            _ => None,
-        };
-        let (found, placed) = classify_rows(&ctx, hrows, a, parts, beside);
+        let found = classify_rows(&ctx, hpass.range_mut(a * s, b * s), a, parts);
         for (list, vals, kept) in found {
             // Kept samples failed the test too; the spread ones are counted
             // when they are spread.
             self.counts.noisy += kept;
             self.counts.kept += kept;
-            self.pending.extend(list);
-            self.pending_v.extend(vals);
+            self.pending.samples.extend(list);
+            self.pending.values.extend(vals);
         }
-        placed
     }
 }
 

@@ -56,24 +56,24 @@ impl GaussianStage {
     /// are read for the first time and must take the 4x grid's share first
     /// (its 4x rows are final too: each reaches every fine row the 2x rows
     /// it feeds reach), where the 4x grid is used.
-    /// [`GaussianStage::base_and_upsample`] then brings them up, a task a
-    /// row: each task upsamples the coarse rows it reads across itself (one
-    /// or two), then down, where a loop across and one down were two joins a
-    /// grid (docs/DESIGN.md, "The trace and the scaling model").
+    /// [`GaussianStage::coarse_share`] then brings them up, a task a row:
+    /// each task upsamples the coarse rows it reads across itself (one or
+    /// two), then down.
     pub(super) fn coarse_rows_read(&mut self, a: usize, b: usize) -> Option<(usize, usize)> {
-        let last = self.c2.last_read(a, b);
-        self.c2.grow_to(last);
+        let Windows { c2, c4, .. } = &mut self.win;
+        let last = c2.last_read(a, b);
+        c2.grow_to(last);
         // Rows the accumulator no longer reaches were released unread (no
         // coarse spread reached them before the grid was used).
-        let from = self.c2.read.max(self.c2.acc.first());
+        let from = c2.read.max(c2.acc.first());
         if last < from {
             return None;
         }
-        self.c2.read = last + 1;
-        if !self.c4.used {
+        c2.read = last + 1;
+        if !c4.used {
             return None;
         }
-        self.c4.grow_to(self.c4.last_read(from, last + 1));
+        c4.grow_to(c4.last_read(from, last + 1));
         Some((from, last + 1))
     }
 }

@@ -38,10 +38,9 @@ mod rows;
 mod scatter;
 
 use coarse::CoarseGrid;
-use rows::Due;
 
 use super::counts::{MethodCounts, SpreadCounts};
-use super::stage::{Early, Output, Stage, WindowUse};
+use super::stage::{Output, Stage, WindowUse};
 use super::window::RowWindow;
 use super::ChannelMode;
 use crate::filter::ep_box::{cluster_count, StatsLayout};
@@ -53,7 +52,6 @@ use crate::filter::kernel::{ColumnTaps, Kernel1d, TentTaps};
 use crate::filter::luminance::Luminance;
 use crate::filter::{Method, ValidParams};
 use crate::geometry::{mirror, Grid, Halo};
-use crate::trace::Span;
 
 /// The memory of a spread chunk: that of this many noisy samples whose every
 /// kernel is reflected at an edge (about 8192 x 1.5 KiB of folded weights at
@@ -179,45 +177,30 @@ impl AreaSums for YView<'_> {
     }
 }
 
-/// The Gaussian family's state between strips.
-pub struct GaussianStage {
+/// The grid's sizes, read by every pass.
+#[derive(Clone, Copy, Debug)]
+struct Shape {
     grid: Grid,
+    /// Output pixels across and down.
     w: usize,
     h: usize,
     nch: usize,
     inv_s2: f64,
+    /// Mirrored pixels each side of a box luminance row (the search's
+    /// reach across).
+    pad: usize,
+    tile: usize,
+    halo: Halo,
+}
+
+/// The kernels and the tests, set once.
+struct Rules {
     lum: Luminance,
     modes: Vec<ChannelMode>,
     base: Kernel1d,
     cols: ColumnTaps,
     ep: Option<EpGauss>,
-    halo: Halo,
-    pad: usize,
-    tile: usize,
-    ybox: RowWindow<f32>,
-    /// The summed-area table of `ybox` (`--bound-from`), one row more above, and
-    /// their block; `None` where no width is bounded.
-    csum: Option<(RowWindow<f64>, usize)>,
-    /// Rows of the summed-area table added down (the box luminance rows
-    /// may come first, beside the books' loop).
-    csums_done: usize,
-    hpass: RowWindow<f64>,
-    base_rows: RowWindow<f64>,
-    acc: RowWindow<f64>,
-    pending: Vec<Noisy>,
-    /// The pending samples' values, `nch` each, in the same order (what
-    /// the emission guide leaves of them).
-    pending_v: Vec<f64>,
-    /// The emission guide: its light is set aside before any test and
-    /// keeps the base kernel.
-    emission: Option<EmissionParts>,
-    /// Samples of `pending` before this one are spread (dropped from the
-    /// front once they are half of it, so that dropping them moves no more
-    /// than was spread: a drain per strip moved every later one).
-    pending_first: usize,
-    classified: usize,
-    spread_done: usize,
-    counts: SpreadCounts,
+    /// The clamp foil's limit.
     clamp: Option<f32>,
     support: Support,
     /// ep-gauss at S = 1 on a file with per-pixel statistics: where they
@@ -226,17 +209,57 @@ pub struct GaussianStage {
     /// `--edge pad`: real samples per output column and row (S where the
     /// pixel is whole), so that `Ybox` is the mean of what exists.
     real_counts: Option<(Vec<usize>, Vec<usize>)>,
-    /// The 2x coarse grid (`--coarse-from`), whose rows are upsampled into
-    /// the accumulator's, and the output rows it has been added to.
+    /// The emission guide: its light is set aside before any test and
+    /// keeps the base kernel.
+    emission: Option<EmissionParts>,
+}
+
+/// The rows held between strips, each window indexed by its own rows.
+struct Windows {
+    /// The box luminance of pixel rows, `pad` mirrored pixels each side.
+    ybox: RowWindow<f32>,
+    /// The summed-area table of `ybox` (`--bound-from`), one row more above,
+    /// and its block; `None` where no width is bounded.
+    csum: Option<(RowWindow<f64>, usize)>,
+    /// The horizontal pass of the base kernel over input rows, noisy
+    /// samples taken out.
+    hpass: RowWindow<f64>,
+    /// The vertical gather of `hpass`: output rows without the noise.
+    base_rows: RowWindow<f64>,
+    /// The spread noise, on the output grid and the 2x and 4x coarse ones.
+    acc: RowWindow<f64>,
     c2: CoarseGrid,
-    up_done: usize,
-    /// What the last advance planned for the next push's loops, and the
-    /// end of the base rows planned.
-    due: Due,
-    base_planned: usize,
-    /// The 4x grid, whose rows are upsampled into the 2x grid's: its share
-    /// enters a 2x row once, just before that row is upsampled.
     c4: CoarseGrid,
+}
+
+/// Noisy samples classified and not yet spread, in input row-major order.
+#[derive(Default)]
+struct Pending {
+    samples: Vec<Noisy>,
+    /// Their values, `nch` each, in the same order (what the emission
+    /// guide leaves of them).
+    values: Vec<f64>,
+    /// Samples before this one are spread (dropped from the front once
+    /// they are half of the list, so that dropping them moves no more than
+    /// was spread).
+    first: usize,
+}
+
+/// The Gaussian family's state between strips: the shape and rules (set
+/// once), the windows, the pending noisy samples, and three cursors over
+/// pixel rows.
+pub struct GaussianStage {
+    shape: Shape,
+    rules: Rules,
+    win: Windows,
+    pending: Pending,
+    /// Pixel rows classified (their input rows' horizontal passes made).
+    classified: usize,
+    /// Pixel rows whose noisy samples are spread.
+    spread_done: usize,
+    /// Output rows final (base rows made, every spread and coarse share in).
+    out_done: usize,
+    counts: SpreadCounts,
     /// Samples of an input row per classification task (0: automatic).
     classify_samples: usize,
     /// Noisy samples at an edge per spread chunk (0: [`SPREAD_CHUNK`]).
@@ -290,14 +313,16 @@ impl GaussianStage {
                     e
                 }
             });
-        let coarse = ep
-            .as_ref()
-            .is_some_and(|e| e.levels().iter().any(|l| l.coarse.is_some()));
-        let coarse4 = ep.as_ref().is_some_and(|e| {
-            e.levels()
-                .iter()
-                .any(|l| l.coarse.as_ref().is_some_and(|c| c.factor == 4))
-        });
+        let coarse_factor = |f: Option<usize>| {
+            ep.as_ref().is_some_and(|e| {
+                e.levels().iter().any(|l| {
+                    l.coarse
+                        .as_ref()
+                        .is_some_and(|c| f.is_none_or(|f| c.factor == f))
+                })
+            })
+        };
+        let (coarse, coarse4) = (coarse_factor(None), coarse_factor(Some(4)));
         let halo = Halo {
             xbar_reach: ep.as_ref().map_or(0, |e| e.xbar_reach()),
             base_reach: base.reach(),
@@ -311,46 +336,47 @@ impl GaussianStage {
             .map(|e| (RowWindow::new(w + 2 * pad + 2), e.csum_block()));
         let cols = ColumnTaps::new(&base, w, grid.in_w);
         GaussianStage {
-            grid,
-            w,
-            h,
-            nch,
-            inv_s2: 1.0 / (s * s) as f64,
-            lum: Luminance::new(&lum),
-            modes,
-            base,
-            cols,
-            ep,
-            halo,
-            pad,
-            tile,
-            ybox: RowWindow::new(w + 2 * pad),
-            csum,
-            csums_done: 0,
-            hpass: RowWindow::new(nch * w),
-            base_rows: RowWindow::new(nch * w),
-            acc: RowWindow::new(nch * w),
-            pending: Vec::new(),
-            pending_v: Vec::new(),
-            emission: None,
-            pending_first: 0,
+            shape: Shape {
+                grid,
+                w,
+                h,
+                nch,
+                inv_s2: 1.0 / (s * s) as f64,
+                pad,
+                tile,
+                halo,
+            },
+            rules: Rules {
+                lum: Luminance::new(&lum),
+                modes,
+                base,
+                cols,
+                clamp: (params.method == Method::Clamp).then_some(params.clamp as f32),
+                support: Support::new(params.support, params.support_ratio, params.support_compact)
+                    .with_over(params.support_over)
+                    .with_region(params.support_region, params.support_level)
+                    .with_group(params.support_group),
+                pixel_stats: stats
+                    .filter(|_| params.method == Method::EpGauss && s == 1 && params.support > 0)
+                    .map(|st| (st, Carriers::new(&params.ep_box))),
+                ep,
+                real_counts: None,
+                emission: None,
+            },
+            win: Windows {
+                ybox: RowWindow::new(w + 2 * pad),
+                csum,
+                hpass: RowWindow::new(nch * w),
+                base_rows: RowWindow::new(nch * w),
+                acc: RowWindow::new(nch * w),
+                c2: CoarseGrid::new(nch, (w, h), 2, coarse),
+                c4: CoarseGrid::new(nch, (w.div_ceil(2), h.div_ceil(2)), 2, coarse4),
+            },
+            pending: Pending::default(),
             classified: 0,
             spread_done: 0,
+            out_done: 0,
             counts: SpreadCounts::default(),
-            clamp: (params.method == Method::Clamp).then_some(params.clamp as f32),
-            support: Support::new(params.support, params.support_ratio, params.support_compact)
-                .with_over(params.support_over)
-                .with_region(params.support_region, params.support_level)
-                .with_group(params.support_group),
-            pixel_stats: stats
-                .filter(|_| params.method == Method::EpGauss && s == 1 && params.support > 0)
-                .map(|st| (st, Carriers::new(&params.ep_box))),
-            real_counts: None,
-            c2: CoarseGrid::new(nch, (w, h), 2, coarse),
-            up_done: 0,
-            due: Due::default(),
-            base_planned: 0,
-            c4: CoarseGrid::new(nch, (w.div_ceil(2), h.div_ceil(2)), 2, coarse4),
             classify_samples: 0,
             spread_chunk: 0,
         }
@@ -372,37 +398,39 @@ impl GaussianStage {
     /// aside before any test, keeps the base kernel, and only the rest of a
     /// noisy sample is spread ([`crate::filter::guides`]).
     pub fn set_emission(&mut self, parts: EmissionParts) {
-        if self.ep.is_some() {
-            self.emission = Some(parts);
+        if self.rules.ep.is_some() {
+            self.rules.emission = Some(parts);
         }
     }
 
     /// `--edge pad`: the grid's first `real.0` x `real.1` samples are real,
     /// the rest zeros.
     pub fn set_real_size(&mut self, real: (usize, usize)) {
-        let s = self.grid.s;
+        let Shape { grid, w, h, .. } = self.shape;
         let counts = |n: usize, n_real: usize| -> Vec<usize> {
             (0..n)
-                .map(|p| n_real.saturating_sub(p * s).min(s))
+                .map(|p| n_real.saturating_sub(p * grid.s).min(grid.s))
                 .collect()
         };
-        self.real_counts = Some((counts(self.w, real.0), counts(self.h, real.1)));
+        self.rules.real_counts = Some((counts(w, real.0), counts(h, real.1)));
     }
 }
 
 impl Stage for GaussianStage {
     fn halo(&self) -> Halo {
-        self.halo
+        self.shape.halo
     }
 
     fn arrive(&mut self, input: &mut RowWindow<f32>, a: usize, b: usize) {
-        let Some(limit) = self.clamp else { return };
+        let Some(limit) = self.rules.clamp else {
+            return;
+        };
         // The clamp foil: colour samples above the limit are cut (after the
         // ledger took the input, so the loss shows).
-        let in_w = self.grid.in_w;
+        let in_w = self.shape.grid.in_w;
         for row in input.range_mut(a, b) {
             for (c, ch) in row.chunks_mut(in_w).enumerate() {
-                if self.lum.weights()[c] != 0.0 {
+                if self.rules.lum.weights()[c] != 0.0 {
                     crate::filter::foils::clamp_samples(ch, limit);
                 }
             }
@@ -416,213 +444,138 @@ impl Stage for GaussianStage {
     fn input_needed(&self) -> usize {
         // Classification of the next row reads the input rows just above it
         // (the support rule's reach).
-        (self.classified * self.grid.s).saturating_sub(self.support.reach())
+        (self.classified * self.shape.grid.s).saturating_sub(self.rules.support.reach())
     }
 
     fn output(&self, rows: (usize, usize)) -> Output<'_> {
-        Output::of(&self.base_rows, self.ep.as_ref().map(|_| &self.acc), rows)
-    }
-
-    fn beside_books<'s>(
-        &'s mut self,
-        input: &'s RowWindow<f32>,
-        (_, b): (usize, usize),
-        finish: (usize, usize),
-    ) -> (Output<'s>, Option<Box<Early<'s>>>) {
-        // The box luminance of the pixel rows the new input rows complete,
-        // and what the last advance planned.
-        let (from, ready) = (self.ybox.end(), b / self.grid.s);
-        let ybox = (self.ep.is_some() && ready > from).then_some((from, ready));
-        self.books_work(ybox.map(|r| (r, input)), finish)
+        let acc = self.rules.ep.as_ref().map(|_| &self.win.acc);
+        Output::of(&self.win.base_rows, acc, rows)
     }
 
     fn release(&mut self, y: usize) {
-        self.base_rows.evict_below(y);
-        self.acc.evict_below(y);
+        let win = &mut self.win;
+        win.base_rows.evict_below(y);
+        win.acc.evict_below(y);
         // Coarse row C reaches fine rows 2C - 1 ..= 2C + 2.
         let c = y.saturating_sub(2) / 2;
-        self.c2.acc.evict_below(c);
+        win.c2.acc.evict_below(c);
         // And 4x row K reaches 2x rows 2K - 1 ..= 2K + 2.
         let k = c.saturating_sub(2) / 2;
-        self.c4.acc.evict_below(k);
+        win.c4.acc.evict_below(k);
     }
 
     fn counts(&self) -> MethodCounts {
-        match self.ep {
+        match self.rules.ep {
             Some(_) => MethodCounts::EpGauss(self.counts),
             None => MethodCounts::Plain,
         }
     }
 
     fn windows(&self) -> Vec<WindowUse> {
-        let (nch, w) = (self.nch, self.w);
+        let Shape { nch, w, pad, .. } = self.shape;
+        let win = &self.win;
+        let rows = |name, rows, row_bytes| WindowUse {
+            name,
+            rows,
+            row_bytes,
+        };
         vec![
-            WindowUse {
-                name: "box luminance",
-                rows: self.ybox.high_water(),
-                row_bytes: (w + 2 * self.pad) * 8,
-            },
-            WindowUse {
-                name: "summed-area table",
-                rows: self.csum.as_ref().map_or(0, |c| c.0.high_water()),
-                row_bytes: (w + 2 * self.pad + 2) * 8,
-            },
-            WindowUse {
-                name: "horizontal pass",
-                rows: self.hpass.high_water(),
-                row_bytes: nch * w * 8,
-            },
-            WindowUse {
-                name: "base rows",
-                rows: self.base_rows.high_water(),
-                row_bytes: nch * w * 8,
-            },
-            WindowUse {
-                name: "accumulator",
-                rows: self.acc.high_water(),
-                row_bytes: nch * w * 8,
-            },
-            WindowUse {
-                name: "coarse accumulator",
-                rows: self.c2.acc.high_water(),
-                row_bytes: nch * w.div_ceil(2) * 8,
-            },
-            WindowUse {
-                name: "4x accumulator",
-                rows: self.c4.acc.high_water(),
-                row_bytes: nch * w.div_ceil(4) * 8,
-            },
+            rows("box luminance", win.ybox.high_water(), (w + 2 * pad) * 8),
+            rows(
+                "summed-area table",
+                win.csum.as_ref().map_or(0, |c| c.0.high_water()),
+                (w + 2 * pad + 2) * 8,
+            ),
+            rows("horizontal pass", win.hpass.high_water(), nch * w * 8),
+            rows("base rows", win.base_rows.high_water(), nch * w * 8),
+            rows("accumulator", win.acc.high_water(), nch * w * 8),
+            rows(
+                "coarse accumulator",
+                win.c2.acc.high_water(),
+                nch * w.div_ceil(2) * 8,
+            ),
+            rows(
+                "4x accumulator",
+                win.c4.acc.high_water(),
+                nch * w.div_ceil(4) * 8,
+            ),
         ]
     }
 }
 
 impl GaussianStage {
     /// Advance every cursor as far as `rows_in` input rows allow; returns
-    /// the end of the final output rows.
+    /// the end of the final output rows. A strip's work, in order, each
+    /// pass a parallel loop over rows (or tiles) that reads only what the
+    /// passes before it made.
     fn run(&mut self, input: &RowWindow<f32>, rows_in: usize) -> usize {
-        // What the last advance planned and no books' loop took.
-        self.run_due_rows();
-        let s = self.grid.s;
-        // 1. box luminance
-        // (only ep-gauss reads it: the others go by the rows that are in)
-        let ready = rows_in / s;
-        let yb = if self.ep.is_some() {
-            if ready > self.ybox.end() {
-                // Not computed beside the books' loop.
-                let ybox = Some(((self.ybox.end(), ready), input));
-                if let (_, Some(work)) = self.books_work(ybox, (0, 0)) {
-                    work(&crate::trace::region("box luminance"));
-                }
-            }
-            let (done, end) = (self.csums_done, self.ybox.end());
-            if end > done {
-                self.make_csums(done, end);
-                self.csums_done = end;
-            }
-            end
-        } else {
-            ready
-        };
-        let all_in = yb == self.h;
-        // 2. classification + horizontal pass
-        // A row's classification reads the input row just below it (the
-        // support of samples on its last row): one pixel row more than
-        // `xbar_reach` when that is 0.
-        let cls_target = if all_in {
-            self.h
-        } else {
-            yb.saturating_sub(self.halo.xbar_reach.max(1))
-        };
-        // 3. spreading
-        let classified = self.classified.max(cls_target);
-        let sp_target = if all_in {
-            classified
-        } else {
-            classified.min(yb.saturating_sub(self.halo.search_reach))
-        };
-        let spreads = self.ep.is_some() && sp_target > self.spread_done;
-        if cls_target > self.classified && spreads && sp_target <= self.classified {
-            // Every sample to spread was classified before: its first chunk
-            // is spread in classification's loops (two joins fewer a strip:
-            // docs/DESIGN.md, "The trace and the scaling model"), the rest after.
-            if let Some(mut batch) = self.spread_begin(sp_target) {
-                // The coarse share the last advance planned, in the same
-                // loop.
-                let up = self.due.up.take();
-                self.classify_spreading(input, (self.classified, cls_target), &mut batch, up);
-                if batch.next < batch.split {
-                    self.spread_chunks(&mut batch);
-                }
-                self.spread_end(batch);
-            }
-        } else {
-            self.run_due_up();
-            if cls_target > self.classified {
-                self.classify(input, self.classified, cls_target);
-            }
-            if spreads {
-                self.spread(sp_target);
-            }
+        let Shape { grid, h, halo, .. } = self.shape;
+        let ep = self.rules.ep.is_some();
+        // 1. The box luminance of the pixel rows that are in (only ep-gauss
+        // reads it: the others go by the rows that are in).
+        let ready = rows_in / grid.s;
+        if ep && ready > self.win.ybox.end() {
+            self.box_luminance(input, self.win.ybox.end(), ready);
         }
-        self.classified = classified;
-        if spreads {
+        let all_in = ready == h;
+        // 2. Classification and the horizontal pass: a row's classification
+        // reads `Ybox` rows `xbar_reach` below and the input row just below
+        // it (the support of samples on its last row): one pixel row more
+        // than `xbar_reach` when that is 0.
+        let cls_target = if all_in {
+            h
+        } else {
+            ready.saturating_sub(halo.xbar_reach.max(1))
+        };
+        if cls_target > self.classified {
+            self.classify(input, self.classified, cls_target);
+            self.classified = cls_target;
+        }
+        // 3. Spreading, once the width search's rows are in.
+        let sp_target = if all_in {
+            self.classified
+        } else {
+            self.classified.min(ready.saturating_sub(halo.search_reach))
+        };
+        if ep && sp_target > self.spread_done {
+            self.spread(sp_target);
             self.spread_done = sp_target;
         }
-        // 4. base rows: the vertical gather, once its input rows are
-        // classified (made in the next push's first loop, rows.rs); the
-        // short-lived horizontal-pass rows go then, the (S times fewer) base
-        // rows wait for the spreading.
-        let h = self.h;
+        // 4. Base rows: the vertical gather, once its input rows are
+        // classified.
         let base_target = if self.classified == h {
             h
         } else {
-            self.classified.saturating_sub(self.halo.base_reach)
+            self.classified.saturating_sub(halo.base_reach)
         };
-        // 5. output: base plus spread noise, once no later row can reach it.
-        let by_spread = match &self.ep {
-            Some(_) if self.spread_done < h => {
-                self.spread_done.saturating_sub(self.halo.spread_reach)
-            }
+        self.base_rows(base_target);
+        // 5. Final rows: base plus spread noise, once no later sample can
+        // reach them, with the coarse grids' share added.
+        let by_spread = match ep {
+            true if self.spread_done < h => self.spread_done.saturating_sub(halo.spread_reach),
             _ => h,
         };
-        // Planned for the next push's loops (rows.rs); done now at the end.
-        let done = self.plan_rows(base_target, by_spread, all_in);
-        let keep = if self.ep.is_some() {
+        let out = self.win.base_rows.end().min(by_spread).max(self.out_done);
+        if out > self.out_done && self.win.c2.used {
+            self.coarse_share(self.out_done, out);
+        }
+        self.out_done = out;
+        // What no later pass reads goes.
+        let keep = if ep {
             self.classified
-                .saturating_sub(self.halo.xbar_reach)
-                .min(self.spread_done.saturating_sub(self.halo.search_reach))
+                .saturating_sub(halo.xbar_reach)
+                .min(self.spread_done.saturating_sub(halo.search_reach))
         } else {
-            yb
+            ready
         };
-        self.ybox.evict_below(keep.min(yb));
-        if let Some((c, _)) = &mut self.csum {
+        let keep = keep.min(ready);
+        self.win.ybox.evict_below(keep);
+        if let Some((c, _)) = &mut self.win.csum {
             // The bound reads the row above its topmost.
-            c.evict_below(keep.min(yb).saturating_sub(1));
+            c.evict_below(keep.saturating_sub(1));
         }
-        done
-    }
-
-    /// The summed-area table's rows for the box luminance rows `a..b`
-    /// (`--bound-from`): each row's running sum ([`Self::ybox_work`], in
-    /// its row's task), plus here the row above's where the row is not the
-    /// first of its block, on the image's grid of blocks, so the table does
-    /// not depend on the strips. The same operations in the same order as
-    /// [`csum_row`]. On the calling thread: a strip's additions cost less
-    /// than a parallel loop's end on many cores.
-    fn make_csums(&mut self, a: usize, b: usize) {
-        let Some((csum, block)) = &mut self.csum else {
-            return;
-        };
-        let block = *block;
-        // Rows a - 1 (when held and in a's block) ..b, each added to the
-        // one above.
-        let first = if a % block != 0 { a - 1 } else { a };
-        let mut rows = csum.range_mut(first, b);
-        for (k, y) in (first..b).enumerate().skip(1) {
-            if y % block != 0 {
-                let (above, below) = rows.split_at_mut(k);
-                csum_add(above[k - 1], below[0]);
-            }
-        }
+        let base_keep = self.win.base_rows.end().saturating_sub(halo.base_reach);
+        self.win.hpass.evict_below(base_keep * grid.s);
+        out
     }
 }

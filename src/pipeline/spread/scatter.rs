@@ -5,7 +5,6 @@
 
 use rayon::prelude::*;
 
-use super::rows::{run_rows, share_jobs};
 use super::*;
 
 /// Where the weights of one axis of a spread are.
@@ -191,10 +190,10 @@ impl GaussianStage {
     /// `end`): as many as fit the memory of [`SPREAD_CHUNK`] samples whose
     /// every kernel is reflected at an edge, so that a chunk of the
     /// interior, whose kernels are read in place, takes a whole strip's
-    /// samples in one chunk (two loops), and the worst case holds what it
-    /// held when every chunk was [`SPREAD_CHUNK`] samples.
+    /// samples, and the worst case holds [`SPREAD_CHUNK`] samples' weights.
     pub(super) fn chunk_end(&self, bound: EdgeBound, c0: usize, end: usize) -> usize {
-        let per_sample = std::mem::size_of::<Spread>() + self.nch * std::mem::size_of::<f64>();
+        let per_sample =
+            std::mem::size_of::<Spread>() + self.shape.nch * std::mem::size_of::<f64>();
         let weight = std::mem::size_of::<f64>();
         let chunk = match self.spread_chunk {
             0 => SPREAD_CHUNK,
@@ -204,9 +203,10 @@ impl GaussianStage {
         if (end - c0) <= chunk {
             return end;
         }
-        let inner = bound.inner(self.grid.s, (self.w, self.h));
+        let Shape { grid, w, h, .. } = self.shape;
+        let inner = bound.inner(grid.s, (w, h));
         let mut used = 0;
-        for (k, n) in self.pending[c0..end].iter().enumerate() {
+        for (k, n) in self.pending.samples[c0..end].iter().enumerate() {
             used += per_sample + bound.arena_len(n, inner) * weight;
             if used > budget {
                 return c0 + k.max(1);
@@ -218,124 +218,79 @@ impl GaussianStage {
     /// Spread the pending samples of pixel rows before `target`, in the
     /// pending (row-major) order, chunk by chunk: in one loop each sample's
     /// width searched and its kernels placed, in the next the scatter into
-    /// the accumulators.
+    /// the accumulators. The batch's samples then leave the pending list.
     pub(super) fn spread(&mut self, target: usize) {
-        let Some(mut batch) = self.spread_begin(target) else {
+        let Shape {
+            grid,
+            w,
+            h,
+            nch,
+            inv_s2,
+            tile,
+            halo,
+            ..
+        } = self.shape;
+        let Some(ep) = self.rules.ep.as_ref() else {
             return;
         };
-        self.spread_chunks(&mut batch);
-        self.spread_end(batch);
-    }
-
-    /// The batch of pending samples of pixel rows before `target`, with the
-    /// accumulator rows it reaches grown (their new rows not yet filled: the
-    /// first scatter's tasks fill them, a tile each, where a loop of their
-    /// own was a join a strip).
-    pub(super) fn spread_begin(&mut self, target: usize) -> Option<Batch> {
-        let (s, h) = (self.grid.s, self.h);
-        let ep = self.ep.as_ref()?;
-        let first = self.pending_first;
-        let split = first + self.pending[first..].partition_point(|n| (n.j as usize) / s < target);
+        let bound = EdgeBound::of(ep);
+        let first = self.pending.first;
+        let split = first
+            + self.pending.samples[first..].partition_point(|n| (n.j as usize) / grid.s < target);
         // Accumulator rows down to the widest reach of this batch, and the
         // coarse rows reaching fine rows below that (and a spare; 4x row K
-        // reaches fine rows 4K - 3 ..= 4K + 6).
-        let need = (target + self.halo.spread_reach).min(h);
-        let fresh = [
-            grow(&mut self.acc, need),
-            grow(&mut self.c2.acc, (need.div_ceil(2) + 1).min(h.div_ceil(2))),
-            grow(&mut self.c4.acc, (need.div_ceil(4) + 1).min(h.div_ceil(4))),
-        ];
-        Some(Batch {
-            next: first,
-            split,
-            fresh: fresh.map(Some),
-            bound: EdgeBound::of(ep),
-        })
-    }
-
-    /// The batch's chunks from its next sample on, each a loop searching
-    /// and placing and a loop scattering.
-    pub(super) fn spread_chunks(&mut self, batch: &mut Batch) {
+        // reaches fine rows 4K - 3 ..= 4K + 6); the batch's first scatter
+        // fills them, a tile each.
+        let need = (target + halo.spread_reach).min(h);
+        let win = &mut self.win;
+        let mut fresh = [
+            grow(&mut win.acc, need),
+            grow(&mut win.c2.acc, (need.div_ceil(2) + 1).min(h.div_ceil(2))),
+            grow(&mut win.c4.acc, (need.div_ceil(4) + 1).min(h.div_ceil(4))),
+        ]
+        .map(Some);
+        let mut next = first;
         loop {
-            let c1 = self.chunk_end(batch.bound, batch.next, batch.split);
-            let (place, samples, values, mut accs) = self.spread_parts(batch.next, c1);
+            let c1 = self.chunk_end(bound, next, split);
+            let (ep, win) = (
+                self.rules.ep.as_ref().expect("checked above"),
+                &mut self.win,
+            );
+            let place = SearchPlace::new(
+                ep,
+                (&win.ybox, win.csum.as_ref()),
+                &self.rules.modes,
+                inv_s2,
+                (grid.s, nch),
+                (w, h),
+            );
             let region = crate::trace::region("search and place");
-            let parts = place.run(samples, values, &region);
+            let parts = place.run(
+                &mut self.pending.samples[next..c1],
+                &self.pending.values[next * nch..c1 * nch],
+                &region,
+            );
             drop(region);
             let region = crate::trace::region("scatter");
-            accs.scatter(&parts, &mut batch.fresh, &region);
+            let mut accs = Accs::new(ep, (&mut win.acc, &mut win.c2, &mut win.c4), w, nch, tile);
+            accs.scatter(&parts, &mut fresh, &region);
             drop(region);
-            self.count_placed(&parts);
-            batch.next = c1;
-            if batch.next >= batch.split {
+            for part in &parts {
+                self.counts += part.counts;
+            }
+            next = c1;
+            if next >= split {
                 break;
             }
         }
-    }
-
-    /// The batch spread: its samples leave the pending list (dropped from the
-    /// front once they are half of it, so that dropping them moves no more
-    /// than was spread).
-    pub(super) fn spread_end(&mut self, batch: Batch) {
-        let (split, nch) = (batch.split, self.nch);
-        self.pending_first = split;
-        if 2 * split >= self.pending.len() {
-            self.pending.drain(..split);
-            self.pending_v.drain(..split * nch);
-            self.pending_first = 0;
+        let pending = &mut self.pending;
+        pending.first = split;
+        if 2 * split >= pending.samples.len() {
+            pending.samples.drain(..split);
+            pending.values.drain(..split * nch);
+            pending.first = 0;
         }
     }
-
-    /// What the spread of the pending samples `c0..c1` works with, each
-    /// part a borrow of its own (so that one can run beside other work):
-    /// the search and placement, the samples and their values, and the
-    /// accumulators.
-    pub(super) fn spread_parts(
-        &mut self,
-        c0: usize,
-        c1: usize,
-    ) -> (SearchPlace<'_>, &mut [Noisy], &[f64], Accs<'_>) {
-        let (w, h, nch) = (self.w, self.h, self.nch);
-        let ep = self.ep.as_ref().expect("spread only where ep-gauss is");
-        let place = SearchPlace::new(
-            ep,
-            (&self.ybox, self.csum.as_ref()),
-            &self.modes,
-            self.inv_s2,
-            (self.grid.s, nch),
-            (w, h),
-        );
-        let accs = Accs::new(
-            ep,
-            (&mut self.acc, &mut self.c2, &mut self.c4),
-            w,
-            nch,
-            self.tile,
-        );
-        (
-            place,
-            &mut self.pending[c0..c1],
-            &self.pending_v[c0 * nch..c1 * nch],
-            accs,
-        )
-    }
-
-    /// What the placed parts counted.
-    pub(super) fn count_placed(&mut self, parts: &[Placed]) {
-        for part in parts {
-            self.counts += part.counts;
-        }
-    }
-}
-
-/// A batch of pending samples being spread: the next sample to spread, the
-/// end, the first new row of each grid (fine, 2x, 4x) until the first
-/// scatter fills them, and the bound on a chunk's reflected weights.
-pub(super) struct Batch {
-    pub(super) next: usize,
-    pub(super) split: usize,
-    pub(super) fresh: [Option<usize>; 3],
-    pub(super) bound: EdgeBound,
 }
 
 /// What a chunk's width search and placement read.
@@ -376,8 +331,7 @@ impl<'a> SearchPlace<'a> {
     }
 
     /// Each sample's width searched and its kernels placed (reflected where
-    /// they cross an edge) in one task of `region`: one loop, one join
-    /// (docs/DESIGN.md, "The trace and the scaling model"). The parts in order.
+    /// they cross an edge), in tasks of `region`. The parts in order.
     pub(super) fn run(
         &self,
         samples: &mut [Noisy],
@@ -423,13 +377,6 @@ pub(super) struct Accs<'a> {
 }
 
 impl<'a> Accs<'a> {
-    /// The coarse grids' share of the accumulator's final rows `a..b`, a
-    /// task a row of `region` ([`super::coarse::tent_row`]).
-    pub(super) fn upsample(&mut self, (a, b): (usize, usize), region: &crate::trace::Span) {
-        let jobs = share_jobs(self.acc.range_mut(a, b), a, self.c2, self.w);
-        run_rows(None, jobs.collect(), region);
-    }
-
     /// The fine, 2x and 4x grids, `w` pixels wide, `nch` channels, tiles of
     /// `tile` fine pixels.
     pub(super) fn new(
@@ -455,9 +402,8 @@ impl<'a> Accs<'a> {
     }
 
     /// Scatter `parts` (in order): the three grids' tiles are the tasks of
-    /// one loop (one join a chunk, not three: each costs its lane a wake-up;
-    /// docs/DESIGN.md, "The trace and the scaling model"), each pixel still getting its
-    /// grid's spreads in order, from one task. The tiles first fill their
+    /// one loop, each pixel getting its grid's spreads in order, from one
+    /// task. The tiles first fill their
     /// grid's `fresh` rows (-0.0 on the accumulator, whose untouched pixels
     /// keep the sign of the base's zero; 0.0 on the coarse grids), which
     /// are then filled.
@@ -703,7 +649,7 @@ mod tests {
             level: 0,
             capped: false,
         };
-        st.pending = vec![sample; n];
+        st.pending.samples = vec![sample; n];
         st
     }
 
@@ -713,7 +659,7 @@ mod tests {
         let n = 3 * SPREAD_CHUNK;
         // In the middle no kernel reaches an edge: one chunk.
         let mid = stage_with(n, (200, 200));
-        let bound = EdgeBound::of(mid.ep.as_ref().unwrap());
+        let bound = EdgeBound::of(mid.rules.ep.as_ref().unwrap());
         assert!(bound.margin < 200, "the test's middle is inside");
         assert_eq!(mid.chunk_end(bound, 0, n), n);
         // In a corner every kernel may fold on both axes: SPREAD_CHUNK a
