@@ -467,10 +467,7 @@ impl Report {
             energy_rel_error_rounded: vec![],
             digest: format!("{:016x}", stats.digest),
             tile: run.cfg.tile,
-            strip_rows: match run.cfg.strip_rows {
-                0 => layout.auto_strip_rows(),
-                n => n,
-            },
+            strip_rows: layout.strip_rows(run.cfg),
             window_blocks: (run.cfg.window_blocks > 0).then_some(run.cfg.window_blocks),
             memory_estimate_bytes: 0,
             threads: run.cfg.workers(),

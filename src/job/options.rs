@@ -417,12 +417,18 @@ options! {
     }
     /// Accumulator tile width in output pixels (does not change the result).
     tile: usize { Value, PERFORMANCE, parse: number, default: "256" }
-    /// Input rows per strip, 0 = automatic (from the input's width; at least
-    /// 6 pixel rows, 16 where they fit; does not change the result).
+    /// Input rows per strip, 0 = automatic (from the input's width and the
+    /// threads; at least 6 pixel rows, 16 or two a thread where they fit;
+    /// does not change the result).
     strip_rows: usize { Value, PERFORMANCE, parse: number, default: "0" }
     /// Blocks (chunks) the reader decodes ahead at most, 0 = automatic (from
     /// the threads and the memory allowed; does not change the result).
     window_blocks: usize { Value, PERFORMANCE, parse: number, default: "0" }
+    /// Size the strips and the reader's window as for this many worker
+    /// threads, 0 = `--threads` (a 1-thread trace for the scaling model
+    /// takes the geometry of the runs it predicts; does not change the
+    /// result).
+    geometry_threads: usize { Value, PERFORMANCE, parse: number, default: "0" }
 }
 
 /// `--quality`'s long help: every preset's knob values.
@@ -629,6 +635,7 @@ impl FilterOptions {
             strip_rows: self.strip_rows,
             threads,
             window_blocks: self.window_blocks,
+            geometry_threads: self.geometry_threads,
             cancel,
             nonfinite,
             ..PipelineConfig::default()

@@ -31,12 +31,9 @@ pub fn auto_strip_rows(in_w: usize, channels: usize) -> usize {
 /// not more, because each pixel row more is paid in memory on those inputs.
 pub const MIN_STRIP_PIXEL_ROWS: usize = 6;
 
-/// Pixel rows a strip holds where they fit in `TALL_STRIP_BYTES`. Each of
-/// a strip's loops (classification, base rows, finishing) has a task a pixel
-/// row, so a strip of fewer pixel rows than cores leaves cores idle in them,
-/// and fewer strips are fewer loops, whose ends cost on many cores (the
-/// scaling model, `scripts/scaling-model`, predicted every method faster at
-/// 16 and 32 cores with them).
+/// Pixel rows a strip holds where they fit in `TALL_STRIP_BYTES`: each of
+/// a strip's loops (classification, base rows, finishing) has a task a
+/// pixel row, and fewer strips are fewer loops.
 pub const TALL_STRIP_PIXEL_ROWS: usize = 16;
 
 /// The most input bytes a strip grown to `TALL_STRIP_PIXEL_ROWS` holds:
@@ -44,19 +41,39 @@ pub const TALL_STRIP_PIXEL_ROWS: usize = 16;
 /// `MIN_STRIP_PIXEL_ROWS`.
 pub const TALL_STRIP_BYTES: usize = 2 * STRIP_BYTES;
 
+/// Pixel rows a strip holds per worker thread where they fit: two tasks a
+/// worker in each of a strip's row loops, so that many workers are not left
+/// waiting on a strip's last rows.
+pub const STRIP_PIXEL_ROWS_PER_THREAD: usize = 2;
+
+/// Input bytes a tall strip may hold per worker thread, beyond
+/// `TALL_STRIP_BYTES`: a pixel row or two of a 12288-wide S = 3 input each.
+pub const STRIP_BYTES_PER_THREAD: usize = 1 << 20;
+
 impl StripLayout {
-    /// Default strip height of this job: [`auto_strip_rows`], at least
-    /// `MIN_STRIP_PIXEL_ROWS` pixel rows (whole pixel rows: `S` input rows
-    /// each), at most 96 input rows or `MIN_STRIP_PIXEL_ROWS` pixel rows,
-    /// whichever is more; and `TALL_STRIP_PIXEL_ROWS` pixel rows where
-    /// that is more and they fit in `TALL_STRIP_BYTES`.
-    pub fn auto_strip_rows(&self) -> usize {
+    /// Input rows per strip for `cfg`: `--strip-rows` where given, else
+    /// [`Self::auto_strip_rows`] for its worker threads.
+    pub fn strip_rows(&self, cfg: &PipelineConfig) -> usize {
+        match cfg.strip_rows {
+            0 => self.auto_strip_rows(cfg.geometry_workers()),
+            n => n,
+        }
+    }
+
+    /// Default strip height of this job on `threads` workers:
+    /// [`auto_strip_rows`], at least `MIN_STRIP_PIXEL_ROWS` pixel rows
+    /// (whole pixel rows: `S` input rows each); and `TALL_STRIP_PIXEL_ROWS`
+    /// pixel rows, or `STRIP_PIXEL_ROWS_PER_THREAD` a worker, where that is
+    /// more and they fit in `TALL_STRIP_BYTES` (or `STRIP_BYTES_PER_THREAD`
+    /// a worker).
+    pub fn auto_strip_rows(&self, threads: usize) -> usize {
         let s = self.grid.s.max(1);
         let (w, nch) = (self.grid.in_w.max(1), self.strip_channels().max(1));
         let rows = auto_strip_rows(w, nch).max(MIN_STRIP_PIXEL_ROWS * s);
-        let tall = TALL_STRIP_PIXEL_ROWS * s;
+        let tall = TALL_STRIP_PIXEL_ROWS.max(STRIP_PIXEL_ROWS_PER_THREAD * threads) * s;
+        let limit = TALL_STRIP_BYTES.max(STRIP_BYTES_PER_THREAD * threads);
         let bytes = tall.saturating_mul(w).saturating_mul(nch * 4);
-        if tall > rows && bytes <= TALL_STRIP_BYTES {
+        if tall > rows && bytes <= limit {
             tall
         } else {
             rows
@@ -110,7 +127,7 @@ pub fn window_blocks(
     cfg: &PipelineConfig,
     block_bytes: u64,
 ) -> u64 {
-    let threads = cfg.workers() as u64;
+    let threads = cfg.geometry_workers() as u64;
     let by_threads = (WINDOW_BLOCKS_PER_THREAD * threads).max(FEWEST_WINDOW_BLOCKS as u64);
     let floor = READ_AHEAD_BATCHES * read_ahead_blocks(block_bytes);
     if floor >= WINDOW_MIN_BLOCKS {
@@ -184,7 +201,7 @@ pub fn fit_memory(
     let mut strips = Vec::new();
     match cfg.strip_rows {
         0 => {
-            let mut rows = job.auto_strip_rows();
+            let mut rows = job.auto_strip_rows(cfg.geometry_workers());
             loop {
                 strips.push(rows);
                 if rows <= s {
@@ -227,7 +244,7 @@ fn estimate_with(
     let pixel = params.method == Method::EpGauss && job.grid.s == 1;
     if params.method == Method::EpBox || pixel {
         let surfaces = if pixel && job.guides.surface() {
-            let (w, strip) = (job.grid.in_w as u64, job.auto_strip_rows() as u64);
+            let (w, strip) = (job.grid.in_w as u64, job.strip_rows(cfg) as u64);
             w.saturating_mul(12)
                 .saturating_mul(2 * halo.search_reach as u64 + strip + 2)
         } else {
@@ -241,10 +258,7 @@ fn estimate_with(
         job.grid.in_w as u64,
         (job.grid.in_w / job.grid.s.max(1)) as u64,
     );
-    let strip = match cfg.strip_rows {
-        0 => job.auto_strip_rows(),
-        n => n,
-    } as u64;
+    let strip = job.strip_rows(cfg) as u64;
     // Input rows carry the statistics too (ep-gauss at S = 1 reads them).
     let in_row = w
         .saturating_mul(job.strip_channels() as u64)
@@ -296,10 +310,7 @@ fn estimate_box_bytes(
 ) -> u64 {
     let w = job.grid.in_w as u64;
     let (nch, nall) = (job.channels.len() as u64, job.strip_channels() as u64);
-    let strip = match cfg.strip_rows {
-        0 => job.auto_strip_rows(),
-        n => n,
-    } as u64;
+    let strip = job.strip_rows(cfg) as u64;
     let (p, r) = (halo.search_reach as u64, halo.spread_reach as u64);
     let threads = cfg.workers() as u64;
     // Input rows with their luminance, guard bound, raw flags and decision;
@@ -361,11 +372,30 @@ mod tests {
         // 12288 wide at S = 3: 28 rows by STRIP_BYTES (9.3 pixel rows); 48
         // fit in TALL_STRIP_BYTES.
         let square = rgb(12288, 12288);
-        assert_eq!(square.auto_strip_rows(), TALL_STRIP_PIXEL_ROWS * 3);
+        assert_eq!(square.auto_strip_rows(2), TALL_STRIP_PIXEL_ROWS * 3);
         // 32769 wide: 48 rows would not fit; the 6 pixel rows stay.
-        assert_eq!(rgb(32769, 3600).auto_strip_rows(), MIN_STRIP_PIXEL_ROWS * 3);
+        assert_eq!(
+            rgb(32769, 3600).auto_strip_rows(2),
+            MIN_STRIP_PIXEL_ROWS * 3
+        );
         // Narrower: STRIP_BYTES already holds more pixel rows (56 rows).
-        assert_eq!(rgb(6144, 6144).auto_strip_rows(), 56);
+        assert_eq!(rgb(6144, 6144).auto_strip_rows(2), 56);
+        // Two pixel rows a worker where they fit: 16 workers get 32 at
+        // 12288 wide (14 MiB a strip), the same 16 up to 8 workers.
+        assert_eq!(square.auto_strip_rows(8), TALL_STRIP_PIXEL_ROWS * 3);
+        assert_eq!(square.auto_strip_rows(16), 32 * 3);
+        // At 32769 wide 32 pixel rows would be 48 MiB: the strip stays.
+        assert_eq!(
+            rgb(32769, 3600).auto_strip_rows(16),
+            MIN_STRIP_PIXEL_ROWS * 3
+        );
+        // --strip-rows wins.
+        let given = PipelineConfig {
+            strip_rows: 7,
+            threads: 16,
+            ..PipelineConfig::default()
+        };
+        assert_eq!(square.strip_rows(&given), 7);
         // The estimate counts the taller strips.
         let (block, ep) = (12288 * 3 * 4 * 16, FilterParams::new(Method::EpGauss, 3));
         let short = PipelineConfig {
@@ -437,11 +467,7 @@ mod tests {
                 let limit = floor + (full - floor) * k / 8;
                 let c = fit_memory(&job, &p, &cfg, block, limit).unwrap().0;
                 assert!(estimate_bytes(&job, &p, &c, block) <= limit, "{m:?} {k}");
-                let rows = if c.strip_rows == 0 {
-                    job.auto_strip_rows()
-                } else {
-                    c.strip_rows
-                };
+                let rows = job.strip_rows(&c);
                 assert!(rows >= last, "{m:?} {k}: {rows} after {last}");
                 last = rows;
             }
@@ -468,8 +494,10 @@ mod tests {
         let block = 6144 * 3 * 4 * 16;
         let p = FilterParams::new(Method::EpGauss, 3);
         let at = |threads| {
+            // The strips as on 2 threads (they follow the threads too).
             let cfg = PipelineConfig {
                 threads,
+                strip_rows: 56,
                 ..PipelineConfig::default()
             };
             (

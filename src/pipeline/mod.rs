@@ -213,6 +213,9 @@ pub struct PipelineConfig {
     /// Blocks the reader decodes ahead at most (0: automatic,
     /// [`window_blocks`]; [`fit_memory`] sets fewer under a small budget).
     pub window_blocks: usize,
+    /// Size strips and the reader's window as for this many workers (0:
+    /// [`Self::workers`]).
+    pub geometry_threads: usize,
     /// Set to stop the run early (e.g. on SIGINT).
     pub cancel: Option<Arc<AtomicBool>>,
     /// NaN and infinite input samples.
@@ -235,6 +238,15 @@ impl PipelineConfig {
             n => n,
         }
     }
+
+    /// The workers strips and the reader's window are sized for:
+    /// `geometry_threads`, or [`Self::workers`].
+    pub fn geometry_workers(&self) -> usize {
+        match self.geometry_threads {
+            0 => self.workers(),
+            n => n,
+        }
+    }
 }
 
 impl Default for PipelineConfig {
@@ -244,6 +256,7 @@ impl Default for PipelineConfig {
             strip_rows: 0,
             threads: 0,
             window_blocks: 0,
+            geometry_threads: 0,
             cancel: None,
             nonfinite: NonFinite::Error,
             classify_samples: 0,

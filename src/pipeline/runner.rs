@@ -68,10 +68,7 @@ pub fn run<S: Source, K: Sink>(
     };
     let (strip_tx, strip_rx) = crossbeam_channel::bounded::<Result<Strip>>(2);
     let (row_tx, row_rx) = crossbeam_channel::bounded::<(usize, OutRows)>(2);
-    let strip_rows = match cfg.strip_rows {
-        0 => job.auto_strip_rows(),
-        n => n,
-    };
+    let strip_rows = job.strip_rows(cfg);
     let pool = &pool;
     let io = io_pool.as_ref().unwrap_or(pool);
     let mut stages = StageSeconds::default();
@@ -256,7 +253,7 @@ pub fn mean_luminance<S: Source>(
     let w = job.grid.in_w;
     let nall = job.strip_channels();
     let strip_rows = match strip_rows {
-        0 => job.auto_strip_rows(),
+        0 => job.auto_strip_rows(rayon::current_num_threads()),
         n => n,
     };
     let luminance = &crate::filter::luminance::Luminance::new(&job.luminance);
