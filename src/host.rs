@@ -12,13 +12,17 @@ pub fn default_max_memory() -> u64 {
     total.map_or(8 << 30, |kb| (kb * 1024 / 2).max(1 << 30))
 }
 
+/// A `/proc/self/status` figure in KiB.
+fn status_kib(key: &str) -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with(key))?;
+    line.split_whitespace().nth(1)?.parse().ok()
+}
+
 /// Peak resident set size of this process in bytes (`VmHWM`), where the
 /// platform tells it.
 pub fn peak_rss_bytes() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
+    status_kib("VmHWM:").map(|kb| kb * 1024)
 }
 
 /// CPU time (user + system) this process has used so far, in seconds, where

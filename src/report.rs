@@ -98,6 +98,8 @@ pub struct Report {
     /// Blocks the reader decodes ahead at most where `--max-memory` set
     /// them (`None`: as many as the job's default window).
     pub window_blocks: Option<usize>,
+    /// Bytes of output rows the writer held before it compressed them.
+    pub write_ahead_bytes: usize,
     /// What the run was estimated to hold, with the strips and window
     /// chosen (checked against `--max-memory`; 0 where not estimated).
     pub memory_estimate_bytes: u64,
@@ -469,6 +471,7 @@ impl Report {
             tile: run.cfg.tile,
             strip_rows: layout.strip_rows(run.cfg),
             window_blocks: (run.cfg.window_blocks > 0).then_some(run.cfg.window_blocks),
+            write_ahead_bytes: run.cfg.write_ahead_bytes(),
             memory_estimate_bytes: 0,
             threads: run.cfg.workers(),
             peak_rss_bytes: peak_rss_bytes(),

@@ -89,6 +89,7 @@ pub fn assemble(
         allow_lossy: false,
         provenance,
         extra: vec![(super::provenance::FINGERPRINT.into(), fingerprint.into())],
+        write_ahead: 0,
     };
     let mut out = super::ExrOutput::create(dest, &header, 1, &names, 0, &settings)?;
     let (w, h) = size;

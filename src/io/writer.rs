@@ -22,7 +22,7 @@ use crate::error::{Error, Result};
 use crate::pipeline::{Precision, Sink};
 
 /// What the output file looks like.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct OutputSettings {
     /// Compression (None: the input's, unless that is lossy for the output's
     /// samples: then ZIP, and [`ExrOutput::note`] says so).
@@ -39,6 +39,9 @@ pub struct OutputSettings {
     pub provenance: Option<String>,
     /// More text attributes (name, value) for the header.
     pub extra: Vec<(String, String)>,
+    /// Bytes of rows (as f32) the writer holds before it compresses them
+    /// in parallel, one block at the least (0: [`WRITE_AHEAD_BYTES`]).
+    pub write_ahead: usize,
 }
 
 /// An output file being written.
@@ -55,6 +58,8 @@ pub struct ExrOutput {
     types: Vec<Precision>,
     pending: Vec<f32>,
     pending_y0: usize,
+    /// Bytes of `pending` compressed at once ([`OutputSettings::write_ahead`]).
+    write_ahead: usize,
     compression: Compression,
     note: Option<String>,
     /// A text attribute whose value is filled in (same length) at finish.
@@ -345,6 +350,9 @@ impl ExrOutput {
         );
         header.shared_attributes = shared;
         let mut out = Self::start(dest, header, channels, types)?;
+        if settings.write_ahead > 0 {
+            out.write_ahead = settings.write_ahead;
+        }
         out.note = note;
         Ok(out)
     }
@@ -577,6 +585,7 @@ impl ExrOutput {
             types,
             pending: Vec::new(),
             pending_y0: 0,
+            write_ahead: WRITE_AHEAD_BYTES,
             compression: header_compression,
             note: None,
             fill: None,
@@ -603,11 +612,12 @@ impl ExrOutput {
         } else {
             rows / self.lines
         };
-        // Compress blocks in batches of WRITE_AHEAD_BYTES (one block at the
-        // least): a batch of one or two blocks per strip made the writer's
-        // compression the critical path (the scaling model, 12288x12288).
+        // Compress blocks in batches of `write_ahead` bytes (one block at
+        // the least): a batch of one or two blocks per strip made the
+        // writer's compression the critical path (the scaling model,
+        // 12288x12288).
         let block = (row_len * self.lines * 4).max(1);
-        let batch = (WRITE_AHEAD_BYTES / block).max(1);
+        let batch = (self.write_ahead / block).max(1);
         if full == 0 || (!all && full < batch) {
             return Ok(());
         }
@@ -788,8 +798,8 @@ struct Writeback {
     unsynced: u64,
 }
 
-/// Rows the writer holds before it compresses them (as f32), so that a
-/// batch holds enough blocks to keep 16 workers busy.
+/// Rows the writer holds before it compresses them (as f32) where the
+/// settings do not say: enough blocks to keep 16 workers busy.
 pub const WRITE_AHEAD_BYTES: usize = 16 << 20;
 
 /// Bytes written between two requests to start writing back.

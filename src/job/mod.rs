@@ -210,6 +210,7 @@ impl FilterJob {
                 allow_lossy: false,
                 provenance: None,
                 extra: Vec::new(),
+                write_ahead: 0,
             },
             part: None,
             layer: None,

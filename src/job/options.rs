@@ -406,12 +406,13 @@ options! {
     /// Run `--threads` even where they are more than this machine's cores
     /// (slower: to measure memory at a core count the machine lacks).
     oversubscribe: bool { Flag, PERFORMANCE }
-    /// Memory the job may use, in MiB, by its estimate: where the default
-    /// strips and blocks read ahead need more, it runs with shorter strips
-    /// and fewer blocks (the same result, `--report` says which); refused
-    /// only below the floor it names. The measured peak is some tens of MiB
-    /// above the estimate (docs/bench/memory.md) [default: half the
-    /// machine's memory].
+    /// Memory the process may use, in MiB, by its estimate: where the
+    /// default strips and blocks read ahead need more, it runs with shorter
+    /// strips and fewer blocks (the same result, `--report` says which);
+    /// refused only below the floor it names. The estimate counts the
+    /// program, the mapped input and the writer's rows; the measured peak
+    /// stays within it (docs/bench/memory.md) [default: half the machine's
+    /// memory].
     max_memory: Option<u64> {
         Value, PERFORMANCE, parse: number, env: "EPFILT_MAX_MEMORY", files_only: true
     }
@@ -742,6 +743,7 @@ impl FilterOptions {
                 allow_lossy: self.allow_lossy,
                 provenance: None,
                 extra: Vec::new(),
+                write_ahead: 0,
             },
             part: self.part.clone(),
             layer: self.layer.clone(),

@@ -373,15 +373,16 @@ fn fit_memory(
     carried: usize,
 ) -> Result<(crate::pipeline::PipelineConfig, u64)> {
     let limit = job.max_memory.unwrap_or_else(default_max_memory);
+    let program = crate::pipeline::PROGRAM_BYTES;
     let floor = match crate::pipeline::fit_memory(
         pipe_job,
         &job.params,
         &job.pipeline,
         input.block_bytes(),
-        limit,
+        limit.saturating_sub(program),
     ) {
-        Ok(fit) => return Ok(fit),
-        Err(floor) => floor,
+        Ok((cfg, bytes)) => return Ok((cfg, bytes + program)),
+        Err(floor) => floor + program,
     };
     let hint = if carried == 0 {
         String::new()

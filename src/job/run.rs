@@ -164,6 +164,7 @@ impl FilterPlan<'_> {
             .join(" ");
         let mut out = OutputSettings {
             provenance: Some(provenance),
+            write_ahead: self.pipeline.write_ahead_bytes(),
             ..self.job.output_settings.clone()
         };
         out.extra

@@ -101,44 +101,22 @@ pub fn read_ahead_blocks(block_bytes: u64) -> u64 {
 }
 
 /// Blocks the reader's window of blocks decoding ahead holds at the least
-/// where the job's memory allows (`WINDOW_BUDGET`): a block decodes on one
-/// core, so the window bounds the cores decoding at once: on the widest
-/// inputs [`READ_AHEAD_BATCHES`] of [`read_ahead_blocks`] are too few blocks
-/// to keep 16 cores decoding, and each block more costs its decoded size.
+/// where the threads ask for them: a block decodes on one core, so the
+/// window bounds the cores decoding at once, and on the widest inputs
+/// [`READ_AHEAD_BATCHES`] of [`read_ahead_blocks`] are too few blocks to
+/// keep 16 cores decoding.
 pub const WINDOW_MIN_BLOCKS: u64 = 8;
 
-/// The job's estimate ([`estimate_bytes`]) within which the reader's window
-/// grows to `WINDOW_MIN_BLOCKS`: what a job of the widest inputs should
-/// stay within on a small server, less what many threads hold beyond the
-/// estimate (blocks each worker decodes or compresses, the allocator's
-/// arenas). The light methods
-/// fit it on the widest inputs; ep-gauss, whose windows of rows hold the
-/// most and for which decoding is a smaller share of the work, does not.
-pub const WINDOW_BUDGET: u64 = 208 << 20;
-
 /// Blocks (chunks) of `block_bytes` decoded bytes the reader's window holds
-/// for `job`: [`READ_AHEAD_BATCHES`] batches of [`read_ahead_blocks`], or
-/// `WINDOW_MIN_BLOCKS` where that is more and the job's estimate with them
-/// stays within `WINDOW_BUDGET`; at most `WINDOW_BLOCKS_PER_THREAD` a
-/// worker thread.
-pub fn window_blocks(
-    job: &StripLayout,
-    params: &FilterParams,
-    cfg: &PipelineConfig,
-    block_bytes: u64,
-) -> u64 {
+/// for `cfg`: [`READ_AHEAD_BATCHES`] batches of [`read_ahead_blocks`], or
+/// `WINDOW_MIN_BLOCKS` where that is more; at most
+/// `WINDOW_BLOCKS_PER_THREAD` a worker thread. [`fit_memory`] takes fewer
+/// under a small budget.
+pub fn window_blocks(cfg: &PipelineConfig, block_bytes: u64) -> u64 {
     let threads = cfg.geometry_workers() as u64;
     let by_threads = (WINDOW_BLOCKS_PER_THREAD * threads).max(FEWEST_WINDOW_BLOCKS as u64);
-    let floor = READ_AHEAD_BATCHES * read_ahead_blocks(block_bytes);
-    if floor >= WINDOW_MIN_BLOCKS {
-        return floor.min(by_threads);
-    }
-    let grown = estimate_with(job, params, cfg, block_bytes, WINDOW_MIN_BLOCKS);
-    if grown <= WINDOW_BUDGET {
-        WINDOW_MIN_BLOCKS.min(by_threads)
-    } else {
-        floor.min(by_threads)
-    }
+    let by_bytes = READ_AHEAD_BATCHES * read_ahead_blocks(block_bytes);
+    by_bytes.max(WINDOW_MIN_BLOCKS).min(by_threads)
 }
 
 /// Blocks the reader's window holds per worker thread at most: a block
@@ -147,6 +125,21 @@ pub fn window_blocks(
 /// memory (docs/bench/windows.md). A run on few threads no longer pays for a
 /// window sized for many.
 pub const WINDOW_BLOCKS_PER_THREAD: u64 = 2;
+
+/// Bytes of output rows the sink holds per worker thread before it encodes
+/// them in parallel: a block or two a worker at the widths of the benches,
+/// 16 MiB on 16 threads.
+pub const WRITE_AHEAD_BYTES_PER_THREAD: usize = 1 << 20;
+
+/// What the program holds beside a job's buffers (its code, libraries,
+/// threads' stacks and headers read): `epfilt filter` peaks at about 7 MiB
+/// on a tiny image. `--max-memory` counts it.
+pub const PROGRAM_BYTES: u64 = 8 << 20;
+
+/// The input file's bytes handed over before the reader releases their
+/// pages (each release interrupts every core): at most this much of the
+/// mapped input is resident beside the window of blocks decoding.
+pub const MAPPED_RELEASE_BYTES: usize = 8 << 20;
 
 /// The reader's window of `blocks` blocks in bytes (at most
 /// [`READ_AHEAD_BATCHES`] whole images of `h` rows of `row` bytes).
@@ -170,7 +163,7 @@ pub fn estimate_bytes(
     block_bytes: u64,
 ) -> u64 {
     let blocks = match cfg.window_blocks {
-        0 => window_blocks(job, params, cfg, block_bytes),
+        0 => window_blocks(cfg, block_bytes),
         n => n as u64,
     };
     estimate_with(job, params, cfg, block_bytes, blocks)
@@ -180,10 +173,15 @@ pub fn estimate_bytes(
 /// handed over while the next decodes.
 pub const FEWEST_WINDOW_BLOCKS: usize = 2;
 
+/// Bytes the sink holds before it encodes at the least ([`fit_memory`]):
+/// one byte, so one block (a sink encodes a block at the least).
+pub const FEWEST_WRITE_AHEAD: usize = 1;
+
 /// How `cfg` runs `job` within `limit` bytes ([`estimate_bytes`]): as it is
 /// where it fits; else with shorter strips (halved down to one pixel row,
-/// unless `--strip-rows` gave them) and the reader's window down to
-/// `FEWEST_WINDOW_BLOCKS`, the first that fits, tallest strips first. None
+/// unless `--strip-rows` gave them), and the reader's window and the sink's
+/// rows down to `FEWEST_WINDOW_BLOCKS` and one block, the first that fits,
+/// tallest strips first. None
 /// of it changes the result. `Err` holds what the smallest of them needs
 /// (the halo's rows and one strip: the floor the job cannot go below).
 pub fn fit_memory(
@@ -214,10 +212,12 @@ pub fn fit_memory(
     }
     let mut floor = u64::MAX;
     for &strip_rows in &strips {
-        for window_blocks in [cfg.window_blocks, FEWEST_WINDOW_BLOCKS] {
+        let fewest = (FEWEST_WINDOW_BLOCKS, FEWEST_WRITE_AHEAD);
+        for (window_blocks, write_ahead) in [(cfg.window_blocks, cfg.write_ahead), fewest] {
             let c = PipelineConfig {
                 strip_rows,
                 window_blocks,
+                write_ahead,
                 ..cfg.clone()
             };
             let need = estimate_bytes(job, params, &c, block_bytes);
@@ -288,6 +288,7 @@ fn estimate_with(
     };
     let strips = in_row.saturating_mul(strip).saturating_mul(STRIPS_HELD);
     // The encoder's blocks, and the reader's batch of decoded blocks.
+    let blocks_n = blocks;
     let blocks = block_bytes.saturating_mul(3 * 4).saturating_add(read_ahead(
         in_row,
         job.grid.in_h,
@@ -299,7 +300,27 @@ fn estimate_with(
         .saturating_add(coarse)
         .saturating_add(strips)
         .saturating_add(blocks)
-        .saturating_add(out_row.saturating_mul(16 * 4))
+        .saturating_add(around(job, cfg, (block_bytes, blocks_n), ow, strip / s))
+}
+
+/// What a job holds around its stage: the sink's rows waiting to be encoded
+/// (`write_ahead` bytes of f32 rows, and as many encoded), the output rows
+/// of three strips on their way to it (`ow` wide, `out_rows` a strip), and
+/// the mapped input's resident pages (the window's compressed blocks, at
+/// most their decoded size, and what waits to be released).
+fn around(
+    job: &StripLayout,
+    cfg: &PipelineConfig,
+    (block_bytes, blocks): (u64, u64),
+    ow: u64,
+    out_rows: u64,
+) -> u64 {
+    let nch = job.channels.len() as u64;
+    let out_f32 = ow.saturating_mul(nch * 4);
+    (2 * cfg.write_ahead_bytes() as u64)
+        .saturating_add(out_f32.saturating_mul(3 * out_rows))
+        .saturating_add(MAPPED_RELEASE_BYTES as u64)
+        .saturating_add(block_bytes.saturating_mul(blocks))
 }
 
 fn estimate_box_bytes(
@@ -336,7 +357,7 @@ fn estimate_box_bytes(
             block_bytes,
             blocks,
         ))
-        .saturating_add(w.saturating_mul(nch * 8 * 16 * 4))
+        .saturating_add(around(job, cfg, (block_bytes, blocks), w, strip))
 }
 
 #[cfg(test)]
@@ -407,40 +428,38 @@ mod tests {
     }
 
     #[test]
-    fn the_window_grows_to_eight_blocks_within_the_budget() {
-        // On 16 threads (the window's blocks follow the threads).
-        let cfg = PipelineConfig {
-            threads: 16,
+    fn the_window_holds_eight_blocks_where_the_threads_ask() {
+        let on = |threads| PipelineConfig {
+            threads,
             ..PipelineConfig::default()
         };
-        let window = |job: &StripLayout, m: Method, block: u64| {
-            let p = FilterParams::new(m, 3);
-            (
-                window_blocks(job, &p, &cfg, block),
-                estimate_bytes(job, &p, &cfg, block),
-            )
-        };
-        // 32769 wide, 16-row ZIP blocks: the light methods' job fits
-        // the budget with 8 of them (where two batches hold 6), ep-gauss's
-        // does not.
-        let wide = rgb(32769, 3600);
+        // 32769 wide, 16-row ZIP blocks: two batches hold 6; 16 threads
+        // get 8, and 2 threads their 4.
         let block = 32769 * 3 * 4 * 16;
-        for m in [Method::Box, Method::Gauss] {
-            let (blocks, bytes) = window(&wide, m, block);
-            assert_eq!(blocks, WINDOW_MIN_BLOCKS, "{m:?}");
-            assert!(bytes <= WINDOW_BUDGET, "{m:?}");
-            // Its estimate counts the whole window.
-            assert!(bytes >= WINDOW_MIN_BLOCKS * block, "{m:?}");
+        assert_eq!(READ_AHEAD_BATCHES * read_ahead_blocks(block), 6);
+        assert_eq!(window_blocks(&on(16), block), WINDOW_MIN_BLOCKS);
+        assert_eq!(window_blocks(&on(2), block), 4);
+        // The estimate counts the whole window, for every method.
+        let wide = rgb(32769, 3600);
+        for m in [Method::Box, Method::Gauss, Method::EpGauss] {
+            let p = FilterParams::new(m, 3);
+            let eight = estimate_bytes(&wide, &p, &on(16), block);
+            let two = estimate_bytes(
+                &wide,
+                &p,
+                &PipelineConfig {
+                    window_blocks: 2,
+                    ..on(16)
+                },
+                block,
+            );
+            assert!(eight >= two + 6 * block, "{m:?}");
         }
-        let (blocks, bytes) = window(&wide, Method::EpGauss, block);
-        assert_eq!(blocks, READ_AHEAD_BATCHES * read_ahead_blocks(block));
-        assert!(bytes > WINDOW_BUDGET);
         // Narrower: two batches already hold more than 8 blocks.
-        let narrow = rgb(12288, 12288);
         let block = 12288 * 3 * 4 * 16;
-        let (blocks, _) = window(&narrow, Method::Box, block);
-        assert_eq!(blocks, READ_AHEAD_BATCHES * read_ahead_blocks(block));
-        assert!(blocks > WINDOW_MIN_BLOCKS);
+        let by_bytes = READ_AHEAD_BATCHES * read_ahead_blocks(block);
+        assert!(by_bytes > WINDOW_MIN_BLOCKS);
+        assert_eq!(window_blocks(&on(16), block), by_bytes);
     }
 
     #[test]
@@ -494,14 +513,16 @@ mod tests {
         let block = 6144 * 3 * 4 * 16;
         let p = FilterParams::new(Method::EpGauss, 3);
         let at = |threads| {
-            // The strips as on 2 threads (they follow the threads too).
+            // The strips and the sink's rows as on 2 threads (they follow
+            // the threads too).
             let cfg = PipelineConfig {
                 threads,
                 strip_rows: 56,
+                write_ahead: 2 << 20,
                 ..PipelineConfig::default()
             };
             (
-                window_blocks(&job, &p, &cfg, block),
+                window_blocks(&cfg, block),
                 estimate_bytes(&job, &p, &cfg, block),
             )
         };
@@ -509,7 +530,8 @@ mod tests {
         assert_eq!(at(1).0, 2);
         assert_eq!(at(2).0, 4);
         assert_eq!(at(64).0, by_bytes);
-        // Fewer blocks are less memory, by the blocks' bytes.
-        assert_eq!(at(64).1 - at(1).1, (by_bytes - 2) * block);
+        // Fewer blocks are less memory, by the blocks' bytes: decoded, and
+        // their compressed pages (counted at most as much).
+        assert_eq!(at(64).1 - at(1).1, 2 * (by_bytes - 2) * block);
     }
 }

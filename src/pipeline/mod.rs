@@ -59,7 +59,8 @@ pub use stream::{OutRows, Streamer};
 
 pub use estimate::{
     auto_strip_rows, estimate_bytes, fit_memory, read_ahead_blocks, window_blocks,
-    READ_AHEAD_BATCHES, READ_AHEAD_BYTES, STRIPS_RECYCLED, STRIP_BYTES,
+    MAPPED_RELEASE_BYTES, PROGRAM_BYTES, READ_AHEAD_BATCHES, READ_AHEAD_BYTES, STRIPS_RECYCLED,
+    STRIP_BYTES, WRITE_AHEAD_BYTES_PER_THREAD,
 };
 pub use memory::{filter_in_memory, filter_planar, MemoryRun, MemorySink, MemorySource};
 pub use runner::{mean_luminance, run, thread_pool, Progress};
@@ -216,6 +217,10 @@ pub struct PipelineConfig {
     /// Size strips and the reader's window as for this many workers (0:
     /// [`Self::workers`]).
     pub geometry_threads: usize,
+    /// Bytes of output rows the sink holds before it encodes them (0:
+    /// [`PipelineConfig::write_ahead_bytes`]'s rule; [`fit_memory`] sets
+    /// fewer under a small budget).
+    pub write_ahead: usize,
     /// Set to stop the run early (e.g. on SIGINT).
     pub cancel: Option<Arc<AtomicBool>>,
     /// NaN and infinite input samples.
@@ -239,6 +244,15 @@ impl PipelineConfig {
         }
     }
 
+    /// Bytes of output rows the sink holds before it encodes them:
+    /// `write_ahead`, or [`WRITE_AHEAD_BYTES_PER_THREAD`] a worker.
+    pub fn write_ahead_bytes(&self) -> usize {
+        match self.write_ahead {
+            0 => WRITE_AHEAD_BYTES_PER_THREAD * self.geometry_workers(),
+            n => n,
+        }
+    }
+
     /// The workers strips and the reader's window are sized for:
     /// `geometry_threads`, or [`Self::workers`].
     pub fn geometry_workers(&self) -> usize {
@@ -257,6 +271,7 @@ impl Default for PipelineConfig {
             threads: 0,
             window_blocks: 0,
             geometry_threads: 0,
+            write_ahead: 0,
             cancel: None,
             nonfinite: NonFinite::Error,
             classify_samples: 0,

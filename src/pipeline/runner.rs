@@ -75,7 +75,7 @@ pub fn run<S: Source, K: Sink>(
     // The reader's window of blocks, from the job's memory, and the strips'
     // buffers back to it.
     let window = |block_bytes| match cfg.window_blocks {
-        0 => window_blocks(job, &params, cfg, block_bytes),
+        0 => window_blocks(cfg, block_bytes),
         n => n as u64,
     };
     let (recycle, recycled) = crossbeam_channel::bounded(STRIPS_RECYCLED);

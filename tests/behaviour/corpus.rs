@@ -276,9 +276,7 @@ fn identity_job(input: &Path, output: &Path, part: Option<PartSelect>) -> Filter
     job.output_settings = OutputSettings {
         compression: Some(exr::prelude::Compression::ZIP16),
         precision: Some(Precision::F32),
-        allow_lossy: false,
-        provenance: None,
-        extra: Vec::new(),
+        ..OutputSettings::default()
     };
     job.part = part;
     job

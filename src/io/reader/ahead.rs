@@ -153,8 +153,9 @@ pub(super) fn start<'s>(
 
 /// File bytes handed over before their pages are released: each release
 /// interrupts every core the process runs on (a TLB shoot-down), so
-/// releasing a block row at a time costs measurably more CPU.
-const RELEASE_BYTES: usize = 8 << 20;
+/// releasing a block row at a time costs measurably more CPU. The memory
+/// estimate counts them.
+const RELEASE_BYTES: usize = crate::pipeline::MAPPED_RELEASE_BYTES;
 
 /// A decoded block row this large releases its file pages itself, at once:
 /// waiting for its rows to be handed over, a window of wide blocks decoded
