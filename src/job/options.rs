@@ -411,8 +411,8 @@ options! {
     /// strips and fewer blocks (the same result, `--report` says which);
     /// refused only below the floor it names. The estimate counts the
     /// program, the mapped input and the writer's rows; the measured peak
-    /// stays within it (docs/bench/memory.md) [default: half the machine's
-    /// memory].
+    /// stays within it where at most one sample in ten is noisy
+    /// (docs/bench/memory.md) [default: half the machine's memory].
     max_memory: Option<u64> {
         Value, PERFORMANCE, parse: number, env: "EPFILT_MAX_MEMORY", files_only: true
     }
