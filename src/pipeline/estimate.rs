@@ -47,7 +47,8 @@ pub const TALL_STRIP_BYTES: usize = 2 * STRIP_BYTES;
 pub const STRIP_PIXEL_ROWS_PER_THREAD: usize = 2;
 
 /// Input bytes a tall strip may hold per worker thread, beyond
-/// `TALL_STRIP_BYTES`: a pixel row or two of a 12288-wide S = 3 input each.
+/// `TALL_STRIP_BYTES`: a pixel row or two a worker at ordinary widths, and
+/// the widest inputs keep their shorter strips.
 pub const STRIP_BYTES_PER_THREAD: usize = 1 << 20;
 
 impl StripLayout {
@@ -127,21 +128,21 @@ pub fn window_blocks(cfg: &PipelineConfig, block_bytes: u64) -> u64 {
 pub const WINDOW_BLOCKS_PER_THREAD: u64 = 2;
 
 /// Bytes of output rows the sink holds per worker thread before it encodes
-/// them in parallel: a block or two a worker at the widths of the benches,
-/// 16 MiB on 16 threads.
+/// them in parallel: a block or two a worker at ordinary widths, so that a
+/// batch keeps the workers compressing and few threads hold little.
 pub const WRITE_AHEAD_BYTES_PER_THREAD: usize = 1 << 20;
 
 /// The share of samples the estimate counts as noisy at once (one in this
 /// many): ep-gauss keeps each noisy sample from its classification to its
-/// spread. A synthetic mixed scene has 8.5% noisy samples, the firefly bench
-/// 1%; denser noise holds more than the estimate (the report's
-/// `samples_noisy` says how many a run had).
+/// spread, and the share is not known before the run. Denser noise holds
+/// more than the estimate (the report's `samples_noisy` says how many a run
+/// had; docs/bench/memory.md).
 pub const NOISY_SHARE_INV: u64 = 10;
 
-/// What the process holds beside a job's buffers: its code and libraries
-/// (about 7 MiB resident), the threads' stacks, and the freed pages the
-/// allocator keeps for reuse (the heap's peak runs about 10 MiB below the
-/// resident anonymous memory on the 6144 bench). `--max-memory` counts it.
+/// What the process holds beside a job's buffers: its code and libraries,
+/// the threads' stacks, and the freed pages the allocator keeps for reuse
+/// (the peak beside the heap's, docs/bench/memory.md). `--max-memory`
+/// counts it.
 pub const PROGRAM_BYTES: u64 = 16 << 20;
 
 /// The input file's bytes handed over before the reader releases their
