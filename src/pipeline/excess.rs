@@ -57,15 +57,8 @@ struct Source {
     on_surface: bool,
 }
 
-/// The `ep-box` filter state between strips.
-pub struct ExcessStage {
-    w: usize,
-    h: usize,
-    nch: usize,
-    lum: Vec<f64>,
-    /// Which channels give up the excess (the colour and additive layers).
-    modes: Vec<ChannelMode>,
-    stats: StatsLayout,
+/// The excess rule's settings and factors, set once.
+struct ExcessRule {
     params: EpBoxParams,
     ltvis: f64,
     dl: f64,
@@ -75,7 +68,10 @@ pub struct ExcessStage {
     ring: Ring,
     passes: usize,
     reach: usize,
-    tile: usize,
+}
+
+/// The rows the stage holds between strips, each of the image's width.
+struct ExcessWindows {
     ylum: RowWindow<f64>,
     /// `t_g * S_p`: the most of a pixel's excess that noise can explain.
     cap: RowWindow<f64>,
@@ -85,6 +81,20 @@ pub struct ExcessStage {
     noisy: RowWindow<u8>,
     kept: RowWindow<f64>,
     acc: RowWindow<f64>,
+}
+
+/// The `ep-box` filter state between strips.
+pub struct ExcessStage {
+    w: usize,
+    h: usize,
+    nch: usize,
+    lum: Vec<f64>,
+    /// Which channels give up the excess (the colour and additive layers).
+    modes: Vec<ChannelMode>,
+    stats: StatsLayout,
+    rule: ExcessRule,
+    tile: usize,
+    win: ExcessWindows,
     treat_done: usize,
     counters: ExcessCounts,
     guides: GuideReader,
@@ -151,21 +161,25 @@ impl ExcessStage {
             lum,
             modes,
             stats,
-            params: params.clone(),
-            ltvis,
-            dl: params.d * ltvis,
-            t: TFactor::new(params.confidence),
-            tg: TFactor::new(params.guard_confidence),
-            passes: params.passes,
-            reach: ring.radius(),
-            ring,
+            rule: ExcessRule {
+                params: params.clone(),
+                ltvis,
+                dl: params.d * ltvis,
+                t: TFactor::new(params.confidence),
+                tg: TFactor::new(params.guard_confidence),
+                passes: params.passes,
+                reach: ring.radius(),
+                ring,
+            },
             tile,
-            ylum: RowWindow::new(w),
-            cap: RowWindow::new(w),
-            raw: RowWindow::new(w),
-            noisy: RowWindow::new(w),
-            kept: RowWindow::new(nch * w),
-            acc: RowWindow::new(nch * w),
+            win: ExcessWindows {
+                ylum: RowWindow::new(w),
+                cap: RowWindow::new(w),
+                raw: RowWindow::new(w),
+                noisy: RowWindow::new(w),
+                kept: RowWindow::new(nch * w),
+                acc: RowWindow::new(nch * w),
+            },
             treat_done: 0,
             counters: ExcessCounts::default(),
             guides,
@@ -174,7 +188,7 @@ impl ExcessStage {
 
     /// The visibility threshold in use.
     pub fn ltvis(&self) -> f64 {
-        self.ltvis
+        self.rule.ltvis
     }
 }
 
@@ -186,15 +200,15 @@ impl Stage for ExcessStage {
             xbar_reach: 0,
             base_reach: 0,
             search_reach: self.treat_lag(),
-            spread_reach: self.reach,
+            spread_reach: self.rule.reach,
         }
     }
 
     fn arrive(&mut self, input: &mut RowWindow<f32>, a: usize, b: usize) {
         for _ in a..b {
-            self.ylum.push_stale(0.0);
-            self.cap.push_stale(0.0);
-            self.raw.push_stale(0);
+            self.win.ylum.push_stale(0.0);
+            self.win.cap.push_stale(0.0);
+            self.win.raw.push_stale(0);
         }
         self.statistics(input, a, b);
     }
@@ -207,16 +221,16 @@ impl Stage for ExcessStage {
         // The passes read back to `passes + GUARD_REACH` rows; the spreads'
         // receivers (their surface guides) `reach` rows.
         self.treat_done
-            .saturating_sub((self.passes + GUARD_REACH).max(self.reach))
+            .saturating_sub((self.rule.passes + GUARD_REACH).max(self.rule.reach))
     }
 
     fn output(&self, rows: (usize, usize)) -> Output<'_> {
-        Output::of(&self.kept, Some(&self.acc), rows)
+        Output::of(&self.win.kept, Some(&self.win.acc), rows)
     }
 
     fn release(&mut self, y: usize) {
-        self.kept.evict_below(y);
-        self.acc.evict_below(y);
+        self.win.kept.evict_below(y);
+        self.win.acc.evict_below(y);
     }
 
     fn counts(&self) -> MethodCounts {
@@ -228,27 +242,27 @@ impl Stage for ExcessStage {
         vec![
             WindowUse {
                 name: "luminance",
-                rows: self.ylum.high_water(),
+                rows: self.win.ylum.high_water(),
                 row_bytes: w * 8,
             },
             WindowUse {
                 name: "guard bound",
-                rows: self.cap.high_water(),
+                rows: self.win.cap.high_water(),
                 row_bytes: w * 8,
             },
             WindowUse {
                 name: "flags",
-                rows: self.raw.high_water() + self.noisy.high_water(),
+                rows: self.win.raw.high_water() + self.win.noisy.high_water(),
                 row_bytes: w,
             },
             WindowUse {
                 name: "kept",
-                rows: self.kept.high_water(),
+                rows: self.win.kept.high_water(),
                 row_bytes: nch * w * 8,
             },
             WindowUse {
                 name: "accumulator",
-                rows: self.acc.high_water(),
+                rows: self.win.acc.high_water(),
                 row_bytes: nch * w * 8,
             },
         ]
@@ -260,12 +274,12 @@ impl ExcessStage {
     /// [`RAW_FEW`]) and the stderr guard's bound of rows `a..b`.
     fn statistics(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
         let w = self.w;
-        let (lum, stats, dl) = (&self.lum, &self.stats, self.dl);
-        let (t, tg) = (&self.t, &self.tg);
-        let ys = self.ylum.range_mut(a, b);
-        let cs = self.cap.range_mut(a, b);
-        let fs = self.raw.range_mut(a, b);
-        let params = &self.params;
+        let (lum, stats, dl) = (&self.lum, &self.stats, self.rule.dl);
+        let (t, tg) = (&self.rule.t, &self.rule.tg);
+        let ys = self.win.ylum.range_mut(a, b);
+        let cs = self.win.cap.range_mut(a, b);
+        let fs = self.win.raw.range_mut(a, b);
+        let params = &self.rule.params;
         let guides = &self.guides;
         let region = crate::trace::region("ep-box statistics");
         ys.into_par_iter()
@@ -301,11 +315,11 @@ impl ExcessStage {
     fn decide(&mut self, a: usize, b: usize) {
         let (w, h) = (self.w, self.h);
         for _ in a..b {
-            self.noisy.push_stale(0);
+            self.win.noisy.push_stale(0);
         }
-        let (raw, ylum) = (&self.raw, &self.ylum);
-        let guard = self.params.guard;
-        let rows = self.noisy.range_mut(a, b);
+        let (raw, ylum) = (&self.win.raw, &self.win.ylum);
+        let guard = self.rule.params.guard;
+        let rows = self.win.noisy.range_mut(a, b);
         let region = crate::trace::region("ep-box decide");
         let reliable: u64 = rows
             .into_par_iter()
@@ -343,31 +357,34 @@ impl ExcessStage {
         } else {
             rows_in.saturating_sub(CLUSTER_REACH)
         };
-        if decide_target > self.noisy.end() {
-            self.decide(self.noisy.end(), decide_target);
-            self.raw
-                .evict_below(self.noisy.end().saturating_sub(CLUSTER_REACH));
+        if decide_target > self.win.noisy.end() {
+            self.decide(self.win.noisy.end(), decide_target);
+            self.win
+                .raw
+                .evict_below(self.win.noisy.end().saturating_sub(CLUSTER_REACH));
         }
-        let decided = self.noisy.end();
+        let decided = self.win.noisy.end();
         let treat_target = if decided == h && rows_in == h {
             h
         } else {
             // The spreads' receivers are `reach` rows below at most.
-            (decided.saturating_sub(self.passes + GUARD_REACH))
-                .min(rows_in.saturating_sub(self.reach))
+            (decided.saturating_sub(self.rule.passes + GUARD_REACH))
+                .min(rows_in.saturating_sub(self.rule.reach))
         };
         if treat_target > self.treat_done {
             self.treat(input, self.treat_done, treat_target);
             self.treat_done = treat_target;
-            let keep = self.treat_done.saturating_sub(self.passes + GUARD_REACH);
-            self.ylum.evict_below(keep);
-            self.cap.evict_below(keep);
-            self.noisy.evict_below(keep);
+            let keep = self
+                .treat_done
+                .saturating_sub(self.rule.passes + GUARD_REACH);
+            self.win.ylum.evict_below(keep);
+            self.win.cap.evict_below(keep);
+            self.win.noisy.evict_below(keep);
         }
         if self.treat_done == h {
             h
         } else {
-            self.treat_done.saturating_sub(self.reach)
+            self.treat_done.saturating_sub(self.rule.reach)
         }
     }
 
@@ -376,26 +393,26 @@ impl ExcessStage {
     fn treat(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
         let (w, h, nch) = (self.w, self.h, self.nch);
         for _ in a..b {
-            self.kept.push_stale(0.0);
+            self.win.kept.push_stale(0.0);
         }
-        while self.acc.end() < (b + self.reach).min(h) {
-            self.acc.push(-0.0);
+        while self.win.acc.end() < (b + self.rule.reach).min(h) {
+            self.win.acc.push(-0.0);
         }
-        let kept = self.kept.range_mut(a, b);
+        let kept = self.win.kept.range_mut(a, b);
         let ctx = Band {
             w,
             h,
             nch,
             input,
-            ylum: &self.ylum,
-            cap: &self.cap,
-            noisy: &self.noisy,
+            ylum: &self.win.ylum,
+            cap: &self.win.cap,
+            noisy: &self.win.noisy,
             modes: &self.modes,
-            passes: self.passes,
-            dl: self.dl,
-            ltvis: self.ltvis,
-            guard: self.params.guard,
-            ring: &self.ring,
+            passes: self.rule.passes,
+            dl: self.rule.dl,
+            ltvis: self.rule.ltvis,
+            guard: self.rule.params.guard,
+            ring: &self.rule.ring,
             guides: &self.guides,
         };
         let mut chunks: Vec<(usize, Vec<&mut [f64]>)> = Vec::new();
@@ -436,8 +453,8 @@ impl ExcessStage {
             .chooses_receivers()
             .then_some((input, &self.guides));
         scatter_ring(
-            &mut self.acc,
-            &self.ring,
+            &mut self.win.acc,
+            &self.rule.ring,
             (&sources, &shares),
             &self.modes,
             (w, h),
@@ -502,7 +519,7 @@ impl ExcessStage {
     /// Rows past a row that its treatment reads: the passes', the guards'
     /// and the cluster look's, and the spreads' receivers'.
     fn treat_lag(&self) -> usize {
-        (self.passes + GUARD_REACH + CLUSTER_REACH).max(self.reach)
+        (self.rule.passes + GUARD_REACH + CLUSTER_REACH).max(self.rule.reach)
     }
 }
 

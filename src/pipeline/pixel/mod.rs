@@ -71,13 +71,8 @@ struct Source {
     mask: usize,
 }
 
-/// ep-gauss's state between strips at S = 1.
-pub struct PixelStage {
-    w: usize,
-    h: usize,
-    nch: usize,
-    modes: Vec<ChannelMode>,
-    guides: GuideReader,
+/// The widths and the tests, set once.
+struct PixelRule {
     tolerance: f64,
     /// The feature rules (`--guard` other than `none`).
     features: bool,
@@ -85,7 +80,10 @@ pub struct PixelStage {
     /// Unnormalised taps of each rung (`2 reach + 1`).
     taps: Vec<Vec<f64>>,
     reach: usize,
-    tile: usize,
+}
+
+/// The rows the stage holds between strips, each of the image's width.
+struct PixelWindows {
     /// Luminance of what is left after the emission guide.
     ylum: RowWindow<f64>,
     /// The background of local maxima (NaN elsewhere).
@@ -97,10 +95,22 @@ pub struct PixelStage {
     /// Each pixel's surface guides (with them), for the rows a spread may
     /// reach (as `light`).
     surf: RowWindow<Surface>,
-    /// Pixels whose emission guide set light aside (counted on arrival).
-    emissive: u64,
     kept: RowWindow<f64>,
     acc: RowWindow<f64>,
+}
+
+/// ep-gauss's state between strips at S = 1.
+pub struct PixelStage {
+    w: usize,
+    h: usize,
+    nch: usize,
+    modes: Vec<ChannelMode>,
+    guides: GuideReader,
+    rule: PixelRule,
+    tile: usize,
+    win: PixelWindows,
+    /// Pixels whose emission guide set light aside (counted on arrival).
+    emissive: u64,
     class_done: usize,
     treat_done: usize,
     counts: SpreadCounts,
@@ -140,20 +150,24 @@ impl PixelStage {
             nch,
             modes,
             guides,
-            tolerance: params.tolerance,
-            features: params.ep_box.guard != crate::filter::ep_box::Guard::None,
-            widths,
-            taps,
-            reach,
+            rule: PixelRule {
+                tolerance: params.tolerance,
+                features: params.ep_box.guard != crate::filter::ep_box::Guard::None,
+                widths,
+                taps,
+                reach,
+            },
             tile,
-            ylum: RowWindow::new(w),
-            bg: RowWindow::new(w),
-            cand: RowWindow::new(w),
-            light: RowWindow::new(w),
-            surf: RowWindow::new(w),
+            win: PixelWindows {
+                ylum: RowWindow::new(w),
+                bg: RowWindow::new(w),
+                cand: RowWindow::new(w),
+                light: RowWindow::new(w),
+                surf: RowWindow::new(w),
+                kept: RowWindow::new(nch * w),
+                acc: RowWindow::new(nch * w),
+            },
             emissive: 0,
-            kept: RowWindow::new(nch * w),
-            acc: RowWindow::new(nch * w),
             class_done: 0,
             treat_done: 0,
             counts: SpreadCounts::default(),
@@ -170,21 +184,21 @@ impl Stage for PixelStage {
             xbar_reach: 0,
             base_reach: 0,
             search_reach: self.treat_lag(),
-            spread_reach: self.reach,
+            spread_reach: self.rule.reach,
         }
     }
 
     fn arrive(&mut self, input: &mut RowWindow<f32>, a: usize, b: usize) {
         for _ in a..b {
-            self.ylum.push_stale(0.0);
-            self.light.push_stale(0);
+            self.win.ylum.push_stale(0.0);
+            self.win.light.push_stale(0);
         }
         if self.guides.surface() {
             for _ in a..b {
-                self.surf.push_stale(Surface::default());
+                self.win.surf.push_stale(Surface::default());
             }
             let guides = &self.guides;
-            let rows = self.surf.range_mut(a, b);
+            let rows = self.win.surf.range_mut(a, b);
             rows.into_par_iter().enumerate().for_each(|(k, srow)| {
                 let row = input.get(a + k);
                 for (x, q) in srow.iter_mut().enumerate() {
@@ -194,8 +208,8 @@ impl Stage for PixelStage {
         }
         let guides = &self.guides;
         let region = crate::trace::region("pixel luminance");
-        let rows = self.ylum.range_mut(a, b);
-        let lights = self.light.range_mut(a, b);
+        let rows = self.win.ylum.range_mut(a, b);
+        let lights = self.win.light.range_mut(a, b);
         let emissive: u64 = rows
             .into_par_iter()
             .zip(lights)
@@ -233,38 +247,39 @@ impl Stage for PixelStage {
         let treat_target = if rows_in == h && self.class_done == h {
             h
         } else {
-            (self.class_done.saturating_sub(DECIDE_REACH)).min(rows_in.saturating_sub(self.reach))
+            (self.class_done.saturating_sub(DECIDE_REACH))
+                .min(rows_in.saturating_sub(self.rule.reach))
         };
         if treat_target > self.treat_done {
             self.treat(input, self.treat_done, treat_target);
             self.treat_done = treat_target;
             let keep = self.treat_done.saturating_sub(2 * BACKGROUND_REACH);
-            self.ylum.evict_below(keep);
-            self.bg.evict_below(keep);
-            self.cand.evict_below(keep);
+            self.win.ylum.evict_below(keep);
+            self.win.bg.evict_below(keep);
+            self.win.cand.evict_below(keep);
             // Receivers are read `reach` rows above a treated row.
-            let receivers = self.treat_done.saturating_sub(self.reach);
-            self.light.evict_below(keep.min(receivers));
-            self.surf.evict_below(receivers);
+            let receivers = self.treat_done.saturating_sub(self.rule.reach);
+            self.win.light.evict_below(keep.min(receivers));
+            self.win.surf.evict_below(receivers);
         }
         if self.treat_done == h {
             h
         } else {
-            self.treat_done.saturating_sub(self.reach)
+            self.treat_done.saturating_sub(self.rule.reach)
         }
     }
 
     fn input_needed(&self) -> usize {
-        self.treat_done.saturating_sub(self.reach)
+        self.treat_done.saturating_sub(self.rule.reach)
     }
 
     fn output(&self, rows: (usize, usize)) -> Output<'_> {
-        Output::of(&self.kept, Some(&self.acc), rows)
+        Output::of(&self.win.kept, Some(&self.win.acc), rows)
     }
 
     fn release(&mut self, y: usize) {
-        self.kept.evict_below(y);
-        self.acc.evict_below(y);
+        self.win.kept.evict_below(y);
+        self.win.acc.evict_below(y);
     }
 
     fn counts(&self) -> MethodCounts {
@@ -279,27 +294,27 @@ impl Stage for PixelStage {
         vec![
             WindowUse {
                 name: "luminance",
-                rows: self.ylum.high_water(),
+                rows: self.win.ylum.high_water(),
                 row_bytes: w * 8,
             },
             WindowUse {
                 name: "background",
-                rows: self.bg.high_water(),
+                rows: self.win.bg.high_water(),
                 row_bytes: w * 8,
             },
             WindowUse {
                 name: "flags",
-                rows: self.cand.high_water() + self.light.high_water(),
+                rows: self.win.cand.high_water() + self.win.light.high_water(),
                 row_bytes: w,
             },
             WindowUse {
                 name: "kept",
-                rows: self.kept.high_water(),
+                rows: self.win.kept.high_water(),
                 row_bytes: nch * w * 8,
             },
             WindowUse {
                 name: "accumulator",
-                rows: self.acc.high_water(),
+                rows: self.win.acc.high_water(),
                 row_bytes: nch * w * 8,
             },
         ]
@@ -311,20 +326,20 @@ impl PixelStage {
     /// surface guides, so that the halo follows from the settings alone
     /// ([`crate::filter::halo`]).
     fn treat_lag(&self) -> usize {
-        (BACKGROUND_REACH + DECIDE_REACH).max(self.reach)
+        (BACKGROUND_REACH + DECIDE_REACH).max(self.rule.reach)
     }
 
     /// Backgrounds and Rule 1 for rows `a..b` (their luminance rows within
     /// [`BACKGROUND_REACH`] are in, reflected at the image's edges).
     fn classify(&mut self, a: usize, b: usize) {
         for _ in a..b {
-            self.bg.push_stale(f64::NAN);
-            self.cand.push_stale(0);
+            self.win.bg.push_stale(f64::NAN);
+            self.win.cand.push_stale(0);
         }
         let (w, h) = (self.w, self.h);
-        let (ylum, light) = (&self.ylum, &self.light);
-        let bgs = self.bg.range_mut(a, b);
-        let cands = self.cand.range_mut(a, b);
+        let (ylum, light) = (&self.win.ylum, &self.win.light);
+        let bgs = self.win.bg.range_mut(a, b);
+        let cands = self.win.cand.range_mut(a, b);
         let region = crate::trace::region("pixel classify");
         bgs.into_par_iter()
             .zip(cands)
@@ -367,13 +382,13 @@ impl PixelStage {
     fn treat(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
         let (h, nch) = (self.h, self.nch);
         for _ in a..b {
-            self.kept.push_stale(0.0);
+            self.win.kept.push_stale(0.0);
         }
-        while self.acc.end() < (b + self.reach).min(h) {
-            self.acc.push(-0.0);
+        while self.win.acc.end() < (b + self.rule.reach).min(h) {
+            self.win.acc.push(-0.0);
         }
         // The kept rows are written while the rest of the stage is read.
-        let mut kept_window = std::mem::replace(&mut self.kept, RowWindow::new(0));
+        let mut kept_window = std::mem::replace(&mut self.win.kept, RowWindow::new(0));
         let kept = kept_window.range_mut(a, b);
         let mut chunks: Vec<(usize, Vec<&mut [f64]>)> = Vec::new();
         let mut rows = kept.into_iter();
@@ -404,10 +419,10 @@ impl PixelStage {
             masks.extend(t.masks);
             self.counts += t.counts;
         }
-        self.kept = kept_window;
+        self.win.kept = kept_window;
         let taps: u64 = sources
             .iter()
-            .map(|s| (2 * self.widths.reach[s.k as usize] as u64 + 1).pow(2))
+            .map(|s| (2 * self.rule.widths.reach[s.k as usize] as u64 + 1).pow(2))
             .sum();
         self.counts.spread_taps += taps * nch as u64;
         self.scatter(&sources, &shares, &masks);
@@ -421,59 +436,65 @@ impl PixelStage {
             return;
         }
         let (w, h, nch) = (self.w, self.h, self.nch);
-        let first = self.acc.first();
-        let (taps, widths, modes) = (&self.taps, &self.widths, &self.modes);
+        let first = self.win.acc.first();
+        let (taps, widths, modes) = (&self.rule.taps, &self.rule.widths, &self.modes);
         let choose = self.guides.chooses_receivers();
         let spread: Vec<usize> = (0..nch)
             .filter(|&c| modes[c] == ChannelMode::Spread)
             .collect();
-        crate::pipeline::tiles::for_each_tile(&mut self.acc, w, nch, self.tile, |cols, parts| {
-            let (x0, x1) = (cols.start, cols.end);
-            for s in sources {
-                let k = s.k as usize;
-                let r = widths.reach[k];
-                let (sx, sy) = (s.x as usize, s.y as usize);
-                if sx + r < x0 || sx >= x1 + r {
-                    continue;
-                }
-                let g = &taps[k];
-                let (xa, xb) = (sx.saturating_sub(r).max(x0), (sx + r + 1).min(x1));
-                if xa >= xb {
-                    continue;
-                }
-                let gx = &g[xa + r - sx..xb + r - sx];
-                for ty in sy.saturating_sub(r)..(sy + r + 1).min(h) {
-                    let gy = g[ty + r - sy];
-                    if gy == 0.0 {
+        crate::pipeline::tiles::for_each_tile(
+            &mut self.win.acc,
+            w,
+            nch,
+            self.tile,
+            |cols, parts| {
+                let (x0, x1) = (cols.start, cols.end);
+                for s in sources {
+                    let k = s.k as usize;
+                    let r = widths.reach[k];
+                    let (sx, sy) = (s.x as usize, s.y as usize);
+                    if sx + r < x0 || sx >= x1 + r {
                         continue;
                     }
-                    let ri = ty - first;
-                    if choose {
-                        // The receivers the guides allow: the bits the
-                        // width's normalisation set.
-                        let side = 2 * r + 1;
-                        let row = s.mask * 64 + (ty + r - sy) * side + xa + r - sx;
-                        for (k, (tx, &wx)) in (xa..xb).zip(gx).enumerate() {
-                            let bit = row + k;
-                            if masks[bit / 64] & (1 << (bit % 64)) == 0 {
-                                continue;
-                            }
-                            for &c in &spread {
-                                parts[ri * nch + c][tx - x0] += shares[s.off + c] * gy * wx;
-                            }
-                        }
+                    let g = &taps[k];
+                    let (xa, xb) = (sx.saturating_sub(r).max(x0), (sx + r + 1).min(x1));
+                    if xa >= xb {
                         continue;
                     }
-                    for &c in &spread {
-                        let a = shares[s.off + c] * gy;
-                        let dst = &mut parts[ri * nch + c][xa - x0..xb - x0];
-                        for (d, &wx) in dst.iter_mut().zip(gx) {
-                            *d += a * wx;
+                    let gx = &g[xa + r - sx..xb + r - sx];
+                    for ty in sy.saturating_sub(r)..(sy + r + 1).min(h) {
+                        let gy = g[ty + r - sy];
+                        if gy == 0.0 {
+                            continue;
+                        }
+                        let ri = ty - first;
+                        if choose {
+                            // The receivers the guides allow: the bits the
+                            // width's normalisation set.
+                            let side = 2 * r + 1;
+                            let row = s.mask * 64 + (ty + r - sy) * side + xa + r - sx;
+                            for (k, (tx, &wx)) in (xa..xb).zip(gx).enumerate() {
+                                let bit = row + k;
+                                if masks[bit / 64] & (1 << (bit % 64)) == 0 {
+                                    continue;
+                                }
+                                for &c in &spread {
+                                    parts[ri * nch + c][tx - x0] += shares[s.off + c] * gy * wx;
+                                }
+                            }
+                            continue;
+                        }
+                        for &c in &spread {
+                            let a = shares[s.off + c] * gy;
+                            let dst = &mut parts[ri * nch + c][xa - x0..xb - x0];
+                            for (d, &wx) in dst.iter_mut().zip(gx) {
+                                *d += a * wx;
+                            }
                         }
                     }
                 }
-            }
-        });
+            },
+        );
     }
 }
 

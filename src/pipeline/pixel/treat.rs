@@ -42,19 +42,20 @@ impl Treat<'_> {
             }
             let r = BACKGROUND_REACH as i64;
             let lrows: Vec<&[f64]> = (-1..=1)
-                .map(|d| st.ylum.get(mirror(y as i64 + d, h)))
+                .map(|d| st.win.ylum.get(mirror(y as i64 + d, h)))
                 .collect();
-            let cand = st.cand.get(y);
-            let bgrow = st.bg.get(y);
+            let cand = st.win.cand.get(y);
+            let bgrow = st.win.bg.get(y);
             for x in (0..w).filter(|&x| cand[x] != 0) {
                 counts.noisy += 1;
                 let (v, bg) = (lrows[1][x], bgrow[x]);
-                if st.features {
+                if st.rule.features {
                     let n8 = neighbours8(&lrows, x, w);
                     let calm = || {
                         let mut m = f64::NEG_INFINITY;
                         for yy in (y as i64 - r).max(0)..(y as i64 + r + 1).min(h as i64) {
-                            let (f, l) = (st.cand.get(yy as usize), st.ylum.get(yy as usize));
+                            let (f, l) =
+                                (st.win.cand.get(yy as usize), st.win.ylum.get(yy as usize));
                             for xx in (x as i64 - r).max(0)..(x as i64 + r + 1).min(w as i64) {
                                 let xx = xx as usize;
                                 if f[xx] == 0 {
@@ -125,10 +126,10 @@ impl Treat<'_> {
         (cur, best): (&mut Vec<u64>, &mut Vec<u64>),
     ) -> Option<(usize, f64, bool)> {
         let st = self.stage;
-        let limit = st.tolerance * bg;
-        let cap = st.widths.rho.len() - 1;
+        let limit = st.rule.tolerance * bg;
+        let cap = st.rule.widths.rho.len() - 1;
         // Even the whole plane's kernel at the cap is too narrow: left.
-        let first = st.widths.first_within(excess, bg, st.tolerance)?;
+        let first = st.rule.widths.first_within(excess, bg, st.rule.tolerance)?;
         let passes = |norm: f64| norm > 0.0 && excess <= limit * norm;
         // A source keeps to its surface where the surface has room for it:
         // one with little of its kernel there sits on an edge or a sliver
@@ -181,7 +182,7 @@ impl Treat<'_> {
         passes: impl Fn(f64) -> bool,
         (cur, best): (&mut Vec<u64>, &mut Vec<u64>),
     ) -> Option<(usize, f64)> {
-        let cap = self.stage.widths.rho.len() - 1;
+        let cap = self.stage.rule.widths.rho.len() - 1;
         let (mut lo, mut step) = (None, 1);
         let mut k = first;
         let (mut hi, mut at_hi) = loop {
@@ -221,8 +222,8 @@ impl Treat<'_> {
     /// from `(x, y)`, every one of them.
     fn plain_norm(&self, k: usize, x: usize, y: usize) -> f64 {
         let st = self.stage;
-        let r = st.widths.reach[k];
-        let g = &st.taps[k];
+        let r = st.rule.widths.reach[k];
+        let g = &st.rule.taps[k];
         let (xa, xb) = (x.saturating_sub(r), (x + r + 1).min(st.w));
         let (ya, yb) = (y.saturating_sub(r), (y + r + 1).min(st.h));
         let sx: f64 = (xa..xb).map(|tx| g[tx + r - x]).sum();
@@ -242,8 +243,8 @@ impl Treat<'_> {
     ) -> f64 {
         let st = self.stage;
         let (w, h) = (st.w, st.h);
-        let r = st.widths.reach[k];
-        let g = &st.taps[k];
+        let r = st.rule.widths.reach[k];
+        let g = &st.rule.taps[k];
         let (xa, xb) = (x.saturating_sub(r), (x + r + 1).min(w));
         let (ya, yb) = (y.saturating_sub(r), (y + r + 1).min(h));
         if !st.guides.chooses_receivers() {
@@ -256,12 +257,12 @@ impl Treat<'_> {
         let mut sum = 0.0;
         for ty in ya..yb {
             let gy = g[ty + r - y];
-            let lights = &st.light.get(ty)[xa..xb];
+            let lights = &st.win.light.get(ty)[xa..xb];
             let row = (ty + r - y) * side + xa + r - x;
             let mut part = 0.0;
             match surface {
                 Some(from) => {
-                    let surfs = &st.surf.get(ty)[xa..xb];
+                    let surfs = &st.win.surf.get(ty)[xa..xb];
                     for (k, (tx, &wx)) in (xa..xb).zip(gx).enumerate() {
                         let q = (lights[k] != 0, &surfs[k]);
                         if st.guides.accepts(q, (tx, ty), Some((from, x, y))) {
