@@ -435,10 +435,10 @@ mod tests {
         // Narrower: STRIP_BYTES already holds more pixel rows (56 rows).
         assert_eq!(rgb(6144, 6144).auto_strip_rows(2), 56);
         // Two pixel rows a worker where they fit: 16 workers get 32 at
-        // 12288 wide (14 MiB a strip), the same 16 up to 8 workers.
+        // 12288 wide; up to 8 workers keep 16.
         assert_eq!(square.auto_strip_rows(8), TALL_STRIP_PIXEL_ROWS * 3);
         assert_eq!(square.auto_strip_rows(16), 32 * 3);
-        // At 32769 wide 32 pixel rows would be 48 MiB: the strip stays.
+        // At 32769 wide 32 pixel rows would not fit: the strip stays.
         assert_eq!(
             rgb(32769, 3600).auto_strip_rows(16),
             MIN_STRIP_PIXEL_ROWS * 3
