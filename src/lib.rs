@@ -55,5 +55,6 @@ pub mod trace;
 pub use error::{Error, Result};
 pub use filter::{FilterParams, Method};
 pub use geometry::Grid;
+pub use job::restore::{restore_file, RestoreJob};
 pub use job::{filter_file, FilterJob};
 pub use pipeline::{filter_in_memory, PipelineConfig, Precision, RunStats, StripLayout};

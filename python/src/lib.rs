@@ -1,5 +1,5 @@
-//! epfilt for Python: numpy arrays in and out (`filter`), the streaming file
-//! filter (`filter_file`), `info`, `compare` and `read`. Every call releases
+//! epfilt for Python: numpy arrays in and out (`filter`, `restore`), the
+//! streaming file filter (`filter_file`), `info`, `compare` and `read`. Every call releases
 //! the GIL while it works; Ctrl-C stops it (no output is left); the
 //! library's errors become `epfilt.Error` subclasses, with its message.
 //!
@@ -436,6 +436,66 @@ fn read<'py>(
     Ok((arr.into_any(), names))
 }
 
+/// A denoiser's output with the energy of `energy` put back; see the stub.
+#[pyfunction]
+#[pyo3(signature = (denoised, energy, scale=None, *, channels=None, threads=0, nonfinite="error"))]
+fn restore<'py>(
+    py: Python<'py>,
+    denoised: &Bound<'py, PyAny>,
+    energy: &Bound<'py, PyAny>,
+    scale: Option<f64>,
+    channels: Option<Vec<String>>,
+    threads: usize,
+    nonfinite: &str,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    let (d, dshape, _) = samples_of(denoised, "denoised")?;
+    let (e, eshape, _) = samples_of(energy, "energy")?;
+    if dshape != eshape {
+        return Err(config_error(format!(
+            "denoised has shape {dshape:?} and energy {eshape:?}: restore needs the denoiser's output of that very image"
+        )));
+    }
+    let [h, w, c] = eshape[..] else {
+        return Err(config_error(format!(
+            "arrays must have shape (height, width, channels), not {eshape:?}"
+        )));
+    };
+    let channels = match channels {
+        Some(names) if names.len() == c => names,
+        Some(names) => {
+            return Err(config_error(format!(
+                "{} channel names for {c} channels",
+                names.len()
+            )))
+        }
+        None => default_channels(c)?,
+    };
+    let nonfinite = match nonfinite {
+        "error" => epfilt::pipeline::NonFinite::Error,
+        "zero" => epfilt::pipeline::NonFinite::Zero,
+        other => {
+            return Err(config_error(format!(
+                "nonfinite must be \"error\" or \"zero\", not {other:?}"
+            )))
+        }
+    };
+    let scale = scale.unwrap_or(epfilt::filter::restore::DEFAULT_SCALE);
+    let (out, report) = detached(py, |cancel| {
+        epfilt::job::restore::restore_array(
+            &d,
+            &e,
+            (w, h),
+            &channels,
+            scale,
+            threads,
+            nonfinite,
+            Some(cancel),
+        )
+    })?;
+    let image = PyArray1::from_vec(py, out).reshape([h, w, c])?.into_any();
+    Ok((image, to_dict(py, &report)?))
+}
+
 /// The native module (`epfilt._epfilt`); `epfilt/__init__.py` is the API.
 #[pymodule]
 fn _epfilt(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -444,6 +504,7 @@ fn _epfilt(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(info, m)?)?;
     m.add_function(wrap_pyfunction!(compare, m)?)?;
     m.add_function(wrap_pyfunction!(read, m)?)?;
+    m.add_function(wrap_pyfunction!(restore, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

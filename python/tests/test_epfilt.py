@@ -335,3 +335,31 @@ def test_filter_file_reports_progress_and_a_failing_callback_stops_it(tmp_path):
     with pytest.raises(Stop):
         epfilt.filter_file(src, out, threads=1, progress=stop)
     assert list(out.parent.iterdir()) == []
+
+
+def test_restore_puts_the_energy_back_at_any_thread_count():
+    rng = np.random.default_rng(7)
+    energy = (rng.random((40, 52, 3)) + 0.2).astype(np.float32)
+    energy[5, 9] = 500.0  # a firefly the "denoiser" removed
+    denoised = np.full_like(energy, 0.5)
+    denoised[:, :10] = 0.0  # and a region it left black
+    out, report = epfilt.restore(denoised, energy, 2.0)
+    assert out.shape == energy.shape and out.dtype == np.float32
+    for l in report["ledger"]:
+        assert l["rel_error"] <= LEDGER_TOL
+    total = energy.astype(np.float64).sum(axis=(0, 1))
+    assert np.allclose(out.astype(np.float64).sum(axis=(0, 1)), total, rtol=1e-6)
+    assert report["counts"]["unshaped"] > 0
+    # The same digest at any thread count.
+    _, again = epfilt.restore(denoised, energy, 2.0, threads=1)
+    assert again["digest"] == report["digest"]
+    with pytest.raises(epfilt.ConfigError):
+        epfilt.restore(denoised[:, :-1], energy)
+    with pytest.raises(epfilt.ConfigError):
+        epfilt.restore(denoised, energy, 0.0)
+    bad = energy.copy()
+    bad[0, 0, 0] = np.nan
+    with pytest.raises(epfilt.InputError):
+        epfilt.restore(denoised, bad)
+    _, rep = epfilt.restore(denoised, bad, nonfinite="zero")
+    assert rep["nonfinite_zeroed"] == 1

@@ -19,6 +19,7 @@ pub mod foils;
 pub mod guides;
 pub mod kernel;
 pub mod luminance;
+pub mod restore;
 pub mod settings;
 
 use crate::error::{Error, Result};

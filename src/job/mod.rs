@@ -4,6 +4,7 @@
 pub mod array;
 pub mod options;
 mod plan;
+pub mod restore;
 mod run;
 
 use std::path::{Path, PathBuf};

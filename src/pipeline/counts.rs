@@ -75,6 +75,45 @@ pub struct ExcessCounts {
     pub passes: u64,
 }
 
+/// What `epfilt restore` counted, in pixel channels.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct RestoreCounts {
+    /// Where the denoiser's energy around a pixel was below a
+    /// [`crate::filter::restore::MAX_GAIN`]th of its energy: the gain was
+    /// capped and the rest spread as a plain Gaussian.
+    pub capped: u64,
+    /// Where the denoiser had nothing around a pixel with energy: all of
+    /// it spread as a plain Gaussian.
+    pub unshaped: u64,
+    /// Negative energy values, spread as a plain Gaussian.
+    pub negative: u64,
+    /// The energy spread as a plain Gaussian (summed over channels).
+    pub plain_energy: f64,
+}
+
+impl RestoreCounts {
+    /// A pixel channel of energy `e` with `q` of the denoiser's around it,
+    /// some of it left over.
+    pub fn count(&mut self, e: f64, q: f64) {
+        if e < 0.0 {
+            self.negative += 1;
+        } else if q > 0.0 {
+            self.capped += 1;
+        } else {
+            self.unshaped += 1;
+        }
+    }
+}
+
+impl std::ops::AddAssign for RestoreCounts {
+    fn add_assign(&mut self, o: RestoreCounts) {
+        self.capped += o.capped;
+        self.unshaped += o.unshaped;
+        self.negative += o.negative;
+        self.plain_energy += o.plain_energy;
+    }
+}
+
 /// What a method counted; each method its own type.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub enum MethodCounts {
@@ -82,6 +121,8 @@ pub enum MethodCounts {
     EpGauss(SpreadCounts),
     /// ep-box (§5.1): pixels.
     EpBox(ExcessCounts),
+    /// `epfilt restore`: pixel channels.
+    Restore(RestoreCounts),
     /// The linear filters and the foils count nothing.
     Plain,
 }

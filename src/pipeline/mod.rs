@@ -31,7 +31,9 @@ mod guided;
 pub mod ledger;
 mod memory;
 pub mod order;
+pub mod pair;
 pub mod pixel;
+pub mod restore;
 mod runner;
 pub mod spread;
 pub mod stage;
@@ -63,7 +65,7 @@ pub use estimate::{
     STRIP_BYTES, WRITE_AHEAD_BYTES_PER_THREAD,
 };
 pub use memory::{filter_in_memory, filter_planar, MemoryRun, MemorySink, MemorySource};
-pub use runner::{mean_luminance, run, thread_pool, Progress};
+pub use runner::{mean_luminance, run, run_streamer, thread_pool, Progress};
 
 /// Rows of input samples, `[row][channel][x]`.
 #[derive(Clone, Debug)]

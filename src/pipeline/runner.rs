@@ -49,10 +49,22 @@ pub fn run<S: Source, K: Sink>(
     progress: Progress<'_>,
 ) -> Result<RunStats> {
     let params = params.validated()?;
+    let streamer = Streamer::new(job, &params, cfg, sink.precisions(job.channels.len()))?;
+    run_streamer(source, sink, job, streamer, cfg, progress)
+}
+
+/// [`run`] with the skeleton and its stage built (`epfilt restore`'s).
+pub fn run_streamer<S: Source, K: Sink>(
+    source: S,
+    sink: K,
+    job: &StripLayout,
+    mut streamer: Streamer,
+    cfg: &PipelineConfig,
+    progress: Progress<'_>,
+) -> Result<RunStats> {
     let pool = thread_pool(cfg.threads)?;
     let io_pool = io_pool(cfg.threads)?;
     let start = Instant::now();
-    let mut streamer = Streamer::new(job, &params, cfg, sink.precisions(job.channels.len()))?;
     let real = job.padded_from.unwrap_or((job.grid.in_w, job.grid.in_h));
     let source = edge::Padded::new(
         source,

@@ -165,6 +165,35 @@ impl Streamer {
         })
     }
 
+    /// The skeleton around a stage built by its caller (`epfilt restore`'s):
+    /// the books count `job.channels` (the strips' first channels) and
+    /// apply `nonfinite` to them; `job.aux` are data the stage reads as it
+    /// sees fit.
+    pub fn of_stage(
+        job: &StripLayout,
+        stage: Box<dyn Stage>,
+        nonfinite: super::NonFinite,
+        precision: Vec<Precision>,
+    ) -> Self {
+        let nall = job.strip_channels();
+        let mut books = Books::new(job.channels.clone(), nall);
+        books.set_nonfinite(nonfinite);
+        let mut data = vec![false; job.channels.len()];
+        data.resize(nall, true);
+        books.set_data(data);
+        Streamer {
+            stage,
+            input: RowWindow::new(nall * job.grid.in_w),
+            books,
+            grid: job.grid,
+            nall,
+            w: job.grid.out_w(),
+            precision,
+            rows_in: 0,
+            out_done: 0,
+        }
+    }
+
     /// Feed the next strip of input rows; returns the output rows it finished.
     ///
     /// A push is three steps, each its own parallel loop or loops: the new

@@ -19,6 +19,7 @@ mod guides;
 mod invariance;
 mod parts;
 mod reference;
+mod restore;
 mod rgbe;
 mod robust;
 mod synth;

@@ -21,6 +21,7 @@ __version__ = _epfilt.__version__
 __all__ = [
     "filter",
     "filter_file",
+    "restore",
     "info",
     "compare",
     "read",
@@ -91,6 +92,29 @@ def filter_file(input, output, *, progress=None, **settings):
     found a complete output).
     """
     return _epfilt.filter_file(str(input), str(output), progress=progress, **settings)
+
+
+def restore(denoised, energy, scale=None, *, channels=None, threads=0, nonfinite="error"):
+    """A denoiser's output with ``energy``'s energy put back, and the report.
+
+    ``denoised`` is any denoiser's output (OIDN, OptiX, ...) and ``energy`` the image
+    whose energy is right (the render, or ``filter``'s output of it), both float32 or
+    float16 arrays of the same shape (height, width, channels). Each pixel of ``energy``
+    is spread over a Gaussian of ``scale`` pixels (its standard deviation; default 2) in
+    proportion to the denoiser's picture there: the result's local energy at that scale
+    and its total (report ``ledger``) are ``energy``'s, its detail the denoiser's. Where
+    the denoiser has too little light to carry it, the energy is spread as a plain
+    Gaussian (report ``counts`` and ``plain_share``). ``nonfinite``: "error" refuses NaN
+    or infinite energy values, "zero" counts them as zero. The result is float32.
+
+    With Intel OIDN (``pip install epfilt[oidn]``: pyoidn, colour only)::
+
+        import numpy as np, pyoidn, epfilt
+        render, names = epfilt.read("render.exr")              # R, G, B
+        denoised = pyoidn.denoise(render, hdr=True, quality="high")
+        restored, report = epfilt.restore(np.asarray(denoised, np.float32), render)
+    """
+    return _epfilt.restore(denoised, energy, scale, channels=channels, threads=threads, nonfinite=nonfinite)
 
 
 def info(path):

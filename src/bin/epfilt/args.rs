@@ -60,6 +60,10 @@ pub enum Command {
     },
     /// Render a noisy synthetic scene with exact ground truth (streamed: any size).
     Synth(Box<SynthArgs>),
+    /// Put a render's energy back into a denoiser's output (OIDN, OptiX, ...):
+    /// its local energy at --scale and its total become the render's, exactly.
+    #[command(after_long_help = RESTORE_EXAMPLES)]
+    Restore(Box<RestoreArgs>),
     /// Compare an image with a reference: RMSE, relative MSE, PSNR, energy
     /// ratio; with --max-*, exit 1 when a threshold is exceeded (as idiff does).
     Compare(Box<CompareArgs>),
@@ -143,6 +147,49 @@ pub struct SynthArgs {
     /// Worker threads, 0 = one per core (does not change the bytes).
     #[arg(long, default_value_t = 0, env = "EPFILT_THREADS")]
     pub threads: usize,
+    /// No progress bar and no summary.
+    #[arg(long, short = 'q')]
+    pub quiet: bool,
+}
+
+const RESTORE_EXAMPLES: &str = "Examples:
+  oidn --hdr render.pfm -o denoised.pfm ...    (any denoiser, then as EXR)
+  epfilt restore denoised.exr render.exr restored.exr
+  epfilt filter render.exr clean.exr && epfilt restore denoised.exr clean.exr out.exr --scale 4
+
+The denoiser's output shapes the light; the energy image (the render, or
+epfilt's output of it: same size and channels) says how much there is. Each
+energy pixel is spread over a Gaussian of --scale pixels in proportion to the
+denoiser's picture there, so every pixel's energy stays within the kernel and
+the total is exact (the ledger balances to 1e-12 or nothing is written).
+Small --scale: energy exact locally, some grain back; large: the denoiser's
+look, energy exact in total and over large areas.";
+
+#[derive(Args)]
+pub struct RestoreArgs {
+    /// The denoiser's output (EXR or Radiance picture).
+    pub denoised: PathBuf,
+    /// The image whose energy is right: the render, or epfilt's output of it.
+    pub energy: PathBuf,
+    /// The result (.exr; never one of the inputs).
+    pub output: PathBuf,
+    /// The Gaussian's standard deviation in pixels: the scale at which the
+    /// result's energy is the energy image's.
+    #[arg(long, default_value_t = epfilt::filter::restore::DEFAULT_SCALE)]
+    pub scale: f64,
+    /// NaN and infinite energy values: error (refuse the input) or zero
+    /// (count them in the report). The denoiser's are nothing to shape with.
+    #[arg(long, default_value = "error")]
+    pub nonfinite: String,
+    /// Output compression [default: the energy image's].
+    #[arg(long)]
+    pub compression: Option<String>,
+    /// Worker threads, 0 = one per core (does not change the bytes).
+    #[arg(long, default_value_t = 0, env = "EPFILT_THREADS")]
+    pub threads: usize,
+    /// Write the summary as JSON to this file (- for standard output).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
     /// No progress bar and no summary.
     #[arg(long, short = 'q')]
     pub quiet: bool,

@@ -19,7 +19,7 @@ use epfilt::io::{parse_compression, Format, PartSelect, Selection};
 use epfilt::synth::{Sampling, Scene, SceneKind, SynthJob};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use args::{Cli, Command, CompareArgs, PreviewArgs, SelectArgs, SynthArgs};
+use args::{Cli, Command, CompareArgs, PreviewArgs, RestoreArgs, SelectArgs, SynthArgs};
 
 fn main() {
     tune_allocator();
@@ -69,6 +69,7 @@ fn dispatch(cli: Cli, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
         }
         Command::Synth(args) => synth(*args),
         Command::Compare(a) => compare(*a),
+        Command::Restore(a) => restore(*a, cancel),
         Command::Preview(a) => preview(*a),
         Command::Plan(a) => {
             let (opts, _) =
@@ -170,6 +171,65 @@ fn compare(a: CompareArgs) -> Result<(), Exit> {
             over.join("; ")
         )))
     }
+}
+
+fn restore(a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
+    let nonfinite = match a.nonfinite.as_str() {
+        "error" => epfilt::pipeline::NonFinite::Error,
+        "zero" => epfilt::pipeline::NonFinite::Zero,
+        other => {
+            return Err(usage(anyhow::anyhow!(
+                "--nonfinite must be error or zero, not {other:?}"
+            )))
+        }
+    };
+    let mut job = epfilt::RestoreJob::new(&a.denoised, &a.energy, &a.output);
+    job.scale = a.scale;
+    job.threads = capped_threads(a.threads);
+    job.nonfinite = nonfinite;
+    job.cancel = Some(cancel);
+    if let Some(c) = &a.compression {
+        job.output_settings.compression = Some(
+            parse_compression(c)
+                .ok_or_else(|| usage(anyhow::anyhow!("unknown compression {c:?}")))?,
+        );
+    }
+    let bar = progress_bar(a.quiet);
+    let report = epfilt::restore_file(&job, &|done, total| {
+        if let Some(b) = &bar {
+            b.set_length(total as u64);
+            b.set_position(done as u64);
+        }
+    });
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    let r = report.map_err(fail)?;
+    if let Some(path) = &a.report {
+        write_report(path, &r)?;
+    }
+    if r.nonfinite_zeroed > 0 {
+        warn(&format!(
+            "{}: {} non-finite energy values taken as zero",
+            a.energy.display(),
+            r.nonfinite_zeroed
+        ));
+    }
+    if !a.quiet {
+        let worst = r.ledger.iter().map(|l| l.rel_error).fold(0.0, f64::max);
+        eprintln!(
+            "{}: {}x{} restored at scale {} in {:.2} s; energy exact to {worst:.1e}; {:.2}% of it spread plainly where the denoiser had too little ({} capped, {} empty)",
+            r.output,
+            r.width,
+            r.height,
+            r.scale,
+            r.seconds,
+            100.0 * r.plain_share,
+            r.counts.capped,
+            r.counts.unshaped
+        );
+    }
+    Ok(())
 }
 
 fn preview(a: PreviewArgs) -> Result<(), Exit> {

@@ -1,0 +1,299 @@
+//! `epfilt restore`: a denoiser's output with the energy of the image it was
+//! made from put back ([`crate::filter::restore`]), file to file or on
+//! arrays. Both inputs are checked against each other before a row is read;
+//! the output is put in place only once the ledger balances.
+
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+use crate::error::{Error, Result};
+use crate::filter::restore::{check_scale, DEFAULT_SCALE};
+use crate::host::peak_rss_bytes;
+use crate::io::output::OutputLayout;
+use crate::io::{ExrInput, OutputSettings};
+use crate::pipeline::counts::{MethodCounts, RestoreCounts};
+use crate::pipeline::ledger::ChannelLedger;
+use crate::pipeline::restore::{restore_planar, restore_stream};
+use crate::pipeline::{NonFinite, PipelineConfig, Precision, Progress, RunStats};
+
+use super::check_not_same_file;
+
+/// `restore`'s ledger must balance to this before rounding: every energy
+/// pixel's weights sum to one by construction, so what is left is the
+/// rounding of a few f64 blurs and compensated sums (about 1e-15).
+pub const RESTORE_LEDGER_LIMIT: f64 = 1e-12;
+
+/// A file-to-file restore.
+#[derive(Clone, Debug)]
+pub struct RestoreJob {
+    /// The denoiser's output.
+    pub denoised: PathBuf,
+    /// The image whose energy is right.
+    pub energy: PathBuf,
+    /// Where the result goes.
+    pub output: PathBuf,
+    /// The kernel's standard deviation, pixels.
+    pub scale: f64,
+    /// Worker threads (0: one per core).
+    pub threads: usize,
+    /// What to do with non-finite energy values.
+    pub nonfinite: NonFinite,
+    /// The output's compression and sample type.
+    pub output_settings: OutputSettings,
+    /// Stops the run.
+    pub cancel: Option<Arc<AtomicBool>>,
+}
+
+impl RestoreJob {
+    /// A job with the default scale and settings.
+    pub fn new(
+        denoised: impl Into<PathBuf>,
+        energy: impl Into<PathBuf>,
+        output: impl Into<PathBuf>,
+    ) -> Self {
+        RestoreJob {
+            denoised: denoised.into(),
+            energy: energy.into(),
+            output: output.into(),
+            scale: DEFAULT_SCALE,
+            threads: 0,
+            nonfinite: NonFinite::Error,
+            output_settings: OutputSettings::default(),
+            cancel: None,
+        }
+    }
+}
+
+/// What a restore did (`--report`).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RestoreReport {
+    /// The denoiser's output, the energy image and the result (`<array>`
+    /// for arrays).
+    pub denoised: String,
+    /// The image whose energy was kept.
+    pub energy: String,
+    /// The result.
+    pub output: String,
+    /// Width and height in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// The kernel's standard deviation, pixels.
+    pub scale: f64,
+    /// Per channel: the energy image's total, the result's, their relative
+    /// difference (before and after rounding).
+    pub ledger: Vec<ChannelLedger>,
+    /// Where the denoiser's output could not carry the energy alone.
+    pub counts: RestoreCounts,
+    /// Of the energy, the share spread as a plain Gaussian.
+    pub plain_share: f64,
+    /// Energy values that were not finite, zeroed (`--nonfinite zero`).
+    pub nonfinite_zeroed: u64,
+    /// FNV-1a digest of the unrounded result.
+    pub digest: String,
+    /// Seconds of the run.
+    pub seconds: f64,
+    /// Worker threads.
+    pub threads: usize,
+    /// The process's peak resident memory.
+    pub peak_rss_bytes: Option<u64>,
+}
+
+impl RestoreReport {
+    fn of(
+        job: (&str, &str, &str),
+        (w, h): (usize, usize),
+        scale: f64,
+        stats: &RunStats,
+        threads: usize,
+    ) -> Self {
+        let counts = match stats.method {
+            MethodCounts::Restore(c) => c,
+            _ => RestoreCounts::default(),
+        };
+        let mass: f64 = stats.ledger.iter().map(|l| l.mass_in).sum();
+        RestoreReport {
+            denoised: job.0.into(),
+            energy: job.1.into(),
+            output: job.2.into(),
+            width: w,
+            height: h,
+            scale,
+            ledger: stats.ledger.clone(),
+            plain_share: if mass > 0.0 {
+                counts.plain_energy / mass
+            } else {
+                0.0
+            },
+            counts,
+            nonfinite_zeroed: stats.nonfinite_zeroed.iter().sum(),
+            digest: format!("{:016x}", stats.digest),
+            seconds: stats.seconds,
+            threads,
+            peak_rss_bytes: peak_rss_bytes(),
+        }
+    }
+}
+
+fn check_ledger(stats: &RunStats) -> Result<()> {
+    for l in &stats.ledger {
+        if !(l.rel_error <= RESTORE_LEDGER_LIMIT) {
+            return Err(Error::Ledger {
+                channel: l.channel.clone(),
+                rel_error: l.rel_error,
+            });
+        }
+    }
+    Ok(())
+}
+
+fn config(threads: usize, nonfinite: NonFinite, cancel: Option<Arc<AtomicBool>>) -> PipelineConfig {
+    PipelineConfig {
+        threads,
+        nonfinite,
+        cancel,
+        ..PipelineConfig::default()
+    }
+}
+
+/// Restore `job.denoised` with `job.energy`'s energy into `job.output`.
+pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreReport> {
+    let scale = check_scale(job.scale).map_err(Error::Config)?;
+    check_not_same_file(&job.energy, &job.output)?;
+    check_not_same_file(&job.denoised, &job.output)?;
+    let energy = ExrInput::open(&job.energy, None)?;
+    let denoised = ExrInput::open(&job.denoised, None)?;
+    let (size, channels) = (energy.size(), energy.channels());
+    let mismatch = |what: String| Error::Value {
+        path: job.denoised.clone(),
+        reason: format!("{what}: restore needs the denoiser's output of that very image"),
+    };
+    if denoised.size() != size {
+        let (dw, dh) = denoised.size();
+        return Err(mismatch(format!(
+            "{dw}x{dh} pixels, but {} has {}x{}",
+            job.energy.display(),
+            size.0,
+            size.1
+        )));
+    }
+    if denoised.channels() != channels {
+        return Err(mismatch(format!(
+            "channels {}, but {} has {}",
+            denoised.channels().join(","),
+            job.energy.display(),
+            channels.join(",")
+        )));
+    }
+    let provenance = format!(
+        "restore scale={scale} denoised={}",
+        job.denoised
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    );
+    let settings = OutputSettings {
+        provenance: Some(provenance),
+        ..job.output_settings.clone()
+    };
+    let layout = OutputLayout::of(&energy, &channels, &settings);
+    let mut output = layout.create(&job.output, false, 1, &channels, &settings)?;
+    let cfg = config(job.threads, job.nonfinite, job.cancel.clone());
+    let stats = restore_stream(
+        energy.source(),
+        denoised.source(),
+        &mut output,
+        size,
+        channels,
+        energy.luminance(),
+        scale,
+        &cfg,
+        progress,
+    )
+    .map_err(|e| match e {
+        Error::StreamValue { reason, .. } => Error::Value {
+            path: job.energy.clone(),
+            reason,
+        },
+        e => e,
+    })?;
+    check_ledger(&stats)?;
+    output.commit()?;
+    Ok(RestoreReport::of(
+        (
+            &job.denoised.display().to_string(),
+            &job.energy.display().to_string(),
+            &job.output.display().to_string(),
+        ),
+        size,
+        scale,
+        &stats,
+        cfg.workers(),
+    ))
+}
+
+/// Restore on arrays: `denoised` and `energy` interleaved `[y][x][channel]`
+/// of `channels` (names, for the ledger), `w x h`. Returns the result in
+/// the same layout and the report.
+#[allow(clippy::too_many_arguments)]
+pub fn restore_array(
+    denoised: &[f32],
+    energy: &[f32],
+    (w, h): (usize, usize),
+    channels: &[String],
+    scale: f64,
+    threads: usize,
+    nonfinite: NonFinite,
+    cancel: Option<Arc<AtomicBool>>,
+) -> Result<(Vec<f32>, RestoreReport)> {
+    let nch = channels.len();
+    let n = w.checked_mul(h).and_then(|p| p.checked_mul(nch));
+    if n != Some(denoised.len()) || n != Some(energy.len()) {
+        return Err(Error::Config(format!(
+            "denoised has {} values and energy {}; a {w}x{h} image of {nch} channels has {}",
+            denoised.len(),
+            energy.len(),
+            n.map_or("too many".into(), |n| n.to_string())
+        )));
+    }
+    let planar = |v: &[f32]| {
+        let mut out = vec![0.0f32; v.len()];
+        for y in 0..h {
+            for x in 0..w {
+                for c in 0..nch {
+                    out[(y * nch + c) * w + x] = v[(y * w + x) * nch + c];
+                }
+            }
+        }
+        out
+    };
+    let cfg = config(threads, nonfinite, cancel);
+    let (out, stats) = restore_planar(
+        planar(energy),
+        planar(denoised),
+        (w, h),
+        channels.to_vec(),
+        vec![0.0; nch],
+        scale,
+        &cfg,
+        Precision::F32,
+    )?;
+    check_ledger(&stats)?;
+    let mut inter = vec![0.0f32; out.len()];
+    for y in 0..h {
+        for x in 0..w {
+            for c in 0..nch {
+                inter[(y * w + x) * nch + c] = out[(y * nch + c) * w + x];
+            }
+        }
+    }
+    let report = RestoreReport::of(
+        ("<array>", "<array>", "<array>"),
+        (w, h),
+        scale,
+        &stats,
+        cfg.workers(),
+    );
+    Ok((inter, report))
+}

@@ -1,0 +1,90 @@
+//! Two sources of the same rows read side by side: each strip holds the
+//! first's channels, then the second's (`epfilt restore`'s energy image and
+//! denoiser's output).
+
+use super::{Decoder, ReadAhead, Source, Strip};
+use crate::error::{Error, Result};
+
+/// Sources `a` and `b`, `w` samples wide, of `na` and `nb` channels.
+pub struct Pair<A, B> {
+    a: A,
+    b: B,
+    w: usize,
+    na: usize,
+    nb: usize,
+}
+
+impl<A: Source, B: Source> Pair<A, B> {
+    /// The pair of `a` (`na` channels) and `b` (`nb`), `w` samples wide.
+    pub fn new(a: A, b: B, w: usize, na: usize, nb: usize) -> Self {
+        Pair { a, b, w, na, nb }
+    }
+}
+
+impl<A: Source, B: Source> Source for Pair<A, B> {
+    fn next_strip(&mut self, max_rows: usize) -> Result<Option<Strip>> {
+        let (sa, sb) = (self.a.next_strip(max_rows)?, self.b.next_strip(max_rows)?);
+        let (sa, sb) = match (sa, sb) {
+            (None, None) => return Ok(None),
+            (Some(a), Some(b)) if a.y0 == b.y0 && a.rows == b.rows => (a, b),
+            _ => {
+                return Err(Error::Internal(
+                    "the two inputs gave different rows (source bug)".into(),
+                ))
+            }
+        };
+        let (ra, rb) = (self.na * self.w, self.nb * self.w);
+        if sa.data.len() != sa.rows * ra || sb.data.len() != sb.rows * rb {
+            return Err(Error::Internal(
+                "a strip of the wrong size (source bug)".into(),
+            ));
+        }
+        let mut data = Vec::with_capacity(sa.rows * (ra + rb));
+        for (x, y) in sa.data.chunks_exact(ra).zip(sb.data.chunks_exact(rb)) {
+            data.extend_from_slice(x);
+            data.extend_from_slice(y);
+        }
+        Ok(Some(Strip {
+            y0: sa.y0,
+            rows: sa.rows,
+            data,
+        }))
+    }
+
+    fn decoder<'s>(
+        &mut self,
+        ahead: &ReadAhead<'_>,
+        pool: &'s rayon::ThreadPool,
+    ) -> Option<Decoder<'s>>
+    where
+        Self: 's,
+    {
+        // Each source decodes ahead on its own thread; the strips' buffers
+        // are the pair's, so neither gets them back.
+        let own = ReadAhead {
+            strip_rows: ahead.strip_rows,
+            recycled: None,
+            window_blocks: ahead.window_blocks,
+        };
+        let da = self.a.decoder(&own, pool);
+        let db = self.b.decoder(&own, pool);
+        match (da, db) {
+            (None, None) => None,
+            (da, db) => Some(Box::new(move || {
+                std::thread::scope(|s| {
+                    if let Some(da) = da {
+                        s.spawn(da);
+                    }
+                    if let Some(db) = db {
+                        db();
+                    }
+                })
+            })),
+        }
+    }
+
+    fn wait_ready(&mut self) {
+        self.a.wait_ready();
+        self.b.wait_ready();
+    }
+}

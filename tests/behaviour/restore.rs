@@ -1,0 +1,159 @@
+//! `epfilt restore` from the command line: the energy image's total kept
+//! exactly, the same bytes at any thread count, and the guards a user meets
+//! (sizes, channels, NaN, an empty denoiser output), none of which leaves
+//! an output behind.
+
+use exr::image::FlatSamples;
+
+use crate::common::{epfilt_run, read_json};
+use crate::exr_io::{tmpdir, write_flat};
+
+/// `restore`'s own bound on the ledger before rounding (the job refuses
+/// to write above it).
+const LEDGER_TOL: f64 = 1e-12;
+
+/// An R, G, B image `w x h` from `f(x, y, c)`.
+fn write(path: &std::path::Path, (w, h): (usize, usize), f: impl Fn(usize, usize, usize) -> f32) {
+    let plane = |c| FlatSamples::F32((0..w * h).map(|i| f(i % w, i / w, c)).collect());
+    write_flat(
+        path,
+        (w, h),
+        vec![("B", plane(2)), ("G", plane(1)), ("R", plane(0))],
+    );
+}
+
+/// A noisy render with fireflies.
+fn render(x: usize, y: usize, c: usize) -> f32 {
+    let h = ((x * 7919 + y * 104729 + c * 31) % 1000) as f32 / 1000.0;
+    let base = 1.0 + ((x + y) as f32 * 0.2).sin() * 0.5;
+    if h > 0.99 {
+        base * 300.0
+    } else {
+        base * (0.5 + h)
+    }
+}
+
+/// A smooth "denoised" picture, too dark by a third.
+fn denoised(x: usize, y: usize, _c: usize) -> f32 {
+    0.66 * (1.0 + ((x + y) as f32 * 0.2).sin() * 0.5)
+}
+
+fn restore(
+    d: &std::path::Path,
+    e: &std::path::Path,
+    out: &std::path::Path,
+    extra: &[&str],
+) -> std::process::Output {
+    let mut args = vec![
+        "restore",
+        d.to_str().unwrap(),
+        e.to_str().unwrap(),
+        out.to_str().unwrap(),
+        "-q",
+    ];
+    args.extend_from_slice(extra);
+    epfilt_run(&args)
+}
+
+#[test]
+fn restore_keeps_the_energy_and_the_bytes_at_any_thread_count() {
+    let dir = tmpdir();
+    let (e, d) = (dir.path().join("e.exr"), dir.path().join("d.exr"));
+    write(&e, (70, 45), render);
+    write(&d, (70, 45), denoised);
+    let mut digests = Vec::new();
+    for threads in ["1", "2", "3"] {
+        let (out, rep) = (dir.path().join("o.exr"), dir.path().join("r.json"));
+        let o = restore(
+            &d,
+            &e,
+            &out,
+            &["--threads", threads, "--report", rep.to_str().unwrap()],
+        );
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let r = read_json(&rep);
+        for l in r["ledger"].as_array().unwrap() {
+            assert!(l["rel_error"].as_f64().unwrap() <= LEDGER_TOL, "{l}");
+        }
+        digests.push(r["digest"].as_str().unwrap().to_string());
+    }
+    assert!(digests.windows(2).all(|p| p[0] == p[1]), "{digests:?}");
+}
+
+#[test]
+fn restore_refuses_images_that_do_not_match() {
+    let dir = tmpdir();
+    let (e, d, out) = (
+        dir.path().join("e.exr"),
+        dir.path().join("d.exr"),
+        dir.path().join("o.exr"),
+    );
+    write(&e, (20, 10), render);
+    write(&d, (21, 10), denoised);
+    let o = restore(&d, &e, &out, &[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("d.exr") && err.contains("21x10"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    let y = FlatSamples::F32(vec![1.0; 200]);
+    write_flat(&d, (20, 10), vec![("Y", y)]);
+    let o = restore(&d, &e, &out, &[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("channels"), "{err}");
+    assert!(!out.exists());
+    let o = restore(&e, &e, &e, &[]);
+    assert!(!o.status.success());
+    let o = restore(&d, &e, &out, &["--scale", "0"]);
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+#[test]
+fn restore_refuses_nan_energy_unless_told_and_keeps_what_the_denoiser_lacks() {
+    let dir = tmpdir();
+    let (e, d, out) = (
+        dir.path().join("e.exr"),
+        dir.path().join("d.exr"),
+        dir.path().join("o.exr"),
+    );
+    write(&e, (16, 12), |x, y, c| {
+        if (x, y, c) == (3, 4, 1) {
+            f32::NAN
+        } else {
+            render(x, y, c)
+        }
+    });
+    // The denoiser's output is black on the left half and NaN in a corner:
+    // nothing to shape that energy with.
+    write(&d, (16, 12), |x, y, c| match (x, y) {
+        (0, 0) => f32::NAN,
+        (x, _) if x < 8 => 0.0,
+        _ => denoised(x, y, c),
+    });
+    let before = std::fs::read(&e).unwrap();
+    let o = restore(&d, &e, &out, &[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("e.exr"), "{err}");
+    assert!(!out.exists());
+    let rep = dir.path().join("r.json");
+    let o = restore(
+        &d,
+        &e,
+        &out,
+        &["--nonfinite", "zero", "--report", rep.to_str().unwrap()],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r = read_json(&rep);
+    assert_eq!(r["nonfinite_zeroed"], 1);
+    assert!(r["counts"]["unshaped"].as_u64().unwrap() > 0, "{r}");
+    for l in r["ledger"].as_array().unwrap() {
+        assert!(l["rel_error"].as_f64().unwrap() <= LEDGER_TOL, "{l}");
+    }
+    assert_eq!(std::fs::read(&e).unwrap(), before, "the input was touched");
+}
