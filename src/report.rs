@@ -279,7 +279,7 @@ fn method_counts(stats: &RunStats) -> (u64, u64, u64, u64) {
     match stats.method {
         MethodCounts::EpGauss(g) => (g.noisy, g.spread, g.capped, g.kept),
         MethodCounts::EpBox(b) => (b.noisy, b.spread, b.capped, 0),
-        MethodCounts::Restore(r) => (0, 0, r.capped, 0),
+        MethodCounts::Restore(r) => (0, 0, r.kept, 0),
         MethodCounts::Plain => (0, 0, 0, 0),
     }
 }

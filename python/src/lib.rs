@@ -443,7 +443,7 @@ fn restore<'py>(
     py: Python<'py>,
     denoised: &Bound<'py, PyAny>,
     energy: &Bound<'py, PyAny>,
-    scale: Option<f64>,
+    scale: Option<usize>,
     channels: Option<Vec<String>>,
     threads: usize,
     nonfinite: &str,

@@ -343,7 +343,7 @@ def test_restore_puts_the_energy_back_at_any_thread_count():
     energy[5, 9] = 500.0  # a firefly the "denoiser" removed
     denoised = np.full_like(energy, 0.5)
     denoised[:, :10] = 0.0  # and a region it left black
-    out, report = epfilt.restore(denoised, energy, 2.0)
+    out, report = epfilt.restore(denoised, energy, 8)
     assert out.shape == energy.shape and out.dtype == np.float32
     for l in report["ledger"]:
         assert l["rel_error"] <= LEDGER_TOL
@@ -351,12 +351,12 @@ def test_restore_puts_the_energy_back_at_any_thread_count():
     assert np.allclose(out.astype(np.float64).sum(axis=(0, 1)), total, rtol=1e-6)
     assert report["counts"]["unshaped"] > 0
     # The same digest at any thread count.
-    _, again = epfilt.restore(denoised, energy, 2.0, threads=1)
+    _, again = epfilt.restore(denoised, energy, 8, threads=1)
     assert again["digest"] == report["digest"]
     with pytest.raises(epfilt.ConfigError):
         epfilt.restore(denoised[:, :-1], energy)
     with pytest.raises(epfilt.ConfigError):
-        epfilt.restore(denoised, energy, 0.0)
+        epfilt.restore(denoised, energy, 1)
     bad = energy.copy()
     bad[0, 0, 0] = np.nan
     with pytest.raises(epfilt.InputError):

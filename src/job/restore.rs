@@ -33,8 +33,8 @@ pub struct RestoreJob {
     pub energy: PathBuf,
     /// Where the result goes.
     pub output: PathBuf,
-    /// The kernel's standard deviation, pixels.
-    pub scale: f64,
+    /// The side of the blocks whose energy is kept, pixels.
+    pub scale: usize,
     /// Worker threads (0: one per core).
     pub threads: usize,
     /// What to do with non-finite energy values.
@@ -79,15 +79,15 @@ pub struct RestoreReport {
     pub width: usize,
     /// Height in pixels.
     pub height: usize,
-    /// The kernel's standard deviation, pixels.
-    pub scale: f64,
+    /// The side of the blocks whose energy is kept, pixels.
+    pub scale: usize,
     /// Per channel: the energy image's total, the result's, their relative
     /// difference (before and after rounding).
     pub ledger: Vec<ChannelLedger>,
     /// Where the denoiser's output could not carry the energy alone.
     pub counts: RestoreCounts,
-    /// Of the energy, the share spread as a plain Gaussian.
-    pub plain_share: f64,
+    /// Of the energy, the share kept in place.
+    pub kept_share: f64,
     /// Energy values that were not finite, zeroed (`--nonfinite zero`).
     pub nonfinite_zeroed: u64,
     /// FNV-1a digest of the unrounded result.
@@ -104,7 +104,7 @@ impl RestoreReport {
     fn of(
         job: (&str, &str, &str),
         (w, h): (usize, usize),
-        scale: f64,
+        scale: usize,
         stats: &RunStats,
         threads: usize,
     ) -> Self {
@@ -121,8 +121,8 @@ impl RestoreReport {
             height: h,
             scale,
             ledger: stats.ledger.clone(),
-            plain_share: if mass > 0.0 {
-                counts.plain_energy / mass
+            kept_share: if mass > 0.0 {
+                counts.kept_energy / mass
             } else {
                 0.0
             },
@@ -201,8 +201,8 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
     let mut output = layout.create(&job.output, false, 1, &channels, &settings)?;
     let cfg = config(job.threads, job.nonfinite, job.cancel.clone());
     let stats = restore_stream(
-        energy.source(),
-        denoised.source(),
+        || energy.source(),
+        || denoised.source(),
         &mut output,
         size,
         channels,
@@ -242,7 +242,7 @@ pub fn restore_array(
     energy: &[f32],
     (w, h): (usize, usize),
     channels: &[String],
-    scale: f64,
+    scale: usize,
     threads: usize,
     nonfinite: NonFinite,
     cancel: Option<Arc<AtomicBool>>,

@@ -78,27 +78,30 @@ pub struct ExcessCounts {
 /// What `epfilt restore` counted, in pixel channels.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct RestoreCounts {
-    /// Where the denoiser's energy around a pixel was below a
-    /// [`crate::filter::restore::MAX_GAIN`]th of its energy: the gain was
-    /// capped and the rest spread as a plain Gaussian.
-    pub capped: u64,
+    /// Where one pixel's energy was more than
+    /// [`crate::filter::restore::KEEP_GAIN`] times what the denoiser put
+    /// around it: the excess was kept in place.
+    pub kept: u64,
     /// Where the denoiser had nothing around a pixel with energy: all of
-    /// it spread as a plain Gaussian.
+    /// it kept in place.
     pub unshaped: u64,
-    /// Negative energy values, spread as a plain Gaussian.
+    /// Negative energy values, kept in place.
     pub negative: u64,
-    /// The energy spread as a plain Gaussian (summed over channels).
-    pub plain_energy: f64,
+    /// Blocks (per channel) with energy where the denoiser had no light:
+    /// their energy stayed as it was.
+    pub unshaped_blocks: u64,
+    /// The energy kept in place (absolute, summed over channels).
+    pub kept_energy: f64,
 }
 
 impl RestoreCounts {
     /// A pixel channel of energy `e` with `q` of the denoiser's around it,
-    /// some of it left over.
+    /// some of it kept in place.
     pub fn count(&mut self, e: f64, q: f64) {
         if e < 0.0 {
             self.negative += 1;
         } else if q > 0.0 {
-            self.capped += 1;
+            self.kept += 1;
         } else {
             self.unshaped += 1;
         }
@@ -107,10 +110,11 @@ impl RestoreCounts {
 
 impl std::ops::AddAssign for RestoreCounts {
     fn add_assign(&mut self, o: RestoreCounts) {
-        self.capped += o.capped;
+        self.kept += o.kept;
         self.unshaped += o.unshaped;
         self.negative += o.negative;
-        self.plain_energy += o.plain_energy;
+        self.unshaped_blocks += o.unshaped_blocks;
+        self.kept_energy += o.kept_energy;
     }
 }
 

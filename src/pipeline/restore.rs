@@ -1,17 +1,25 @@
-//! `epfilt restore`'s stage: the energy image's pixels spread in the
-//! denoiser's shape ([`crate::filter::restore`]), streamed.
+//! `epfilt restore`'s stage and its first pass: the energy image's energy
+//! put back into the denoiser's output ([`crate::filter::restore`]),
+//! streamed.
 //!
 //! The strips hold the energy image's channels, then the denoiser's (the
 //! books' ledger counts the first ones: the total it checks is the energy
-//! image's). A strip's work is three passes, each a parallel loop over rows:
+//! image's). Both passes share [`Kept`]: each arriving row's shape
+//! `s = max(d, 0)` blurred along the row; then, for the rows whose column of
+//! those is in, the denoiser's energy around each pixel (`q`) and the part
+//! of the energy kept in place (`l`).
 //!
-//! 1. `arrive`: each new row's shape `s = max(d, 0)`, blurred along the row;
-//! 2. the rows whose column of those is in: `q = G s`, the split of `e` into
-//!    the gain `t` and the leftover `l`, both blurred along the row;
-//! 3. the rows whose column of those is in: `r = s G t + G l`.
+//! 1. The first pass ([`block_field`]) adds each row into the blocks'
+//!    targets (`Σ e - l`) and moments, and solves the field.
+//! 2. The second ([`RestoreStage`]) holds one row of blocks at a time: once
+//!    its last row's `l` is known, it computes `s f` for its rows, each
+//!    block's exact factor `g`, and the rows `s f g + l`.
 //!
-//! Each row's values depend only on rows that are in, never on how they
-//! came, so the output is the same for any strip height and thread count.
+//! Each row's values depend only on rows that are in, and the block sums
+//! are added row by row in order, never by how rows came: the output is the
+//! same for any strip height and thread count.
+
+use std::collections::VecDeque;
 
 use rayon::prelude::*;
 
@@ -25,168 +33,56 @@ use super::{
     run_streamer, PipelineConfig, Precision, Progress, RunStats, Sink, Source, StripLayout,
 };
 use crate::error::{Error, Result};
-use crate::filter::restore::{blur_column, blur_row, check_scale, reflect, shape, split, taps};
+use crate::filter::restore::{
+    blur_column, blur_row, check_scale, kept, reflect, shape, taps, BlockField, KEEP_SIGMA,
+};
 use crate::geometry::{Grid, Halo};
 
-/// The kernel, the image's height (its columns reflect at its ends) and the
-/// 2-D kernel's centre weight.
-struct Kernel {
-    taps: Vec<f64>,
-    h: usize,
-    centre: f64,
-}
-
-impl Kernel {
-    fn r(&self) -> usize {
-        self.taps.len() / 2
-    }
-
-    /// The rows of row `y`'s column, reflected at the image's ends, with
-    /// their taps.
-    fn column(&self, y: usize) -> impl Iterator<Item = usize> + '_ {
-        let r = self.r() as isize;
-        (-r..=r).map(move |i| reflect(y as isize + i, self.h))
-    }
-}
-
-/// The stage of one restore: sizes, the kernel and three windows.
-pub struct RestoreStage {
+/// The shape's blur and the part of the energy kept in place, row by row.
+struct Kept {
     nch: usize,
     w: usize,
     h: usize,
-    k: Kernel,
+    taps: Vec<f64>,
+    /// The 2-D kernel's centre weight.
+    centre: f64,
     /// Per input row: the shape blurred along the row, `[channel][x]`.
     shape_rows: RowWindow<f64>,
-    /// Per row whose split is done: `G_x t` then `G_x (l / n)`, and whether
-    /// that row has any leftover (most have none: its blur is skipped).
-    split_rows: RowWindow<f64>,
-    leftover: std::collections::VecDeque<bool>,
-    /// Final rows.
-    out: RowWindow<f64>,
+    /// Per row whose column is in: `l`, `[channel][x]`, and whether the row
+    /// has any (most have none).
+    kept_rows: RowWindow<f64>,
+    any: VecDeque<bool>,
     counts: RestoreCounts,
 }
 
-impl RestoreStage {
-    /// The stage for `nch` channels of a `w x h` image at `scale` pixels.
-    pub fn new(nch: usize, w: usize, h: usize, scale: f64) -> Self {
-        let taps = taps(scale);
-        RestoreStage {
+impl Kept {
+    fn new(nch: usize, w: usize, h: usize) -> Self {
+        let taps = taps(KEEP_SIGMA);
+        Kept {
             nch,
             w,
             h,
-            k: Kernel {
-                centre: taps[taps.len() / 2].powi(2),
-                taps,
-                h,
-            },
+            centre: taps[taps.len() / 2].powi(2),
+            taps,
             shape_rows: RowWindow::new(nch * w),
-            split_rows: RowWindow::new(2 * nch * w),
-            leftover: Default::default(),
-            out: RowWindow::new(nch * w),
+            kept_rows: RowWindow::new(nch * w),
+            any: VecDeque::new(),
             counts: RestoreCounts::default(),
         }
     }
 
-    /// Pass 2 for rows `a..b`.
-    fn split(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
-        let (nch, w) = (self.nch, self.w);
-        for _ in a..b {
-            self.split_rows.push_stale(0.0);
-        }
-        let (k, shapes) = (&self.k, &self.shape_rows);
-        let mut rows = self.split_rows.range_mut(a, b);
-        let per_row: Vec<(bool, RestoreCounts)> = rows
-            .par_iter_mut()
-            .enumerate()
-            .map_init(
-                || (vec![0.0f64; w], vec![0.0f64; w], vec![0.0f64; w]),
-                |(q, t, l), (i, out)| {
-                    let y = a + i;
-                    let e_row = input.get(y);
-                    let mut c = RestoreCounts::default();
-                    let mut any = false;
-                    for ch in 0..nch {
-                        let col = k.column(y).map(|v| &shapes.get(v)[ch * w..(ch + 1) * w]);
-                        blur_column(col, &k.taps, q);
-                        let e = &e_row[ch * w..(ch + 1) * w];
-                        for x in 0..w {
-                            let ev = f64::from(e[x]);
-                            (t[x], l[x]) = split(ev, q[x], k.centre);
-                            if l[x] != 0.0 {
-                                any = true;
-                                c.count(ev, q[x]);
-                                c.plain_energy += l[x].abs();
-                            }
-                        }
-                        let (gt, gl) = out.split_at_mut(nch * w);
-                        blur_row(t, &k.taps, &mut gt[ch * w..(ch + 1) * w]);
-                        gl[ch * w..(ch + 1) * w].copy_from_slice(l);
-                    }
-                    (any, c)
-                },
-            )
-            .collect();
-        // Summed in row order: the counts' energy is the same for any strips.
-        for (any, c) in per_row {
-            self.leftover.push_back(any);
-            self.counts += c;
-        }
+    fn r(&self) -> usize {
+        self.taps.len() / 2
     }
 
-    /// Pass 3 for rows `a..b`.
-    fn finish(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
-        let (nch, w) = (self.nch, self.w);
-        for _ in a..b {
-            self.out.push_stale(0.0);
-        }
-        let (k, splits, leftover) = (&self.k, &self.split_rows, &self.leftover);
-        let mut rows = self.out.range_mut(a, b);
-        rows.par_iter_mut().enumerate().for_each_init(
-            || vec![0.0f64; w],
-            |gt, (i, out)| {
-                let y = a + i;
-                let d_row = &input.get(y)[nch * w..];
-                let base = splits.first();
-                let own = &splits.get(y)[nch * w..];
-                let any = leftover[y - base];
-                for ch in 0..nch {
-                    let col = k.column(y).map(|v| &splits.get(v)[ch * w..(ch + 1) * w]);
-                    blur_column(col, &k.taps, gt);
-                    let d = &d_row[ch * w..(ch + 1) * w];
-                    let o = &mut out[ch * w..(ch + 1) * w];
-                    for x in 0..w {
-                        o[x] = shape(d[x]) * gt[x];
-                    }
-                    if any {
-                        for (o, &l) in o.iter_mut().zip(&own[ch * w..(ch + 1) * w]) {
-                            *o += l;
-                        }
-                    }
-                }
-            },
-        );
-    }
-}
-
-impl Stage for RestoreStage {
-    fn halo(&self) -> Halo {
-        // Two blurs down the columns: the shape's, then the gain's.
-        let r = self.k.r();
-        Halo {
-            xbar_reach: 0,
-            base_reach: r,
-            search_reach: 0,
-            spread_reach: 2 * r,
-        }
-    }
-
-    fn arrive(&mut self, input: &mut RowWindow<f32>, a: usize, b: usize) {
+    /// Input rows `a..b` arrived: their shapes, blurred along the row.
+    fn arrive(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
         let (nch, w) = (self.nch, self.w);
         for _ in a..b {
             self.shape_rows.push_stale(0.0);
         }
+        let taps = &self.taps;
         let mut rows = self.shape_rows.range_mut(a, b);
-        let (input, taps) = (&*input, &self.k.taps);
         rows.par_iter_mut().enumerate().for_each_init(
             || vec![0.0f64; w],
             |s, (k, out)| {
@@ -201,43 +97,299 @@ impl Stage for RestoreStage {
         );
     }
 
-    fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> usize {
-        let r = self.k.r();
-        // A row is split once its column of shapes is in, final once its
-        // column of splits is.
-        let split_done = self.split_rows.end();
-        let split_to = if all_in {
+    /// `l` for every row whose column of shapes is in (`rows_in`, all of
+    /// them when `all_in`); returns the rows done now.
+    fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> (usize, usize) {
+        let (nch, w, r) = (self.nch, self.w, self.r());
+        let a = self.kept_rows.end();
+        let b = if all_in {
             self.h
         } else {
             rows_in.saturating_sub(r)
         };
-        if split_to > split_done {
-            self.split(input, split_done, split_to);
+        if b <= a {
+            return (a, a);
         }
-        let (out_done, split_end) = (self.out.end(), self.split_rows.end());
-        let out_to = if split_end == self.h {
-            self.h
-        } else {
-            split_end.saturating_sub(r)
-        };
-        if out_to > out_done {
-            self.finish(input, out_done, out_to);
+        for _ in a..b {
+            self.kept_rows.push_stale(0.0);
         }
-        // Rows no longer read by either column.
-        let keep_shape = self.split_rows.end().saturating_sub(r);
-        self.shape_rows.evict_below(keep_shape);
-        let keep_split = self.out.end().saturating_sub(r);
-        let before = self.split_rows.first();
-        self.split_rows.evict_below(keep_split);
-        for _ in before..self.split_rows.first() {
-            self.leftover.pop_front();
+        let (taps, centre, h, shapes) = (&self.taps, self.centre, self.h, &self.shape_rows);
+        let mut rows = self.kept_rows.range_mut(a, b);
+        let per_row: Vec<(bool, RestoreCounts)> = rows
+            .par_iter_mut()
+            .enumerate()
+            .map_init(
+                || vec![0.0f64; w],
+                |q, (i, out)| {
+                    let y = a + i;
+                    let e_row = input.get(y);
+                    let mut c = RestoreCounts::default();
+                    let mut any = false;
+                    for ch in 0..nch {
+                        let col = (-(r as isize)..=r as isize)
+                            .map(|k| &shapes.get(reflect(y as isize + k, h))[ch * w..(ch + 1) * w]);
+                        blur_column(col, taps, q);
+                        let e = &e_row[ch * w..(ch + 1) * w];
+                        let l = &mut out[ch * w..(ch + 1) * w];
+                        for x in 0..w {
+                            let ev = f64::from(e[x]);
+                            l[x] = kept(ev, q[x], centre);
+                            if l[x] != 0.0 {
+                                any = true;
+                                c.count(ev, q[x]);
+                                c.kept_energy += l[x].abs();
+                            }
+                        }
+                    }
+                    (any, c)
+                },
+            )
+            .collect();
+        // Summed in row order: the counts' energy is the same for any strips.
+        for (any, c) in per_row {
+            self.any.push_back(any);
+            self.counts += c;
+        }
+        // The next row's column starts `r` rows up.
+        self.shape_rows.evict_below(b.saturating_sub(r));
+        (a, b)
+    }
+
+    /// `l` of row `y` (`None`: all zero).
+    fn row(&self, y: usize) -> Option<&[f64]> {
+        self.any[y - self.kept_rows.first()].then(|| self.kept_rows.get(y))
+    }
+
+    /// Rows below `y` are no longer read.
+    fn release(&mut self, y: usize) {
+        let before = self.kept_rows.first();
+        self.kept_rows.evict_below(y);
+        for _ in before..self.kept_rows.first() {
+            self.any.pop_front();
+        }
+    }
+}
+
+/// The first pass: every row's rest `e - l` and shape into the blocks of
+/// `scale` pixels, and the field solved, per channel. `source` gives the
+/// strips of the pair (energy channels, then the denoiser's).
+pub fn block_field<S: Source>(
+    mut source: S,
+    (w, h): (usize, usize),
+    nch: usize,
+    scale: usize,
+    strip_rows: usize,
+) -> Result<Vec<BlockField>> {
+    let mut kept = Kept::new(nch, w, h);
+    let mut fields: Vec<BlockField> = (0..nch).map(|_| BlockField::new(w, h, scale)).collect();
+    let mut input = RowWindow::new(2 * nch * w);
+    let mut rows_in = 0;
+    while let Some(mut strip) = source.next_strip(strip_rows.max(1))? {
+        // Non-finite energy is the second pass's to refuse or count; here
+        // it is nothing.
+        for row in strip.data.chunks_exact_mut(2 * nch * w) {
+            for v in &mut row[..nch * w] {
+                if !v.is_finite() {
+                    *v = 0.0;
+                }
+            }
+        }
+        let a = rows_in;
+        rows_in += strip.rows;
+        input.push_rows(strip.data, strip.rows);
+        kept.arrive(&input, a, rows_in);
+        let (ka, kb) = kept.advance(&input, rows_in, rows_in == h);
+        let nbx = fields[0].nbx;
+        let fields_ref = &fields;
+        let kept_ref = &kept;
+        let input_ref = &input;
+        let sums: Vec<Vec<(f64, [f64; 9])>> = (ka..kb)
+            .into_par_iter()
+            .map_init(
+                || (vec![0.0f64; w], vec![0.0f64; w]),
+                |(s, rest), y| {
+                    let row = input_ref.get(y);
+                    let l = kept_ref.row(y);
+                    let mut out = vec![(0.0, [0.0; 9]); nch * nbx];
+                    for ch in 0..nch {
+                        let e = &row[ch * w..(ch + 1) * w];
+                        let d = &row[(nch + ch) * w..(nch + ch + 1) * w];
+                        for x in 0..w {
+                            s[x] = shape(d[x]);
+                            rest[x] = f64::from(e[x]) - l.map_or(0.0, |l| l[ch * w + x]);
+                        }
+                        fields_ref[ch].row_sums(y, h, s, rest, &mut out[ch * nbx..(ch + 1) * nbx]);
+                    }
+                    out
+                },
+            )
+            .collect();
+        for (y, row) in (ka..kb).zip(sums) {
+            let jb = y / scale;
+            for (ch, f) in fields.iter_mut().enumerate() {
+                for (i, (t, m)) in row[ch * nbx..(ch + 1) * nbx].iter().enumerate() {
+                    f.target[jb * nbx + i] += t;
+                    for (acc, v) in f.moments[jb * nbx + i].iter_mut().zip(m) {
+                        *acc += v;
+                    }
+                }
+            }
+        }
+        kept.release(kb);
+        input.evict_below(kb);
+    }
+    if rows_in != h {
+        return Err(Error::Internal(format!(
+            "the inputs ended after {rows_in} of {h} rows"
+        )));
+    }
+    fields.par_iter_mut().for_each(BlockField::solve);
+    Ok(fields)
+}
+
+/// The second pass: one row of blocks at a time, `s f g + l`.
+pub struct RestoreStage {
+    nch: usize,
+    w: usize,
+    h: usize,
+    kept: Kept,
+    fields: Vec<BlockField>,
+    /// Final rows.
+    out: RowWindow<f64>,
+    /// Blocks whose denoiser shape carried nothing: their energy stayed.
+    unshaped_blocks: u64,
+}
+
+impl RestoreStage {
+    /// The stage for `nch` channels of a `w x h` image with the solved
+    /// `fields` (one per channel).
+    pub fn new(nch: usize, w: usize, h: usize, fields: Vec<BlockField>) -> Self {
+        RestoreStage {
+            nch,
+            w,
+            h,
+            kept: Kept::new(nch, w, h),
+            fields,
+            out: RowWindow::new(nch * w),
+            unshaped_blocks: 0,
+        }
+    }
+
+    fn b(&self) -> usize {
+        self.fields[0].b
+    }
+
+    /// Rows `a..b`, a whole row of blocks.
+    fn finish_blocks(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
+        let (nch, w, h) = (self.nch, self.w, self.h);
+        for _ in a..b {
+            self.out.push_stale(0.0);
+        }
+        let (fields, bs) = (&self.fields, self.b());
+        let nbx = fields[0].nbx;
+        // s f per pixel, and per row its block sums.
+        let mut rows = self.out.range_mut(a, b);
+        let sums: Vec<Vec<f64>> = rows
+            .par_iter_mut()
+            .enumerate()
+            .map_init(
+                || vec![0.0f64; w],
+                |f, (i, out)| {
+                    let y = a + i;
+                    let d_row = &input.get(y)[nch * w..];
+                    let mut sums = vec![0.0; nch * nbx];
+                    for ch in 0..nch {
+                        fields[ch].row(y, h, f);
+                        let d = &d_row[ch * w..(ch + 1) * w];
+                        let o = &mut out[ch * w..(ch + 1) * w];
+                        for x in 0..w {
+                            o[x] = shape(d[x]) * f[x];
+                            sums[ch * nbx + x / bs] += o[x];
+                        }
+                    }
+                    sums
+                },
+            )
+            .collect();
+        // Each block's exact factor, from the sums in row order.
+        let jb = a / bs;
+        let mut reached = vec![0.0f64; nch * nbx];
+        for row in &sums {
+            for (r, v) in reached.iter_mut().zip(row) {
+                *r += v;
+            }
+        }
+        let mut g = vec![0.0f64; nch * nbx];
+        for ch in 0..nch {
+            for i in 0..nbx {
+                let (t, r) = (fields[ch].target[jb * nbx + i], reached[ch * nbx + i]);
+                g[ch * nbx + i] = if r > 0.0 {
+                    t / r
+                } else {
+                    if t != 0.0 {
+                        self.unshaped_blocks += 1;
+                    }
+                    // Nothing to shape the rest with: it stays (below).
+                    f64::NAN
+                };
+            }
+        }
+        let kept = &self.kept;
+        let mut rows = self.out.range_mut(a, b);
+        rows.par_iter_mut().enumerate().for_each(|(i, out)| {
+            let y = a + i;
+            let e_row = input.get(y);
+            let l = kept.row(y);
+            for ch in 0..nch {
+                let o = &mut out[ch * w..(ch + 1) * w];
+                for x in 0..w {
+                    let gb = g[ch * nbx + x / bs];
+                    let lv = l.map_or(0.0, |l| l[ch * w + x]);
+                    o[x] = if gb.is_nan() {
+                        f64::from(e_row[ch * w + x])
+                    } else {
+                        o[x] * gb + lv
+                    };
+                }
+            }
+        });
+    }
+}
+
+impl Stage for RestoreStage {
+    fn halo(&self) -> Halo {
+        // The shape's column, then a row of blocks held whole.
+        let r = self.kept.r();
+        Halo {
+            xbar_reach: 0,
+            base_reach: r,
+            search_reach: 0,
+            spread_reach: r + self.b(),
+        }
+    }
+
+    fn arrive(&mut self, input: &mut RowWindow<f32>, a: usize, b: usize) {
+        self.kept.arrive(input, a, b);
+    }
+
+    fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> usize {
+        self.kept.advance(input, rows_in, all_in);
+        let bs = self.b();
+        loop {
+            let a = self.out.end();
+            let b = (a + bs).min(self.h);
+            if a >= self.h || self.kept.kept_rows.end() < b {
+                break;
+            }
+            self.finish_blocks(input, a, b);
+            self.kept.release(b);
         }
         self.out.end()
     }
 
     fn input_needed(&self) -> usize {
-        // The energy of rows not yet split; the shape of rows not yet final.
-        self.split_rows.end().min(self.out.end())
+        // The energy and shape of rows not yet final.
+        self.out.end()
     }
 
     fn output(&self, (a, b): (usize, usize)) -> Output<'_> {
@@ -249,7 +401,9 @@ impl Stage for RestoreStage {
     }
 
     fn counts(&self) -> MethodCounts {
-        MethodCounts::Restore(self.counts)
+        let mut c = self.kept.counts;
+        c.unshaped_blocks = self.unshaped_blocks;
+        MethodCounts::Restore(c)
     }
 
     fn windows(&self) -> Vec<WindowUse> {
@@ -257,13 +411,13 @@ impl Stage for RestoreStage {
         vec![
             WindowUse {
                 name: "shape blurred along rows",
-                rows: self.shape_rows.high_water(),
+                rows: self.kept.shape_rows.high_water(),
                 row_bytes: row,
             },
             WindowUse {
-                name: "gain and leftover blurred along rows",
-                rows: self.split_rows.high_water(),
-                row_bytes: 2 * row,
+                name: "energy kept in place",
+                rows: self.kept.kept_rows.high_water(),
+                row_bytes: row,
             },
             WindowUse {
                 name: "output",
@@ -274,18 +428,20 @@ impl Stage for RestoreStage {
     }
 }
 
-/// Restore `denoised` from `energy`'s energy at `scale` pixels into `sink`:
-/// both sources `w x h` with `channels` (`luminance`: their weights, for
-/// the layout), read side by side; the books' ledger counts `energy`.
+/// Restore the denoiser's output with the energy image's energy at blocks
+/// of `scale` into `sink`: both `w x h` with `channels` (`luminance`: their
+/// weights, for the layout). `energy` and `denoised` give a fresh source of
+/// each on every call (the first pass reads them once, the second again);
+/// the books' ledger counts `energy`.
 #[allow(clippy::too_many_arguments)]
 pub fn restore_stream<A: Source, B: Source, K: Sink>(
-    energy: A,
-    denoised: B,
+    energy: impl Fn() -> A,
+    denoised: impl Fn() -> B,
     sink: K,
     (w, h): (usize, usize),
     channels: Vec<String>,
     luminance: Vec<f64>,
-    scale: f64,
+    scale: usize,
     cfg: &PipelineConfig,
     progress: Progress<'_>,
 ) -> Result<RunStats> {
@@ -303,27 +459,31 @@ pub fn restore_stream<A: Source, B: Source, K: Sink>(
     };
     let mut layout = StripLayout::new(grid, channels.clone(), luminance);
     layout.aux = channels.iter().map(|c| format!("denoised.{c}")).collect();
-    let stage = RestoreStage::new(nch, w, h, scale);
+    let pool = super::thread_pool(cfg.threads)?;
+    let strip_rows = layout.strip_rows(cfg);
+    let first = Pair::new(energy(), denoised(), w, nch, nch);
+    let fields = pool.install(|| block_field(first, (w, h), nch, scale, strip_rows))?;
+    let stage = RestoreStage::new(nch, w, h, fields);
     let streamer = Streamer::of_stage(
         &layout,
         Box::new(stage),
         cfg.nonfinite,
         sink.precisions(nch),
     );
-    let pair = Pair::new(energy, denoised, w, nch, nch);
+    let pair = Pair::new(energy(), denoised(), w, nch, nch);
     run_streamer(pair, sink, &layout, streamer, cfg, progress)
 }
 
-#[allow(clippy::too_many_arguments)]
 /// [`restore_stream`] of two whole images in memory (planar
 /// `[row][channel][x]`), rounded to `precision`: the output and the run.
+#[allow(clippy::too_many_arguments)]
 pub fn restore_planar(
     energy: Vec<f32>,
     denoised: Vec<f32>,
     (w, h): (usize, usize),
     channels: Vec<String>,
     luminance: Vec<f64>,
-    scale: f64,
+    scale: usize,
     cfg: &PipelineConfig,
     precision: Precision,
 ) -> Result<(Vec<f32>, RunStats)> {
@@ -339,8 +499,8 @@ pub fn restore_planar(
     let row = channels.len() * w;
     let mut sink = MemorySink::with_precision(precision);
     let stats = restore_stream(
-        MemorySource::new(energy, row),
-        MemorySource::new(denoised, row),
+        || MemorySource::new(energy.clone(), row),
+        || MemorySource::new(denoised.clone(), row),
         &mut sink,
         (w, h),
         channels,
@@ -359,6 +519,9 @@ mod tests {
 
     /// What a restore's ledger balances to (see the job's limit).
     const LEDGER_TOL: f64 = 1e-12;
+    /// A block's sum of f32 outputs against its f64 energy: a few f32
+    /// roundings (2^-24 each) over up to a thousand values.
+    const BLOCK_TOL: f64 = 1e-5;
 
     /// A noisy image with fireflies, and a smooth "denoised" one with holes.
     fn images(w: usize, h: usize, nch: usize) -> (Vec<f32>, Vec<f32>) {
@@ -391,7 +554,7 @@ mod tests {
         w: usize,
         h: usize,
         nch: usize,
-        scale: f64,
+        scale: usize,
         cfg: &PipelineConfig,
     ) -> (Vec<f32>, RunStats) {
         let (e, d) = images(w, h, nch);
@@ -411,7 +574,7 @@ mod tests {
 
     #[test]
     fn energy_is_exact_and_bytes_do_not_depend_on_strips_or_threads() {
-        for (w, h, scale) in [(37, 29, 2.0), (5, 4, 3.0), (64, 3, 0.7)] {
+        for (w, h, scale) in [(37, 29, 8), (5, 4, 2), (64, 3, 32), (70, 45, 16)] {
             let base = PipelineConfig {
                 threads: 1,
                 strip_rows: 1,
@@ -420,6 +583,26 @@ mod tests {
             let (out, stats) = run(w, h, 2, scale, &base);
             for l in &stats.ledger {
                 assert!(l.rel_error <= LEDGER_TOL, "{w}x{h} {scale}: {l:?}");
+            }
+            // Every block holds the energy image's energy (to the output's
+            // f32 rounding).
+            let (e, _) = images(w, h, 2);
+            let (nbx, nby) = (w.div_ceil(scale), h.div_ceil(scale));
+            let mut sums = vec![[0.0f64; 2]; 2 * nbx * nby];
+            for y in 0..h {
+                for c in 0..2 {
+                    for x in 0..w {
+                        let k = 2 * ((y / scale) * nbx + x / scale) + c;
+                        sums[k][0] += f64::from(e[(y * 2 + c) * w + x]);
+                        sums[k][1] += f64::from(out[(y * 2 + c) * w + x]);
+                    }
+                }
+            }
+            for [se, so] in sums {
+                assert!(
+                    (so - se).abs() <= BLOCK_TOL * se.abs(),
+                    "{w}x{h} {scale}: {so} vs {se}"
+                );
             }
             for (threads, strip_rows) in [(2, 1), (1, 7), (3, 64), (2, 0)] {
                 let cfg = PipelineConfig {
@@ -448,7 +631,7 @@ mod tests {
             (w, h),
             vec!["Y".into()],
             vec![1.0],
-            2.0,
+            4,
             &PipelineConfig::default(),
             Precision::F32,
         )

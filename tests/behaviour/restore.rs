@@ -105,7 +105,7 @@ fn restore_refuses_images_that_do_not_match() {
     assert!(!out.exists());
     let o = restore(&e, &e, &e, &[]);
     assert!(!o.status.success());
-    let o = restore(&d, &e, &out, &["--scale", "0"]);
+    let o = restore(&d, &e, &out, &["--scale", "1"]);
     assert_eq!(
         o.status.code(),
         Some(2),

@@ -99,13 +99,13 @@ def restore(denoised, energy, scale=None, *, channels=None, threads=0, nonfinite
 
     ``denoised`` is any denoiser's output (OIDN, OptiX, ...) and ``energy`` the image
     whose energy is right (the render, or ``filter``'s output of it), both float32 or
-    float16 arrays of the same shape (height, width, channels). Each pixel of ``energy``
-    is spread over a Gaussian of ``scale`` pixels (its standard deviation; default 2) in
-    proportion to the denoiser's picture there: the result's local energy at that scale
-    and its total (report ``ledger``) are ``energy``'s, its detail the denoiser's. Where
-    the denoiser has too little light to carry it, the energy is spread as a plain
-    Gaussian (report ``counts`` and ``plain_share``). ``nonfinite``: "error" refuses NaN
-    or infinite energy values, "zero" counts them as zero. The result is float32.
+    float16 arrays of the same shape (height, width, channels). Where one pixel of
+    ``energy`` holds far more than the denoiser put around it (a lamp it dimmed), the
+    excess stays in place (report ``counts``, ``kept_share``); the rest is carried by the
+    denoiser's picture times a smooth field, so that every block of ``scale`` x ``scale``
+    pixels (default 32) and the total (report ``ledger``) hold ``energy``'s energy exactly.
+    ``nonfinite``: "error" refuses NaN or infinite energy values, "zero" counts them as
+    zero. The result is float32.
 
     With Intel OIDN (``pip install epfilt[oidn]``: pyoidn, colour only)::
 

@@ -37,7 +37,7 @@ def filter_file(
 def restore(
     denoised: _Samples,
     energy: _Samples,
-    scale: Optional[float] = None,
+    scale: Optional[int] = None,
     *,
     channels: Optional[Sequence[str]] = None,
     threads: int = 0,

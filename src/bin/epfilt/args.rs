@@ -61,7 +61,7 @@ pub enum Command {
     /// Render a noisy synthetic scene with exact ground truth (streamed: any size).
     Synth(Box<SynthArgs>),
     /// Put a render's energy back into a denoiser's output (OIDN, OptiX, ...):
-    /// its local energy at --scale and its total become the render's, exactly.
+    /// the energy of every --scale block and the total become the render's, exactly.
     #[command(after_long_help = RESTORE_EXAMPLES)]
     Restore(Box<RestoreArgs>),
     /// Compare an image with a reference: RMSE, relative MSE, PSNR, energy
@@ -153,17 +153,21 @@ pub struct SynthArgs {
 }
 
 const RESTORE_EXAMPLES: &str = "Examples:
-  oidn --hdr render.pfm -o denoised.pfm ...    (any denoiser, then as EXR)
   epfilt restore denoised.exr render.exr restored.exr
-  epfilt filter render.exr clean.exr && epfilt restore denoised.exr clean.exr out.exr --scale 4
+  epfilt filter render.exr clean.exr && epfilt restore denoised.exr clean.exr out.exr
+  epfilt restore denoised.exr render.exr out.exr --scale 64 --report r.json
 
-The denoiser's output shapes the light; the energy image (the render, or
-epfilt's output of it: same size and channels) says how much there is. Each
-energy pixel is spread over a Gaussian of --scale pixels in proportion to the
-denoiser's picture there, so every pixel's energy stays within the kernel and
-the total is exact (the ledger balances to 1e-12 or nothing is written).
-Small --scale: energy exact locally, some grain back; large: the denoiser's
-look, energy exact in total and over large areas.";
+The denoiser's output (any denoiser: OIDN, OptiX, Arnold's noice, ...) shapes
+the light; the energy image (the render, or epfilt's output of it: same size
+and channels) says how much there is. Where one pixel of the energy image
+holds far more than the denoiser put around it (a lamp or a highlight the
+denoiser dimmed), the excess stays in place; the rest is carried by the
+denoiser's picture times a smooth field, solved so that every block of
+--scale x --scale pixels (from the top left) holds the energy image's energy.
+The total is exact: the ledger balances to 1e-12 or nothing is written.
+Small --scale: energy exact in small regions, some of the render's grain
+back; large: the denoiser's look, energy exact over large regions.
+The blocks' field is held whole: about 100 bytes per block and channel.";
 
 #[derive(Args)]
 pub struct RestoreArgs {
@@ -173,10 +177,9 @@ pub struct RestoreArgs {
     pub energy: PathBuf,
     /// The result (.exr; never one of the inputs).
     pub output: PathBuf,
-    /// The Gaussian's standard deviation in pixels: the scale at which the
-    /// result's energy is the energy image's.
+    /// The side of the blocks (pixels) whose energy is the energy image's.
     #[arg(long, default_value_t = epfilt::filter::restore::DEFAULT_SCALE)]
-    pub scale: f64,
+    pub scale: usize,
     /// NaN and infinite energy values: error (refuse the input) or zero
     /// (count them in the report). The denoiser's are nothing to shape with.
     #[arg(long, default_value = "error")]

@@ -218,14 +218,14 @@ fn restore(a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
     if !a.quiet {
         let worst = r.ledger.iter().map(|l| l.rel_error).fold(0.0, f64::max);
         eprintln!(
-            "{}: {}x{} restored at scale {} in {:.2} s; energy exact to {worst:.1e}; {:.2}% of it spread plainly where the denoiser had too little ({} capped, {} empty)",
+            "{}: {}x{} restored in blocks of {} in {:.2} s; energy exact to {worst:.1e}; {:.2}% of it kept in place where the denoiser had too little ({} pixel channels, {} empty)",
             r.output,
             r.width,
             r.height,
             r.scale,
             r.seconds,
-            100.0 * r.plain_share,
-            r.counts.capped,
+            100.0 * r.kept_share,
+            r.counts.kept,
             r.counts.unshaped
         );
     }
