@@ -6,7 +6,10 @@ For every `<scene>_px_<res>_spp<N>.exr` beside its `<scene>_ref_<res>.exr` in th
 * **epfilt**: `epfilt.filter_file` with its defaults (the file decides: ep-box where it holds
   variance, else ep-gauss; the guide passes it finds);
 * **ep-gauss**: the same with `method="ep-gauss"`, what a render without a variance pass gets;
-* **epfilt then OIDN**: OIDN on epfilt's output.
+* **epfilt then OIDN**: OIDN on epfilt's output;
+* **OIDN then restore**: `epfilt.restore` of OIDN's output with the render's energy, at its
+  default scale (every 32 x 32 block and the total hold the render's energy), and the same at
+  other scales for the scale's trade.
 
 Measures, each against the reference:
 
@@ -17,7 +20,9 @@ Measures, each against the reference:
 * **peaks**: over the reference's brightest 0.1% of pixels by luminance, the output's mean
   luminance over the reference's (1: the brightest features kept at their true values);
 * **blocks**: the largest relative difference, over the 32 x 32 blocks, between the output's
-  energy and the input's (what a lighting study reads off a region).
+  energy and the input's (what a lighting study reads off a region);
+* **peaks in**: the same brightest pixels, the output's mean luminance over the input's (what
+  restore keeps: the render's own values there).
 
 Writes `oidn.md` and `oidn.csv` into `--out` (default docs/bench) with the command, machine,
 versions and date, and prints the Markdown. Run by `scripts/oidn-compare`.
@@ -45,6 +50,8 @@ import epfilt
 PEAK_SHARE = 1e-3
 # Blocks whose energy the blocks column compares, in pixels.
 BLOCK = 32
+# restore's scales whose trade the last table measures (block sides, pixels).
+SCALES = (8, 16, 32, 64, 128)
 # relMSE's floor in the denominator, as the renders evaluation has it.
 REL_EPS = 1e-2
 LUM = np.array([0.2126, 0.7152, 0.0722])
@@ -76,6 +83,7 @@ def measures(out, inp, ref, top):
         "energy": float(out.astype(np.float64).sum() / inp.astype(np.float64).sum() - 1.0),
         "peaks": float(lum[top].mean() / rlum[top].mean()),
         "blocks": float(np.max(np.abs(bo - bi) / np.maximum(np.abs(bi), 1e-12))),
+        "peaks_in": float(lum[top].mean() / (inp.astype(np.float64) @ LUM)[top].mean()),
     }
 
 
@@ -123,10 +131,17 @@ def main():
                    "input_rel_mse": rel_mse(inp, ref),
                    "input_energy_vs_ref": float(inp.astype(np.float64).sum() / ref.astype(np.float64).sum() - 1),
                    "input_peaks": measures(inp, inp, ref, top)["peaks"]}
-            for name, img in (("oidn", oidn(inp)), ("epfilt", ep), ("ep_gauss", gauss),
-                              ("epfilt_oidn", oidn(ep))):
+            denoised = oidn(inp)
+            restored, rep = epfilt.restore(denoised, inp)
+            row["restore_kept_share"] = rep["kept_share"]
+            for name, img in (("oidn", denoised), ("epfilt", ep), ("ep_gauss", gauss),
+                              ("epfilt_oidn", oidn(ep)), ("oidn_restore", restored)):
                 for key, v in measures(img, inp, ref, top).items():
                     row[f"{name}_{key}"] = v
+            for k in SCALES:
+                img, _ = epfilt.restore(denoised, inp, k)
+                for key, v in measures(img, inp, ref, top).items():
+                    row[f"restore{k}_{key}"] = v
             rows.append(row)
             print(f"{row['input']}: done", file=sys.stderr)
     os.makedirs(a.out, exist_ok=True)
@@ -151,20 +166,22 @@ def main():
           "at its defaults (method and guides from the file; the method is named beside each input); "
           "ep-gauss: the same without the variance, as a render without a variance pass gets.\n", file=md)
     names = (("oidn", "OIDN"), ("epfilt", "epfilt"), ("ep_gauss", "ep-gauss"),
-             ("epfilt_oidn", "epfilt then OIDN"))
-    formats = {"error": "{:.3f}", "energy": "{:+.3%}", "peaks": "{:.2f}", "blocks": "{:.1%}"}
+             ("epfilt_oidn", "epfilt then OIDN"), ("oidn_restore", "OIDN then restore"))
+    formats = {"error": "{:.3f}", "energy": "{:+.3%}", "peaks": "{:.2f}", "blocks": "{:.1%}",
+               "peaks_in": "{:.2f}"}
     for key, title in (("error", "Error (relMSE over the input's)"), ("energy", "Energy moved"),
                        ("peaks", "The brightest 0.1%, over the reference's"),
+                       ("peaks_in", "The brightest 0.1%, over the input's"),
                        ("blocks", "The most a 32 x 32 block's energy moved")):
         print(f"## {title}\n", file=md)
         extra = {"error": "relMSE in", "energy": "input over reference", "peaks": "input",
-                 "blocks": ""}[key]
+                 "blocks": "", "peaks_in": ""}[key]
         head = ["input"] + ([extra] if extra else []) + [label for _, label in names]
         print("| " + " | ".join(head) + " |", file=md)
         print("|" + "---|" * len(head), file=md)
         for r in rows:
             lead = {"error": f"{r['input_rel_mse']:.4f}", "energy": f"{r['input_energy_vs_ref']:+.2%}",
-                    "peaks": f"{r['input_peaks']:.2f}", "blocks": None}[key]
+                    "peaks": f"{r['input_peaks']:.2f}", "blocks": None, "peaks_in": None}[key]
             cells = [r["input"] + (f" ({r['method']})" if key == "error" else "")]
             cells += [lead] if lead is not None else []
             cells += [formats[key].format(r[f"{n}_{key}"]) for n, _ in names]
@@ -182,6 +199,32 @@ def main():
     print(f"Over {len(rows)} renders:\n", file=md)
     for n, label in names:
         print(f"* **{label}**: {summary(n)}.", file=md)
+    print("", file=md)
+    print("## restore's scale\n", file=md)
+    print("OIDN then `restore` with the render's energy in blocks of each side: error over OIDN's "
+          "alone (geometric mean and worst over the renders, and how many within 1.2x), the most a "
+          "32 x 32 block's energy moved against the input, and the brightest 0.1% of the reference's "
+          "pixels against the input's values there (mean distance from 1, and the farthest). Small "
+          "blocks: energy exact in small regions, the render's grain back; large: OIDN's look, "
+          "energy exact over large regions only.\n", file=md)
+    print("| scale | error over OIDN's (geometric mean) | worst | within 1.2x | blocks moved (most) | "
+          "peaks over the input's (mean distance) | farthest |", file=md)
+    print("|---|---|---|---|---|---|---|", file=md)
+    for k in SCALES:
+        ratio = [r[f"restore{k}_error"] / r["oidn_error"] for r in rows]
+        blocks = max(r[f"restore{k}_blocks"] for r in rows)
+        pk = [abs(r[f"restore{k}_peaks_in"] - 1) for r in rows]
+        print(f"| {k} | {np.exp(np.mean(np.log(ratio))):.2f}x | {max(ratio):.2f}x | "
+              f"{sum(x <= 1.2 for x in ratio)} of {len(ratio)} | {blocks:.1%} | {np.mean(pk):.1%} | "
+              f"{max(pk):.0%} |", file=md)
+    ratio = [r["oidn_restore_error"] / r["oidn_error"] for r in rows]
+    print("\nAt the default scale, per render: error over OIDN's, peaks over the input's, and the "
+          "share of the energy kept in place (what OIDN lost: lamps, bulbs, highlights).\n", file=md)
+    print("| input | error over OIDN's | OIDN's peaks over the input's | restore's | kept in place |", file=md)
+    print("|---|---|---|---|---|", file=md)
+    for r, x in zip(rows, ratio):
+        print(f"| {r['input']} | {x:.2f}x | {r['oidn_peaks_in']:.2f} | {r['oidn_restore_peaks_in']:.2f} | "
+              f"{r['restore_kept_share']:.1%} |", file=md)
     text = md.getvalue()
     with open(os.path.join(a.out, "oidn.md"), "w") as f:
         f.write(text)

@@ -82,36 +82,6 @@ pub fn reflect(p: isize, n: usize) -> usize {
     (if m < n { m } else { 2 * n - 1 - m }) as usize
 }
 
-/// `out[x] = Σ_i taps[i] src[reflect(x + i - r)]`.
-pub fn blur_row(src: &[f64], taps: &[f64], out: &mut [f64]) {
-    let n = src.len();
-    let r = taps.len() / 2;
-    for (x, o) in out.iter_mut().enumerate().take(n) {
-        let mut acc = 0.0;
-        if x >= r && x + r < n {
-            for (&t, &v) in taps.iter().zip(&src[x - r..=x + r]) {
-                acc += t * v;
-            }
-        } else {
-            for (i, &t) in taps.iter().enumerate() {
-                acc += t * src[reflect(x as isize + i as isize - r as isize, n)];
-            }
-        }
-        *o = acc;
-    }
-}
-
-/// `out = Σ_i taps[i] rows[i]`: the column's rows, reflected at the image's
-/// edges by the caller (a row may come more than once).
-pub fn blur_column<'a>(rows: impl Iterator<Item = &'a [f64]>, taps: &[f64], out: &mut [f64]) {
-    out.fill(0.0);
-    for (row, &t) in rows.zip(taps) {
-        for (o, &v) in out.iter_mut().zip(row) {
-            *o += t * v;
-        }
-    }
-}
-
 /// The denoiser's value as a shape: its negative and non-finite values are
 /// nothing to shape energy with.
 #[inline]
@@ -123,16 +93,23 @@ pub fn shape(d: f32) -> f64 {
     }
 }
 
-/// The part of energy `e` kept in place, where the denoiser put `q` around
-/// it (`centre`: the 2-D kernel's centre weight): the excess over
-/// [`KEEP_GAIN`] times the denoiser's own share, all of it where the
-/// denoiser has nothing, and negative energy (a render's rare negative
-/// samples: nothing to scale a shape by).
+/// The part of energy `e` kept in place, where the denoiser's own value is
+/// `own` and `q()` measures what it put around (the shape under the 2-D
+/// kernel whose centre weight is `centre`, so `q >= centre own`): nothing
+/// within [`KEEP_GAIN`] times the denoiser's own value (then within it of
+/// its share around, and `q` is never measured: the common case), else the
+/// excess over that gain on its share around, all of it where the denoiser
+/// has nothing, and negative energy (a render's rare negative samples:
+/// nothing to scale a shape by).
 #[inline]
-pub fn kept(e: f64, q: f64, centre: f64) -> f64 {
+pub fn kept(e: f64, own: f64, q: impl FnOnce() -> f64, centre: f64) -> f64 {
     if e <= 0.0 {
-        return e.min(0.0);
+        return e;
     }
+    if e <= KEEP_GAIN * own {
+        return 0.0;
+    }
+    let q = q();
     if q <= 0.0 {
         return e;
     }
@@ -311,11 +288,14 @@ mod tests {
 
     #[test]
     fn kept_is_the_excess_over_the_denoisers_share() {
-        assert_eq!(kept(1.0, 1.0, 0.04), 0.0);
-        assert_eq!(kept(3.0, 0.0, 0.04), 3.0);
-        assert_eq!(kept(-2.0, 1.0, 0.04), -2.0);
-        let l = kept(1000.0, 0.001, 0.04);
-        assert!((l - (1000.0 - KEEP_GAIN * 0.001 / 0.04)).abs() < SUM_TOL * 1000.0);
+        let never = || -> f64 { panic!("q measured where the own value settles it") };
+        assert_eq!(kept(1.0, 1.0, never, 0.04), 0.0);
+        assert_eq!(kept(-2.0, 1.0, never, 0.04), -2.0);
+        assert_eq!(kept(3.0, 0.0, || 0.0, 0.04), 3.0);
+        // A lamp the denoiser dimmed to a glow: q around, little of its own.
+        let l = kept(1000.0, 0.5, || 0.05, 0.04);
+        assert!((l - (1000.0 - KEEP_GAIN * 0.05 / 0.04)).abs() < SUM_TOL * 1000.0);
+        assert_eq!(kept(10.0, 0.5, || 1.0, 0.04), 0.0);
     }
 
     /// On a smooth shape the solved field reaches every block's target

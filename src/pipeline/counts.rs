@@ -82,8 +82,8 @@ pub struct RestoreCounts {
     /// [`crate::filter::restore::KEEP_GAIN`] times what the denoiser put
     /// around it: the excess was kept in place.
     pub kept: u64,
-    /// Where the denoiser had nothing around a pixel with energy: all of
-    /// it kept in place.
+    /// Where the denoiser had (next to) nothing around a pixel with
+    /// energy: all of it kept in place.
     pub unshaped: u64,
     /// Negative energy values, kept in place.
     pub negative: u64,
@@ -95,15 +95,15 @@ pub struct RestoreCounts {
 }
 
 impl RestoreCounts {
-    /// A pixel channel of energy `e` with `q` of the denoiser's around it,
-    /// some of it kept in place.
-    pub fn count(&mut self, e: f64, q: f64) {
+    /// A pixel channel of energy `e` some of which was kept in place
+    /// (`all`: all of it).
+    pub fn count(&mut self, e: f64, all: bool) {
         if e < 0.0 {
             self.negative += 1;
-        } else if q > 0.0 {
-            self.kept += 1;
-        } else {
+        } else if all {
             self.unshaped += 1;
+        } else {
+            self.kept += 1;
         }
     }
 }

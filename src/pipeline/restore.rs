@@ -4,12 +4,12 @@
 //!
 //! The strips hold the energy image's channels, then the denoiser's (the
 //! books' ledger counts the first ones: the total it checks is the energy
-//! image's). Both passes share [`Kept`]: each arriving row's shape
-//! `s = max(d, 0)` blurred along the row; then, for the rows whose column of
-//! those is in, the denoiser's energy around each pixel (`q`) and the part
-//! of the energy kept in place (`l`).
+//! image's). Both passes share `Kept`: for the rows whose rows around are
+//! in, the part of the energy kept in place (`l`), with the denoiser's
+//! energy around a pixel (`q`) measured only where its energy exceeds the
+//! gain on the denoiser's own value (rare: lamps, fireflies).
 //!
-//! 1. The first pass ([`block_field`]) adds each row into the blocks'
+//! 1. The first pass ([`FirstPass`]) adds each row into the blocks'
 //!    targets (`Σ e - l`) and moments, and solves the field.
 //! 2. The second ([`RestoreStage`]) holds one row of blocks at a time: once
 //!    its last row's `l` is known, it computes `s f` for its rows, each
@@ -30,12 +30,11 @@ use super::stage::{Output, Stage, WindowUse};
 use super::stream::{Streamer, MAX_CHANNELS};
 use super::window::RowWindow;
 use super::{
-    run_streamer, PipelineConfig, Precision, Progress, RunStats, Sink, Source, StripLayout,
+    run_streamer, scan, PipelineConfig, Precision, Progress, RunStats, Sink, Source, Strip,
+    StripLayout,
 };
 use crate::error::{Error, Result};
-use crate::filter::restore::{
-    blur_column, blur_row, check_scale, kept, reflect, shape, taps, BlockField, KEEP_SIGMA,
-};
+use crate::filter::restore::{check_scale, kept, reflect, shape, taps, BlockField, KEEP_SIGMA};
 use crate::geometry::{Grid, Halo};
 
 /// The shape's blur and the part of the energy kept in place, row by row.
@@ -46,8 +45,6 @@ struct Kept {
     taps: Vec<f64>,
     /// The 2-D kernel's centre weight.
     centre: f64,
-    /// Per input row: the shape blurred along the row, `[channel][x]`.
-    shape_rows: RowWindow<f64>,
     /// Per row whose column is in: `l`, `[channel][x]`, and whether the row
     /// has any (most have none).
     kept_rows: RowWindow<f64>,
@@ -64,7 +61,6 @@ impl Kept {
             h,
             centre: taps[taps.len() / 2].powi(2),
             taps,
-            shape_rows: RowWindow::new(nch * w),
             kept_rows: RowWindow::new(nch * w),
             any: VecDeque::new(),
             counts: RestoreCounts::default(),
@@ -75,84 +71,58 @@ impl Kept {
         self.taps.len() / 2
     }
 
-    /// Input rows `a..b` arrived: their shapes, blurred along the row.
-    fn arrive(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
-        let (nch, w) = (self.nch, self.w);
-        for _ in a..b {
-            self.shape_rows.push_stale(0.0);
-        }
-        let taps = &self.taps;
-        let mut rows = self.shape_rows.range_mut(a, b);
-        rows.par_iter_mut().enumerate().for_each_init(
-            || vec![0.0f64; w],
-            |s, (k, out)| {
-                let d_row = &input.get(a + k)[nch * w..];
-                for ch in 0..nch {
-                    for (v, &d) in s.iter_mut().zip(&d_row[ch * w..(ch + 1) * w]) {
-                        *v = shape(d);
-                    }
-                    blur_row(s, taps, &mut out[ch * w..(ch + 1) * w]);
-                }
-            },
-        );
-    }
-
-    /// `l` for every row whose column of shapes is in (`rows_in`, all of
-    /// them when `all_in`); returns the rows done now.
+    /// `l` for every row whose rows around are in (`rows_in`, all of them
+    /// when `all_in`); returns the rows done now. The input window holds
+    /// the rows `r` above and below.
     fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> (usize, usize) {
-        let (nch, w, r) = (self.nch, self.w, self.r());
+        let (nch, w, h, r) = (self.nch, self.w, self.h, self.r());
         let a = self.kept_rows.end();
-        let b = if all_in {
-            self.h
-        } else {
-            rows_in.saturating_sub(r)
-        };
+        let b = if all_in { h } else { rows_in.saturating_sub(r) };
         if b <= a {
             return (a, a);
         }
         for _ in a..b {
             self.kept_rows.push_stale(0.0);
         }
-        let (taps, centre, h, shapes) = (&self.taps, self.centre, self.h, &self.shape_rows);
+        let (taps, centre) = (&self.taps, self.centre);
         let mut rows = self.kept_rows.range_mut(a, b);
         let per_row: Vec<(bool, RestoreCounts)> = rows
             .par_iter_mut()
             .enumerate()
-            .map_init(
-                || vec![0.0f64; w],
-                |q, (i, out)| {
-                    let y = a + i;
-                    let e_row = input.get(y);
-                    let mut c = RestoreCounts::default();
-                    let mut any = false;
-                    for ch in 0..nch {
-                        let col = (-(r as isize)..=r as isize)
-                            .map(|k| &shapes.get(reflect(y as isize + k, h))[ch * w..(ch + 1) * w]);
-                        blur_column(col, taps, q);
-                        let e = &e_row[ch * w..(ch + 1) * w];
-                        let l = &mut out[ch * w..(ch + 1) * w];
-                        for x in 0..w {
-                            let ev = f64::from(e[x]);
-                            l[x] = kept(ev, q[x], centre);
-                            if l[x] != 0.0 {
-                                any = true;
-                                c.count(ev, q[x]);
-                                c.kept_energy += l[x].abs();
-                            }
+            .map(|(i, out)| {
+                let y = a + i;
+                let row = input.get(y);
+                let mut c = RestoreCounts::default();
+                let mut any = false;
+                for ch in 0..nch {
+                    let e = &row[ch * w..(ch + 1) * w];
+                    let d = &row[(nch + ch) * w..(nch + ch + 1) * w];
+                    let l = &mut out[ch * w..(ch + 1) * w];
+                    for x in 0..w {
+                        let ev = f64::from(e[x]);
+                        let q = || around(input, (x, y), (w, h), (nch + ch) * w, taps);
+                        l[x] = kept(ev, shape(d[x]), q, centre);
+                        if l[x] != 0.0 {
+                            any = true;
+                            c.count(ev, l[x] == ev);
+                            c.kept_energy += l[x].abs();
                         }
                     }
-                    (any, c)
-                },
-            )
+                }
+                (any, c)
+            })
             .collect();
         // Summed in row order: the counts' energy is the same for any strips.
         for (any, c) in per_row {
             self.any.push_back(any);
             self.counts += c;
         }
-        // The next row's column starts `r` rows up.
-        self.shape_rows.evict_below(b.saturating_sub(r));
         (a, b)
+    }
+
+    /// The first input row still read: `r` above the next row of `l`.
+    fn input_needed(&self) -> usize {
+        self.kept_rows.end().saturating_sub(self.r())
     }
 
     /// `l` of row `y` (`None`: all zero).
@@ -170,21 +140,66 @@ impl Kept {
     }
 }
 
-/// The first pass: every row's rest `e - l` and shape into the blocks of
-/// `scale` pixels, and the field solved, per channel. `source` gives the
-/// strips of the pair (energy channels, then the denoiser's).
-pub fn block_field<S: Source>(
-    mut source: S,
+/// The denoiser's energy around pixel `at` of a `size` image: its shape
+/// under the 2-D kernel `taps x taps`, reflected at the edges, from the
+/// input rows' channel at `offset`. Only for the few pixels whose energy
+/// exceeds the gain on the denoiser's own value.
+fn around(
+    input: &RowWindow<f32>,
+    (x, y): (usize, usize),
     (w, h): (usize, usize),
+    offset: usize,
+    taps: &[f64],
+) -> f64 {
+    let r = (taps.len() / 2) as isize;
+    let mut q = 0.0;
+    for (i, &ty) in taps.iter().enumerate() {
+        let d = &input.get(reflect(y as isize + i as isize - r, h))[offset..offset + w];
+        let mut row = 0.0;
+        for (k, &tx) in taps.iter().enumerate() {
+            row += tx * shape(d[reflect(x as isize + k as isize - r, w)]);
+        }
+        q += ty * row;
+    }
+    q
+}
+
+/// The first pass: every row's rest `e - l` and shape into the blocks of
+/// `scale` pixels, per channel, strip by strip ([`FirstPass::take`]); then
+/// the fields solved ([`FirstPass::solve`]).
+pub struct FirstPass {
     nch: usize,
-    scale: usize,
-    strip_rows: usize,
-) -> Result<Vec<BlockField>> {
-    let mut kept = Kept::new(nch, w, h);
-    let mut fields: Vec<BlockField> = (0..nch).map(|_| BlockField::new(w, h, scale)).collect();
-    let mut input = RowWindow::new(2 * nch * w);
-    let mut rows_in = 0;
-    while let Some(mut strip) = source.next_strip(strip_rows.max(1))? {
+    w: usize,
+    h: usize,
+    kept: Kept,
+    fields: Vec<BlockField>,
+    input: RowWindow<f32>,
+    rows_in: usize,
+}
+
+impl FirstPass {
+    /// The pass over `nch` channels of a `w x h` pair in blocks of `scale`.
+    pub fn new(nch: usize, (w, h): (usize, usize), scale: usize) -> Self {
+        FirstPass {
+            nch,
+            w,
+            h,
+            kept: Kept::new(nch, w, h),
+            fields: (0..nch).map(|_| BlockField::new(w, h, scale)).collect(),
+            input: RowWindow::new(2 * nch * w),
+            rows_in: 0,
+        }
+    }
+
+    /// The next strip of the pair (energy channels, then the denoiser's).
+    pub fn take(&mut self, mut strip: Strip) -> Result<()> {
+        let (nch, w, h) = (self.nch, self.w, self.h);
+        if strip.y0 != self.rows_in || strip.data.len() != strip.rows * 2 * nch * w {
+            return Err(Error::Internal(format!(
+                "the first pass got rows {}.. for row {} (source bug)",
+                strip.y0, self.rows_in
+            )));
+        }
         // Non-finite energy is the second pass's to refuse or count; here
         // it is nothing.
         for row in strip.data.chunks_exact_mut(2 * nch * w) {
@@ -194,22 +209,20 @@ pub fn block_field<S: Source>(
                 }
             }
         }
-        let a = rows_in;
-        rows_in += strip.rows;
-        input.push_rows(strip.data, strip.rows);
-        kept.arrive(&input, a, rows_in);
-        let (ka, kb) = kept.advance(&input, rows_in, rows_in == h);
+        self.rows_in += strip.rows;
+        self.input.push_rows(strip.data, strip.rows);
+        let (ka, kb) = self
+            .kept
+            .advance(&self.input, self.rows_in, self.rows_in == h);
+        let (fields, kept, input) = (&self.fields, &self.kept, &self.input);
         let nbx = fields[0].nbx;
-        let fields_ref = &fields;
-        let kept_ref = &kept;
-        let input_ref = &input;
         let sums: Vec<Vec<(f64, [f64; 9])>> = (ka..kb)
             .into_par_iter()
             .map_init(
                 || (vec![0.0f64; w], vec![0.0f64; w]),
                 |(s, rest), y| {
-                    let row = input_ref.get(y);
-                    let l = kept_ref.row(y);
+                    let row = input.get(y);
+                    let l = kept.row(y);
                     let mut out = vec![(0.0, [0.0; 9]); nch * nbx];
                     for ch in 0..nch {
                         let e = &row[ch * w..(ch + 1) * w];
@@ -218,15 +231,17 @@ pub fn block_field<S: Source>(
                             s[x] = shape(d[x]);
                             rest[x] = f64::from(e[x]) - l.map_or(0.0, |l| l[ch * w + x]);
                         }
-                        fields_ref[ch].row_sums(y, h, s, rest, &mut out[ch * nbx..(ch + 1) * nbx]);
+                        let o = &mut out[ch * nbx..(ch + 1) * nbx];
+                        fields[ch].row_sums(y, h, s, rest, o);
                     }
                     out
                 },
             )
             .collect();
+        // Added in row order: the sums are the same for any strips.
         for (y, row) in (ka..kb).zip(sums) {
-            let jb = y / scale;
-            for (ch, f) in fields.iter_mut().enumerate() {
+            let jb = y / self.fields[0].b;
+            for (ch, f) in self.fields.iter_mut().enumerate() {
                 for (i, (t, m)) in row[ch * nbx..(ch + 1) * nbx].iter().enumerate() {
                     f.target[jb * nbx + i] += t;
                     for (acc, v) in f.moments[jb * nbx + i].iter_mut().zip(m) {
@@ -235,16 +250,22 @@ pub fn block_field<S: Source>(
                 }
             }
         }
-        kept.release(kb);
-        input.evict_below(kb);
+        self.kept.release(kb);
+        self.input.evict_below(self.kept.input_needed());
+        Ok(())
     }
-    if rows_in != h {
-        return Err(Error::Internal(format!(
-            "the inputs ended after {rows_in} of {h} rows"
-        )));
+
+    /// Every row in: the fields, solved.
+    pub fn solve(mut self) -> Result<Vec<BlockField>> {
+        if self.rows_in != self.h {
+            return Err(Error::Internal(format!(
+                "the inputs ended after {} of {} rows",
+                self.rows_in, self.h
+            )));
+        }
+        self.fields.par_iter_mut().for_each(BlockField::solve);
+        Ok(self.fields)
     }
-    fields.par_iter_mut().for_each(BlockField::solve);
-    Ok(fields)
 }
 
 /// The second pass: one row of blocks at a time, `s f g + l`.
@@ -368,9 +389,7 @@ impl Stage for RestoreStage {
         }
     }
 
-    fn arrive(&mut self, input: &mut RowWindow<f32>, a: usize, b: usize) {
-        self.kept.arrive(input, a, b);
-    }
+    fn arrive(&mut self, _input: &mut RowWindow<f32>, _a: usize, _b: usize) {}
 
     fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> usize {
         self.kept.advance(input, rows_in, all_in);
@@ -388,8 +407,9 @@ impl Stage for RestoreStage {
     }
 
     fn input_needed(&self) -> usize {
-        // The energy and shape of rows not yet final.
-        self.out.end()
+        // The energy and shape of rows not yet final, and the rows around
+        // the next row of `l`.
+        self.out.end().min(self.kept.input_needed())
     }
 
     fn output(&self, (a, b): (usize, usize)) -> Output<'_> {
@@ -409,11 +429,6 @@ impl Stage for RestoreStage {
     fn windows(&self) -> Vec<WindowUse> {
         let row = self.nch * self.w * 8;
         vec![
-            WindowUse {
-                name: "shape blurred along rows",
-                rows: self.kept.shape_rows.high_water(),
-                row_bytes: row,
-            },
             WindowUse {
                 name: "energy kept in place",
                 rows: self.kept.kept_rows.high_water(),
@@ -459,10 +474,11 @@ pub fn restore_stream<A: Source, B: Source, K: Sink>(
     };
     let mut layout = StripLayout::new(grid, channels.clone(), luminance);
     layout.aux = channels.iter().map(|c| format!("denoised.{c}")).collect();
-    let pool = super::thread_pool(cfg.threads)?;
-    let strip_rows = layout.strip_rows(cfg);
-    let first = Pair::new(energy(), denoised(), w, nch, nch);
-    let fields = pool.install(|| block_field(first, (w, h), nch, scale, strip_rows))?;
+    let start = std::time::Instant::now();
+    let mut first = FirstPass::new(nch, (w, h), scale);
+    let pair = Pair::new(energy(), denoised(), w, nch, nch);
+    scan(pair, cfg, layout.strip_rows(cfg), |strip| first.take(strip))?;
+    let fields = first.solve()?;
     let stage = RestoreStage::new(nch, w, h, fields);
     let streamer = Streamer::of_stage(
         &layout,
@@ -471,7 +487,10 @@ pub fn restore_stream<A: Source, B: Source, K: Sink>(
         sink.precisions(nch),
     );
     let pair = Pair::new(energy(), denoised(), w, nch, nch);
-    run_streamer(pair, sink, &layout, streamer, cfg, progress)
+    let mut stats = run_streamer(pair, sink, &layout, streamer, cfg, progress)?;
+    // Both passes.
+    stats.seconds = start.elapsed().as_secs_f64();
+    Ok(stats)
 }
 
 /// [`restore_stream`] of two whole images in memory (planar
