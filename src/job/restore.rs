@@ -201,8 +201,8 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
     let mut output = layout.create(&job.output, false, 1, &channels, &settings)?;
     let cfg = config(job.threads, job.nonfinite, job.cancel.clone());
     let stats = restore_stream(
-        || energy.source(),
-        || denoised.source(),
+        energy.source(),
+        denoised.source(),
         &mut output,
         size,
         channels,

@@ -65,7 +65,7 @@ pub use estimate::{
     STRIP_BYTES, WRITE_AHEAD_BYTES_PER_THREAD,
 };
 pub use memory::{filter_in_memory, filter_planar, MemoryRun, MemorySink, MemorySource};
-pub use runner::{mean_luminance, run, run_streamer, scan, thread_pool, Progress};
+pub use runner::{mean_luminance, run, run_streamer, thread_pool, Progress};
 
 /// Rows of input samples, `[row][channel][x]`.
 #[derive(Clone, Debug)]

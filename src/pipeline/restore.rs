@@ -1,22 +1,21 @@
-//! `epfilt restore`'s stage and its first pass: the energy image's energy
-//! put back into the denoiser's output ([`crate::filter::restore`]),
-//! streamed.
+//! `epfilt restore`'s stage: the energy image's energy put back into the
+//! denoiser's output ([`crate::filter::restore`]), streamed in one pass.
 //!
 //! The strips hold the energy image's channels, then the denoiser's (the
 //! books' ledger counts the first ones: the total it checks is the energy
-//! image's). Both passes share `Kept`: for the rows whose rows around are
-//! in, the part of the energy kept in place (`l`), with the denoiser's
-//! energy around a pixel (`q`) measured only where its energy exceeds the
-//! gain on the denoiser's own value (rare: lamps, fireflies).
+//! image's). A strip's work is three steps, each a parallel loop over rows:
 //!
-//! 1. The first pass ([`FirstPass`]) adds each row into the blocks'
-//!    targets (`Σ e - l`) and moments, and solves the field.
-//! 2. The second ([`RestoreStage`]) holds one row of blocks at a time: once
-//!    its last row's `l` is known, it computes `s f` for its rows, each
-//!    block's exact factor `g`, and the rows `s f g + l`.
+//! 1. the part of the energy kept in place (`l`) for the rows whose rows
+//!    around are in, with the denoiser's energy around a pixel (`q`)
+//!    measured only where its energy exceeds the gain on the denoiser's own
+//!    value (rare: lamps, fireflies);
+//! 2. those rows' rest `e - l` and shape added into their blocks' sums;
+//! 3. each row of blocks whose field can be fixed (the rows of blocks
+//!    [`LOOKAHEAD`] below it summed): `s f` for its rows, each block's exact
+//!    factor `g`, and the rows `s f g + l`.
 //!
-//! Each row's values depend only on rows that are in, and the block sums
-//! are added row by row in order, never by how rows came: the output is the
+//! Each row's values depend only on rows that are in, and block sums are
+//! added row by row in order, never by how rows came: the output is the
 //! same for any strip height and thread count.
 
 use std::collections::VecDeque;
@@ -30,11 +29,12 @@ use super::stage::{Output, Stage, WindowUse};
 use super::stream::{Streamer, MAX_CHANNELS};
 use super::window::RowWindow;
 use super::{
-    run_streamer, scan, PipelineConfig, Precision, Progress, RunStats, Sink, Source, Strip,
-    StripLayout,
+    run_streamer, PipelineConfig, Precision, Progress, RunStats, Sink, Source, StripLayout,
 };
 use crate::error::{Error, Result};
-use crate::filter::restore::{check_scale, kept, reflect, shape, taps, BlockField, KEEP_SIGMA};
+use crate::filter::restore::{
+    check_scale, kept, reflect, shape, taps, FieldRows, KEEP_SIGMA, LOOKAHEAD,
+};
 use crate::geometry::{Grid, Halo};
 
 /// The shape's blur and the part of the energy kept in place, row by row.
@@ -164,59 +164,47 @@ fn around(
     q
 }
 
-/// The first pass: every row's rest `e - l` and shape into the blocks of
-/// `scale` pixels, per channel, strip by strip ([`FirstPass::take`]); then
-/// the fields solved ([`FirstPass::solve`]).
-pub struct FirstPass {
+/// One row of blocks at a time: `s f g + l`.
+pub struct RestoreStage {
     nch: usize,
     w: usize,
     h: usize,
     kept: Kept,
-    fields: Vec<BlockField>,
-    input: RowWindow<f32>,
-    rows_in: usize,
+    /// The field of each channel.
+    fields: Vec<FieldRows>,
+    /// Pixel rows summed into the fields.
+    summed: usize,
+    /// Final rows.
+    out: RowWindow<f64>,
+    /// Blocks whose denoiser shape carried nothing: their energy stayed.
+    unshaped_blocks: u64,
 }
 
-impl FirstPass {
-    /// The pass over `nch` channels of a `w x h` pair in blocks of `scale`.
-    pub fn new(nch: usize, (w, h): (usize, usize), scale: usize) -> Self {
-        FirstPass {
+impl RestoreStage {
+    /// The stage for `nch` channels of a `w x h` image in blocks of `scale`.
+    pub fn new(nch: usize, w: usize, h: usize, scale: usize) -> Self {
+        RestoreStage {
             nch,
             w,
             h,
             kept: Kept::new(nch, w, h),
-            fields: (0..nch).map(|_| BlockField::new(w, h, scale)).collect(),
-            input: RowWindow::new(2 * nch * w),
-            rows_in: 0,
+            fields: (0..nch).map(|_| FieldRows::new(w, h, scale)).collect(),
+            summed: 0,
+            out: RowWindow::new(nch * w),
+            unshaped_blocks: 0,
         }
     }
 
-    /// The next strip of the pair (energy channels, then the denoiser's).
-    pub fn take(&mut self, mut strip: Strip) -> Result<()> {
-        let (nch, w, h) = (self.nch, self.w, self.h);
-        if strip.y0 != self.rows_in || strip.data.len() != strip.rows * 2 * nch * w {
-            return Err(Error::Internal(format!(
-                "the first pass got rows {}.. for row {} (source bug)",
-                strip.y0, self.rows_in
-            )));
-        }
-        // Non-finite energy is the second pass's to refuse or count; here
-        // it is nothing.
-        for row in strip.data.chunks_exact_mut(2 * nch * w) {
-            for v in &mut row[..nch * w] {
-                if !v.is_finite() {
-                    *v = 0.0;
-                }
-            }
-        }
-        self.rows_in += strip.rows;
-        self.input.push_rows(strip.data, strip.rows);
-        let (ka, kb) = self
-            .kept
-            .advance(&self.input, self.rows_in, self.rows_in == h);
-        let (fields, kept, input) = (&self.fields, &self.kept, &self.input);
+    fn b(&self) -> usize {
+        self.fields[0].b
+    }
+
+    /// Rows `a..b` (their `l` known) into the fields' block sums.
+    fn add_sums(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
+        let (nch, w) = (self.nch, self.w);
+        let (fields, kept) = (&self.fields, &self.kept);
         let nbx = fields[0].nbx;
-        let sums: Vec<Vec<(f64, [f64; 9])>> = (ka..kb)
+        let sums: Vec<Vec<(f64, [f64; 9])>> = (a..b)
             .into_par_iter()
             .map_init(
                 || (vec![0.0f64; w], vec![0.0f64; w]),
@@ -231,78 +219,24 @@ impl FirstPass {
                             s[x] = shape(d[x]);
                             rest[x] = f64::from(e[x]) - l.map_or(0.0, |l| l[ch * w + x]);
                         }
-                        let o = &mut out[ch * nbx..(ch + 1) * nbx];
-                        fields[ch].row_sums(y, h, s, rest, o);
+                        fields[ch].row_sums(y, s, rest, &mut out[ch * nbx..(ch + 1) * nbx]);
                     }
                     out
                 },
             )
             .collect();
         // Added in row order: the sums are the same for any strips.
-        for (y, row) in (ka..kb).zip(sums) {
-            let jb = y / self.fields[0].b;
+        for (y, row) in (a..b).zip(sums) {
             for (ch, f) in self.fields.iter_mut().enumerate() {
-                for (i, (t, m)) in row[ch * nbx..(ch + 1) * nbx].iter().enumerate() {
-                    f.target[jb * nbx + i] += t;
-                    for (acc, v) in f.moments[jb * nbx + i].iter_mut().zip(m) {
-                        *acc += v;
-                    }
-                }
+                f.add(y, &row[ch * nbx..(ch + 1) * nbx]);
             }
         }
-        self.kept.release(kb);
-        self.input.evict_below(self.kept.input_needed());
-        Ok(())
+        self.summed = b;
     }
 
-    /// Every row in: the fields, solved.
-    pub fn solve(mut self) -> Result<Vec<BlockField>> {
-        if self.rows_in != self.h {
-            return Err(Error::Internal(format!(
-                "the inputs ended after {} of {} rows",
-                self.rows_in, self.h
-            )));
-        }
-        self.fields.par_iter_mut().for_each(BlockField::solve);
-        Ok(self.fields)
-    }
-}
-
-/// The second pass: one row of blocks at a time, `s f g + l`.
-pub struct RestoreStage {
-    nch: usize,
-    w: usize,
-    h: usize,
-    kept: Kept,
-    fields: Vec<BlockField>,
-    /// Final rows.
-    out: RowWindow<f64>,
-    /// Blocks whose denoiser shape carried nothing: their energy stayed.
-    unshaped_blocks: u64,
-}
-
-impl RestoreStage {
-    /// The stage for `nch` channels of a `w x h` image with the solved
-    /// `fields` (one per channel).
-    pub fn new(nch: usize, w: usize, h: usize, fields: Vec<BlockField>) -> Self {
-        RestoreStage {
-            nch,
-            w,
-            h,
-            kept: Kept::new(nch, w, h),
-            fields,
-            out: RowWindow::new(nch * w),
-            unshaped_blocks: 0,
-        }
-    }
-
-    fn b(&self) -> usize {
-        self.fields[0].b
-    }
-
-    /// Rows `a..b`, a whole row of blocks.
+    /// Rows `a..b`, a whole row of blocks, their fields fixed.
     fn finish_blocks(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
-        let (nch, w, h) = (self.nch, self.w, self.h);
+        let (nch, w) = (self.nch, self.w);
         for _ in a..b {
             self.out.push_stale(0.0);
         }
@@ -320,7 +254,7 @@ impl RestoreStage {
                     let d_row = &input.get(y)[nch * w..];
                     let mut sums = vec![0.0; nch * nbx];
                     for ch in 0..nch {
-                        fields[ch].row(y, h, f);
+                        fields[ch].row(y, f);
                         let d = &d_row[ch * w..(ch + 1) * w];
                         let o = &mut out[ch * w..(ch + 1) * w];
                         for x in 0..w {
@@ -343,7 +277,7 @@ impl RestoreStage {
         let mut g = vec![0.0f64; nch * nbx];
         for ch in 0..nch {
             for i in 0..nbx {
-                let (t, r) = (fields[ch].target[jb * nbx + i], reached[ch * nbx + i]);
+                let (t, r) = (fields[ch].target(jb, i), reached[ch * nbx + i]);
                 g[ch * nbx + i] = if r > 0.0 {
                     t / r
                 } else {
@@ -379,29 +313,42 @@ impl RestoreStage {
 
 impl Stage for RestoreStage {
     fn halo(&self) -> Halo {
-        // The shape's column, then a row of blocks held whole.
+        // The kept part's rows around, then the rows of blocks the field
+        // looks ahead, and the row of blocks being finished.
         let r = self.kept.r();
         Halo {
             xbar_reach: 0,
             base_reach: r,
             search_reach: 0,
-            spread_reach: r + self.b(),
+            spread_reach: r + (LOOKAHEAD + 2) * self.b(),
         }
     }
 
     fn arrive(&mut self, _input: &mut RowWindow<f32>, _a: usize, _b: usize) {}
 
     fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> usize {
-        self.kept.advance(input, rows_in, all_in);
-        let bs = self.b();
-        loop {
-            let a = self.out.end();
-            let b = (a + bs).min(self.h);
-            if a >= self.h || self.kept.kept_rows.end() < b {
+        let (ka, kb) = self.kept.advance(input, rows_in, all_in);
+        self.add_sums(input, ka, kb);
+        let (bs, h) = (self.b(), self.h);
+        let nby = self.fields[0].nby;
+        // A row of blocks is finished once its field and the next row's are
+        // fixed (its lower half reads both).
+        while self.out.end() < h {
+            let j = self.out.end() / bs;
+            let next = (j + 1).min(nby - 1);
+            if !self.fields[0].can_fix(next, self.summed) {
                 break;
             }
-            self.finish_blocks(input, a, b);
+            for f in &mut self.fields {
+                f.fix(j);
+                f.fix(next);
+            }
+            let b = ((j + 1) * bs).min(h);
+            self.finish_blocks(input, j * bs, b);
             self.kept.release(b);
+            for f in &mut self.fields {
+                f.release(j);
+            }
         }
         self.out.end()
     }
@@ -445,13 +392,11 @@ impl Stage for RestoreStage {
 
 /// Restore the denoiser's output with the energy image's energy at blocks
 /// of `scale` into `sink`: both `w x h` with `channels` (`luminance`: their
-/// weights, for the layout). `energy` and `denoised` give a fresh source of
-/// each on every call (the first pass reads them once, the second again);
-/// the books' ledger counts `energy`.
+/// weights, for the layout); the books' ledger counts `energy`.
 #[allow(clippy::too_many_arguments)]
 pub fn restore_stream<A: Source, B: Source, K: Sink>(
-    energy: impl Fn() -> A,
-    denoised: impl Fn() -> B,
+    energy: A,
+    denoised: B,
     sink: K,
     (w, h): (usize, usize),
     channels: Vec<String>,
@@ -474,23 +419,15 @@ pub fn restore_stream<A: Source, B: Source, K: Sink>(
     };
     let mut layout = StripLayout::new(grid, channels.clone(), luminance);
     layout.aux = channels.iter().map(|c| format!("denoised.{c}")).collect();
-    let start = std::time::Instant::now();
-    let mut first = FirstPass::new(nch, (w, h), scale);
-    let pair = Pair::new(energy(), denoised(), w, nch, nch);
-    scan(pair, cfg, layout.strip_rows(cfg), |strip| first.take(strip))?;
-    let fields = first.solve()?;
-    let stage = RestoreStage::new(nch, w, h, fields);
+    let stage = RestoreStage::new(nch, w, h, scale);
     let streamer = Streamer::of_stage(
         &layout,
         Box::new(stage),
         cfg.nonfinite,
         sink.precisions(nch),
     );
-    let pair = Pair::new(energy(), denoised(), w, nch, nch);
-    let mut stats = run_streamer(pair, sink, &layout, streamer, cfg, progress)?;
-    // Both passes.
-    stats.seconds = start.elapsed().as_secs_f64();
-    Ok(stats)
+    let pair = Pair::new(energy, denoised, w, nch, nch);
+    run_streamer(pair, sink, &layout, streamer, cfg, progress)
 }
 
 /// [`restore_stream`] of two whole images in memory (planar
@@ -518,8 +455,8 @@ pub fn restore_planar(
     let row = channels.len() * w;
     let mut sink = MemorySink::with_precision(precision);
     let stats = restore_stream(
-        || MemorySource::new(energy.clone(), row),
-        || MemorySource::new(denoised.clone(), row),
+        MemorySource::new(energy, row),
+        MemorySource::new(denoised, row),
         &mut sink,
         (w, h),
         channels,

@@ -175,51 +175,6 @@ pub fn run_streamer<S: Source, K: Sink>(
     })
 }
 
-/// Read `source` whole, strip by strip, into `take` on this thread (the
-/// first pass of a method that needs one: `epfilt restore`'s), the reader
-/// decoding ahead as in [`run`].
-pub fn scan<S: Source>(
-    source: S,
-    cfg: &PipelineConfig,
-    strip_rows: usize,
-    mut take: impl FnMut(Strip) -> Result<()> + Send,
-) -> Result<()> {
-    let pool = thread_pool(cfg.threads)?;
-    let io_pool = io_pool(cfg.threads)?;
-    let io = io_pool.as_ref().unwrap_or(&pool);
-    let (tx, rx) = crossbeam_channel::bounded::<Result<Strip>>(2);
-    let window = |block_bytes| match cfg.window_blocks {
-        0 => window_blocks(cfg, block_bytes),
-        n => n as u64,
-    };
-    let ahead = ReadAhead {
-        strip_rows,
-        window_blocks: &window,
-        recycled: None,
-    };
-    std::thread::scope(|scope| {
-        let reader = scope.spawn(move || read_strips(source, io, ahead, tx));
-        let mut result = Ok(());
-        for strip in rx.iter() {
-            if cfg
-                .cancel
-                .as_ref()
-                .is_some_and(|c| c.load(Ordering::Relaxed))
-            {
-                result = Err(Error::Interrupted);
-                break;
-            }
-            if let Err(e) = strip.and_then(|s| pool.install(|| take(s))) {
-                result = Err(e);
-                break;
-            }
-        }
-        drop(rx);
-        let _ = reader.join();
-        result
-    })
-}
-
 /// The reader thread: strips of `ahead.strip_rows` from `source` into `tx` (an
 /// error ends them); returns its busy seconds. A source that decodes does so
 /// ahead, on a thread of its own ([`Source::decoder`]), while this one hands

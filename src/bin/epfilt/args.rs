@@ -167,7 +167,7 @@ denoiser's picture times a smooth field, solved so that every block of
 The total is exact: the ledger balances to 1e-12 or nothing is written.
 Small --scale: energy exact in small regions, some of the render's grain
 back; large: the denoiser's look, energy exact over large regions.
-The blocks' field is held whole: about 100 bytes per block and channel.";
+One pass over both inputs; memory grows with the width and --scale.";
 
 #[derive(Args)]
 pub struct RestoreArgs {
