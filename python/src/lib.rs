@@ -199,6 +199,18 @@ fn default_channels(c: usize) -> PyResult<Vec<String>> {
     Ok(names.iter().map(|s| s.to_string()).collect())
 }
 
+/// The names given for `c` channels, or the defaults for `c`.
+fn channel_names(names: Option<Vec<String>>, c: usize) -> PyResult<Vec<String>> {
+    match names {
+        Some(names) if names.len() == c => Ok(names),
+        Some(names) => Err(config_error(format!(
+            "{} channel names for {c} channels",
+            names.len()
+        ))),
+        None => default_channels(c),
+    }
+}
+
 /// Filter samples held in a numpy array; see the stub.
 #[pyfunction]
 #[pyo3(signature = (samples, supersample=None, method=None, *, channels=None, variance=None, spp=None, **settings))]
@@ -219,16 +231,7 @@ fn filter<'py>(
             "samples must have shape (height, width, channels), not {shape:?}"
         )));
     };
-    let channels = match channels {
-        Some(names) if names.len() == c => names,
-        Some(names) => {
-            return Err(config_error(format!(
-                "{} channel names for {c} channels",
-                names.len()
-            )))
-        }
-        None => default_channels(c)?,
-    };
+    let channels = channel_names(channels, c)?;
     let mut pairs = settings_of(settings)?;
     if let Some(m) = method {
         pairs.push(("method".into(), Setting::Value(m.into())));
@@ -460,16 +463,7 @@ fn restore<'py>(
             "arrays must have shape (height, width, channels), not {eshape:?}"
         )));
     };
-    let channels = match channels {
-        Some(names) if names.len() == c => names,
-        Some(names) => {
-            return Err(config_error(format!(
-                "{} channel names for {c} channels",
-                names.len()
-            )))
-        }
-        None => default_channels(c)?,
-    };
+    let channels = channel_names(channels, c)?;
     let nonfinite = match nonfinite {
         "error" => epfilt::pipeline::NonFinite::Error,
         "zero" => epfilt::pipeline::NonFinite::Zero,

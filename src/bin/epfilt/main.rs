@@ -194,17 +194,7 @@ fn restore(a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
                 .ok_or_else(|| usage(anyhow::anyhow!("unknown compression {c:?}")))?,
         );
     }
-    let bar = progress_bar(a.quiet);
-    let report = epfilt::restore_file(&job, &|done, total| {
-        if let Some(b) = &bar {
-            b.set_length(total as u64);
-            b.set_position(done as u64);
-        }
-    });
-    if let Some(b) = &bar {
-        b.finish_and_clear();
-    }
-    let r = report.map_err(fail)?;
+    let r = with_progress(a.quiet, |p| epfilt::restore_file(&job, p)).map_err(fail)?;
     if let Some(path) = &a.report {
         write_report(path, &r)?;
     }
@@ -315,17 +305,7 @@ fn synth(a: SynthArgs) -> Result<(), Exit> {
             .transpose()
             .map_err(usage)?,
     };
-    let bar = progress_bar(a.quiet);
-    let report = epfilt::synth::synth(&job, &|done, total| {
-        if let Some(b) = &bar {
-            b.set_length(total as u64);
-            b.set_position(done as u64);
-        }
-    });
-    if let Some(b) = &bar {
-        b.finish_and_clear();
-    }
-    let r = report.map_err(fail)?;
+    let r = with_progress(a.quiet, |p| epfilt::synth::synth(&job, p)).map_err(fail)?;
     if !a.quiet {
         eprintln!(
             "{}: {}x{}{} in {:.2} s{}",
@@ -358,6 +338,22 @@ fn capped_threads(n: usize) -> usize {
 /// A warning about the user's data or settings: printed even under `-q`.
 fn warn(text: &str) {
     eprintln!("epfilt: warning: {text}");
+}
+
+/// Run `work` with a progress bar of rows (none under `-q` or off a
+/// terminal), cleared when it ends.
+fn with_progress<T>(quiet: bool, work: impl FnOnce(epfilt::pipeline::Progress<'_>) -> T) -> T {
+    let bar = progress_bar(quiet);
+    let result = work(&|done, total| {
+        if let Some(b) = &bar {
+            b.set_length(total as u64);
+            b.set_position(done as u64);
+        }
+    });
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    result
 }
 
 fn progress_bar(quiet: bool) -> Option<ProgressBar> {
