@@ -11,7 +11,7 @@ use crate::error::{Error, Result};
 use crate::filter::restore::{check_scale, DEFAULT_SCALE};
 use crate::host::peak_rss_bytes;
 use crate::io::output::OutputLayout;
-use crate::io::{ExrInput, OutputSettings};
+use crate::io::{ExrInput, Format, OutputSettings};
 use crate::pipeline::counts::{MethodCounts, RestoreCounts};
 use crate::pipeline::ledger::ChannelLedger;
 use crate::pipeline::restore::{restore_planar, restore_stream};
@@ -162,6 +162,15 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
     let scale = check_scale(job.scale).map_err(Error::Config)?;
     check_not_same_file(&job.energy, &job.output)?;
     check_not_same_file(&job.denoised, &job.output)?;
+    // OpenEXR only (`-`: to standard output): a Radiance picture would
+    // round the exact energy to 8 bits of mantissa.
+    crate::io::format::output_format(
+        &job.output,
+        None,
+        Some(Format::Exr),
+        &[Format::Exr],
+        "restore",
+    )?;
     let energy = ExrInput::open(&job.energy, None)?;
     let denoised = ExrInput::open(&job.denoised, None)?;
     let (size, channels) = (energy.size(), energy.channels());

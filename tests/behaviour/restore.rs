@@ -105,6 +105,14 @@ fn restore_refuses_images_that_do_not_match() {
     assert!(!out.exists());
     let o = restore(&e, &e, &e, &[]);
     assert!(!o.status.success());
+    let hdr = dir.path().join("o.hdr");
+    let o = restore(&d, &e, &hdr, &[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        o.status.code() == Some(2) && err.contains("restore writes"),
+        "{err}"
+    );
+    assert!(!hdr.exists());
     let o = restore(&d, &e, &out, &["--scale", "1"]);
     assert_eq!(
         o.status.code(),
