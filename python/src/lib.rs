@@ -464,15 +464,7 @@ fn restore<'py>(
         )));
     };
     let channels = channel_names(channels, c)?;
-    let nonfinite = match nonfinite {
-        "error" => epfilt::pipeline::NonFinite::Error,
-        "zero" => epfilt::pipeline::NonFinite::Zero,
-        other => {
-            return Err(config_error(format!(
-                "nonfinite must be \"error\" or \"zero\", not {other:?}"
-            )))
-        }
-    };
+    let nonfinite = epfilt::pipeline::NonFinite::parse(nonfinite).map_err(to_py)?;
     let scale = scale.unwrap_or(epfilt::filter::restore::DEFAULT_SCALE);
     let (out, report) = detached(py, |cancel| {
         epfilt::job::restore::restore_array(

@@ -31,8 +31,9 @@ pub const KEEP_GAIN: f64 = 16.0;
 /// denoiser removes as noise.
 pub const KEEP_SIGMA: f64 = 2.0;
 
-/// Kernel radius in units of its standard deviation: the weight beyond is
-/// below 1.2% of the centre's.
+/// Kernel radius in units of its standard deviation: three, where what is
+/// cut off no longer changes what the denoiser put around a pixel enough
+/// to matter for a gain of [`KEEP_GAIN`].
 pub const REACH_SIGMAS: f64 = 3.0;
 
 /// The default `--scale`: blocks of 32 x 32 pixels (a lighting study's

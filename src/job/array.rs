@@ -138,14 +138,7 @@ pub fn filter_array(
     });
     let run = filter_planar(planar, &layout, &params, &cfg, precision)?;
     let (ow, oh) = (w / s, h / s);
-    let mut samples = vec![0.0f32; ow * oh * nch];
-    for (y, row) in run.data.chunks_exact(ow * nch).enumerate() {
-        for c in 0..nch {
-            for (x, &v) in row[c * ow..(c + 1) * ow].iter().enumerate() {
-                samples[(y * ow + x) * nch + c] = v;
-            }
-        }
-    }
+    let samples = interleaved(&run.data, ow, nch);
     let mut settings = run.params.settings();
     settings.push(("pixel_type", precision.name().into()));
     let report = Report::of_array(
@@ -252,6 +245,40 @@ fn stats_layout(
 
 /// The pipeline's rows, `[row][channel][x]`: the image's channels, then
 /// the statistics (`stats`: the ones read).
+/// Rows `[row][channel][x]` of `w` pixels and `nch` channels as an array's
+/// `[row][x][channel]`.
+pub(crate) fn interleaved(planar: &[f32], w: usize, nch: usize) -> Vec<f32> {
+    let mut out = vec![0.0f32; planar.len()];
+    for (row, dst) in planar
+        .chunks_exact(w * nch)
+        .zip(out.chunks_exact_mut(w * nch))
+    {
+        for c in 0..nch {
+            for (x, &v) in row[c * w..(c + 1) * w].iter().enumerate() {
+                dst[x * nch + c] = v;
+            }
+        }
+    }
+    out
+}
+
+/// An array's `[row][x][channel]` of `w` pixels and `nch` channels as
+/// rows `[row][channel][x]`.
+pub(crate) fn planar(samples: &[f32], w: usize, nch: usize) -> Vec<f32> {
+    let mut out = vec![0.0f32; samples.len()];
+    for (src, row) in samples
+        .chunks_exact(w * nch)
+        .zip(out.chunks_exact_mut(w * nch))
+    {
+        for c in 0..nch {
+            for (x, d) in row[c * w..(c + 1) * w].iter_mut().enumerate() {
+                *d = src[x * nch + c];
+            }
+        }
+    }
+    out
+}
+
 fn planar_rows(input: &ArrayInput<'_>, stats: Option<ArrayStats<'_>>) -> Vec<f32> {
     let (w, h, nch) = (input.width, input.height, input.channels.len());
     let nv = stats.map_or(0, |s| s.variance_channels);

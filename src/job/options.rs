@@ -281,13 +281,7 @@ options! {
     edge: Option<Edge> { Value, INPUT, parse: |_, s| Edge::parse(s), files_only: true }
     /// NaN and infinite input samples: error (refuse, naming the first) or zero (count them).
     nonfinite: NonFinite {
-        Value, INPUT, parse: |_, s| match s {
-            "error" => Ok(NonFinite::Error),
-            "zero" => Ok(NonFinite::Zero),
-            other => Err(Error::Config(format!(
-                "--nonfinite must be error or zero, not {other:?}"
-            ))),
-        },
+        Value, INPUT, parse: |_, s| NonFinite::parse(s),
         default: "error"
     }
     /// ep-gauss (§5.2), ep-box (§5.1, pixels with variance), gauss (linear

@@ -17,6 +17,7 @@ use crate::pipeline::ledger::ChannelLedger;
 use crate::pipeline::restore::{restore_planar, restore_stream};
 use crate::pipeline::{NonFinite, PipelineConfig, Precision, Progress, RunStats};
 
+use super::array::{interleaved, planar};
 use super::check_not_same_file;
 
 /// `restore`'s ledger must balance to this before rounding: every energy
@@ -266,21 +267,10 @@ pub fn restore_array(
             n.map_or("too many".into(), |n| n.to_string())
         )));
     }
-    let planar = |v: &[f32]| {
-        let mut out = vec![0.0f32; v.len()];
-        for y in 0..h {
-            for x in 0..w {
-                for c in 0..nch {
-                    out[(y * nch + c) * w + x] = v[(y * w + x) * nch + c];
-                }
-            }
-        }
-        out
-    };
     let cfg = config(threads, nonfinite, cancel);
     let (out, stats) = restore_planar(
-        planar(energy),
-        planar(denoised),
+        planar(energy, w, nch),
+        planar(denoised, w, nch),
         (w, h),
         channels.to_vec(),
         vec![0.0; nch],
@@ -289,14 +279,7 @@ pub fn restore_array(
         Precision::F32,
     )?;
     check_ledger(&stats)?;
-    let mut inter = vec![0.0f32; out.len()];
-    for y in 0..h {
-        for x in 0..w {
-            for c in 0..nch {
-                inter[(y * w + x) * nch + c] = out[(y * nch + c) * w + x];
-            }
-        }
-    }
+    let inter = interleaved(&out, w, nch);
     let report = RestoreReport::of(
         ("<array>", "<array>", "<array>"),
         (w, h),

@@ -204,6 +204,19 @@ pub enum NonFinite {
     Zero,
 }
 
+impl NonFinite {
+    /// Parse `--nonfinite`: `error` or `zero`.
+    pub fn parse(s: &str) -> Result<Self> {
+        match s {
+            "error" => Ok(NonFinite::Error),
+            "zero" => Ok(NonFinite::Zero),
+            other => Err(Error::Config(format!(
+                "--nonfinite must be error or zero, not {other:?}"
+            ))),
+        }
+    }
+}
+
 /// How the work is cut up; none of it changes the result.
 #[derive(Clone, Debug)]
 pub struct PipelineConfig {

@@ -174,15 +174,7 @@ fn compare(a: CompareArgs) -> Result<(), Exit> {
 }
 
 fn restore(a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
-    let nonfinite = match a.nonfinite.as_str() {
-        "error" => epfilt::pipeline::NonFinite::Error,
-        "zero" => epfilt::pipeline::NonFinite::Zero,
-        other => {
-            return Err(usage(anyhow::anyhow!(
-                "--nonfinite must be error or zero, not {other:?}"
-            )))
-        }
-    };
+    let nonfinite = epfilt::pipeline::NonFinite::parse(&a.nonfinite).map_err(usage)?;
     let mut job = epfilt::RestoreJob::new(&a.denoised, &a.energy, &a.output);
     job.scale = a.scale;
     job.threads = capped_threads(a.threads);
