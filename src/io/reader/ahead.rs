@@ -59,14 +59,33 @@ pub(super) struct Ahead {
 }
 
 /// Block rows decoded or decoding at once: `blocks` chunks (the memory the
-/// estimate counts, `pipeline::window_blocks`), and at least a strip's rows
-/// and one block row more.
+/// estimate counts, `pipeline::window_blocks`), and at least the block rows
+/// a strip's rows span and one block row more, so that a strip is always
+/// handed over (the window waits for nothing it does not hold).
 fn window(input: &ExrInput, first: usize, max_rows: usize, blocks: usize) -> usize {
     let rows = &input.rows[first..];
     let chunks = rows.first().map_or(1, |r| r.chunks.len().max(1));
     let budget = blocks / chunks;
-    let lines = rows.iter().map(|r| r.y1 - r.y0).min().unwrap_or(1).max(1);
-    budget.max(max_rows.div_ceil(lines) + 1).max(2)
+    let lines: Vec<usize> = rows.iter().map(|r| r.y1 - r.y0).collect();
+    budget.max(strip_span(&lines, max_rows) + 1).max(2)
+}
+
+/// The most consecutive block rows (of `lines` rows each) that `max_rows`
+/// rows starting at a block row's first row reach into. Only the block
+/// rows' own heights count: a short last block row (an image height that
+/// is not a multiple of the codec's lines) spans no more than it holds.
+fn strip_span(lines: &[usize], max_rows: usize) -> usize {
+    let max_rows = max_rows.max(1);
+    let (mut most, mut end, mut sum) = (0, 0, 0);
+    for start in 0..lines.len() {
+        while end < lines.len() && sum < max_rows {
+            sum += lines[end];
+            end += 1;
+        }
+        most = most.max(end - start);
+        sum -= lines[start];
+    }
+    most.max(1)
 }
 
 /// Start decoding ahead from block row `first`, rows of `row_len` values, for
@@ -288,5 +307,31 @@ impl Ahead {
             }
         }
         Ok(Some((data, n - need)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::strip_span;
+
+    #[test]
+    fn a_strip_spans_the_block_rows_its_rows_reach() {
+        // 16-line blocks: 18 rows from a block's first reach into two.
+        assert_eq!(strip_span(&[16; 10], 18), 2);
+        assert_eq!(strip_span(&[16; 10], 16), 1);
+        assert_eq!(strip_span(&[16; 10], 17), 2);
+        // A last block row of one line (a height of 16 k + 1) does not
+        // make every strip span 18 block rows.
+        let mut lines = vec![16; 2048];
+        lines.push(1);
+        assert_eq!(strip_span(&lines, 18), 2);
+        // Short block rows in the middle are spanned as they are.
+        assert_eq!(strip_span(&[16, 1, 1, 1, 16], 18), 4);
+        // One-line blocks (uncompressed): a block row a row.
+        assert_eq!(strip_span(&[1; 100], 18), 18);
+        // A strip taller than the image, and an empty image.
+        assert_eq!(strip_span(&[16, 16], 100), 2);
+        assert_eq!(strip_span(&[], 18), 1);
+        assert_eq!(strip_span(&[16], 0), 1);
     }
 }
