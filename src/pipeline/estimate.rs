@@ -310,13 +310,13 @@ fn estimate_with(
     // ep-gauss's noisy samples classified and not yet spread: the rows
     // between the two cursors (the width search's reach and a strip, and the
     // next strip's lists), `NOISY_SHARE` of their samples, each a position,
-    // two luminances and its values, in a list that may hold twice its
-    // length.
+    // two luminances and its values, in lists with an eighth to spare.
     let pending = if params.method == Method::EpGauss {
         let samples = (search + 2 * (strip / s) + 4)
             .saturating_mul(s * s)
             .saturating_mul(ow);
-        (samples / NOISY_SHARE_INV).saturating_mul(2 * (32 + 8 * nch))
+        let each = super::spread::PENDING_SAMPLE_BYTES as u64 + 8 * nch;
+        (samples / NOISY_SHARE_INV).saturating_mul(each + each / 8)
     } else {
         0
     };

@@ -204,8 +204,6 @@ impl FindCtx<'_> {
                         j: j as u32,
                         x0,
                         xbar0: xbar,
-                        level: 0,
-                        capped: false,
                     });
                 }
             }
@@ -416,8 +414,7 @@ impl GaussianStage {
             // when they are spread.
             self.counts.noisy += kept;
             self.counts.kept += kept;
-            self.pending.samples.extend(list);
-            self.pending.values.extend(vals);
+            self.pending.push(list, vals);
         }
     }
 }

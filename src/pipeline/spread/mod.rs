@@ -37,6 +37,8 @@ mod coarse;
 mod rows;
 mod scatter;
 
+use std::collections::VecDeque;
+
 use coarse::CoarseGrid;
 
 use super::counts::{MethodCounts, SpreadCounts};
@@ -111,14 +113,16 @@ mod tests {
     }
 }
 
+/// A noisy sample waiting for its spread: its input position, its
+/// luminance and its pixel's average (what the width search reads). The
+/// search's answer is used at once and not kept: the list is held over the
+/// width search's reach of rows.
 #[derive(Clone, Copy, Debug)]
 struct Noisy {
     i: u32,
     j: u32,
     x0: f64,
     xbar0: f64,
-    level: u16,
-    capped: bool,
 }
 
 /// The box luminance rows a batch of searches reads, each looked up in the
@@ -232,17 +236,40 @@ struct Windows {
     c4: CoarseGrid,
 }
 
-/// Noisy samples classified and not yet spread, in input row-major order.
+/// Bytes a pending noisy sample holds besides its values (the memory
+/// estimate counts them).
+pub const PENDING_SAMPLE_BYTES: usize = std::mem::size_of::<Noisy>();
+
+/// Noisy samples classified and not yet spread, in input row-major order:
+/// classification pushes at the back, the spread takes from the front.
 #[derive(Default)]
 struct Pending {
-    samples: Vec<Noisy>,
+    samples: VecDeque<Noisy>,
     /// Their values, `nch` each, in the same order (what the emission
     /// guide leaves of them).
-    values: Vec<f64>,
-    /// Samples before this one are spread (dropped from the front once
-    /// they are half of the list, so that dropping them moves no more than
-    /// was spread).
-    first: usize,
+    values: VecDeque<f64>,
+}
+
+impl Pending {
+    /// Append one classification task's samples and values. The lists grow
+    /// by an eighth beyond what they hold, not by doubling: they are held
+    /// for the whole run, and their length is set by the noise of the rows
+    /// between the two cursors.
+    fn push(&mut self, samples: Vec<Noisy>, values: Vec<f64>) {
+        grow_by_eighth(&mut self.samples, samples.len());
+        grow_by_eighth(&mut self.values, values.len());
+        self.samples.extend(samples);
+        self.values.extend(values);
+    }
+}
+
+/// Room in `q` for `more` items, reserved an eighth beyond the length when
+/// it has to grow (amortised constant time, at most an eighth idle).
+fn grow_by_eighth<T>(q: &mut VecDeque<T>, more: usize) {
+    let need = q.len() + more;
+    if need > q.capacity() {
+        q.reserve_exact(need + need / 8 - q.len());
+    }
 }
 
 /// The Gaussian family's state between strips: the shape and rules (set

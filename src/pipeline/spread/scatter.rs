@@ -3,6 +3,7 @@
 //! arena), and the scatter into tile accumulators that own output columns,
 //! at full resolution or on the 2x and 4x coarse grids.
 
+use crate::filter::ep_gauss::Choice;
 use rayon::prelude::*;
 
 use super::*;
@@ -78,12 +79,12 @@ impl PlaceCtx<'_> {
     /// Place noisy sample `n` (values `x`) in `out`: its values, and its
     /// kernels on the grid its width goes to (read in place inside the
     /// image, reflected into the arena at an edge).
-    fn place(&self, n: &Noisy, x: &[f64], out: &mut Placed, tmp: &mut Vec<f64>) {
+    fn place(&self, n: &Noisy, c: &Choice, x: &[f64], out: &mut Placed, tmp: &mut Vec<f64>) {
         let s = self.s;
         out.counts.noisy += 1;
-        out.counts.spread += (n.level > 0) as u64;
-        out.counts.capped += n.capped as u64;
-        let level = &self.ep.levels()[n.level as usize];
+        out.counts.spread += (c.level > 0) as u64;
+        out.counts.capped += c.capped as u64;
+        let level = &self.ep.levels()[c.level as usize];
         let (i, j) = (n.i as usize, n.j as usize);
         let voff = out.vals.len();
         out.vals.extend(x.iter().zip(self.modes).map(|(&x, &m)| {
@@ -96,7 +97,7 @@ impl PlaceCtx<'_> {
         debug_assert_eq!(out.vals.len(), voff + self.nch);
         // Wide kernels on a coarse grid, the others at full resolution; each
         // list keeps the batch order.
-        let lv = n.level;
+        let lv = c.level;
         let (sp, k) = match &level.coarse {
             Some(c) => {
                 out.counts.coarse += 1;
@@ -206,7 +207,7 @@ impl GaussianStage {
         let Shape { grid, w, h, .. } = self.shape;
         let inner = bound.inner(grid.s, (w, h));
         let mut used = 0;
-        for (k, n) in self.pending.samples[c0..end].iter().enumerate() {
+        for (k, n) in self.pending.samples.range(c0..end).enumerate() {
             used += per_sample + bound.arena_len(n, inner) * weight;
             if used > budget {
                 return c0 + k.max(1);
@@ -234,9 +235,14 @@ impl GaussianStage {
             return;
         };
         let bound = EdgeBound::of(ep);
-        let first = self.pending.first;
-        let split = first
-            + self.pending.samples[first..].partition_point(|n| (n.j as usize) / grid.s < target);
+        self.pending.samples.make_contiguous();
+        self.pending.values.make_contiguous();
+        let split = self
+            .pending
+            .samples
+            .as_slices()
+            .0
+            .partition_point(|n| (n.j as usize) / grid.s < target);
         // Accumulator rows down to the widest reach of this batch, and the
         // coarse rows reaching fine rows below that (and a spare; 4x row K
         // reaches fine rows 4K - 3 ..= 4K + 6); the batch's first scatter
@@ -249,7 +255,7 @@ impl GaussianStage {
             grow(&mut win.c4.acc, (need.div_ceil(4) + 1).min(h.div_ceil(4))),
         ]
         .map(Some);
-        let mut next = first;
+        let mut next = 0;
         loop {
             let c1 = self.chunk_end(bound, next, split);
             let (ep, win) = (
@@ -266,8 +272,8 @@ impl GaussianStage {
             );
             let region = crate::trace::region("search and place");
             let parts = place.run(
-                &mut self.pending.samples[next..c1],
-                &self.pending.values[next * nch..c1 * nch],
+                &self.pending.samples.as_slices().0[next..c1],
+                &self.pending.values.as_slices().0[next * nch..c1 * nch],
                 &region,
             );
             drop(region);
@@ -283,13 +289,8 @@ impl GaussianStage {
                 break;
             }
         }
-        let pending = &mut self.pending;
-        pending.first = split;
-        if 2 * split >= pending.samples.len() {
-            pending.samples.drain(..split);
-            pending.values.drain(..split * nch);
-            pending.first = 0;
-        }
+        self.pending.samples.drain(..split);
+        self.pending.values.drain(..split * nch);
     }
 }
 
@@ -334,28 +335,26 @@ impl<'a> SearchPlace<'a> {
     /// they cross an edge), in tasks of `region`. The parts in order.
     pub(super) fn run(
         &self,
-        samples: &mut [Noisy],
+        samples: &[Noisy],
         values: &[f64],
         region: &crate::trace::Span,
     ) -> Vec<Placed> {
         let (ctx, view) = (&self.ctx, &self.view);
         let (s, nch, ep) = (ctx.s, ctx.nch, ctx.ep);
         samples
-            .par_chunks_mut(SEARCH_TASK)
+            .par_chunks(SEARCH_TASK)
             .zip(values.par_chunks(SEARCH_TASK * nch))
             .map_init(
                 <(Folded, Vec<f64>)>::default,
                 |(fold, tmp), (samples, values)| {
                     let _task = region.task("search and place");
                     let mut part = Placed::default();
-                    for (n, x) in samples.iter_mut().zip(values.chunks_exact(nch)) {
+                    for (n, x) in samples.iter().zip(values.chunks_exact(nch)) {
                         let (px, py) = (n.i as usize / s, n.j as usize / s);
                         let c = ep.search_in(view, px, py, n.x0, n.xbar0, fold);
-                        n.level = c.level;
-                        n.capped = c.capped;
                         part.counts.search_cost += c.cost;
                         part.counts.bounded += u64::from(c.bounded);
-                        ctx.place(n, x, &mut part, tmp);
+                        ctx.place(n, &c, x, &mut part, tmp);
                     }
                     part
                 },
@@ -646,10 +645,8 @@ mod tests {
             j: y,
             x0: 1.0,
             xbar0: 0.0,
-            level: 0,
-            capped: false,
         };
-        st.pending.samples = vec![sample; n];
+        st.pending.samples = vec![sample; n].into();
         st
     }
 
