@@ -9,13 +9,13 @@ use std::sync::Arc;
 
 use crate::error::{Error, Result};
 use crate::filter::restore::{check_scale, DEFAULT_SCALE};
-use crate::host::peak_rss_bytes;
+use crate::host::{cpu_seconds, peak_rss_bytes};
 use crate::io::output::OutputLayout;
 use crate::io::{ExrInput, Format, OutputSettings};
 use crate::pipeline::counts::{MethodCounts, RestoreCounts};
 use crate::pipeline::ledger::ChannelLedger;
 use crate::pipeline::restore::{restore_planar, restore_stream};
-use crate::pipeline::{NonFinite, PipelineConfig, Precision, Progress, RunStats};
+use crate::pipeline::{NonFinite, PipelineConfig, Precision, Progress, RunStats, StageSeconds};
 
 use super::array::{interleaved, planar};
 use super::check_not_same_file;
@@ -95,6 +95,12 @@ pub struct RestoreReport {
     pub digest: String,
     /// Seconds of the run.
     pub seconds: f64,
+    /// Seconds each stage was busy: reading and decoding both inputs,
+    /// restoring, encoding and writing.
+    pub stage_seconds: StageSeconds,
+    /// CPU seconds (user + system) the run used, where the platform tells
+    /// it.
+    pub cpu_seconds: Option<f64>,
     /// Worker threads.
     pub threads: usize,
     /// The process's peak resident memory.
@@ -108,6 +114,7 @@ impl RestoreReport {
         scale: usize,
         stats: &RunStats,
         threads: usize,
+        cpu_start: Option<f64>,
     ) -> Self {
         let counts = match stats.method {
             MethodCounts::Restore(c) => c,
@@ -131,6 +138,8 @@ impl RestoreReport {
             nonfinite_zeroed: stats.nonfinite_zeroed.iter().sum(),
             digest: format!("{:016x}", stats.digest),
             seconds: stats.seconds,
+            stage_seconds: stats.stages,
+            cpu_seconds: cpu_seconds().zip(cpu_start).map(|(c, s)| c - s),
             threads,
             peak_rss_bytes: peak_rss_bytes(),
         }
@@ -210,6 +219,7 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
     let layout = OutputLayout::of(&energy, &channels, &settings);
     let mut output = layout.create(&job.output, false, 1, &channels, &settings)?;
     let cfg = config(job.threads, job.nonfinite, job.cancel.clone());
+    let cpu_start = cpu_seconds();
     let stats = restore_stream(
         energy.source(),
         denoised.source(),
@@ -240,6 +250,7 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
         scale,
         &stats,
         cfg.workers(),
+        cpu_start,
     ))
 }
 
@@ -268,6 +279,7 @@ pub fn restore_array(
         )));
     }
     let cfg = config(threads, nonfinite, cancel);
+    let cpu_start = cpu_seconds();
     let (out, stats) = restore_planar(
         planar(energy, w, nch),
         planar(denoised, w, nch),
@@ -286,6 +298,7 @@ pub fn restore_array(
         scale,
         &stats,
         cfg.workers(),
+        cpu_start,
     );
     Ok((inter, report))
 }
