@@ -9,7 +9,9 @@ For every `<scene>_px_<res>_spp<N>.exr` beside its `<scene>_ref_<res>.exr` in th
 * **epfilt then OIDN**: OIDN on epfilt's output;
 * **OIDN then restore**: `epfilt.restore` of OIDN's output with the render's energy, at its
   default scale (every 32 x 32 block and the total hold the render's energy), and the same at
-  other scales for the scale's trade.
+  other scales for the scale's trade;
+* **OIDN then restore onto epfilt**: the same with epfilt's output as the energy (its fireflies
+  already spread; its blocks are epfilt's, not the render's).
 
 Measures, each against the reference:
 
@@ -134,8 +136,11 @@ def main():
             denoised = oidn(inp)
             restored, rep = epfilt.restore(denoised, inp)
             row["restore_kept_share"] = rep["kept_share"]
+            onto_ep, rep = epfilt.restore(denoised, ep)
+            row["restore_ep_kept_share"] = rep["kept_share"]
             for name, img in (("oidn", denoised), ("epfilt", ep), ("ep_gauss", gauss),
-                              ("epfilt_oidn", oidn(ep)), ("oidn_restore", restored)):
+                              ("epfilt_oidn", oidn(ep)), ("oidn_restore", restored),
+                              ("oidn_restore_ep", onto_ep)):
                 for key, v in measures(img, inp, ref, top).items():
                     row[f"{name}_{key}"] = v
             for k in SCALES:
@@ -166,7 +171,8 @@ def main():
           "at its defaults (method and guides from the file; the method is named beside each input); "
           "ep-gauss: the same without the variance, as a render without a variance pass gets.\n", file=md)
     names = (("oidn", "OIDN"), ("epfilt", "epfilt"), ("ep_gauss", "ep-gauss"),
-             ("epfilt_oidn", "epfilt then OIDN"), ("oidn_restore", "OIDN then restore"))
+             ("epfilt_oidn", "epfilt then OIDN"), ("oidn_restore", "OIDN then restore"),
+             ("oidn_restore_ep", "OIDN then restore onto epfilt"))
     formats = {"error": "{:.3f}", "energy": "{:+.3%}", "peaks": "{:.2f}", "blocks": "{:.1%}",
                "peaks_in": "{:.2f}"}
     for key, title in (("error", "Error (relMSE over the input's)"), ("energy", "Energy moved"),
@@ -218,13 +224,21 @@ def main():
               f"{sum(x <= 1.2 for x in ratio)} of {len(ratio)} | {blocks:.1%} | {np.mean(pk):.1%} | "
               f"{max(pk):.0%} |", file=md)
     ratio = [r["oidn_restore_error"] / r["oidn_error"] for r in rows]
+    onto = [r["oidn_restore_ep_error"] / r["oidn_error"] for r in rows]
     print("\nAt the default scale, per render: error over OIDN's, peaks over the input's, and the "
-          "share of the energy kept in place (what OIDN lost: lamps, bulbs, highlights).\n", file=md)
-    print("| input | error over OIDN's | OIDN's peaks over the input's | restore's | kept in place |", file=md)
-    print("|---|---|---|---|---|", file=md)
-    for r, x in zip(rows, ratio):
+          "share of the energy kept in place (what OIDN lost: lamps, bulbs, highlights); then the "
+          "same with epfilt's output as the energy (its peaks over the input's).\n", file=md)
+    print("| input | error over OIDN's | OIDN's peaks over the input's | restore's | kept in place | "
+          "onto epfilt: error over OIDN's | peaks | kept in place |", file=md)
+    print("|---|---|---|---|---|---|---|---|", file=md)
+    for r, x, y in zip(rows, ratio, onto):
         print(f"| {r['input']} | {x:.2f}x | {r['oidn_peaks_in']:.2f} | {r['oidn_restore_peaks_in']:.2f} | "
-              f"{r['restore_kept_share']:.1%} |", file=md)
+              f"{r['restore_kept_share']:.1%} | {y:.2f}x | {r['oidn_restore_ep_peaks_in']:.2f} | "
+              f"{r['restore_ep_kept_share']:.1%} |", file=md)
+    for label, xs in (("the render's", ratio), ("epfilt's", onto)):
+        print(f"\nWith {label} energy: error over OIDN's geometric mean "
+              f"{np.exp(np.mean(np.log(xs))):.2f}x, worst {max(xs):.2f}x, "
+              f"{sum(x <= 1.2 for x in xs)} of {len(xs)} within 1.2x.", file=md)
     text = md.getvalue()
     with open(os.path.join(a.out, "oidn.md"), "w") as f:
         f.write(text)
