@@ -11,7 +11,8 @@ For every `<scene>_px_<res>_spp<N>.exr` beside its `<scene>_ref_<res>.exr` in th
   default scale (every 32 x 32 block and the total hold the render's energy), and the same at
   other scales for the scale's trade;
 * **OIDN then restore onto epfilt**: the same with epfilt's output as the energy (its fireflies
-  already spread; its blocks are epfilt's, not the render's).
+  already spread; its blocks are epfilt's, not the render's), at the keep gain `restore` takes
+  from such a file's header (`KEEP_GAIN_FILTERED`).
 
 Measures, each against the reference:
 
@@ -54,6 +55,9 @@ PEAK_SHARE = 1e-3
 BLOCK = 32
 # restore's scales whose trade the last table measures (block sides, pixels).
 SCALES = (8, 16, 32, 64, 128)
+# The keep gain `epfilt restore` takes where the energy image is epfilt's ep-gauss or ep-box
+# output (filter::restore::KEEP_GAIN_FILTERED; arrays carry no header to say so).
+KEEP_GAIN_FILTERED = 2.0
 # relMSE's floor in the denominator, as the renders evaluation has it.
 REL_EPS = 1e-2
 LUM = np.array([0.2126, 0.7152, 0.0722])
@@ -136,7 +140,7 @@ def main():
             denoised = oidn(inp)
             restored, rep = epfilt.restore(denoised, inp)
             row["restore_kept_share"] = rep["kept_share"]
-            onto_ep, rep = epfilt.restore(denoised, ep)
+            onto_ep, rep = epfilt.restore(denoised, ep, keep_gain=KEEP_GAIN_FILTERED)
             row["restore_ep_kept_share"] = rep["kept_share"]
             for name, img in (("oidn", denoised), ("epfilt", ep), ("ep_gauss", gauss),
                               ("epfilt_oidn", oidn(ep)), ("oidn_restore", restored),

@@ -441,12 +441,13 @@ fn read<'py>(
 
 /// A denoiser's output with the energy of `energy` put back; see the stub.
 #[pyfunction]
-#[pyo3(signature = (denoised, energy, scale=None, *, channels=None, threads=0, nonfinite="error"))]
+#[pyo3(signature = (denoised, energy, scale=None, *, keep_gain=None, channels=None, threads=0, nonfinite="error"))]
 fn restore<'py>(
     py: Python<'py>,
     denoised: &Bound<'py, PyAny>,
     energy: &Bound<'py, PyAny>,
     scale: Option<usize>,
+    keep_gain: Option<f64>,
     channels: Option<Vec<String>>,
     threads: usize,
     nonfinite: &str,
@@ -472,7 +473,7 @@ fn restore<'py>(
             &e,
             (w, h),
             &channels,
-            scale,
+            (scale, keep_gain),
             threads,
             nonfinite,
             Some(cancel),

@@ -363,3 +363,9 @@ def test_restore_puts_the_energy_back_at_any_thread_count():
         epfilt.restore(denoised, bad)
     _, rep = epfilt.restore(denoised, bad, nonfinite="zero")
     assert rep["nonfinite_zeroed"] == 1
+    # Arrays say nothing of how they were made: the render's gain unless told.
+    assert report["keep_gain"] == 16.0
+    _, low = epfilt.restore(denoised, energy, 8, keep_gain=2.0)
+    assert low["keep_gain"] == 2.0 and low["kept_share"] >= report["kept_share"]
+    with pytest.raises(epfilt.ConfigError):
+        epfilt.restore(denoised, energy, keep_gain=0.5)

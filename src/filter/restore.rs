@@ -20,11 +20,48 @@
 //!    it makes every block's energy, and so the total, `e`'s to the rounding
 //!    of f64 sums. A block where the denoiser has no light keeps `e`.
 
-/// Most one pixel's energy may exceed what the denoiser put around it
+/// Most one pixel of a render may exceed what the denoiser put around it
 /// before the excess is kept in place: sixteen times the denoiser's energy
 /// there, weighted by the kernel's centre (a lamp the denoiser dimmed is
-/// thousands of times over; grain in the energy image stays below it).
+/// thousands of times over; a render's fireflies, which the denoiser
+/// rightly removed, mostly stay below it).
 pub const KEEP_GAIN: f64 = 16.0;
+
+/// The same for an energy image epfilt's ep-gauss or ep-box made: its
+/// fireflies are already spread, so what still exceeds twice the
+/// denoiser's is a feature the denoiser dimmed (bulbs' cores, lamps), kept
+/// in place instead of scaling the block around it (docs/bench/oidn.md).
+pub const KEEP_GAIN_FILTERED: f64 = 2.0;
+
+/// The gains `--keep-gain` takes: at least one (below, the denoiser's own
+/// energy would be kept), at most a million (above, nothing is kept).
+pub const KEEP_GAIN_RANGE: std::ops::RangeInclusive<f64> = 1.0..=1e6;
+
+/// What a restore is asked for: the blocks' side and the keep gain.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RestoreParams {
+    /// The side of the blocks whose energy is kept, pixels.
+    pub scale: usize,
+    /// [`KEEP_GAIN`] or [`KEEP_GAIN_FILTERED`], or the user's.
+    pub keep_gain: f64,
+}
+
+impl RestoreParams {
+    /// Checked: the scale by [`check_scale`], the gain within
+    /// [`KEEP_GAIN_RANGE`].
+    pub fn check(self) -> Result<Self, String> {
+        check_scale(self.scale)?;
+        if !KEEP_GAIN_RANGE.contains(&self.keep_gain) {
+            return Err(format!(
+                "--keep-gain must be from {} to {}, not {}",
+                KEEP_GAIN_RANGE.start(),
+                KEEP_GAIN_RANGE.end(),
+                self.keep_gain
+            ));
+        }
+        Ok(self)
+    }
+}
 
 /// The standard deviation (pixels) of the Gaussian that measures what the
 /// denoiser put around a pixel: a few pixels, the size of the features a
@@ -97,24 +134,24 @@ pub fn shape(d: f32) -> f64 {
 /// The part of energy `e` kept in place, where the denoiser's own value is
 /// `own` and `q()` measures what it put around (the shape under the 2-D
 /// kernel whose centre weight is `centre`, so `q >= centre own`): nothing
-/// within [`KEEP_GAIN`] times the denoiser's own value (then within it of
+/// within `gain` times the denoiser's own value (then within it of
 /// its share around, and `q` is never measured: the common case), else the
 /// excess over that gain on its share around, all of it where the denoiser
 /// has nothing, and negative energy (a render's rare negative samples:
 /// nothing to scale a shape by).
 #[inline]
-pub fn kept(e: f64, own: f64, q: impl FnOnce() -> f64, centre: f64) -> f64 {
+pub fn kept(e: f64, own: f64, q: impl FnOnce() -> f64, centre: f64, gain: f64) -> f64 {
     if e <= 0.0 {
         return e;
     }
-    if e <= KEEP_GAIN * own {
+    if e <= gain * own {
         return 0.0;
     }
     let q = q();
     if q <= 0.0 {
         return e;
     }
-    (e - KEEP_GAIN * q / centre).max(0.0)
+    (e - gain * q / centre).max(0.0)
 }
 
 /// Where pixel `p` of a line `n` long lies between the centres of blocks
@@ -366,13 +403,34 @@ mod tests {
     #[test]
     fn kept_is_the_excess_over_the_denoisers_share() {
         let never = || -> f64 { panic!("q measured where the own value settles it") };
-        assert_eq!(kept(1.0, 1.0, never, 0.04), 0.0);
-        assert_eq!(kept(-2.0, 1.0, never, 0.04), -2.0);
-        assert_eq!(kept(3.0, 0.0, || 0.0, 0.04), 3.0);
+        let g = KEEP_GAIN;
+        assert_eq!(kept(1.0, 1.0, never, 0.04, g), 0.0);
+        assert_eq!(kept(-2.0, 1.0, never, 0.04, g), -2.0);
+        assert_eq!(kept(3.0, 0.0, || 0.0, 0.04, g), 3.0);
         // A lamp the denoiser dimmed to a glow: q around, little of its own.
-        let l = kept(1000.0, 0.5, || 0.05, 0.04);
-        assert!((l - (1000.0 - KEEP_GAIN * 0.05 / 0.04)).abs() < SUM_TOL * 1000.0);
-        assert_eq!(kept(10.0, 0.5, || 1.0, 0.04), 0.0);
+        let l = kept(1000.0, 0.5, || 0.05, 0.04, g);
+        assert!((l - (1000.0 - g * 0.05 / 0.04)).abs() < SUM_TOL * 1000.0);
+        assert_eq!(kept(10.0, 0.5, || 1.0, 0.04, g), 0.0);
+        // A bulb's core at five times the denoiser's: within the render's
+        // gain, kept over an epfilt output's.
+        assert_eq!(kept(5.0, 1.0, never, 0.04, g), 0.0);
+        let l = kept(5.0, 1.0, || 0.06, 0.04, KEEP_GAIN_FILTERED);
+        assert!((l - (5.0 - KEEP_GAIN_FILTERED * 0.06 / 0.04)).abs() < SUM_TOL * 5.0);
+    }
+
+    #[test]
+    fn params_check_the_scale_and_the_gain() {
+        let p = |scale, keep_gain| RestoreParams { scale, keep_gain }.check();
+        assert!(p(32, KEEP_GAIN).is_ok() && p(2, 1.0).is_ok() && p(4096, 1e6).is_ok());
+        for (scale, gain) in [
+            (1, 16.0),
+            (32, 0.5),
+            (32, f64::NAN),
+            (32, f64::INFINITY),
+            (32, 2e6),
+        ] {
+            assert!(p(scale, gain).is_err(), "{scale} {gain}");
+        }
     }
 
     /// On a smooth shape the fixed field reaches every block's target

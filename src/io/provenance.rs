@@ -170,6 +170,28 @@ fn one_line(e: &Error) -> String {
     crate::error::one_line(e)
 }
 
+/// The method of epfilt's `filter` that made `input`, read from the
+/// software attribute it writes (`epfilt VERSION (method=NAME ...)`): `None`
+/// for any other file, and for a Radiance picture (whose `SOFTWARE=` line is
+/// not read).
+pub fn filtered_by(input: &super::ExrInput) -> Option<String> {
+    let software = input
+        .header()
+        .own_attributes
+        .software_name
+        .as_ref()?
+        .to_string();
+    let settings = software
+        .strip_prefix("epfilt ")?
+        .split_once(" (")?
+        .1
+        .strip_suffix(')')?;
+    settings
+        .split_whitespace()
+        .find_map(|kv| kv.strip_prefix("method="))
+        .map(str::to_string)
+}
+
 /// The text of [`BAND_LEDGER`] (zeros where no sums are given yet: the
 /// header is written with it and filled in, same length, at the end).
 pub fn band_ledger_text(names: &[String], energy_in: &[f64], energy_out: &[f64]) -> String {

@@ -8,7 +8,7 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use crate::error::{Error, Result};
-use crate::filter::restore::{check_scale, DEFAULT_SCALE};
+use crate::filter::restore::{RestoreParams, DEFAULT_SCALE, KEEP_GAIN, KEEP_GAIN_FILTERED};
 use crate::host::{cpu_seconds, peak_rss_bytes};
 use crate::io::output::OutputLayout;
 use crate::io::{ExrInput, Format, OutputSettings};
@@ -36,6 +36,9 @@ pub struct RestoreJob {
     pub output: PathBuf,
     /// The side of the blocks whose energy is kept, pixels.
     pub scale: usize,
+    /// The keep gain (`None`: [`KEEP_GAIN_FILTERED`] where `energy` is
+    /// epfilt's ep-gauss or ep-box output, else [`KEEP_GAIN`]).
+    pub keep_gain: Option<f64>,
     /// Worker threads (0: one per core).
     pub threads: usize,
     /// What to do with non-finite energy values.
@@ -58,6 +61,7 @@ impl RestoreJob {
             energy: energy.into(),
             output: output.into(),
             scale: DEFAULT_SCALE,
+            keep_gain: None,
             threads: 0,
             nonfinite: NonFinite::Error,
             output_settings: OutputSettings::default(),
@@ -82,6 +86,12 @@ pub struct RestoreReport {
     pub height: usize,
     /// The side of the blocks whose energy is kept, pixels.
     pub scale: usize,
+    /// The keep gain, and what chose it: `--keep-gain`, the energy image
+    /// being epfilt's output of a method that spreads fireflies, or a
+    /// render.
+    pub keep_gain: f64,
+    /// What chose [`Self::keep_gain`].
+    pub keep_gain_from: String,
     /// Per channel: the energy image's total, the result's, their relative
     /// difference (before and after rounding).
     pub ledger: Vec<ChannelLedger>,
@@ -111,7 +121,7 @@ impl RestoreReport {
     fn of(
         job: (&str, &str, &str),
         (w, h): (usize, usize),
-        scale: usize,
+        (params, keep_gain_from): (RestoreParams, String),
         stats: &RunStats,
         threads: usize,
         cpu_start: Option<f64>,
@@ -127,7 +137,9 @@ impl RestoreReport {
             output: job.2.into(),
             width: w,
             height: h,
-            scale,
+            scale: params.scale,
+            keep_gain: params.keep_gain,
+            keep_gain_from,
             ledger: stats.ledger.clone(),
             kept_share: if mass > 0.0 {
                 counts.kept_energy / mass
@@ -167,9 +179,20 @@ fn config(threads: usize, nonfinite: NonFinite, cancel: Option<Arc<AtomicBool>>)
     }
 }
 
+/// The methods of `filter` whose output has its fireflies spread: an energy
+/// image they made takes [`KEEP_GAIN_FILTERED`].
+const SPREADS_FIREFLIES: [&str; 2] = ["ep-gauss", "ep-box"];
+
 /// Restore `job.denoised` with `job.energy`'s energy into `job.output`.
 pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreReport> {
-    let scale = check_scale(job.scale).map_err(Error::Config)?;
+    // Both checked before anything is read.
+    let asked = RestoreParams {
+        scale: job.scale,
+        keep_gain: job.keep_gain.unwrap_or(KEEP_GAIN),
+    }
+    .check()
+    .map_err(Error::Config)?;
+    let scale = asked.scale;
     check_not_same_file(&job.energy, &job.output)?;
     check_not_same_file(&job.denoised, &job.output)?;
     // OpenEXR only (`-`: to standard output): a Radiance picture would
@@ -183,6 +206,17 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
     )?;
     let energy = ExrInput::open(&job.energy, None)?;
     let denoised = ExrInput::open(&job.denoised, None)?;
+    let (keep_gain, keep_gain_from) = match job.keep_gain {
+        Some(g) => (g, "--keep-gain".to_string()),
+        None => match crate::io::provenance::filtered_by(&energy) {
+            Some(m) if SPREADS_FIREFLIES.contains(&m.as_str()) => (
+                KEEP_GAIN_FILTERED,
+                format!("the energy image is epfilt's {m} output"),
+            ),
+            _ => (KEEP_GAIN, "the energy image is a render".to_string()),
+        },
+    };
+    let params = RestoreParams { scale, keep_gain };
     let (size, channels) = (energy.size(), energy.channels());
     let mismatch = |what: String| Error::Value {
         path: job.denoised.clone(),
@@ -206,7 +240,7 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
         )));
     }
     let provenance = format!(
-        "restore scale={scale} denoised={}",
+        "restore scale={scale} keep_gain={keep_gain} denoised={}",
         job.denoised
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
@@ -227,7 +261,7 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
         size,
         channels,
         energy.luminance(),
-        scale,
+        params,
         &cfg,
         progress,
     )
@@ -247,7 +281,7 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
             &job.output.display().to_string(),
         ),
         size,
-        scale,
+        (params, keep_gain_from),
         &stats,
         cfg.workers(),
         cpu_start,
@@ -263,11 +297,21 @@ pub fn restore_array(
     energy: &[f32],
     (w, h): (usize, usize),
     channels: &[String],
-    scale: usize,
+    (scale, keep_gain): (usize, Option<f64>),
     threads: usize,
     nonfinite: NonFinite,
     cancel: Option<Arc<AtomicBool>>,
 ) -> Result<(Vec<f32>, RestoreReport)> {
+    let (keep_gain, keep_gain_from) = match keep_gain {
+        Some(g) => (g, "keep_gain"),
+        None => (
+            KEEP_GAIN,
+            "the energy image is a render (arrays say nothing else)",
+        ),
+    };
+    let params = RestoreParams { scale, keep_gain }
+        .check()
+        .map_err(Error::Config)?;
     let nch = channels.len();
     let n = w.checked_mul(h).and_then(|p| p.checked_mul(nch));
     if n != Some(denoised.len()) || n != Some(energy.len()) {
@@ -286,7 +330,7 @@ pub fn restore_array(
         (w, h),
         channels.to_vec(),
         vec![0.0; nch],
-        scale,
+        params,
         &cfg,
         Precision::F32,
     )?;
@@ -295,7 +339,7 @@ pub fn restore_array(
     let report = RestoreReport::of(
         ("<array>", "<array>", "<array>"),
         (w, h),
-        scale,
+        (params, keep_gain_from.to_string()),
         &stats,
         cfg.workers(),
         cpu_start,

@@ -33,7 +33,7 @@ use super::{
 };
 use crate::error::{Error, Result};
 use crate::filter::restore::{
-    check_scale, kept, reflect, shape, taps, FieldRows, KEEP_SIGMA, LOOKAHEAD,
+    kept, reflect, shape, taps, FieldRows, RestoreParams, KEEP_SIGMA, LOOKAHEAD,
 };
 use crate::geometry::{Grid, Halo};
 
@@ -45,6 +45,8 @@ struct Kept {
     taps: Vec<f64>,
     /// The 2-D kernel's centre weight.
     centre: f64,
+    /// The keep gain.
+    gain: f64,
     /// Per row whose column is in: `l`, `[channel][x]`, and whether the row
     /// has any (most have none).
     kept_rows: RowWindow<f64>,
@@ -53,12 +55,13 @@ struct Kept {
 }
 
 impl Kept {
-    fn new(nch: usize, w: usize, h: usize) -> Self {
+    fn new(nch: usize, w: usize, h: usize, gain: f64) -> Self {
         let taps = taps(KEEP_SIGMA);
         Kept {
             nch,
             w,
             h,
+            gain,
             centre: taps[taps.len() / 2].powi(2),
             taps,
             kept_rows: RowWindow::new(nch * w),
@@ -84,7 +87,7 @@ impl Kept {
         for _ in a..b {
             self.kept_rows.push_stale(0.0);
         }
-        let (taps, centre) = (&self.taps, self.centre);
+        let (taps, centre, gain) = (&self.taps, self.centre, self.gain);
         let mut rows = self.kept_rows.range_mut(a, b);
         let per_row: Vec<(bool, RestoreCounts)> = rows
             .par_iter_mut()
@@ -101,7 +104,7 @@ impl Kept {
                     for x in 0..w {
                         let ev = f64::from(e[x]);
                         let q = || around(input, (x, y), (w, h), (nch + ch) * w, taps);
-                        l[x] = kept(ev, shape(d[x]), q, centre);
+                        l[x] = kept(ev, shape(d[x]), q, centre, gain);
                         if l[x] != 0.0 {
                             any = true;
                             c.count(ev, l[x] == ev);
@@ -181,14 +184,17 @@ pub struct RestoreStage {
 }
 
 impl RestoreStage {
-    /// The stage for `nch` channels of a `w x h` image in blocks of `scale`.
-    pub fn new(nch: usize, w: usize, h: usize, scale: usize) -> Self {
+    /// The stage for `nch` channels of a `w x h` image, blocks of
+    /// `params.scale`, its keep gain.
+    pub fn new(nch: usize, w: usize, h: usize, params: RestoreParams) -> Self {
         RestoreStage {
             nch,
             w,
             h,
-            kept: Kept::new(nch, w, h),
-            fields: (0..nch).map(|_| FieldRows::new(w, h, scale)).collect(),
+            kept: Kept::new(nch, w, h, params.keep_gain),
+            fields: (0..nch)
+                .map(|_| FieldRows::new(w, h, params.scale))
+                .collect(),
             summed: 0,
             out: RowWindow::new(nch * w),
             unshaped_blocks: 0,
@@ -390,8 +396,8 @@ impl Stage for RestoreStage {
     }
 }
 
-/// Restore the denoiser's output with the energy image's energy at blocks
-/// of `scale` into `sink`: both `w x h` with `channels` (`luminance`: their
+/// Restore the denoiser's output with the energy image's energy by
+/// `params` into `sink`: both `w x h` with `channels` (`luminance`: their
 /// weights, for the layout); the books' ledger counts `energy`.
 #[allow(clippy::too_many_arguments)]
 pub fn restore_stream<A: Source, B: Source, K: Sink>(
@@ -401,7 +407,7 @@ pub fn restore_stream<A: Source, B: Source, K: Sink>(
     (w, h): (usize, usize),
     channels: Vec<String>,
     luminance: Vec<f64>,
-    scale: usize,
+    params: RestoreParams,
     cfg: &PipelineConfig,
     progress: Progress<'_>,
 ) -> Result<RunStats> {
@@ -411,7 +417,7 @@ pub fn restore_stream<A: Source, B: Source, K: Sink>(
             "restore needs a non-empty image of 1..={MAX_CHANNELS} channels, not {w}x{h} of {nch}"
         )));
     }
-    let scale = check_scale(scale).map_err(Error::Config)?;
+    let params = params.check().map_err(Error::Config)?;
     let grid = Grid {
         in_w: w,
         in_h: h,
@@ -419,7 +425,7 @@ pub fn restore_stream<A: Source, B: Source, K: Sink>(
     };
     let mut layout = StripLayout::new(grid, channels.clone(), luminance);
     layout.aux = channels.iter().map(|c| format!("denoised.{c}")).collect();
-    let stage = RestoreStage::new(nch, w, h, scale);
+    let stage = RestoreStage::new(nch, w, h, params);
     let streamer = Streamer::of_stage(
         &layout,
         Box::new(stage),
@@ -439,7 +445,7 @@ pub fn restore_planar(
     (w, h): (usize, usize),
     channels: Vec<String>,
     luminance: Vec<f64>,
-    scale: usize,
+    params: RestoreParams,
     cfg: &PipelineConfig,
     precision: Precision,
 ) -> Result<(Vec<f32>, RunStats)> {
@@ -461,7 +467,7 @@ pub fn restore_planar(
         (w, h),
         channels,
         luminance,
-        scale,
+        params,
         cfg,
         &|_, _| {},
     )?;
@@ -471,6 +477,7 @@ pub fn restore_planar(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::filter::restore::KEEP_GAIN;
     use crate::pipeline::RunStats;
 
     /// What a restore's ledger balances to (see the job's limit).
@@ -521,7 +528,10 @@ mod tests {
             (w, h),
             names,
             vec![0.0; nch],
-            scale,
+            RestoreParams {
+                scale,
+                keep_gain: KEEP_GAIN,
+            },
             cfg,
             Precision::F32,
         )
@@ -587,7 +597,10 @@ mod tests {
             (w, h),
             vec!["Y".into()],
             vec![1.0],
-            4,
+            RestoreParams {
+                scale: 4,
+                keep_gain: KEEP_GAIN,
+            },
             &PipelineConfig::default(),
             Precision::F32,
         )

@@ -165,3 +165,70 @@ fn restore_refuses_nan_energy_unless_told_and_keeps_what_the_denoiser_lacks() {
     }
     assert_eq!(std::fs::read(&e).unwrap(), before, "the input was touched");
 }
+
+#[test]
+fn restore_keeps_more_in_place_over_epfilts_output_and_takes_keep_gain() {
+    let dir = tmpdir();
+    let (e, d, ep, out) = (
+        dir.path().join("e.exr"),
+        dir.path().join("d.exr"),
+        dir.path().join("ep.exr"),
+        dir.path().join("o.exr"),
+    );
+    write(&e, (40, 30), render);
+    write(&d, (40, 30), denoised);
+    let o = epfilt_run(&[
+        "filter",
+        e.to_str().unwrap(),
+        ep.to_str().unwrap(),
+        "--method",
+        "ep-gauss",
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rep = dir.path().join("r.json");
+    let run = |energy: &std::path::Path, extra: &[&str]| {
+        let mut args = vec!["--report", rep.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        let o = restore(&d, energy, &out, &args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let r = read_json(&rep);
+        for l in r["ledger"].as_array().unwrap() {
+            assert!(l["rel_error"].as_f64().unwrap() <= LEDGER_TOL, "{l}");
+        }
+        r
+    };
+    // A render: the render's gain; epfilt's ep-gauss output, read from its
+    // header: the lower one; the user's, whatever the energy image.
+    let r = run(&e, &[]);
+    assert_eq!(r["keep_gain"], 16.0);
+    assert!(
+        r["keep_gain_from"].as_str().unwrap().contains("render"),
+        "{r}"
+    );
+    let r = run(&ep, &[]);
+    assert_eq!(r["keep_gain"], 2.0);
+    assert!(
+        r["keep_gain_from"].as_str().unwrap().contains("ep-gauss"),
+        "{r}"
+    );
+    let high = run(&e, &[]);
+    let low = run(&e, &["--keep-gain", "2"]);
+    assert_eq!(low["keep_gain_from"], "--keep-gain");
+    // A lower gain keeps at least as much of the same render in place.
+    assert!(
+        low["kept_share"].as_f64().unwrap() >= high["kept_share"].as_f64().unwrap(),
+        "{low} {high}"
+    );
+    std::fs::remove_file(&out).unwrap();
+    for bad in ["0.5", "nan", "2e6"] {
+        let o = restore(&d, &e, &out, &["--keep-gain", bad]);
+        assert_eq!(
+            o.status.code(),
+            Some(2),
+            "{bad}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(!out.exists(), "{bad}");
+    }
+}

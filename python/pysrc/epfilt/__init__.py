@@ -94,14 +94,18 @@ def filter_file(input, output, *, progress=None, **settings):
     return _epfilt.filter_file(str(input), str(output), progress=progress, **settings)
 
 
-def restore(denoised, energy, scale=None, *, channels=None, threads=0, nonfinite="error"):
+def restore(denoised, energy, scale=None, *, keep_gain=None, channels=None, threads=0,
+            nonfinite="error"):
     """A denoiser's output with ``energy``'s energy put back, and the report.
 
     ``denoised`` is any denoiser's output (OIDN, OptiX, ...) and ``energy`` the image
     whose energy is right (the render, or ``filter``'s output of it), both float32 or
     float16 arrays of the same shape (height, width, channels). Where one pixel of
     ``energy`` holds far more than the denoiser put around it (a lamp it dimmed), the
-    excess stays in place (report ``counts``, ``kept_share``); the rest is carried by the
+    excess stays in place (report ``counts``, ``kept_share``): over ``keep_gain`` times,
+    16 by default (a render: its fireflies, which the denoiser rightly removed, stay
+    below it); pass ``keep_gain=2`` where ``energy`` is ``filter``'s ep-gauss or ep-box
+    output (its fireflies already spread: bulbs and lamps come back). The rest is carried by the
     denoiser's picture times a smooth field, so that every block of ``scale`` x ``scale``
     pixels (default 32) and the total (report ``ledger``) hold ``energy``'s energy exactly.
     ``nonfinite``: "error" refuses NaN or infinite energy values, "zero" counts them as
@@ -114,7 +118,8 @@ def restore(denoised, energy, scale=None, *, channels=None, threads=0, nonfinite
         denoised = pyoidn.denoise(render, hdr=True, quality="high")
         restored, report = epfilt.restore(np.asarray(denoised, np.float32), render)
     """
-    return _epfilt.restore(denoised, energy, scale, channels=channels, threads=threads, nonfinite=nonfinite)
+    return _epfilt.restore(denoised, energy, scale, keep_gain=keep_gain, channels=channels,
+                           threads=threads, nonfinite=nonfinite)
 
 
 def info(path):

@@ -39,6 +39,7 @@ def restore(
     energy: _Samples,
     scale: Optional[int] = None,
     *,
+    keep_gain: Optional[float] = None,
     channels: Optional[Sequence[str]] = None,
     threads: int = 0,
     nonfinite: str = "error",

@@ -177,6 +177,7 @@ fn restore(a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
     let nonfinite = epfilt::pipeline::NonFinite::parse(&a.nonfinite).map_err(usage)?;
     let mut job = epfilt::RestoreJob::new(&a.denoised, &a.energy, &a.output);
     job.scale = a.scale;
+    job.keep_gain = a.keep_gain;
     job.threads = capped_threads(a.threads);
     job.nonfinite = nonfinite;
     job.cancel = Some(cancel);
@@ -200,13 +201,15 @@ fn restore(a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
     if !a.quiet {
         let worst = r.ledger.iter().map(|l| l.rel_error).fold(0.0, f64::max);
         eprintln!(
-            "{}: {}x{} restored in blocks of {} in {:.2} s; energy exact to {worst:.1e}; {:.2}% of it kept in place where the denoiser had too little ({} pixel channels, {} empty)",
+            "{}: {}x{} restored in blocks of {} in {:.2} s; energy exact to {worst:.1e}; {:.2}% of it kept in place where it was over {} times what the denoiser put around it ({}; {} pixel channels, {} empty)",
             r.output,
             r.width,
             r.height,
             r.scale,
             r.seconds,
             100.0 * r.kept_share,
+            r.keep_gain,
+            r.keep_gain_from,
             r.counts.kept,
             r.counts.unshaped
         );
