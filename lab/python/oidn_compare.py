@@ -57,7 +57,7 @@ BLOCK = 32
 SCALES = (8, 16, 32, 64, 128)
 # The keep gain `epfilt restore` takes where the energy image is epfilt's ep-gauss or ep-box
 # output (filter::restore::KEEP_GAIN_FILTERED; arrays carry no header to say so).
-KEEP_GAIN_FILTERED = 2.0
+KEEP_GAIN_FILTERED = 1.0
 # relMSE's floor in the denominator, as the renders evaluation has it.
 REL_EPS = 1e-2
 LUM = np.array([0.2126, 0.7152, 0.0722])

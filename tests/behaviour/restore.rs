@@ -207,7 +207,7 @@ fn restore_keeps_more_in_place_over_epfilts_output_and_takes_keep_gain() {
         "{r}"
     );
     let r = run(&ep, &[]);
-    assert_eq!(r["keep_gain"], 2.0);
+    assert_eq!(r["keep_gain"], 1.0);
     assert!(
         r["keep_gain_from"].as_str().unwrap().contains("ep-gauss"),
         "{r}"

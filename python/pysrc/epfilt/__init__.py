@@ -104,7 +104,7 @@ def restore(denoised, energy, scale=None, *, keep_gain=None, channels=None, thre
     ``energy`` holds far more than the denoiser put around it (a lamp it dimmed), the
     excess stays in place (report ``counts``, ``kept_share``): over ``keep_gain`` times,
     16 by default (a render: its fireflies, which the denoiser rightly removed, stay
-    below it); pass ``keep_gain=2`` where ``energy`` is ``filter``'s ep-gauss or ep-box
+    below it); pass ``keep_gain=1`` where ``energy`` is ``filter``'s ep-gauss or ep-box
     output (its fireflies already spread: bulbs and lamps come back). The rest is carried by the
     denoiser's picture times a smooth field, so that every block of ``scale`` x ``scale``
     pixels (default 32) and the total (report ``ledger``) hold ``energy``'s energy exactly.

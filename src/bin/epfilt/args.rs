@@ -162,7 +162,7 @@ the light; the energy image (the render, or epfilt's output of it: same size
 and channels) says how much there is. Where one pixel of the energy image
 holds far more than the denoiser put around it (a lamp or a highlight the
 denoiser dimmed), the excess stays in place: over 16 times on a render, over
-twice on epfilt's ep-gauss or ep-box output (its fireflies already spread; read
+once on epfilt's ep-gauss or ep-box output (its fireflies already spread; read
 from its header), or --keep-gain. The rest is carried by the
 denoiser's picture times a smooth field, solved so that every block of
 --scale x --scale pixels (from the top left) holds the energy image's energy.
@@ -183,7 +183,7 @@ pub struct RestoreArgs {
     #[arg(long, default_value_t = epfilt::filter::restore::DEFAULT_SCALE)]
     pub scale: usize,
     /// Keep a pixel's energy in place where it is over this many times what
-    /// the denoiser put around it (1 to 1e6) [default: 2 where the energy
+    /// the denoiser put around it (1 to 1e6) [default: 1 where the energy
     /// image is epfilt's ep-gauss or ep-box output, else 16].
     #[arg(long)]
     pub keep_gain: Option<f64>,
