@@ -440,6 +440,8 @@ fn read<'py>(
 }
 
 /// A denoiser's output with the energy of `energy` put back; see the stub.
+/// (Python's keyword arguments, one each.)
+#[allow(clippy::too_many_arguments)]
 #[pyfunction]
 #[pyo3(signature = (denoised, energy, scale=None, *, keep_gain=None, channels=None, threads=0, nonfinite="error"))]
 fn restore<'py>(
