@@ -171,16 +171,15 @@ fn one_line(e: &Error) -> String {
 }
 
 /// The method of epfilt's `filter` that made `input`, read from the
-/// software attribute it writes (`epfilt VERSION (method=NAME ...)`): `None`
-/// for any other file, and for a Radiance picture (whose `SOFTWARE=` line is
-/// not read).
+/// software attribute it writes: `None` for any other file, and for a
+/// Radiance picture (whose `SOFTWARE=` line is not read).
 pub fn filtered_by(input: &super::ExrInput) -> Option<String> {
-    let software = input
-        .header()
-        .own_attributes
-        .software_name
-        .as_ref()?
-        .to_string();
+    let software = input.header().own_attributes.software_name.as_ref()?;
+    method_of(&software.to_string())
+}
+
+/// The `method=` of epfilt's software text, `epfilt VERSION (settings)`.
+fn method_of(software: &str) -> Option<String> {
     let settings = software
         .strip_prefix("epfilt ")?
         .split_once(" (")?
@@ -222,6 +221,21 @@ pub fn parse_band_ledger(text: &str) -> Option<Vec<(String, f64, f64)>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_method_comes_from_epfilts_own_software_text_only() {
+        let text = |m: &str| format!("epfilt 0.1.0 (method={m} supersample=1 tolerance=0.08)");
+        assert_eq!(method_of(&text("ep-gauss")).as_deref(), Some("ep-gauss"));
+        assert_eq!(method_of(&text("ep-box")).as_deref(), Some("ep-box"));
+        // restore's own output, another program's, and a torn text.
+        assert_eq!(
+            method_of("epfilt 0.1.0 (restore scale=32 keep_gain=16)"),
+            None
+        );
+        assert_eq!(method_of("Blender 4.2 (method=ep-gauss)"), None);
+        assert_eq!(method_of("epfilt 0.1.0 (method=ep-gauss"), None);
+        assert_eq!(method_of("epfilt 0.1.0"), None);
+    }
 
     #[test]
     fn fingerprints_round_trip_and_tell_inputs_apart() {
