@@ -67,6 +67,12 @@ impl Method {
         !matches!(self, Method::Clamp | Method::Median | Method::AlphaTrim)
     }
 
+    /// Whether the method spreads noisy samples (fireflies) rather than
+    /// blurring or dropping them: its output holds no fireflies to keep out.
+    pub fn spreads_noise(self) -> bool {
+        matches!(self, Method::EpGauss | Method::EpBox)
+    }
+
     /// Every method, in the order of the docs.
     pub const ALL: [Method; 7] = [
         Method::EpGauss,

@@ -9,6 +9,7 @@ use std::sync::Arc;
 
 use crate::error::{Error, Result};
 use crate::filter::restore::{RestoreParams, DEFAULT_SCALE, KEEP_GAIN, KEEP_GAIN_FILTERED};
+use crate::filter::Method;
 use crate::host::{cpu_seconds, peak_rss_bytes};
 use crate::io::output::OutputLayout;
 use crate::io::{ExrInput, Format, OutputSettings};
@@ -179,10 +180,6 @@ fn config(threads: usize, nonfinite: NonFinite, cancel: Option<Arc<AtomicBool>>)
     }
 }
 
-/// The methods of `filter` whose output has its fireflies spread: an energy
-/// image they made takes [`KEEP_GAIN_FILTERED`].
-const SPREADS_FIREFLIES: [&str; 2] = ["ep-gauss", "ep-box"];
-
 /// Restore `job.denoised` with `job.energy`'s energy into `job.output`.
 pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreReport> {
     // Both checked before anything is read.
@@ -209,7 +206,7 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
     let (keep_gain, keep_gain_from) = match job.keep_gain {
         Some(g) => (g, "--keep-gain".to_string()),
         None => match crate::io::provenance::filtered_by(&energy) {
-            Some(m) if SPREADS_FIREFLIES.contains(&m.as_str()) => (
+            Some(m) if Method::parse(&m).is_ok_and(Method::spreads_noise) => (
                 KEEP_GAIN_FILTERED,
                 format!("the energy image is epfilt's {m} output"),
             ),
