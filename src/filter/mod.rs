@@ -223,6 +223,26 @@ pub fn halo(p: &FilterParams) -> crate::geometry::Halo {
     }
 }
 
+/// ep-gauss at S > 1: cells either side that its spread writes on the
+/// output grid and on the 2x and 4x coarse ones
+/// ([`ep_gauss::EpGauss::grid_reach`]; the ladder is built, as the stage
+/// builds it); the spread's reach on the output grid for the others.
+pub fn grid_reaches(p: &FilterParams) -> [usize; 3] {
+    if p.method != Method::EpGauss || p.supersample <= 1 {
+        return [halo(p).spread_reach, 0, 0];
+    }
+    let ep = ep_gauss::EpGauss::new(
+        p.supersample,
+        p.radius,
+        p.max_radius,
+        p.cutoff,
+        p.tolerance,
+        p.width_step,
+    )
+    .with_coarse(p.coarse_from);
+    [1, 2, 4].map(|f| ep.grid_reach(f))
+}
+
 /// Rows a band's window must start on a multiple of (output rows), so
 /// that what the stage computes on a grid fixed by the image is the whole
 /// image's there: the 4x coarse grid (`--coarse-from`), and the blocks of

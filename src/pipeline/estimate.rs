@@ -273,17 +273,17 @@ fn estimate_with(
         .saturating_mul(job.strip_channels() as u64)
         .saturating_mul(4);
     let out_row = ow.saturating_mul(nch).saturating_mul(8);
-    let lag = (halo.lag() + halo.spread_reach) as u64 + strip / s + 4;
     // Base rows wait from the final rows to the classified ones (the width
-    // search's and the spread's reach); the accumulator reaches the spread
-    // either side of the rows spread.
+    // search's and the spread's reach); each accumulator holds the spread's
+    // reach behind the rows spread and its own kernels' reach ahead.
     let (search, spread, base) = (
         halo.search_reach as u64,
         halo.spread_reach as u64,
         halo.base_reach as u64,
     );
+    let [fine, r2, r4] = crate::filter::grid_reaches(params).map(|r| r as u64);
     let base_rows = search + spread + base + strip / s + 4;
-    let acc_rows = 2 * spread + strip / s + 4;
+    let acc_rows = spread + fine + strip / s + 4;
     let windows = in_row.saturating_mul(s * (halo.xbar_reach as u64 + 1) + strip)
         + out_row.saturating_mul(s * (2 * halo.base_reach as u64 + 1) + strip)
         + out_row.saturating_mul(base_rows + acc_rows)
@@ -299,10 +299,13 @@ fn estimate_with(
         0
     };
     // The coarse grids: accumulator rows of half (and a quarter of) the
-    // width over half the lag (each upsampling task holds two rows of its
-    // own, not counted).
+    // width, over half (a quarter of) the rows behind and their own
+    // kernels' reach ahead (each upsampling task holds two rows of its own,
+    // not counted).
     let coarse = if params.method == Method::EpGauss && params.coarse_from > 0.0 {
-        out_row.saturating_mul(lag / 4 + 8)
+        let behind = spread + strip / s;
+        (out_row / 2).saturating_mul(behind / 2 + r2 + 4)
+            + (out_row / 4).saturating_mul(behind / 4 + r4 + 4)
     } else {
         0
     };
@@ -567,5 +570,25 @@ mod tests {
         // Fewer blocks are less memory, by the blocks' bytes: decoded, and
         // their compressed pages (counted at most as much).
         assert_eq!(at(64).1 - at(1).1, 2 * (by_bytes - 2) * block);
+    }
+
+    #[test]
+    fn the_accumulators_count_their_own_kernels_reach() {
+        // ep-gauss at S = 3: the output grid's kernels reach a few rows
+        // (the wider ones go on the coarse grids), so its accumulator holds
+        // fewer rows than the widest kernel's reach twice over.
+        let (job, block) = (rgb(6144, 6144), 6144 * 3 * 4 * 16);
+        let mut p = FilterParams::new(Method::EpGauss, 3);
+        let cfg = PipelineConfig::default();
+        let [fine, r2, r4] = crate::filter::grid_reaches(&p);
+        let spread = crate::filter::halo(&p).spread_reach;
+        assert!(fine < spread / 4 && r2 > 0 && r4 > 0, "{fine} {r2} {r4}");
+        let coarse = estimate_bytes(&job, &p, &cfg, block);
+        // Without the coarse grids every width is on the output grid.
+        p.coarse_from = 0.0;
+        assert_eq!(crate::filter::grid_reaches(&p), [spread, 0, 0]);
+        // The wide kernels' rows on coarse grids of half and a quarter the
+        // rows and width cost less than on the output grid.
+        assert!(estimate_bytes(&job, &p, &cfg, block) > coarse);
     }
 }

@@ -396,6 +396,20 @@ impl EpGauss {
         self.levels.iter().any(|l| l.bound.is_some())
     }
 
+    /// Cells either side that the kernels spread on the grid `factor`
+    /// times coarser than the output write (1: the output grid; 2, 4: the
+    /// coarse grids of [`EpGauss::with_coarse`]), 0 where none is.
+    pub fn grid_reach(&self, factor: usize) -> usize {
+        self.levels
+            .iter()
+            .filter_map(|l| match &l.coarse {
+                None => (factor == 1).then(|| l.kernel.reach()),
+                Some(c) => (c.factor == factor).then(|| c.kernel.reach()),
+            })
+            .max()
+            .unwrap_or(0)
+    }
+
     /// The ladder; level 0 is the base kernel.
     pub fn levels(&self) -> &[Level] {
         &self.levels

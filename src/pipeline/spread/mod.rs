@@ -84,6 +84,26 @@ mod tests {
     }
 
     #[test]
+    fn grid_reaches_from_params_equal_the_stages() {
+        for (s, r, mr, from) in [(3, 0.6, 16.0, 2.0), (4, 0.9, 5.5, 1.0), (2, 0.6, 32.0, 0.0)] {
+            let mut p = FilterParams::new(Method::EpGauss, s);
+            (p.radius, p.max_radius, p.coarse_from) = (r, mr, from);
+            let grid = Grid {
+                in_w: 90 * s,
+                in_h: 60 * s,
+                s,
+            };
+            let e = stage(&p, grid);
+            let ep = e.rules.ep.as_ref().unwrap();
+            assert_eq!(
+                crate::filter::grid_reaches(&p),
+                [1, 2, 4].map(|f| ep.grid_reach(f)),
+                "{s} {r} {mr} {from}"
+            );
+        }
+    }
+
+    #[test]
     fn halo_from_params_equals_the_stages() {
         for m in [Method::EpGauss, Method::Gauss, Method::Box] {
             for (s, r, mr, cut) in [
@@ -507,7 +527,7 @@ impl Stage for GaussianStage {
             row_bytes,
         };
         vec![
-            rows("box luminance", win.ybox.high_water(), (w + 2 * pad) * 8),
+            rows("box luminance", win.ybox.high_water(), (w + 2 * pad) * 4),
             rows(
                 "summed-area table",
                 win.csum.as_ref().map_or(0, |c| c.0.high_water()),

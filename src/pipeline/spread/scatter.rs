@@ -228,7 +228,6 @@ impl GaussianStage {
             nch,
             inv_s2,
             tile,
-            halo,
             ..
         } = self.shape;
         let Some(ep) = self.rules.ep.as_ref() else {
@@ -243,16 +242,23 @@ impl GaussianStage {
             .as_slices()
             .0
             .partition_point(|n| (n.j as usize) / grid.s < target);
-        // Accumulator rows down to the widest reach of this batch, and the
-        // coarse rows reaching fine rows below that (and a spare; 4x row K
-        // reaches fine rows 4K - 3 ..= 4K + 6); the batch's first scatter
-        // fills them, a tile each.
-        let need = (target + halo.spread_reach).min(h);
+        // Each grid's rows down to what its own kernels reach from this
+        // batch's last row (and a spare on the coarse ones), not the widest
+        // kernel's: the output grid's kernels reach a few rows, and its
+        // rows are the widest. The batch's first scatter fills them, a tile
+        // each.
+        let [fine, r2, r4] = [1, 2, 4].map(|f| ep.grid_reach(f));
         let win = &mut self.win;
         let mut fresh = [
-            grow(&mut win.acc, need),
-            grow(&mut win.c2.acc, (need.div_ceil(2) + 1).min(h.div_ceil(2))),
-            grow(&mut win.c4.acc, (need.div_ceil(4) + 1).min(h.div_ceil(4))),
+            grow(&mut win.acc, (target + fine).min(h)),
+            grow(
+                &mut win.c2.acc,
+                (target.div_ceil(2) + r2 + 1).min(h.div_ceil(2)),
+            ),
+            grow(
+                &mut win.c4.acc,
+                (target.div_ceil(4) + r4 + 1).min(h.div_ceil(4)),
+            ),
         ]
         .map(Some);
         let mut next = 0;
