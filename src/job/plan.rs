@@ -114,6 +114,7 @@ impl<'a> FilterPlan<'a> {
         pipe_job.guides = guide_layout;
         pipe_job.surface_rule = job.surface_rule;
         pipe_job.aux = input.aux_channels();
+        pipe_job.block_scratch = !input.decodes_in_place();
         let (pipeline, memory_bytes) = fit_memory(job, &input, &pipe_job, carried)?;
         let mut layout = OutputLayout::of(&input, &channels, &job.output_settings);
         if geometry.w != geometry.full_w || geometry.h != input.size().1 {

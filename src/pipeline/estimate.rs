@@ -150,6 +150,14 @@ pub const PROGRAM_BYTES: u64 = 16 << 20;
 /// mapped input is resident beside the window of blocks decoding.
 pub const MAPPED_RELEASE_BYTES: usize = 8 << 20;
 
+/// The decoding workers' own blocks ([`StripLayout::block_scratch`]).
+fn scratch(job: &StripLayout, cfg: &PipelineConfig, block_bytes: u64) -> u64 {
+    match job.block_scratch {
+        true => block_bytes.saturating_mul(cfg.workers() as u64),
+        false => 0,
+    }
+}
+
 /// The reader's window of `blocks` blocks in bytes (at most
 /// [`READ_AHEAD_BATCHES`] whole images of `h` rows of `row` bytes).
 fn read_ahead(row: u64, h: usize, block_bytes: u64, blocks: u64) -> u64 {
@@ -323,13 +331,15 @@ fn estimate_with(
     } else {
         0
     };
-    // A block's scratch per decoding worker (`exr`'s decompressors keep
-    // one), and the reader's window of decoded blocks.
+    // A block's scratch per decoding worker where `exr` decodes, and the
+    // reader's window of decoded blocks.
     let blocks_n = blocks;
-    let workers = cfg.workers() as u64;
-    let blocks = block_bytes
-        .saturating_mul(workers)
-        .saturating_add(read_ahead(in_row, job.grid.in_h, block_bytes, blocks));
+    let blocks = scratch(job, cfg, block_bytes).saturating_add(read_ahead(
+        in_row,
+        job.grid.in_h,
+        block_bytes,
+        blocks,
+    ));
     windows
         .saturating_add(table)
         .saturating_add(coarse)
@@ -386,7 +396,7 @@ fn estimate_box_bytes(
     windows
         .saturating_add(bands)
         .saturating_add(strips)
-        .saturating_add(block_bytes.saturating_mul(threads))
+        .saturating_add(scratch(job, cfg, block_bytes))
         .saturating_add(read_ahead(
             w.saturating_mul(nall * 4),
             job.grid.in_h,
@@ -570,6 +580,24 @@ mod tests {
         // Fewer blocks are less memory, by the blocks' bytes: decoded, and
         // their compressed pages (counted at most as much).
         assert_eq!(at(64).1 - at(1).1, 2 * (by_bytes - 2) * block);
+    }
+
+    #[test]
+    fn blocks_inflated_in_place_hold_no_scratch() {
+        let block = 32769 * 3 * 4 * 16;
+        let cfg = PipelineConfig {
+            threads: 16,
+            ..PipelineConfig::default()
+        };
+        let mut job = rgb(32769, 3600);
+        for m in [Method::Box, Method::Gauss, Method::EpGauss] {
+            let p = FilterParams::new(m, 3);
+            job.block_scratch = true;
+            let exr = estimate_bytes(&job, &p, &cfg, block);
+            job.block_scratch = false;
+            let zip = estimate_bytes(&job, &p, &cfg, block);
+            assert_eq!(exr - zip, 16 * block, "{m:?}");
+        }
     }
 
     #[test]

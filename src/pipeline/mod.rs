@@ -328,6 +328,10 @@ pub struct StripLayout {
     /// the grid is that size completed with zero samples to a multiple of S
     /// ([`edge::Padded`], [`edge::Coverage`]).
     pub padded_from: Option<(usize, usize)>,
+    /// Whether each decoding worker holds a decoded block of its own (the
+    /// codecs `exr` decodes); blocks inflated straight into the reader's
+    /// window (ZIP, ZIPS) need none.
+    pub block_scratch: bool,
 }
 
 impl StripLayout {
@@ -349,6 +353,7 @@ impl StripLayout {
             guides: GuideLayout::default(),
             surface_rule: SurfaceRule::default(),
             padded_from: None,
+            block_scratch: true,
         }
     }
 

@@ -181,6 +181,49 @@ fn zip_blocks_of_every_sample_type_decode_exactly() {
     }
 }
 
+/// The memory estimate counts a decoded block per decoding worker except
+/// where blocks are inflated into the reader's window: ZIP and ZIPS scan
+/// lines, every channel a 32-bit float.
+#[test]
+fn only_float_zip_scan_lines_decode_in_place() {
+    let dir = tmpdir();
+    let (w, h) = (16usize, 8usize);
+    let plane: Vec<f32> = (0..w * h).map(|i| i as f32 * 0.25).collect();
+    let halves: Vec<f16> = plane.iter().map(|&v| f16::from_f32(v)).collect();
+    let float = |_| FlatSamples::F32(plane.clone());
+    for (compression, blocks, half_g, in_place) in [
+        (Compression::ZIP16, Blocks::ScanLines, false, true),
+        (Compression::ZIP1, Blocks::ScanLines, false, true),
+        (Compression::PIZ, Blocks::ScanLines, false, false),
+        (Compression::Uncompressed, Blocks::ScanLines, false, false),
+        (Compression::ZIP16, Blocks::Tiles(Vec2(8, 8)), false, false),
+        (Compression::ZIP16, Blocks::ScanLines, true, false),
+    ] {
+        let input = dir.path().join("in.exr");
+        let g = match half_g {
+            true => FlatSamples::F16(halves.clone()),
+            false => float(()),
+        };
+        let encoding = Encoding {
+            compression,
+            blocks,
+            line_order: LineOrder::Increasing,
+        };
+        write_encoded(
+            &input,
+            (w, h),
+            vec![("R", float(())), ("G", g), ("B", float(()))],
+            encoding,
+        );
+        let reader = epfilt::io::ExrInput::open(&input, None).expect("open");
+        assert_eq!(
+            reader.decodes_in_place(),
+            in_place,
+            "{compression:?} {blocks:?} half G {half_g}"
+        );
+    }
+}
+
 /// Float-only ZIP and ZIPS scan lines decode straight into the rows, the
 /// block's bytes in place, its channel planes then put in the order filtered
 /// (`R G B` from the file's `B G R`, and beside alpha), decoding ahead or not:

@@ -440,6 +440,24 @@ impl ExrInput {
         block_bytes(self.header())
     }
 
+    /// Whether its blocks are inflated straight into the reader's window
+    /// (ZIP and ZIPS scan lines, [`crate::io::zip::codes`], every channel a
+    /// 32-bit float and read): no decoder holds a block of its own.
+    pub fn decodes_in_place(&self) -> bool {
+        let h = self.header();
+        crate::io::zip::codes(h.compression)
+            && matches!(h.blocks, exr::meta::BlockDescription::ScanLines)
+            && self.reads_every_f32_channel()
+    }
+
+    /// Every channel of the file is a 32-bit float and read: a block's
+    /// bytes are then the rows' values, in the file's channel order.
+    fn reads_every_f32_channel(&self) -> bool {
+        let channels = &self.header().channels.list;
+        channels.iter().all(|c| c.sample_type == SampleType::F32)
+            && self.selected.len() == channels.len()
+    }
+
     /// Names of the channels that will be filtered, in strip order.
     pub fn channels(&self) -> Vec<String> {
         let n = self.selected.len() - self.aux;
@@ -609,10 +627,8 @@ impl ExrInput {
     /// selected, the block as wide as the rows): the block's bytes are then
     /// the rows' values, with the channels in the file's order.
     fn in_place_order(&self, lines: usize, width: usize, len: usize) -> Option<Vec<usize>> {
-        let channels = &self.header().channels.list;
         let n = self.selected.len();
-        let all_f32 = channels.iter().all(|c| c.sample_type == SampleType::F32);
-        (all_f32 && n == channels.len() && lines.checked_mul(n * width) == Some(len))
+        (self.reads_every_f32_channel() && lines.checked_mul(n * width) == Some(len))
             .then(|| self.selected.iter().map(|s| s.index).collect())
     }
 
