@@ -198,7 +198,6 @@ struct BlockRow {
 pub struct FieldRows {
     /// Block side, pixels.
     pub b: usize,
-    w: usize,
     h: usize,
     /// Blocks per row.
     pub nbx: usize,
@@ -216,7 +215,6 @@ impl FieldRows {
     pub fn new(w: usize, h: usize, b: usize) -> Self {
         FieldRows {
             b,
-            w,
             h,
             nbx: w.div_ceil(b),
             nby: h.div_ceil(b),
@@ -231,18 +229,23 @@ impl FieldRows {
     pub fn row_sums(&self, y: usize, s: &[f64], a: &[f64], out: &mut [(f64, [f64; 9])]) {
         let (j0, j1, wy0, wy1) = tent(y, self.h, self.b);
         let jb = y / self.b;
-        for x in 0..self.w {
-            let ib = x / self.b;
+        let (k0, k1) = ((j0 + 1 - jb) * 3, (j1 + 1 - jb) * 3);
+        // Block by block (no division per pixel); each moment takes
+        // `(s wx) wy`, the tents' products in the same order as ever.
+        let cols = (s.chunks(self.b).zip(a.chunks(self.b))).zip(self.tents_x.chunks(self.b));
+        for (ib, ((s, a), tents)) in cols.enumerate().take(self.nbx) {
             let o = &mut out[ib];
-            o.0 += a[x];
-            if s[x] == 0.0 {
-                continue;
-            }
-            let (i0, i1, wx0, wx1) = self.tents_x[x];
-            for (j, wy) in [(j0, wy0), (j1, wy1)] {
-                for (i, wx) in [(i0, wx0), (i1, wx1)] {
-                    o.1[(j + 1 - jb) * 3 + (i + 1 - ib)] += s[x] * wx * wy;
+            for ((&sx, &ax), &(i0, i1, wx0, wx1)) in s.iter().zip(a).zip(tents) {
+                o.0 += ax;
+                if sx == 0.0 {
+                    continue;
                 }
+                let (c0, c1) = (i0 + 1 - ib, i1 + 1 - ib);
+                let (s0, s1) = (sx * wx0, sx * wx1);
+                o.1[k0 + c0] += s0 * wy0;
+                o.1[k0 + c1] += s1 * wy0;
+                o.1[k1 + c0] += s0 * wy1;
+                o.1[k1 + c1] += s1 * wy1;
             }
         }
     }

@@ -263,9 +263,12 @@ impl RestoreStage {
                         fields[ch].row(y, f);
                         let d = &d_row[ch * w..(ch + 1) * w];
                         let o = &mut out[ch * w..(ch + 1) * w];
-                        for x in 0..w {
-                            o[x] = shape(d[x]) * f[x];
-                            sums[ch * nbx + x / bs] += o[x];
+                        let blocks = o.chunks_mut(bs).zip(d.chunks(bs)).zip(f.chunks(bs));
+                        for (sum, ((o, d), f)) in sums[ch * nbx..].iter_mut().zip(blocks) {
+                            for ((o, &d), &f) in o.iter_mut().zip(d).zip(f) {
+                                *o = shape(d) * f;
+                                *sum += *o;
+                            }
                         }
                     }
                     sums
@@ -303,14 +306,27 @@ impl RestoreStage {
             let l = kept.row(y);
             for ch in 0..nch {
                 let o = &mut out[ch * w..(ch + 1) * w];
-                for x in 0..w {
-                    let gb = g[ch * nbx + x / bs];
-                    let lv = l.map_or(0.0, |l| l[ch * w + x]);
-                    o[x] = if gb.is_nan() {
-                        f64::from(e_row[ch * w + x])
-                    } else {
-                        o[x] * gb + lv
-                    };
+                for (ib, &gb) in g[ch * nbx..(ch + 1) * nbx].iter().enumerate() {
+                    let xs = ib * bs..((ib + 1) * bs).min(w);
+                    if gb.is_nan() {
+                        // Nothing shaped the block: its energy stays.
+                        for x in xs {
+                            o[x] = f64::from(e_row[ch * w + x]);
+                        }
+                        continue;
+                    }
+                    match l {
+                        Some(l) => {
+                            for x in xs {
+                                o[x] = o[x] * gb + l[ch * w + x];
+                            }
+                        }
+                        None => {
+                            for x in xs {
+                                o[x] = o[x] * gb + 0.0;
+                            }
+                        }
+                    }
                 }
             }
         });
