@@ -425,9 +425,11 @@ fn one_line(e: &anyhow::Error) -> String {
 
 /// glibc keeps freed multi-megabyte row buffers in per-thread arenas (its
 /// mmap threshold grows with each such free), so on wide inputs peak RSS sat
-/// far above the live heap. Large buffers go straight back to the system;
-/// the trim threshold keeps the heap from shrinking and regrowing on every
-/// strip (a smaller one saved little memory and cost time).
+/// far above the live heap. Large buffers go straight back to the system.
+/// Each arena keeps up to the trim threshold of freed memory at its top, so
+/// which thread freed last moved the peak by up to an arena's threshold from
+/// run to run; 4 MiB bounds that within what `PROGRAM_BYTES` counts, and
+/// cost no time we could measure against 16 MiB.
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 fn tune_allocator() {
     // SAFETY: mallopt only changes glibc's allocation thresholds; it is called
@@ -435,7 +437,7 @@ fn tune_allocator() {
     #[allow(unsafe_code)]
     unsafe {
         libc::mallopt(libc::M_MMAP_THRESHOLD, 4 * 1024 * 1024);
-        libc::mallopt(libc::M_TRIM_THRESHOLD, 16 * 1024 * 1024);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, 4 * 1024 * 1024);
         // glibc gives threads up to 8 arenas per core, each keeping up to
         // the trim threshold of freed memory, so peak memory grew with the
         // thread count. Four arenas bound that, no slower on 2 cores.
