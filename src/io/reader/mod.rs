@@ -445,13 +445,12 @@ impl ExrInput {
     /// 32-bit float and read): no decoder holds a block of its own.
     pub fn decodes_in_place(&self) -> bool {
         let h = self.header();
-        crate::io::zip::codes(h.compression)
-            && matches!(h.blocks, exr::meta::BlockDescription::ScanLines)
-            && self.reads_every_f32_channel()
+        let lines = matches!(h.blocks, exr::meta::BlockDescription::ScanLines);
+        crate::io::zip::codes(h.compression) && lines && self.reads_every_f32_channel()
     }
 
-    /// Every channel of the file is a 32-bit float and read: a block's
-    /// bytes are then the rows' values, in the file's channel order.
+    /// Every channel is a 32-bit float and read: a block's bytes are the
+    /// rows' values, in the file's channel order.
     fn reads_every_f32_channel(&self) -> bool {
         let channels = &self.header().channels.list;
         channels.iter().all(|c| c.sample_type == SampleType::F32)
