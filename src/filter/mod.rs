@@ -231,16 +231,23 @@ pub fn grid_reaches(p: &FilterParams) -> [usize; 3] {
     if p.method != Method::EpGauss || p.supersample <= 1 {
         return [halo(p).spread_reach, 0, 0];
     }
-    let ep = ep_gauss::EpGauss::new(
-        p.supersample,
+    let ep = ladder(p, p.supersample);
+    [1, 2, 4].map(|f| ep.grid_reach(f))
+}
+
+/// ep-gauss's ladder of widths at S = `s` from its settings, with its
+/// coarse grids (`--coarse-from`): what the stage spreads with and the
+/// memory estimate counts.
+pub fn ladder(p: &FilterParams, s: usize) -> ep_gauss::EpGauss {
+    ep_gauss::EpGauss::new(
+        s,
         p.radius,
         p.max_radius,
         p.cutoff,
         p.tolerance,
         p.width_step,
     )
-    .with_coarse(p.coarse_from);
-    [1, 2, 4].map(|f| ep.grid_reach(f))
+    .with_coarse(p.coarse_from)
 }
 
 /// Rows a band's window must start on a multiple of (output rows), so

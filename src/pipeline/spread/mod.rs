@@ -335,18 +335,7 @@ impl GaussianStage {
             _ => Kernel1d::gaussian(s, params.radius, params.cutoff),
         };
         let ep = (params.method == Method::EpGauss)
-            .then(|| {
-                EpGauss::new(
-                    s,
-                    params.radius,
-                    params.max_radius,
-                    params.cutoff,
-                    params.tolerance,
-                    params.width_step,
-                )
-                .with_coarse(params.coarse_from)
-                .with_bound(params.bound_from)
-            })
+            .then(|| crate::filter::ladder(params, s).with_bound(params.bound_from))
             // Beyond the paper, with its feature rules (`support > 0`): only
             // samples brighter than their neighbourhood are noise. Relation 14's
             // dark side wakes below `tolerance = w0` (0.088 at S = 3), where
