@@ -307,25 +307,13 @@ impl RestoreStage {
             for ch in 0..nch {
                 let o = &mut out[ch * w..(ch + 1) * w];
                 for (ib, &gb) in g[ch * nbx..(ch + 1) * nbx].iter().enumerate() {
-                    let xs = ib * bs..((ib + 1) * bs).min(w);
-                    if gb.is_nan() {
-                        // Nothing shaped the block: its energy stays.
-                        for x in xs {
-                            o[x] = f64::from(e_row[ch * w + x]);
-                        }
-                        continue;
-                    }
-                    match l {
-                        Some(l) => {
-                            for x in xs {
-                                o[x] = o[x] * gb + l[ch * w + x];
-                            }
-                        }
-                        None => {
-                            for x in xs {
-                                o[x] = o[x] * gb + 0.0;
-                            }
-                        }
+                    for x in ib * bs..((ib + 1) * bs).min(w) {
+                        let lv = l.map_or(0.0, |l| l[ch * w + x]);
+                        o[x] = if gb.is_nan() {
+                            f64::from(e_row[ch * w + x])
+                        } else {
+                            o[x] * gb + lv
+                        };
                     }
                 }
             }
