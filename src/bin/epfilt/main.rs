@@ -428,8 +428,8 @@ fn one_line(e: &anyhow::Error) -> String {
 /// far above the live heap. Large buffers go straight back to the system.
 /// Each arena keeps up to the trim threshold of freed memory at its top, so
 /// which thread freed last moved the peak by up to an arena's threshold from
-/// run to run; 4 MiB bounds that within what `PROGRAM_BYTES` counts, and
-/// cost no time we could measure against 16 MiB.
+/// run to run; 4 MiB keeps that within what `PROGRAM_BYTES` counts
+/// (docs/bench/memory-gigapixel.md: the floor's peak within its budget).
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 fn tune_allocator() {
     // SAFETY: mallopt only changes glibc's allocation thresholds; it is called
