@@ -12,12 +12,18 @@
 //!    a bulb or a highlight the denoiser dimmed or removed. Where the
 //!    denoiser has nothing at all (`q = 0`), all of `e` stays.
 //! 2. **The rest in the denoiser's shape.** `a = e - l` is carried by the
-//!    denoiser's picture times a smooth field: `r = s f g + l`, where `f`
+//!    denoiser's picture and a smooth field: `r = (s + t (f - 1)) g + l`,
+//!    where `t` is the carrier ([`FieldRows::carrier`]: `s^2 / m` where the
+//!    blocks need more energy, `m` the block means of `s`; `s` where they
+//!    need less; bilinear between block centres), `f`
 //!    interpolates one coefficient per block bilinearly between block
-//!    centres, solved so that each block's `Σ s f` is close to its `Σ a`,
-//!    and `g` is the last, exact step: per block, `Σ a / Σ s f`. With the
-//!    field solved, `g` is close to one (no visible seams);
-//!    it makes every block's energy, and so the total, `e`'s to the rounding
+//!    centres, solved so that each block's `Σ (s + t (f - 1))` (never
+//!    below zero per pixel) is close to its `Σ a`, and `g` is the last, exact step: per block, `Σ a` over
+//!    that sum. Where the shape is flat (`t = s`) this is `s f g`; what a
+//!    block lacks goes back mostly to the pixels brighter than their
+//!    surroundings, where a denoiser dims and spreads light.
+//!    With the field solved, `g` is close to one (no visible seams); it
+//!    makes every block's energy, and so the total, `e`'s to the rounding
 //!    of f64 sums. A block where the denoiser has no light keeps `e`.
 
 /// Most one pixel of a render may exceed what the denoiser put around it
@@ -180,24 +186,54 @@ pub fn tent(p: usize, n: usize, b: usize) -> (usize, usize, f64, f64) {
 pub const LOOKAHEAD: usize = 2;
 
 /// One row of blocks of the field: per block its target (`Σ a`), its
-/// moments (`Σ s φ_k` over its pixels for the tents `φ_k` of its 3 x 3
-/// neighbours, `(dj + 1) * 3 + (di + 1)`) and, once fixed, its coefficient.
+/// shape (`Σ s`, whose mean sets the carrier's scale), its carrier's sum
+/// (`Σ t`) and moments (`Σ t φ_k` over its pixels for the tents `φ_k` of
+/// its 3 x 3 neighbours, `(dj + 1) * 3 + (di + 1)`) and, once fixed, its
+/// coefficient.
 #[derive(Clone, Debug)]
 struct BlockRow {
     target: Vec<f64>,
+    shape: Vec<f64>,
+    carried: Vec<f64>,
     moments: Vec<[f64; 9]>,
+    /// Once the row is summed, per block: the mean of `s`, and 1 where it
+    /// needs more energy than the denoiser gave (`Σ a > Σ s`), else 0.
+    means: Vec<(f64, f64)>,
     rho: Option<Vec<f64>>,
 }
 
+impl BlockRow {
+    fn new(nbx: usize) -> Self {
+        BlockRow {
+            target: vec![0.0; nbx],
+            shape: vec![0.0; nbx],
+            carried: vec![0.0; nbx],
+            moments: vec![[0.0; 9]; nbx],
+            means: Vec::new(),
+            rho: None,
+        }
+    }
+
+    /// What block `i`'s field must carry: `r = s + t (f - 1)` sums to
+    /// `Σ a` where `Σ t f = Σ a - Σ s + Σ t`.
+    fn goal(&self, i: usize) -> f64 {
+        self.target[i] - self.shape[i] + self.carried[i]
+    }
+}
+
 /// The field of one channel over a `w x h` image in blocks of `b`, held a
-/// few rows of blocks at a time: rows are added in order
-/// ([`FieldRows::add`]), a row's coefficients are fixed once the rows
-/// [`LOOKAHEAD`] below it are complete ([`FieldRows::fix`]), and rows no
-/// longer read are dropped ([`FieldRows::release`]).
+/// few rows of blocks at a time. Each pixel row is added twice, in order:
+/// its block sums of the rest and the shape ([`FieldRows::add`]), then,
+/// once the block row below is summed (the carrier reads the block means
+/// around it), its carrier's moments ([`FieldRows::add_moments`]). A row's
+/// coefficients are fixed once the rows [`LOOKAHEAD`] below it have their
+/// moments ([`FieldRows::fix`]), and rows no longer read are dropped
+/// ([`FieldRows::release`]).
 #[derive(Clone, Debug)]
 pub struct FieldRows {
     /// Block side, pixels.
     pub b: usize,
+    w: usize,
     h: usize,
     /// Blocks per row.
     pub nbx: usize,
@@ -215,6 +251,7 @@ impl FieldRows {
     pub fn new(w: usize, h: usize, b: usize) -> Self {
         FieldRows {
             b,
+            w,
             h,
             nbx: w.div_ceil(b),
             nby: h.div_ceil(b),
@@ -224,45 +261,113 @@ impl FieldRows {
         }
     }
 
-    /// Row `y`'s shape `s` and rest `a` as block sums `(target, moments)`
-    /// of `nbx` blocks into `out` (zeroed by the caller).
-    pub fn row_sums(&self, y: usize, s: &[f64], a: &[f64], out: &mut [(f64, [f64; 9])]) {
-        let (j0, j1, wy0, wy1) = tent(y, self.h, self.b);
-        let jb = y / self.b;
-        let (k0, k1) = ((j0 + 1 - jb) * 3, (j1 + 1 - jb) * 3);
-        // Block by block (no division per pixel); each moment takes
-        // `(s wx) wy`, the tents' products in the same order as ever.
-        let cols = (s.chunks(self.b).zip(a.chunks(self.b))).zip(self.tents_x.chunks(self.b));
-        for (ib, ((s, a), tents)) in cols.enumerate().take(self.nbx) {
-            let o = &mut out[ib];
-            for ((&sx, &ax), &(i0, i1, wx0, wx1)) in s.iter().zip(a).zip(tents) {
+    /// Row `y`'s rest `a` and shape `s` as block sums `(Σ a, Σ s)` of
+    /// `nbx` blocks into `out` (zeroed by the caller).
+    pub fn row_sums(&self, s: &[f64], a: &[f64], out: &mut [(f64, f64)]) {
+        let cols = s.chunks(self.b).zip(a.chunks(self.b));
+        for (o, (s, a)) in out.iter_mut().zip(cols) {
+            for (&sx, &ax) in s.iter().zip(a) {
                 o.0 += ax;
-                if sx == 0.0 {
-                    continue;
-                }
-                let (c0, c1) = (i0 + 1 - ib, i1 + 1 - ib);
-                let (s0, s1) = (sx * wx0, sx * wx1);
-                o.1[k0 + c0] += s0 * wy0;
-                o.1[k0 + c1] += s1 * wy0;
-                o.1[k1 + c0] += s0 * wy1;
-                o.1[k1 + c1] += s1 * wy1;
+                o.1 += sx;
             }
         }
     }
 
     /// Add row `y`'s block sums (rows come in order).
-    pub fn add(&mut self, y: usize, sums: &[(f64, [f64; 9])]) {
-        let jb = y / self.b;
-        while self.first + self.rows.len() <= jb {
-            self.rows.push_back(BlockRow {
-                target: vec![0.0; self.nbx],
-                moments: vec![[0.0; 9]; self.nbx],
-                rho: None,
-            });
+    pub fn add(&mut self, y: usize, sums: &[(f64, f64)]) {
+        let (b, w, h) = (self.b, self.w, self.h);
+        let jb = y / b;
+        let row = self.block_row(jb);
+        for (i, (a, s)) in sums.iter().enumerate() {
+            row.target[i] += a;
+            row.shape[i] += s;
         }
-        let row = &mut self.rows[jb - self.first];
+        if y + 1 == ((jb + 1) * b).min(h) {
+            let bh = b.min(h - jb * b);
+            row.means = (row.shape.iter().zip(&row.target).enumerate())
+                .map(|(i, (&s, &a))| {
+                    let n = (b.min(w - i * b) * bh) as f64;
+                    (s / n, if a > s { 1.0 } else { 0.0 })
+                })
+                .collect();
+        }
+    }
+
+    fn block_row(&mut self, jb: usize) -> &mut BlockRow {
+        while self.first + self.rows.len() <= jb {
+            self.rows.push_back(BlockRow::new(self.nbx));
+        }
+        &mut self.rows[jb - self.first]
+    }
+
+    /// Pixel rows whose carrier can be measured once `summed` rows are
+    /// added: those of every block row whose next one is complete.
+    pub fn moments_to(&self, summed: usize) -> usize {
+        if summed >= self.h {
+            return self.h;
+        }
+        (summed / self.b).saturating_sub(1) * self.b
+    }
+
+    /// The carrier `t` along pixel row `y`, `s` its shape: `s^2 / m` where
+    /// the blocks need more energy than the denoiser gave (`Σ a > Σ s`),
+    /// `s` where they need less, bilinear between block centres as the
+    /// field is (`m` the block means of `s`; zero where either is). A
+    /// denoiser loses energy at its brightest features (it dims and spreads
+    /// them), so what a block lacks goes back mostly to the pixels brighter
+    /// than their surroundings; a surplus comes off in proportion, so no
+    /// highlight is dimmed more than its block. Where the shape is flat
+    /// (`s = m`) both are `s`.
+    pub fn carrier(&self, y: usize, s: &[f64], t: &mut [f64]) {
+        let (j0, j1, wy0, wy1) = tent(y, self.h, self.b);
+        let means = |j: usize| &self.rows[j - self.first].means;
+        let (r0, r1) = (means(j0), means(j1));
+        let lerp = |i0: usize, i1: usize, wx0: f64, wx1: f64, k: fn(&(f64, f64)) -> f64| {
+            wy0 * (wx0 * k(&r0[i0]) + wx1 * k(&r0[i1]))
+                + wy1 * (wx0 * k(&r1[i0]) + wx1 * k(&r1[i1]))
+        };
+        for ((t, &sx), &(i0, i1, wx0, wx1)) in t.iter_mut().zip(s).zip(&self.tents_x) {
+            let m = lerp(i0, i1, wx0, wx1, |v| v.0);
+            let more = lerp(i0, i1, wx0, wx1, |v| v.1);
+            *t = if sx > 0.0 && m > 0.0 {
+                sx * (1.0 - more + more * sx / m)
+            } else {
+                0.0
+            };
+        }
+    }
+
+    /// Row `y`'s carrier `t` as block sums `(Σ t, moments)` of `nbx`
+    /// blocks into `out` (zeroed by the caller).
+    pub fn moment_sums(&self, y: usize, t: &[f64], out: &mut [(f64, [f64; 9])]) {
+        let (j0, j1, wy0, wy1) = tent(y, self.h, self.b);
+        let jb = y / self.b;
+        let (k0, k1) = ((j0 + 1 - jb) * 3, (j1 + 1 - jb) * 3);
+        // Block by block (no division per pixel); each moment takes
+        // `(t wx) wy`.
+        let cols = t.chunks(self.b).zip(self.tents_x.chunks(self.b));
+        for (ib, (t, tents)) in cols.enumerate().take(self.nbx) {
+            let o = &mut out[ib];
+            for (&tx, &(i0, i1, wx0, wx1)) in t.iter().zip(tents) {
+                if tx == 0.0 {
+                    continue;
+                }
+                o.0 += tx;
+                let (c0, c1) = (i0 + 1 - ib, i1 + 1 - ib);
+                let (t0, t1) = (tx * wx0, tx * wx1);
+                o.1[k0 + c0] += t0 * wy0;
+                o.1[k0 + c1] += t1 * wy0;
+                o.1[k1 + c0] += t0 * wy1;
+                o.1[k1 + c1] += t1 * wy1;
+            }
+        }
+    }
+
+    /// Add row `y`'s carrier sums (rows come in order).
+    pub fn add_moments(&mut self, y: usize, sums: &[(f64, [f64; 9])]) {
+        let row = self.block_row(y / self.b);
         for (i, (t, m)) in sums.iter().enumerate() {
-            row.target[i] += t;
+            row.carried[i] += t;
             for (acc, v) in row.moments[i].iter_mut().zip(m) {
                 *acc += v;
             }
@@ -270,14 +375,16 @@ impl FieldRows {
     }
 
     /// Whether block row `j` can be fixed once the pixel rows below
-    /// `rows_done` are added: the rows [`LOOKAHEAD`] below it are complete.
+    /// `rows_done` have their moments: the rows [`LOOKAHEAD`] below it are
+    /// complete.
     pub fn can_fix(&self, j: usize, rows_done: usize) -> bool {
         let last = (j + LOOKAHEAD).min(self.nby - 1);
         rows_done >= ((last + 1) * self.b).min(self.h)
     }
 
     /// Fix block row `j`'s coefficients (the row above fixed, the rows
-    /// [`LOOKAHEAD`] below added): each block's own ratio first, then
+    /// [`LOOKAHEAD`] below with their moments): each block's own ratio
+    /// first, then
     /// [`FIELD_ITERATIONS`] multiplicative Jacobi steps over the rows `j` to
     /// `j + LOOKAHEAD`, the row above as fixed and the row after the last
     /// taken as the last. A block whose denoiser shape is empty keeps a
@@ -293,8 +400,8 @@ impl FieldRows {
             (0..nbx)
                 .map(|i| {
                     let s: f64 = r.moments[i].iter().sum();
-                    if s > 0.0 && r.target[i] > 0.0 {
-                        r.target[i] / s
+                    if s > 0.0 && r.goal(i) > 0.0 {
+                        r.goal(i) / s
                     } else {
                         0.0
                     }
@@ -306,8 +413,8 @@ impl FieldRows {
         let mut next = free.clone();
         for _ in 0..FIELD_ITERATIONS {
             for (f, row) in next.iter_mut().enumerate() {
-                let m = &self.rows[k0 + f].moments;
-                let t = &self.rows[k0 + f].target;
+                let br = &self.rows[k0 + f];
+                let m = &br.moments;
                 let rho_of = |dj: usize| -> Option<&Vec<f64>> {
                     match (f + dj).checked_sub(1) {
                         None => above.as_ref(),
@@ -328,7 +435,7 @@ impl FieldRows {
                     }
                     let cur = free[f][i];
                     *v = if reached > 0.0 && cur > 0.0 {
-                        cur * t[i] / reached
+                        cur * br.goal(i) / reached
                     } else {
                         cur
                     };
@@ -445,32 +552,42 @@ mod tests {
         let (w, h, b) = (40, 70, 8);
         let shape = |x: usize, y: usize| 1.0 + 0.5 * ((x + 2 * y) as f64 * 0.15).sin();
         let energy = |x: usize, y: usize| shape(x, y) * (1.0 + 0.3 * (x as f64 / 40.0));
+        let s_row = |y: usize| -> Vec<f64> { (0..w).map(|x| shape(x, y)).collect() };
         for (e, flat) in [
             (&energy as &dyn Fn(usize, usize) -> f64, false),
             (&shape, true),
         ] {
             let mut f = FieldRows::new(w, h, b);
-            let mut fixed_to = 0;
+            let (mut fixed_to, mut momented) = (0, 0);
             let mut got = vec![0.0; f.nbx * f.nby];
             let mut targets = vec![0.0; f.nbx * f.nby];
-            let mut fr = vec![0.0; w];
+            let (mut fr, mut t) = (vec![0.0; w], vec![0.0; w]);
             let mut out_block = 0;
             for y in 0..h {
-                let s: Vec<f64> = (0..w).map(|x| shape(x, y)).collect();
                 let a: Vec<f64> = (0..w).map(|x| e(x, y)).collect();
-                let mut row = vec![(0.0, [0.0; 9]); f.nbx];
-                f.row_sums(y, &s, &a, &mut row);
+                let mut row = vec![(0.0, 0.0); f.nbx];
+                f.row_sums(&s_row(y), &a, &mut row);
                 f.add(y, &row);
+                while momented < f.moments_to(y + 1) {
+                    let mut row = vec![(0.0, [0.0; 9]); f.nbx];
+                    f.carrier(momented, &s_row(momented), &mut t);
+                    f.moment_sums(momented, &t, &mut row);
+                    f.add_moments(momented, &row);
+                    momented += 1;
+                }
                 // Finish every block row whose field is fixed.
-                while out_block < f.nby && f.can_fix((out_block + 1).min(f.nby - 1), y + 1) {
+                while out_block < f.nby && f.can_fix((out_block + 1).min(f.nby - 1), momented) {
                     while fixed_to <= (out_block + 1).min(f.nby - 1) {
                         f.fix(fixed_to);
                         fixed_to += 1;
                     }
                     for yy in out_block * b..((out_block + 1) * b).min(h) {
                         f.row(yy, &mut fr);
+                        let s = s_row(yy);
+                        f.carrier(yy, &s, &mut t);
                         for x in 0..w {
-                            got[out_block * f.nbx + x / b] += shape(x, yy) * fr[x];
+                            got[out_block * f.nbx + x / b] +=
+                                (s[x] + t[x] * (fr[x] - 1.0)).max(0.0);
                         }
                     }
                     for i in 0..f.nbx {
@@ -486,12 +603,39 @@ mod tests {
                     out_block += 1;
                 }
             }
-            assert_eq!(out_block, f.nby);
-            assert!(f.held() <= LOOKAHEAD + 3);
+            assert_eq!((out_block, momented), (f.nby, h));
+            assert!(f.held() <= LOOKAHEAD + 4);
             for (k, g) in got.iter().enumerate() {
                 let rel = (g / targets[k] - 1.0).abs();
                 assert!(rel < 5e-3, "block {k}: {rel}");
             }
+        }
+    }
+
+    /// The carrier is the shape where it is flat or the blocks need less
+    /// energy, and weighs a pixel by its brightness against the block
+    /// means around it where they need more.
+    #[test]
+    fn the_carrier_weighs_brightness_where_energy_is_missing() {
+        let (w, h, b) = (16, 16, 8);
+        let flat = vec![2.0; w];
+        let mut peak = flat.clone();
+        (peak[3], peak[4]) = (8.0, 0.0);
+        for (energy, t3) in [(3.0, 8.0 * 8.0 / 2.0), (1.0, 8.0)] {
+            let mut f = FieldRows::new(w, h, b);
+            for y in 0..h {
+                let mut row = vec![(0.0, 0.0); f.nbx];
+                f.row_sums(&flat, &vec![energy; w], &mut row);
+                f.add(y, &row);
+            }
+            let mut t = vec![0.0; w];
+            f.carrier(5, &flat, &mut t);
+            assert!(t.iter().all(|&v| (v - 2.0).abs() < SUM_TOL), "{t:?}");
+            f.carrier(5, &peak, &mut t);
+            assert!(
+                (t[3] - t3).abs() < SUM_TOL && t[4] == 0.0,
+                "{energy}: {t:?}"
+            );
         }
     }
 

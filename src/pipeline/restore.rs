@@ -3,16 +3,18 @@
 //!
 //! The strips hold the energy image's channels, then the denoiser's (the
 //! books' ledger counts the first ones: the total it checks is the energy
-//! image's). A strip's work is three steps, each a parallel loop over rows:
+//! image's). A strip's work is four steps, each a parallel loop over rows:
 //!
 //! 1. the part of the energy kept in place (`l`) for the rows whose rows
 //!    around are in, with the denoiser's energy around a pixel (`q`)
 //!    measured only where its energy exceeds the gain on the denoiser's own
 //!    value (rare: lamps, fireflies);
 //! 2. those rows' rest `e - l` and shape added into their blocks' sums;
-//! 3. each row of blocks whose field can be fixed (the rows of blocks
-//!    [`LOOKAHEAD`] below it summed): `s f` for its rows, each block's exact
-//!    factor `g`, and the rows `s f g + l`.
+//! 3. the carrier's moments of the rows whose next row of blocks is summed
+//!    (the carrier reads the block means around a row);
+//! 4. each row of blocks whose field can be fixed (the rows of blocks
+//!    [`LOOKAHEAD`] below it with their moments): `c = s + t (f - 1)` for
+//!    its rows, each block's exact factor `g`, and the rows `c g + l`.
 //!
 //! Each row's values depend only on rows that are in, and block sums are
 //! added row by row in order, never by how rows came: the output is the
@@ -167,7 +169,7 @@ fn around(
     q
 }
 
-/// One row of blocks at a time: `s f g + l`.
+/// One row of blocks at a time: `c g + l`, `c = s + t (f - 1)`.
 pub struct RestoreStage {
     nch: usize,
     w: usize,
@@ -177,6 +179,8 @@ pub struct RestoreStage {
     fields: Vec<FieldRows>,
     /// Pixel rows summed into the fields.
     summed: usize,
+    /// Pixel rows whose carrier's moments are in the fields.
+    momented: usize,
     /// Final rows.
     out: RowWindow<f64>,
     /// Blocks whose denoiser shape carried nothing: their energy stayed.
@@ -196,6 +200,7 @@ impl RestoreStage {
                 .map(|_| FieldRows::new(w, h, params.scale))
                 .collect(),
             summed: 0,
+            momented: 0,
             out: RowWindow::new(nch * w),
             unshaped_blocks: 0,
         }
@@ -210,14 +215,14 @@ impl RestoreStage {
         let (nch, w) = (self.nch, self.w);
         let (fields, kept) = (&self.fields, &self.kept);
         let nbx = fields[0].nbx;
-        let sums: Vec<Vec<(f64, [f64; 9])>> = (a..b)
+        let sums: Vec<Vec<(f64, f64)>> = (a..b)
             .into_par_iter()
             .map_init(
                 || (vec![0.0f64; w], vec![0.0f64; w]),
                 |(s, rest), y| {
                     let row = input.get(y);
                     let l = kept.row(y);
-                    let mut out = vec![(0.0, [0.0; 9]); nch * nbx];
+                    let mut out = vec![(0.0, 0.0); nch * nbx];
                     for ch in 0..nch {
                         let e = &row[ch * w..(ch + 1) * w];
                         let d = &row[(nch + ch) * w..(nch + ch + 1) * w];
@@ -225,7 +230,7 @@ impl RestoreStage {
                             s[x] = shape(d[x]);
                             rest[x] = f64::from(e[x]) - l.map_or(0.0, |l| l[ch * w + x]);
                         }
-                        fields[ch].row_sums(y, s, rest, &mut out[ch * nbx..(ch + 1) * nbx]);
+                        fields[ch].row_sums(s, rest, &mut out[ch * nbx..(ch + 1) * nbx]);
                     }
                     out
                 },
@@ -240,6 +245,38 @@ impl RestoreStage {
         self.summed = b;
     }
 
+    /// Rows `a..b` (the block rows around them summed) into the fields'
+    /// carrier moments.
+    fn add_moments(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
+        let (nch, w) = (self.nch, self.w);
+        let fields = &self.fields;
+        let nbx = fields[0].nbx;
+        let sums: Vec<Vec<(f64, [f64; 9])>> = (a..b)
+            .into_par_iter()
+            .map_init(
+                || (vec![0.0f64; w], vec![0.0f64; w]),
+                |(s, t), y| {
+                    let d_row = &input.get(y)[nch * w..];
+                    let mut out = vec![(0.0, [0.0; 9]); nch * nbx];
+                    for ch in 0..nch {
+                        for (s, &d) in s.iter_mut().zip(&d_row[ch * w..(ch + 1) * w]) {
+                            *s = shape(d);
+                        }
+                        fields[ch].carrier(y, s, t);
+                        fields[ch].moment_sums(y, t, &mut out[ch * nbx..(ch + 1) * nbx]);
+                    }
+                    out
+                },
+            )
+            .collect();
+        for (y, row) in (a..b).zip(sums) {
+            for (ch, f) in self.fields.iter_mut().enumerate() {
+                f.add_moments(y, &row[ch * nbx..(ch + 1) * nbx]);
+            }
+        }
+        self.momented = b;
+    }
+
     /// Rows `a..b`, a whole row of blocks, their fields fixed.
     fn finish_blocks(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
         let (nch, w) = (self.nch, self.w);
@@ -248,25 +285,30 @@ impl RestoreStage {
         }
         let (fields, bs) = (&self.fields, self.b());
         let nbx = fields[0].nbx;
-        // s f per pixel, and per row its block sums.
+        // c = s + t (f - 1) per pixel, and per row its block sums.
         let mut rows = self.out.range_mut(a, b);
         let sums: Vec<Vec<f64>> = rows
             .par_iter_mut()
             .enumerate()
             .map_init(
-                || vec![0.0f64; w],
-                |f, (i, out)| {
+                || (vec![0.0f64; w], vec![0.0f64; w]),
+                |(f, t), (i, out)| {
                     let y = a + i;
                     let d_row = &input.get(y)[nch * w..];
                     let mut sums = vec![0.0; nch * nbx];
                     for ch in 0..nch {
                         fields[ch].row(y, f);
-                        let d = &d_row[ch * w..(ch + 1) * w];
                         let o = &mut out[ch * w..(ch + 1) * w];
-                        let blocks = o.chunks_mut(bs).zip(d.chunks(bs)).zip(f.chunks(bs));
-                        for (sum, ((o, d), f)) in sums[ch * nbx..].iter_mut().zip(blocks) {
-                            for ((o, &d), &f) in o.iter_mut().zip(d).zip(f) {
-                                *o = shape(d) * f;
+                        for (o, &d) in o.iter_mut().zip(&d_row[ch * w..(ch + 1) * w]) {
+                            *o = shape(d);
+                        }
+                        fields[ch].carrier(y, o, t);
+                        let blocks = o.chunks_mut(bs).zip(t.chunks(bs)).zip(f.chunks(bs));
+                        for (sum, ((o, t), f)) in sums[ch * nbx..].iter_mut().zip(blocks) {
+                            for ((o, &t), &f) in o.iter_mut().zip(t).zip(f) {
+                                // Never below zero: a pixel brighter than the
+                                // block needs gives what it has.
+                                *o = (*o + t * (f - 1.0)).max(0.0);
                                 *sum += *o;
                             }
                         }
@@ -324,13 +366,14 @@ impl RestoreStage {
 impl Stage for RestoreStage {
     fn halo(&self) -> Halo {
         // The kept part's rows around, then the rows of blocks the field
-        // looks ahead, and the row of blocks being finished.
+        // looks ahead, the row of blocks below them (the carrier's means),
+        // and the row of blocks being finished.
         let r = self.kept.r();
         Halo {
             xbar_reach: 0,
             base_reach: r,
             search_reach: 0,
-            spread_reach: r + (LOOKAHEAD + 2) * self.b(),
+            spread_reach: r + (LOOKAHEAD + 3) * self.b(),
         }
     }
 
@@ -339,6 +382,10 @@ impl Stage for RestoreStage {
     fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> usize {
         let (ka, kb) = self.kept.advance(input, rows_in, all_in);
         self.add_sums(input, ka, kb);
+        let to = self.fields[0].moments_to(self.summed);
+        if to > self.momented {
+            self.add_moments(input, self.momented, to);
+        }
         let (bs, h) = (self.b(), self.h);
         let nby = self.fields[0].nby;
         // A row of blocks is finished once its field and the next row's are
@@ -346,7 +393,7 @@ impl Stage for RestoreStage {
         while self.out.end() < h {
             let j = self.out.end() / bs;
             let next = (j + 1).min(nby - 1);
-            if !self.fields[0].can_fix(next, self.summed) {
+            if !self.fields[0].can_fix(next, self.momented) {
                 break;
             }
             for f in &mut self.fields {

@@ -106,8 +106,9 @@ def restore(denoised, energy, scale=None, *, keep_gain=None, channels=None, thre
     16 by default (a render: its fireflies, which the denoiser rightly removed, stay
     below it); pass ``keep_gain=1`` where ``energy`` is ``filter``'s ep-gauss or ep-box
     output (its fireflies already spread: bulbs and lamps come back). The rest is carried by the
-    denoiser's picture times a smooth field, so that every block of ``scale`` x ``scale``
-    pixels (default 32) and the total (report ``ledger``) hold ``energy``'s energy exactly.
+    denoiser's picture and a smooth field, so that every block of ``scale`` x ``scale``
+    pixels (default 32) and the total (report ``ledger``) hold ``energy``'s energy exactly:
+    what a block lacks goes back mostly to its brightest features, a surplus comes off evenly.
     ``nonfinite``: "error" refuses NaN or infinite energy values, "zero" counts them as
     zero. The result is float32.
 

@@ -164,8 +164,10 @@ holds far more than the denoiser put around it (a lamp or a highlight the
 denoiser dimmed), the excess stays in place: over 16 times on a render, over
 once on epfilt's ep-gauss or ep-box output (its fireflies already spread; read
 from its header), or --keep-gain. The rest is carried by the
-denoiser's picture times a smooth field, solved so that every block of
---scale x --scale pixels (from the top left) holds the energy image's energy.
+denoiser's picture and a smooth field, solved so that every block of
+--scale x --scale pixels (from the top left) holds the energy image's energy:
+what a block lacks goes back mostly to its brightest features (a denoiser dims
+them), a surplus comes off evenly.
 The total is exact: the ledger balances to 1e-12 or nothing is written.
 Small --scale: energy exact in small regions, some of the render's grain
 back; large: the denoiser's look, energy exact over large regions.
