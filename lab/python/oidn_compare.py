@@ -25,7 +25,12 @@ Measures, each against the reference:
 * **blocks**: the largest relative difference, over the 32 x 32 blocks, between the output's
   energy and the input's (what a lighting study reads off a region);
 * **peaks in**: the same brightest pixels, the output's mean luminance over the input's (what
-  restore keeps: the render's own values there).
+  restore keeps: the render's own values there);
+* **block floor**: the least relMSE any image can have whose 32 x 32 blocks hold the energy
+  image's energy within 2% (the issue's block target), in closed form: per block, the part of the
+  energy image's difference from the reference's beyond 2%, squared, over the block's sum of the
+  relMSE weights `ref^2 + 1e-2` (the least-squares correction of the reference onto the block's sum),
+  summed and taken over OIDN's relMSE: how much of restore's error the block target itself forces.
 
 Writes `oidn.md` and `oidn.csv` into `--out` (default docs/bench) with the command, machine,
 versions and date, and prints the Markdown. Run by `scripts/oidn-compare`.
@@ -78,6 +83,17 @@ def block_sums(x):
     hb, wb = h // BLOCK, w // BLOCK
     y = x[: hb * BLOCK, : wb * BLOCK].astype(np.float64).sum(axis=2)
     return y.reshape(hb, BLOCK, wb, BLOCK).sum(axis=(1, 3))
+
+
+def block_floor(energy, ref, tol=0.02):
+    """The least relMSE of any image whose block sums lie within `tol` of `energy`'s (see above)."""
+    r = ref.astype(np.float64)
+    h, w = r.shape[:2]
+    weights = (r[: h // BLOCK * BLOCK, : w // BLOCK * BLOCK] ** 2 + REL_EPS).sum(axis=2)
+    weights = weights.reshape(h // BLOCK, BLOCK, w // BLOCK, BLOCK).sum(axis=(1, 3))
+    e, t = block_sums(energy), block_sums(ref)
+    beyond = np.maximum(0.0, np.abs(e - t) - tol * np.abs(e))
+    return float((beyond ** 2 / weights).sum() / r.size)
 
 
 def measures(out, inp, ref, top):
@@ -142,6 +158,9 @@ def main():
             row["restore_kept_share"] = rep["kept_share"]
             onto_ep, rep = epfilt.restore(denoised, ep, keep_gain=KEEP_GAIN_FILTERED)
             row["restore_ep_kept_share"] = rep["kept_share"]
+            oidn_rel = rel_mse(denoised, ref)
+            row["floor_render"] = block_floor(inp, ref) / oidn_rel
+            row["floor_ep"] = block_floor(ep, ref) / oidn_rel
             for name, img in (("oidn", denoised), ("epfilt", ep), ("ep_gauss", gauss),
                               ("epfilt_oidn", oidn(ep)), ("oidn_restore", restored),
                               ("oidn_restore_ep", onto_ep)):
@@ -229,20 +248,24 @@ def main():
               f"{max(pk):.0%} |", file=md)
     ratio = [r["oidn_restore_error"] / r["oidn_error"] for r in rows]
     onto = [r["oidn_restore_ep_error"] / r["oidn_error"] for r in rows]
-    print("\nAt the default scale, per render: error over OIDN's, peaks over the input's, and the "
-          "share of the energy kept in place (what OIDN lost: lamps, bulbs, highlights); then the "
-          "same with epfilt's output as the energy (its peaks over the input's).\n", file=md)
+    print("\nAt the default scale, per render: error over OIDN's, peaks over the input's, the "
+          "share of the energy kept in place (what OIDN lost: lamps, bulbs, highlights), and the block "
+          "floor (the least error over OIDN's that any image with the energy's 32 x 32 blocks within 2% "
+          "has: what the block target alone forces); then the same with epfilt's output as the energy "
+          "(its peaks over the input's).\n", file=md)
     print("| input | error over OIDN's | OIDN's peaks over the input's | restore's | kept in place | "
-          "onto epfilt: error over OIDN's | peaks | kept in place |", file=md)
-    print("|---|---|---|---|---|---|---|---|", file=md)
+          "block floor | onto epfilt: error over OIDN's | peaks | kept in place | block floor |", file=md)
+    print("|---|---|---|---|---|---|---|---|---|---|", file=md)
     for r, x, y in zip(rows, ratio, onto):
         print(f"| {r['input']} | {x:.2f}x | {r['oidn_peaks_in']:.2f} | {r['oidn_restore_peaks_in']:.2f} | "
-              f"{r['restore_kept_share']:.1%} | {y:.2f}x | {r['oidn_restore_ep_peaks_in']:.2f} | "
-              f"{r['restore_ep_kept_share']:.1%} |", file=md)
-    for label, xs in (("the render's", ratio), ("epfilt's", onto)):
+              f"{r['restore_kept_share']:.1%} | {r['floor_render']:.3f}x | {y:.2f}x | "
+              f"{r['oidn_restore_ep_peaks_in']:.2f} | {r['restore_ep_kept_share']:.1%} | "
+              f"{r['floor_ep']:.3f}x |", file=md)
+    for label, xs, fl in (("the render's", ratio, "floor_render"), ("epfilt's", onto, "floor_ep")):
         print(f"\nWith {label} energy: error over OIDN's geometric mean "
               f"{np.exp(np.mean(np.log(xs))):.2f}x, worst {max(xs):.2f}x, "
-              f"{sum(x <= 1.2 for x in xs)} of {len(xs)} within 1.2x.", file=md)
+              f"{sum(x <= 1.2 for x in xs)} of {len(xs)} within 1.2x; the block floor at most "
+              f"{max(r[fl] for r in rows):.3f}x.", file=md)
     text = md.getvalue()
     with open(os.path.join(a.out, "oidn.md"), "w") as f:
         f.write(text)
