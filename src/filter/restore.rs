@@ -322,18 +322,36 @@ impl FieldRows {
         let (j0, j1, wy0, wy1) = tent(y, self.h, self.b);
         let means = |j: usize| &self.rows[j - self.first].means;
         let (r0, r1) = (means(j0), means(j1));
-        let lerp = |i0: usize, i1: usize, wx0: f64, wx1: f64, k: fn(&(f64, f64)) -> f64| {
-            wy0 * (wx0 * k(&r0[i0]) + wx1 * k(&r0[i1]))
-                + wy1 * (wx0 * k(&r1[i0]) + wx1 * k(&r1[i1]))
+        // Block by block: the means and choices of its row's neighbours
+        // blended down the column once, then across per pixel.
+        let down = |i: usize| {
+            let (a, b) = (r0[i], r1[i]);
+            (wy0 * a.0 + wy1 * b.0, wy0 * a.1 + wy1 * b.1)
         };
-        for ((t, &sx), &(i0, i1, wx0, wx1)) in t.iter_mut().zip(s).zip(&self.tents_x) {
-            let m = lerp(i0, i1, wx0, wx1, |v| v.0);
-            let more = lerp(i0, i1, wx0, wx1, |v| v.1);
-            *t = if sx > 0.0 && m > 0.0 {
-                sx * (1.0 - more + more * sx / m)
-            } else {
-                0.0
-            };
+        let cols = (t.chunks_mut(self.b).zip(s.chunks(self.b))).zip(self.tents_x.chunks(self.b));
+        for (ib, ((t, s), tents)) in cols.enumerate() {
+            let v = [ib.wrapping_sub(1), ib, ib + 1].map(|i| {
+                if i < self.nbx {
+                    down(i)
+                } else {
+                    (0.0, 0.0)
+                }
+            });
+            if v.iter().all(|v| v.1 == 0.0) {
+                // Every block around needs less: the shape itself.
+                t.copy_from_slice(s);
+                continue;
+            }
+            for ((t, &sx), &(i0, i1, wx0, wx1)) in t.iter_mut().zip(s).zip(tents) {
+                let (a, b) = (v[i0 + 1 - ib], v[i1 + 1 - ib]);
+                let m = wx0 * a.0 + wx1 * b.0;
+                let more = wx0 * a.1 + wx1 * b.1;
+                *t = if sx > 0.0 && m > 0.0 {
+                    sx * (1.0 - more + more * sx / m)
+                } else {
+                    0.0
+                };
+            }
         }
     }
 
