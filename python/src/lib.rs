@@ -443,19 +443,32 @@ fn read<'py>(
 /// (Python's keyword arguments, one each.)
 #[allow(clippy::too_many_arguments)]
 #[pyfunction]
-#[pyo3(signature = (denoised, energy, scale=None, *, keep_gain=None, channels=None, threads=0, nonfinite="error"))]
+#[pyo3(signature = (denoised, energy, scale=None, *, keep_gain=None, emission=None, channels=None, threads=0, nonfinite="error"))]
 fn restore<'py>(
     py: Python<'py>,
     denoised: &Bound<'py, PyAny>,
     energy: &Bound<'py, PyAny>,
     scale: Option<usize>,
     keep_gain: Option<f64>,
+    emission: Option<&Bound<'py, PyAny>>,
     channels: Option<Vec<String>>,
     threads: usize,
     nonfinite: &str,
 ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
     let (d, dshape, _) = samples_of(denoised, "denoised")?;
     let (e, eshape, _) = samples_of(energy, "energy")?;
+    let em = match emission {
+        Some(a) => {
+            let (g, gshape, _) = samples_of(a, "emission")?;
+            if gshape != eshape {
+                return Err(config_error(format!(
+                    "emission has shape {gshape:?} and energy {eshape:?}: the guide is the energy image's own"
+                )));
+            }
+            Some(g)
+        }
+        None => None,
+    };
     if dshape != eshape {
         return Err(config_error(format!(
             "denoised has shape {dshape:?} and energy {eshape:?}: restore needs the denoiser's output of that very image"
@@ -473,6 +486,7 @@ fn restore<'py>(
         epfilt::job::restore::restore_array(
             &d,
             &e,
+            em.as_deref(),
             (w, h),
             &channels,
             (scale, keep_gain),

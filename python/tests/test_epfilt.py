@@ -369,3 +369,21 @@ def test_restore_puts_the_energy_back_at_any_thread_count():
     assert low["keep_gain"] == 2.0 and low["kept_share"] >= report["kept_share"]
     with pytest.raises(epfilt.ConfigError):
         epfilt.restore(denoised, energy, keep_gain=0.5)
+
+
+def test_restore_keeps_the_emission_guides_lamp_in_place():
+    energy = np.ones((24, 24, 3), np.float32)
+    energy[9, 12] = 101.0  # a lamp the denoiser removed
+    emission = np.zeros_like(energy)
+    emission[9, 12] = 100.0
+    denoised = np.ones_like(energy)
+    spread, plain = epfilt.restore(denoised, energy, 8)
+    kept, guided = epfilt.restore(denoised, energy, 8, emission=emission)
+    assert plain["emission_guide"] == [] and guided["emission_guide"] == ["emission"]
+    # All but the denoiser's share around (a flat 1 over the kernel's centre
+    # weight, about 25) stays in place; without the guide it is spread.
+    assert spread[9, 12, 0] < 20.0 and kept[9, 12, 0] > 70.0
+    for l in guided["ledger"]:
+        assert l["rel_error"] <= LEDGER_TOL
+    with pytest.raises(epfilt.ConfigError):
+        epfilt.restore(denoised, energy, emission=emission[:, :-1])

@@ -41,6 +41,13 @@ pub const KEEP_GAIN: f64 = 16.0;
 /// error over the denoiser's (docs/bench/oidn.md has the one chosen).
 pub const KEEP_GAIN_FILTERED: f64 = 1.0;
 
+/// The gain for the energy image's emission guide (the directly visible
+/// emission a renderer writes beside the beauty): emission is never a
+/// firefly, so all of it that exceeds the denoiser's share around a pixel
+/// stays in place, as on epfilt's output; the rest of the pixel's energy
+/// then meets the image's own gain.
+pub const EMISSION_KEEP_GAIN: f64 = 1.0;
+
 /// The gains `--keep-gain` takes: at least one (below, the denoiser's own
 /// energy would be kept), at most a million (above, nothing is kept).
 pub const KEEP_GAIN_RANGE: std::ops::RangeInclusive<f64> = 1.0..=1e6;

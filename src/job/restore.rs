@@ -12,10 +12,10 @@ use crate::filter::restore::{RestoreParams, DEFAULT_SCALE, KEEP_GAIN, KEEP_GAIN_
 use crate::filter::Method;
 use crate::host::{cpu_seconds, peak_rss_bytes};
 use crate::io::output::OutputLayout;
-use crate::io::{ExrInput, Format, OutputSettings};
+use crate::io::{find_guides, ExrInput, Format, GuideRequest, OutputSettings};
 use crate::pipeline::counts::{MethodCounts, RestoreCounts};
 use crate::pipeline::ledger::ChannelLedger;
-use crate::pipeline::restore::{restore_planar, restore_stream};
+use crate::pipeline::restore::{restore_planar, restore_stream, EnergyLayout};
 use crate::pipeline::{NonFinite, PipelineConfig, Precision, Progress, RunStats, StageSeconds};
 
 use super::array::{interleaved, planar};
@@ -93,6 +93,10 @@ pub struct RestoreReport {
     pub keep_gain: f64,
     /// What chose [`Self::keep_gain`].
     pub keep_gain_from: String,
+    /// The energy image's emission guide (its channels, or `emission` for
+    /// an array), whose light beyond the denoiser's share around stays in
+    /// place; empty where there is none.
+    pub emission_guide: Vec<String>,
     /// Per channel: the energy image's total, the result's, their relative
     /// difference (before and after rounding).
     pub ledger: Vec<ChannelLedger>,
@@ -122,7 +126,7 @@ impl RestoreReport {
     fn of(
         job: (&str, &str, &str),
         (w, h): (usize, usize),
-        (params, keep_gain_from): (RestoreParams, String),
+        (params, keep_gain_from, emission_guide): (RestoreParams, String, Vec<String>),
         stats: &RunStats,
         threads: usize,
         cpu_start: Option<f64>,
@@ -141,6 +145,7 @@ impl RestoreReport {
             scale: params.scale,
             keep_gain: params.keep_gain,
             keep_gain_from,
+            emission_guide,
             ledger: stats.ledger.clone(),
             kept_share: if mass > 0.0 {
                 counts.kept_energy / mass
@@ -157,6 +162,40 @@ impl RestoreReport {
             peak_rss_bytes: peak_rss_bytes(),
         }
     }
+}
+
+/// The energy image's rows: its `channels`, and the emission guide beside
+/// them where the file has one (read as guide channels after them). A file
+/// whose guides are ambiguous or hold ids gets none: the keep gain alone
+/// decides there.
+fn emission_guide(
+    path: &std::path::Path,
+    energy: &mut ExrInput,
+    channels: Vec<String>,
+) -> Result<EnergyLayout> {
+    let luminance = energy.luminance();
+    let beauty: Vec<String> = (channels.iter().zip(&luminance))
+        .filter(|(_, l)| **l != 0.0)
+        .map(|(c, _)| c.clone())
+        .collect();
+    let auto = GuideRequest::parse("auto", &[])?;
+    let found = find_guides(path, energy.header(), &beauty, &auto).ok();
+    let names = found
+        .and_then(|f| f.emission)
+        .filter(|e| e.len() == beauty.len() && !e.iter().any(|c| energy.is_uint(c)));
+    let mut layout = EnergyLayout::plain(channels, luminance);
+    if let Some(names) = names {
+        energy.add_aux_channels(&names)?;
+        let mut k = 0;
+        for (c, e) in layout.channels.iter().zip(&mut layout.emission) {
+            if beauty.contains(c) {
+                *e = Some(k);
+                k += 1;
+            }
+        }
+        layout.guide = names;
+    }
+    Ok(layout)
 }
 
 fn check_ledger(stats: &RunStats) -> Result<()> {
@@ -201,7 +240,7 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
         &[Format::Exr],
         "restore",
     )?;
-    let energy = ExrInput::open(&job.energy, None)?;
+    let mut energy = ExrInput::open(&job.energy, None)?;
     let denoised = ExrInput::open(&job.denoised, None)?;
     let (keep_gain, keep_gain_from) = match job.keep_gain {
         Some(g) => (g, "--keep-gain".to_string()),
@@ -249,6 +288,8 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
     };
     let layout = OutputLayout::of(&energy, &channels, &settings);
     let mut output = layout.create(&job.output, false, 1, &channels, &settings)?;
+    let energy_layout = emission_guide(&job.energy, &mut energy, channels.clone())?;
+    let guide = energy_layout.guide_names();
     let cfg = config(job.threads, job.nonfinite, job.cancel.clone());
     let cpu_start = cpu_seconds();
     let stats = restore_stream(
@@ -256,8 +297,7 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
         denoised.source(),
         &mut output,
         size,
-        channels,
-        energy.luminance(),
+        energy_layout,
         params,
         &cfg,
         progress,
@@ -278,7 +318,7 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
             &job.output.display().to_string(),
         ),
         size,
-        (params, keep_gain_from),
+        (params, keep_gain_from, guide),
         &stats,
         cfg.workers(),
         cpu_start,
@@ -286,12 +326,14 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
 }
 
 /// Restore on arrays: `denoised` and `energy` interleaved `[y][x][channel]`
-/// of `channels` (names, for the ledger), `w x h`. Returns the result in
-/// the same layout and the report.
+/// of `channels` (names, for the ledger), `w x h`; `emission`, the energy
+/// image's emission guide of the same shape, where the renderer wrote one.
+/// Returns the result in the same layout and the report.
 #[allow(clippy::too_many_arguments)]
 pub fn restore_array(
     denoised: &[f32],
     energy: &[f32],
+    emission: Option<&[f32]>,
     (w, h): (usize, usize),
     channels: &[String],
     (scale, keep_gain): (usize, Option<f64>),
@@ -311,22 +353,39 @@ pub fn restore_array(
         .map_err(Error::Config)?;
     let nch = channels.len();
     let n = w.checked_mul(h).and_then(|p| p.checked_mul(nch));
-    if n != Some(denoised.len()) || n != Some(energy.len()) {
+    let lens = [
+        Some(denoised.len()),
+        Some(energy.len()),
+        emission.map(<[f32]>::len),
+    ];
+    if lens.iter().flatten().any(|&l| Some(l) != n) {
         return Err(Error::Config(format!(
-            "denoised has {} values and energy {}; a {w}x{h} image of {nch} channels has {}",
+            "denoised has {} values, energy {} and emission {}; a {w}x{h} image of {nch} channels has {}",
             denoised.len(),
             energy.len(),
+            emission.map_or("none".into(), |e| e.len().to_string()),
             n.map_or("too many".into(), |n| n.to_string())
         )));
     }
+    let mut layout = EnergyLayout::plain(channels.to_vec(), vec![0.0; nch]);
+    let mut rows = planar(energy, w, nch);
+    if let Some(em) = emission {
+        // Each row: the energy's channels, then the guide's.
+        let em = planar(em, w, nch);
+        rows = (rows.chunks(nch * w).zip(em.chunks(nch * w)))
+            .flat_map(|(e, g)| e.iter().chain(g).copied())
+            .collect();
+        layout.emission = (0..nch).map(Some).collect();
+        layout.guide = vec!["emission".to_string()];
+    }
     let cfg = config(threads, nonfinite, cancel);
     let cpu_start = cpu_seconds();
+    let guide = layout.guide_names();
     let (out, stats) = restore_planar(
-        planar(energy, w, nch),
+        rows,
         planar(denoised, w, nch),
         (w, h),
-        channels.to_vec(),
-        vec![0.0; nch],
+        layout,
         params,
         &cfg,
         Precision::F32,
@@ -336,7 +395,7 @@ pub fn restore_array(
     let report = RestoreReport::of(
         ("<array>", "<array>", "<array>"),
         (w, h),
-        (params, keep_gain_from.to_string()),
+        (params, keep_gain_from.to_string(), guide),
         &stats,
         cfg.workers(),
         cpu_start,

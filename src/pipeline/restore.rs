@@ -35,13 +35,18 @@ use super::{
 };
 use crate::error::{Error, Result};
 use crate::filter::restore::{
-    kept, reflect, shape, taps, FieldRows, RestoreParams, KEEP_SIGMA, LOOKAHEAD,
+    kept, reflect, shape, taps, FieldRows, RestoreParams, EMISSION_KEEP_GAIN, KEEP_SIGMA, LOOKAHEAD,
 };
 use crate::geometry::{Grid, Halo};
 
 /// The shape's blur and the part of the energy kept in place, row by row.
 struct Kept {
     nch: usize,
+    /// Where each channel's emission guide is in the input rows (after the
+    /// energy's channels), if the energy image has one.
+    emission: Vec<Option<usize>>,
+    /// The first of the denoiser's channels in the input rows.
+    d_at: usize,
     w: usize,
     h: usize,
     taps: Vec<f64>,
@@ -57,10 +62,13 @@ struct Kept {
 }
 
 impl Kept {
-    fn new(nch: usize, w: usize, h: usize, gain: f64) -> Self {
+    fn new(emission: Vec<Option<usize>>, w: usize, h: usize, gain: f64) -> Self {
         let taps = taps(KEEP_SIGMA);
+        let nch = emission.len();
         Kept {
             nch,
+            d_at: nch + emission.iter().flatten().count(),
+            emission,
             w,
             h,
             gain,
@@ -80,7 +88,7 @@ impl Kept {
     /// when `all_in`); returns the rows done now. The input window holds
     /// the rows `r` above and below.
     fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> (usize, usize) {
-        let (nch, w, h, r) = (self.nch, self.w, self.h, self.r());
+        let (nch, w, h, r, d_at) = (self.nch, self.w, self.h, self.r(), self.d_at);
         let a = self.kept_rows.end();
         let b = if all_in { h } else { rows_in.saturating_sub(r) };
         if b <= a {
@@ -89,7 +97,7 @@ impl Kept {
         for _ in a..b {
             self.kept_rows.push_stale(0.0);
         }
-        let (taps, centre, gain) = (&self.taps, self.centre, self.gain);
+        let (taps, centre, gain, emission) = (&self.taps, self.centre, self.gain, &self.emission);
         let mut rows = self.kept_rows.range_mut(a, b);
         let per_row: Vec<(bool, RestoreCounts)> = rows
             .par_iter_mut()
@@ -101,12 +109,24 @@ impl Kept {
                 let mut any = false;
                 for ch in 0..nch {
                     let e = &row[ch * w..(ch + 1) * w];
-                    let d = &row[(nch + ch) * w..(nch + ch + 1) * w];
+                    let d = &row[(d_at + ch) * w..(d_at + ch + 1) * w];
+                    let em = emission[ch].map(|k| &row[(nch + k) * w..(nch + k + 1) * w]);
                     let l = &mut out[ch * w..(ch + 1) * w];
                     for x in 0..w {
                         let ev = f64::from(e[x]);
-                        let q = || around(input, (x, y), (w, h), (nch + ch) * w, taps);
-                        l[x] = kept(ev, shape(d[x]), q, centre, gain);
+                        // Measured once, for the emission and the energy.
+                        let mut q_at = None;
+                        let mut q = || {
+                            *q_at.get_or_insert_with(|| {
+                                around(input, (x, y), (w, h), (d_at + ch) * w, taps)
+                            })
+                        };
+                        let own = shape(d[x]);
+                        let lit = em.map_or(0.0, |em| {
+                            let v = shape(em[x]);
+                            kept(v, own, &mut q, centre, EMISSION_KEEP_GAIN).clamp(0.0, ev.max(0.0))
+                        });
+                        l[x] = lit + kept(ev - lit, own, &mut q, centre, gain);
                         if l[x] != 0.0 {
                             any = true;
                             c.count(ev, l[x] == ev);
@@ -172,6 +192,8 @@ fn around(
 /// One row of blocks at a time: `c g + l`, `c = s + t (f - 1)`.
 pub struct RestoreStage {
     nch: usize,
+    /// The first of the denoiser's channels in the input rows.
+    d_at: usize,
     w: usize,
     h: usize,
     kept: Kept,
@@ -190,12 +212,15 @@ pub struct RestoreStage {
 impl RestoreStage {
     /// The stage for `nch` channels of a `w x h` image, blocks of
     /// `params.scale`, its keep gain.
-    pub fn new(nch: usize, w: usize, h: usize, params: RestoreParams) -> Self {
+    pub fn new(emission: Vec<Option<usize>>, w: usize, h: usize, params: RestoreParams) -> Self {
+        let nch = emission.len();
+        let kept = Kept::new(emission, w, h, params.keep_gain);
         RestoreStage {
             nch,
+            d_at: kept.d_at,
             w,
             h,
-            kept: Kept::new(nch, w, h, params.keep_gain),
+            kept,
             fields: (0..nch)
                 .map(|_| FieldRows::new(w, h, params.scale))
                 .collect(),
@@ -212,7 +237,7 @@ impl RestoreStage {
 
     /// Rows `a..b` (their `l` known) into the fields' block sums.
     fn add_sums(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
-        let (nch, w) = (self.nch, self.w);
+        let (nch, w, d_at) = (self.nch, self.w, self.d_at);
         let (fields, kept) = (&self.fields, &self.kept);
         let nbx = fields[0].nbx;
         let sums: Vec<Vec<(f64, f64)>> = (a..b)
@@ -225,7 +250,7 @@ impl RestoreStage {
                     let mut out = vec![(0.0, 0.0); nch * nbx];
                     for ch in 0..nch {
                         let e = &row[ch * w..(ch + 1) * w];
-                        let d = &row[(nch + ch) * w..(nch + ch + 1) * w];
+                        let d = &row[(d_at + ch) * w..(d_at + ch + 1) * w];
                         for x in 0..w {
                             s[x] = shape(d[x]);
                             rest[x] = f64::from(e[x]) - l.map_or(0.0, |l| l[ch * w + x]);
@@ -248,7 +273,7 @@ impl RestoreStage {
     /// Rows `a..b` (the block rows around them summed) into the fields'
     /// carrier moments.
     fn add_moments(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
-        let (nch, w) = (self.nch, self.w);
+        let (nch, w, d_at) = (self.nch, self.w, self.d_at);
         let fields = &self.fields;
         let nbx = fields[0].nbx;
         let sums: Vec<Vec<(f64, [f64; 9])>> = (a..b)
@@ -256,7 +281,7 @@ impl RestoreStage {
             .map_init(
                 || (vec![0.0f64; w], vec![0.0f64; w]),
                 |(s, t), y| {
-                    let d_row = &input.get(y)[nch * w..];
+                    let d_row = &input.get(y)[d_at * w..];
                     let mut out = vec![(0.0, [0.0; 9]); nch * nbx];
                     for ch in 0..nch {
                         for (s, &d) in s.iter_mut().zip(&d_row[ch * w..(ch + 1) * w]) {
@@ -279,7 +304,7 @@ impl RestoreStage {
 
     /// Rows `a..b`, a whole row of blocks, their fields fixed.
     fn finish_blocks(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
-        let (nch, w) = (self.nch, self.w);
+        let (nch, w, d_at) = (self.nch, self.w, self.d_at);
         for _ in a..b {
             self.out.push_stale(0.0);
         }
@@ -294,7 +319,7 @@ impl RestoreStage {
                 || (vec![0.0f64; w], vec![0.0f64; w]),
                 |(f, t), (i, out)| {
                     let y = a + i;
-                    let d_row = &input.get(y)[nch * w..];
+                    let d_row = &input.get(y)[d_at * w..];
                     let mut sums = vec![0.0; nch * nbx];
                     for ch in 0..nch {
                         fields[ch].row(y, f);
@@ -447,25 +472,61 @@ impl Stage for RestoreStage {
     }
 }
 
+/// The energy image's rows: its `channels`, then the emission guide of
+/// those `emission` names (`Some(k)`: the `k`-th guide channel after them).
+#[derive(Clone, Debug)]
+pub struct EnergyLayout {
+    /// The energy's channels, the ones restored.
+    pub channels: Vec<String>,
+    /// Per channel, its emission guide's place among the guide channels.
+    pub emission: Vec<Option<usize>>,
+    /// The luminance weights (for the layout).
+    pub luminance: Vec<f64>,
+    /// The guide's channel names, in their order (for the report).
+    pub guide: Vec<String>,
+}
+
+impl EnergyLayout {
+    /// `channels` without an emission guide.
+    pub fn plain(channels: Vec<String>, luminance: Vec<f64>) -> Self {
+        EnergyLayout {
+            emission: vec![None; channels.len()],
+            channels,
+            luminance,
+            guide: Vec::new(),
+        }
+    }
+
+    /// The emission guide's channel names (none: empty).
+    pub fn guide_names(&self) -> Vec<String> {
+        self.guide.clone()
+    }
+
+    /// Channels the energy's rows hold: its own and the guide's.
+    fn row_channels(&self) -> usize {
+        self.channels.len() + self.emission.iter().flatten().count()
+    }
+}
+
 /// Restore the denoiser's output with the energy image's energy by
-/// `params` into `sink`: both `w x h` with `channels` (`luminance`: their
-/// weights, for the layout); the books' ledger counts `energy`.
+/// `params` into `sink`: both `w x h`; the energy's rows as `energy_layout`
+/// says, the denoiser's of its channels; the books' ledger counts `energy`.
 #[allow(clippy::too_many_arguments)]
 pub fn restore_stream<A: Source, B: Source, K: Sink>(
     energy: A,
     denoised: B,
     sink: K,
     (w, h): (usize, usize),
-    channels: Vec<String>,
-    luminance: Vec<f64>,
+    energy_layout: EnergyLayout,
     params: RestoreParams,
     cfg: &PipelineConfig,
     progress: Progress<'_>,
 ) -> Result<RunStats> {
-    let nch = channels.len();
-    if w == 0 || h == 0 || nch == 0 || nch > MAX_CHANNELS {
+    let nch = energy_layout.channels.len();
+    let na = energy_layout.row_channels();
+    if w == 0 || h == 0 || nch == 0 || na + nch > MAX_CHANNELS {
         return Err(Error::Config(format!(
-            "restore needs a non-empty image of 1..={MAX_CHANNELS} channels, not {w}x{h} of {nch}"
+            "restore needs a non-empty image of channels and guides together at most {MAX_CHANNELS}, not {w}x{h} of {na} and {nch}"
         )));
     }
     let params = params.check().map_err(Error::Config)?;
@@ -474,50 +535,59 @@ pub fn restore_stream<A: Source, B: Source, K: Sink>(
         in_h: h,
         s: 1,
     };
+    let EnergyLayout {
+        channels,
+        emission,
+        luminance,
+        ..
+    } = energy_layout;
     let mut layout = StripLayout::new(grid, channels.clone(), luminance);
-    layout.aux = channels.iter().map(|c| format!("denoised.{c}")).collect();
-    let stage = RestoreStage::new(nch, w, h, params);
+    let guide =
+        (channels.iter().zip(&emission)).filter_map(|(c, e)| e.map(|_| format!("emission.{c}")));
+    layout.aux = guide
+        .chain(channels.iter().map(|c| format!("denoised.{c}")))
+        .collect();
+    let stage = RestoreStage::new(emission, w, h, params);
     let streamer = Streamer::of_stage(
         &layout,
         Box::new(stage),
         cfg.nonfinite,
         sink.precisions(nch),
     );
-    let pair = Pair::new(energy, denoised, w, nch, nch);
+    let pair = Pair::new(energy, denoised, w, na, nch);
     run_streamer(pair, sink, &layout, streamer, cfg, progress)
 }
 
 /// [`restore_stream`] of two whole images in memory (planar
-/// `[row][channel][x]`), rounded to `precision`: the output and the run.
-#[allow(clippy::too_many_arguments)]
+/// `[row][channel][x]`; the energy's rows as `energy_layout` says),
+/// rounded to `precision`: the output and the run.
 pub fn restore_planar(
     energy: Vec<f32>,
     denoised: Vec<f32>,
     (w, h): (usize, usize),
-    channels: Vec<String>,
-    luminance: Vec<f64>,
+    energy_layout: EnergyLayout,
     params: RestoreParams,
     cfg: &PipelineConfig,
     precision: Precision,
 ) -> Result<(Vec<f32>, RunStats)> {
-    let n = w.checked_mul(h).and_then(|p| p.checked_mul(channels.len()));
-    if n != Some(energy.len()) || n != Some(denoised.len()) {
+    let nch = energy_layout.channels.len();
+    let na = energy_layout.row_channels();
+    let pixels = w.checked_mul(h);
+    let n = pixels.and_then(|p| p.checked_mul(nch));
+    if pixels.and_then(|p| p.checked_mul(na)) != Some(energy.len()) || n != Some(denoised.len()) {
         return Err(Error::Config(format!(
-            "{} energy and {} denoised values for a {w}x{h} image of {} channels",
+            "{} energy and {} denoised values for a {w}x{h} image of {nch} channels ({na} with the guide)",
             energy.len(),
             denoised.len(),
-            channels.len()
         )));
     }
-    let row = channels.len() * w;
     let mut sink = MemorySink::with_precision(precision);
     let stats = restore_stream(
-        MemorySource::new(energy, row),
-        MemorySource::new(denoised, row),
+        MemorySource::new(energy, na * w),
+        MemorySource::new(denoised, nch * w),
         &mut sink,
         (w, h),
-        channels,
-        luminance,
+        energy_layout,
         params,
         cfg,
         &|_, _| {},
@@ -564,21 +634,39 @@ mod tests {
         (e, d)
     }
 
+    /// A restore of [`images`]; `lamps`: with an emission guide that
+    /// holds most of every 23rd pixel's energy.
     fn run(
-        w: usize,
-        h: usize,
-        nch: usize,
+        (w, h, nch): (usize, usize, usize),
         scale: usize,
         cfg: &PipelineConfig,
+        lamps: bool,
     ) -> (Vec<f32>, RunStats) {
-        let (e, d) = images(w, h, nch);
+        let (mut e, d) = images(w, h, nch);
         let names = (0..nch).map(|c| format!("c{c}")).collect();
+        let mut layout = EnergyLayout::plain(names, vec![0.0; nch]);
+        if lamps {
+            let row = nch * w;
+            e = (e.chunks(row).enumerate())
+                .flat_map(|(y, r)| {
+                    let lamp = r.iter().enumerate().map(move |(i, &v)| {
+                        let x = i % w;
+                        if (x * 7 + y * 3) % 23 == 0 {
+                            0.9 * v
+                        } else {
+                            0.0
+                        }
+                    });
+                    r.iter().copied().chain(lamp).collect::<Vec<f32>>()
+                })
+                .collect();
+            layout.emission = (0..nch).map(Some).collect();
+        }
         restore_planar(
             e,
             d,
             (w, h),
-            names,
-            vec![0.0; nch],
+            layout,
             RestoreParams {
                 scale,
                 keep_gain: KEEP_GAIN,
@@ -591,13 +679,14 @@ mod tests {
 
     #[test]
     fn energy_is_exact_and_bytes_do_not_depend_on_strips_or_threads() {
-        for (w, h, scale) in [(37, 29, 8), (5, 4, 2), (64, 3, 32), (70, 45, 16)] {
+        let sizes = [(37, 29, 8), (5, 4, 2), (64, 3, 32), (70, 45, 16)];
+        for ((w, h, scale), lamps) in sizes.into_iter().flat_map(|s| [(s, false), (s, true)]) {
             let base = PipelineConfig {
                 threads: 1,
                 strip_rows: 1,
                 ..Default::default()
             };
-            let (out, stats) = run(w, h, 2, scale, &base);
+            let (out, stats) = run((w, h, 2), scale, &base, lamps);
             for l in &stats.ledger {
                 assert!(l.rel_error <= LEDGER_TOL, "{w}x{h} {scale}: {l:?}");
             }
@@ -627,7 +716,7 @@ mod tests {
                     strip_rows,
                     ..Default::default()
                 };
-                let (o, s) = run(w, h, 2, scale, &cfg);
+                let (o, s) = run((w, h, 2), scale, &cfg, lamps);
                 assert_eq!(
                     s.digest, stats.digest,
                     "{w}x{h} threads {threads} strips {strip_rows}"
@@ -646,8 +735,7 @@ mod tests {
             e.clone(),
             vec![0.0; w * h],
             (w, h),
-            vec!["Y".into()],
-            vec![1.0],
+            EnergyLayout::plain(vec!["Y".into()], vec![1.0]),
             RestoreParams {
                 scale: 4,
                 keep_gain: KEEP_GAIN,
@@ -662,6 +750,59 @@ mod tests {
                 assert_eq!(c.unshaped as usize, e.iter().filter(|&&v| v > 0.0).count())
             }
             other => panic!("{other:?}"),
+        }
+    }
+
+    /// A lamp the denoiser removed, within the keep gain of the denoiser's
+    /// own value: spread through its block without the emission guide,
+    /// kept in place with it (beyond the denoiser's share around), and the
+    /// energy exact either way.
+    #[test]
+    fn the_emission_guide_keeps_a_lamp_the_denoiser_removed() {
+        let (w, h, lamp) = (16, 16, 8 * 16 + 8);
+        let mut e = vec![1.0f32; w * h];
+        e[lamp] = 101.0;
+        let d = vec![1.0f32; w * h];
+        let mut with_guide = Vec::new();
+        for row in e.chunks(w) {
+            with_guide.extend_from_slice(row);
+            with_guide.extend(row.iter().map(|&v| if v > 1.0 { 100.0 } else { 0.0 }));
+        }
+        let plain = EnergyLayout::plain(vec!["Y".into()], vec![1.0]);
+        let guided = EnergyLayout {
+            emission: vec![Some(0)],
+            ..plain.clone()
+        };
+        let params = RestoreParams {
+            scale: 8,
+            keep_gain: KEEP_GAIN,
+        };
+        let cfg = PipelineConfig::default();
+        let run = |energy, layout| {
+            restore_planar(
+                energy,
+                d.clone(),
+                (w, h),
+                layout,
+                params,
+                &cfg,
+                Precision::F32,
+            )
+            .unwrap()
+        };
+        let (spread, s0) = run(e.clone(), plain);
+        let (kept, s1) = run(with_guide, guided);
+        // The share around a flat denoiser: its value over the kernel's
+        // centre weight.
+        let around = 1.0 / taps(KEEP_SIGMA)[taps(KEEP_SIGMA).len() / 2].powi(2);
+        assert!(spread[lamp] < 20.0, "{}", spread[lamp]);
+        assert!(
+            kept[lamp] as f64 >= 100.0 - around,
+            "{} {around}",
+            kept[lamp]
+        );
+        for s in [s0, s1] {
+            assert!(s.ledger[0].rel_error <= LEDGER_TOL, "{:?}", s.ledger);
         }
     }
 }

@@ -94,8 +94,8 @@ def filter_file(input, output, *, progress=None, **settings):
     return _epfilt.filter_file(str(input), str(output), progress=progress, **settings)
 
 
-def restore(denoised, energy, scale=None, *, keep_gain=None, channels=None, threads=0,
-            nonfinite="error"):
+def restore(denoised, energy, scale=None, *, keep_gain=None, emission=None, channels=None,
+            threads=0, nonfinite="error"):
     """A denoiser's output with ``energy``'s energy put back, and the report.
 
     ``denoised`` is any denoiser's output (OIDN, OptiX, ...) and ``energy`` the image
@@ -109,7 +109,11 @@ def restore(denoised, energy, scale=None, *, keep_gain=None, channels=None, thre
     denoiser's picture and a smooth field, so that every block of ``scale`` x ``scale``
     pixels (default 32) and the total (report ``ledger``) hold ``energy``'s energy exactly:
     what a block lacks goes back mostly to its brightest features, a surplus comes off evenly.
-    ``nonfinite``: "error" refuses NaN or infinite energy values, "zero" counts them as
+    ``emission``: the render's directly visible emission pass (same shape as ``energy``,
+    e.g. ``epfilt.read(path, ["emission.R", "emission.G", "emission.B"])``'s last three
+    channels), where the renderer wrote one: the light of lamps and bulbs beyond the
+    denoiser's share around stays in place whatever ``keep_gain`` says (report
+    ``emission_guide``). ``nonfinite``: "error" refuses NaN or infinite energy values, "zero" counts them as
     zero. The result is float32.
 
     With Intel OIDN (``pip install epfilt[oidn]``: pyoidn, colour only)::
@@ -119,8 +123,8 @@ def restore(denoised, energy, scale=None, *, keep_gain=None, channels=None, thre
         denoised = pyoidn.denoise(render, hdr=True, quality="high")
         restored, report = epfilt.restore(np.asarray(denoised, np.float32), render)
     """
-    return _epfilt.restore(denoised, energy, scale, keep_gain=keep_gain, channels=channels,
-                           threads=threads, nonfinite=nonfinite)
+    return _epfilt.restore(denoised, energy, scale, keep_gain=keep_gain, emission=emission,
+                           channels=channels, threads=threads, nonfinite=nonfinite)
 
 
 def info(path):

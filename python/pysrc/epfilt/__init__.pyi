@@ -40,6 +40,7 @@ def restore(
     scale: Optional[int] = None,
     *,
     keep_gain: Optional[float] = None,
+    emission: Optional[_Samples] = None,
     channels: Optional[Sequence[str]] = None,
     threads: int = 0,
     nonfinite: str = "error",

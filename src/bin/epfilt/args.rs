@@ -163,7 +163,8 @@ and channels) says how much there is. Where one pixel of the energy image
 holds far more than the denoiser put around it (a lamp or a highlight the
 denoiser dimmed), the excess stays in place: over 16 times on a render, over
 once on epfilt's ep-gauss or ep-box output (its fireflies already spread; read
-from its header), or --keep-gain. The rest is carried by the
+from its header), or --keep-gain; where the energy image has an emission
+guide pass, its light beyond the denoiser's share stays too. The rest is carried by the
 denoiser's picture and a smooth field, solved so that every block of
 --scale x --scale pixels (from the top left) holds the energy image's energy:
 what a block lacks goes back mostly to its brightest features (a denoiser dims

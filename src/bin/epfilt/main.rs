@@ -201,7 +201,7 @@ fn restore(a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
     if !a.quiet {
         let worst = r.ledger.iter().map(|l| l.rel_error).fold(0.0, f64::max);
         eprintln!(
-            "{}: {}x{} restored in blocks of {} in {:.2} s; energy exact to {worst:.1e}; {:.2}% of it kept in place where it was over {} times what the denoiser put around it ({}; {} pixel channels, {} empty)",
+            "{}: {}x{} restored in blocks of {} in {:.2} s; energy exact to {worst:.1e}; {:.2}% of it kept in place where it was over {} times what the denoiser put around it ({}; {} pixel channels, {} empty){}",
             r.output,
             r.width,
             r.height,
@@ -211,7 +211,15 @@ fn restore(a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
             r.keep_gain,
             r.keep_gain_from,
             r.counts.kept,
-            r.counts.unshaped
+            r.counts.unshaped,
+            if r.emission_guide.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    ", or was the emission guide's ({}) beyond the denoiser's share",
+                    r.emission_guide.join(", ")
+                )
+            }
         );
     }
     Ok(())
