@@ -9,7 +9,8 @@ For every `<scene>_px_<res>_spp<N>.exr` beside its `<scene>_ref_<res>.exr` in th
 * **epfilt then OIDN**: OIDN on epfilt's output;
 * **OIDN then restore**: `epfilt.restore` of OIDN's output with the render's energy, at its
   default scale (every 32 x 32 block and the total hold the render's energy), and the same at
-  other scales for the scale's trade;
+  other scales for the scale's trade; with the render's emission guide where it has one
+  (`emission=`, as `epfilt restore` reads it from the file);
 * **OIDN then restore onto epfilt**: the same with epfilt's output as the energy (its fireflies
   already spread; its blocks are epfilt's, not the render's), at the keep gain `restore` takes
   from such a file's header (`KEEP_GAIN_FILTERED`).
@@ -72,6 +73,15 @@ def rgb(path):
     samples, names = epfilt.read(path)
     idx = [names.index(c) for c in ("R", "G", "B")]
     return np.ascontiguousarray(samples[:, :, idx].astype(np.float32))
+
+
+def emission_of(path):
+    """The render's emission guide (R, G, B), or None where it has none."""
+    try:
+        samples, _ = epfilt.read(path, ["emission.R", "emission.G", "emission.B"])
+    except (epfilt.InputError, epfilt.ConfigError, ValueError):
+        return None
+    return np.ascontiguousarray(samples[:, :, 3:6])
 
 
 def rel_mse(x, ref):
@@ -154,9 +164,11 @@ def main():
                    "input_energy_vs_ref": float(inp.astype(np.float64).sum() / ref.astype(np.float64).sum() - 1),
                    "input_peaks": measures(inp, inp, ref, top)["peaks"]}
             denoised = oidn(inp)
-            restored, rep = epfilt.restore(denoised, inp)
+            em = emission_of(path)
+            row["emission_guide"] = em is not None
+            restored, rep = epfilt.restore(denoised, inp, emission=em)
             row["restore_kept_share"] = rep["kept_share"]
-            onto_ep, rep = epfilt.restore(denoised, ep, keep_gain=KEEP_GAIN_FILTERED)
+            onto_ep, rep = epfilt.restore(denoised, ep, keep_gain=KEEP_GAIN_FILTERED, emission=em)
             row["restore_ep_kept_share"] = rep["kept_share"]
             oidn_rel = rel_mse(denoised, ref)
             row["floor_render"] = block_floor(inp, ref) / oidn_rel
@@ -167,7 +179,7 @@ def main():
                 for key, v in measures(img, inp, ref, top).items():
                     row[f"{name}_{key}"] = v
             for k in SCALES:
-                img, _ = epfilt.restore(denoised, inp, k)
+                img, _ = epfilt.restore(denoised, inp, k, emission=em)
                 for key, v in measures(img, inp, ref, top).items():
                     row[f"restore{k}_{key}"] = v
             rows.append(row)
@@ -252,12 +264,14 @@ def main():
           "share of the energy kept in place (what OIDN lost: lamps, bulbs, highlights), and the block "
           "floor (the least error over OIDN's that any image with the energy's 32 x 32 blocks within 2% "
           "has: what the block target alone forces); then the same with epfilt's output as the energy "
-          "(its peaks over the input's).\n", file=md)
+          "(its peaks over the input's). Restore reads the render's emission guide where it has one "
+          "(named beside the input).\n", file=md)
     print("| input | error over OIDN's | OIDN's peaks over the input's | restore's | kept in place | "
           "block floor | onto epfilt: error over OIDN's | peaks | kept in place | block floor |", file=md)
     print("|---|---|---|---|---|---|---|---|---|---|", file=md)
     for r, x, y in zip(rows, ratio, onto):
-        print(f"| {r['input']} | {x:.2f}x | {r['oidn_peaks_in']:.2f} | {r['oidn_restore_peaks_in']:.2f} | "
+        guide = " (emission guide)" if r["emission_guide"] else ""
+        print(f"| {r['input']}{guide} | {x:.2f}x | {r['oidn_peaks_in']:.2f} | {r['oidn_restore_peaks_in']:.2f} | "
               f"{r['restore_kept_share']:.1%} | {r['floor_render']:.3f}x | {y:.2f}x | "
               f"{r['oidn_restore_ep_peaks_in']:.2f} | {r['restore_ep_kept_share']:.1%} | "
               f"{r['floor_ep']:.3f}x |", file=md)
