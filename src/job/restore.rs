@@ -286,10 +286,12 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
         provenance: Some(provenance),
         ..job.output_settings.clone()
     };
+    // The output's layout from the energy's own channels, before its guide
+    // is read beside them.
     let layout = OutputLayout::of(&energy, &channels, &settings);
-    let mut output = layout.create(&job.output, false, 1, &channels, &settings)?;
     let energy_layout = emission_guide(&job.energy, &mut energy, channels.clone())?;
-    let guide = energy_layout.guide_names();
+    let guide = energy_layout.guide.clone();
+    let mut output = layout.create(&job.output, false, 1, &channels, &settings)?;
     let cfg = config(job.threads, job.nonfinite, job.cancel.clone());
     let cpu_start = cpu_seconds();
     let stats = restore_stream(
@@ -380,7 +382,7 @@ pub fn restore_array(
     }
     let cfg = config(threads, nonfinite, cancel);
     let cpu_start = cpu_seconds();
-    let guide = layout.guide_names();
+    let guide = layout.guide.clone();
     let (out, stats) = restore_planar(
         rows,
         planar(denoised, w, nch),

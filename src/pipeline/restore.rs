@@ -327,6 +327,9 @@ impl RestoreStage {
                         for (o, &d) in o.iter_mut().zip(&d_row[ch * w..(ch + 1) * w]) {
                             *o = shape(d);
                         }
+                        // The carrier again rather than held from its
+                        // moments: holding it would keep f64 rows of the
+                        // rows of blocks ahead.
                         fields[ch].carrier(y, o, t);
                         let blocks = o.chunks_mut(bs).zip(t.chunks(bs)).zip(f.chunks(bs));
                         for (sum, ((o, t), f)) in sums[ch * nbx..].iter_mut().zip(blocks) {
@@ -497,11 +500,6 @@ impl EnergyLayout {
         }
     }
 
-    /// The emission guide's channel names (none: empty).
-    pub fn guide_names(&self) -> Vec<String> {
-        self.guide.clone()
-    }
-
     /// Channels the energy's rows hold: its own and the guide's.
     fn row_channels(&self) -> usize {
         self.channels.len() + self.emission.iter().flatten().count()
@@ -526,7 +524,8 @@ pub fn restore_stream<A: Source, B: Source, K: Sink>(
     let na = energy_layout.row_channels();
     if w == 0 || h == 0 || nch == 0 || na + nch > MAX_CHANNELS {
         return Err(Error::Config(format!(
-            "restore needs a non-empty image of channels and guides together at most {MAX_CHANNELS}, not {w}x{h} of {na} and {nch}"
+            "restore needs a non-empty image with at most {MAX_CHANNELS} channels in all (the energy's, its guide's and the denoiser's), not {w}x{h} with {}",
+            na + nch
         )));
     }
     let params = params.check().map_err(Error::Config)?;
