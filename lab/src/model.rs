@@ -75,12 +75,21 @@ pub struct Segment {
     pub after: Vec<usize>,
 }
 
-/// The lanes, by their names in a trace.
-pub const LANES: [&str; 4] = ["read", "filter", "write", "decode"];
+/// The lanes, by their names in a trace (the last only in a model of two
+/// strips in flight).
+pub const LANES: [&str; 5] = ["read", "filter", "write", "decode", "filter rest"];
 
 /// The decode lane: its segments (block rows decoding ahead, each a task on
 /// the pool) run at once, started in order.
 const DECODE: usize = 3;
+
+/// The lane of a filter strip's passes after its first ones, when two
+/// strips are in flight.
+pub const BACK: usize = 4;
+
+/// The tasks of a strip's first passes: what the next strip may run beside
+/// the rest of this one (two strips in flight).
+pub const FRONT: [&str; 4] = ["ledger in", "box luminance", "classify", "classify pass"];
 
 /// A run to replay.
 #[derive(Clone, Debug, Default)]
@@ -97,8 +106,19 @@ pub struct Model {
 impl Model {
     /// The model of a trace's events.
     pub fn from_events(events: &[Event]) -> Result<Model> {
+        Self::build(events, false)
+    }
+
+    /// The model of a trace's events with two filter strips in flight (see
+    /// the module's header).
+    pub fn from_events_in_flight(events: &[Event]) -> Result<Model> {
+        Self::build(events, true)
+    }
+
+    fn build(events: &[Event], split: bool) -> Result<Model> {
         let bad = |why: String| anyhow!("trace: {why}");
-        let mut tasks: HashMap<u64, Vec<f64>> = HashMap::new();
+        // Each task's seconds and whether it is a first pass (FRONT).
+        let mut tasks: HashMap<u64, Vec<(f64, bool)>> = HashMap::new();
         let mut regions: HashMap<u64, Vec<&Event>> = HashMap::new();
         let mut by_task: BTreeMap<String, f64> = BTreeMap::new();
         for e in events {
@@ -109,7 +129,8 @@ impl Model {
                         .deps
                         .first()
                         .ok_or_else(|| bad("a task without its region".into()))?;
-                    tasks.entry(r).or_default().push(e.dur * 1e-6);
+                    let front = FRONT.contains(&e.name.as_str());
+                    tasks.entry(r).or_default().push((e.dur * 1e-6, front));
                     *by_task.entry(e.name.clone()).or_default() += e.dur * 1e-6;
                 }
                 "region" => {
@@ -126,10 +147,11 @@ impl Model {
         };
         let mut segs: Vec<&Event> = events.iter().filter(|e| e.cat == "segment").collect();
         segs.sort_by(|a, b| a.ts.total_cmp(&b.ts));
+        let no_deps = Vec::new();
         let mut ids = Vec::with_capacity(segs.len());
         let mut deps = Vec::with_capacity(segs.len());
         for seg in segs {
-            let lane = LANES
+            let lane = LANES[..BACK]
                 .iter()
                 .position(|l| *l == seg.args.lane)
                 .ok_or_else(|| bad(format!("unknown lane {:?}", seg.args.lane)))?;
@@ -139,7 +161,10 @@ impl Model {
                 .ok_or_else(|| bad("a segment without its strip".into()))?;
             let mut inner = regions.remove(&seg.args.id).unwrap_or_default();
             inner.sort_by(|a, b| a.ts.total_cmp(&b.ts));
+            // The segment's phases, and with `split` those of its rest.
+            let split = split && lane == 1;
             let mut phases = Vec::new();
+            let mut rest = Vec::new();
             let mut at = seg.ts;
             let mut serial = 0.0;
             for r in inner {
@@ -147,15 +172,33 @@ impl Model {
                 let t = tasks.remove(&r.args.id).unwrap_or_default();
                 // What the region took beyond its tasks (handing them out,
                 // joining) stays on the lane.
-                let over = (r.dur * 1e-6 - t.iter().sum::<f64>()).max(0.0);
+                let over = (r.dur * 1e-6 - t.iter().map(|t| t.0).sum::<f64>()).max(0.0);
                 serial += gap + over;
-                phases.push(Phase::Serial(gap + over));
-                phases.push(Phase::Region(t));
+                let (first, later): (Vec<(f64, bool)>, Vec<_>) =
+                    t.iter().partition(|t| t.1 || !split);
+                let sides = [(&mut phases, first), (&mut rest, later)];
+                // The serial time goes with the first side that has tasks.
+                let mut serial_left = gap + over;
+                for (side, t) in sides {
+                    if t.is_empty() {
+                        continue;
+                    }
+                    side.push(Phase::Serial(serial_left));
+                    side.push(Phase::Region(t.iter().map(|t| t.0).collect()));
+                    serial_left = 0.0;
+                }
+                if serial_left > 0.0 {
+                    phases.push(Phase::Serial(serial_left));
+                }
                 at = at.max(r.ts + r.dur);
             }
             let tail = (seg.ts + seg.dur - at).max(0.0) * 1e-6;
             serial += tail;
-            phases.push(Phase::Serial(tail));
+            if split {
+                rest.push(Phase::Serial(tail));
+            } else {
+                phases.push(Phase::Serial(tail));
+            }
             *model.serial_by_lane.entry(LANES[lane].into()).or_default() += serial;
             ids.push(seg.args.id);
             deps.push(&seg.args.deps);
@@ -165,6 +208,17 @@ impl Model {
                 phases,
                 after: Vec::new(),
             });
+            if split {
+                // Its rest: after its first passes (the lane's rule).
+                model.segments.push(Segment {
+                    lane: BACK,
+                    strip,
+                    phases: rest,
+                    after: Vec::new(),
+                });
+                ids.push(u64::MAX);
+                deps.push(&no_deps);
+            }
         }
         let at: HashMap<u64, usize> = ids.iter().enumerate().map(|(i, &id)| (id, i)).collect();
         for (seg, d) in model.segments.iter_mut().zip(deps) {
@@ -317,9 +371,9 @@ enum Unit {
 struct Replay<'a> {
     m: &'a Model,
     /// Each lane's segments in order.
-    lanes: [Vec<usize>; 4],
+    lanes: [Vec<usize>; 5],
     /// Per lane: the next segment to start, and the phase it is in.
-    next: [usize; 4],
+    next: [usize; 5],
     phase: Vec<usize>,
     /// Tasks left in the running region of each segment.
     left: Vec<usize>,
@@ -328,14 +382,14 @@ struct Replay<'a> {
     /// (lane, strip) -> segment.
     index: HashMap<(usize, usize), usize>,
     /// Whether each lane is inside a segment.
-    busy: [bool; 4],
+    busy: [bool; 5],
     /// Seconds a lane's serial piece after a region starts with.
     join: f64,
 }
 
 impl<'a> Replay<'a> {
     fn new(m: &'a Model, join: f64) -> Self {
-        let mut lanes: [Vec<usize>; 4] = Default::default();
+        let mut lanes: [Vec<usize>; 5] = Default::default();
         let mut index = HashMap::new();
         for (i, s) in m.segments.iter().enumerate() {
             lanes[s.lane].push(i);
@@ -348,13 +402,13 @@ impl<'a> Replay<'a> {
         Replay {
             m,
             lanes,
-            next: [0; 4],
+            next: [0; 5],
             phase: vec![0; n],
             left: vec![0; n],
             started: vec![None; n],
             done: vec![false; n],
             index,
-            busy: [false; 4],
+            busy: [false; 5],
             join,
         }
     }
@@ -371,8 +425,11 @@ impl<'a> Replay<'a> {
                     .get(&(1, k))
                     .is_none_or(|&j| self.started[j].is_some())
             }),
-            1 => done(0, s.strip),
-            2 => done(1, s.strip),
+            // Two strips in flight: strip k's first passes wait for the
+            // rest of strip k - 2 (no rest lane: always done).
+            1 => done(0, s.strip) && s.strip.checked_sub(2).is_none_or(|k| done(BACK, k)),
+            2 => done(1, s.strip) && done(BACK, s.strip),
+            BACK => done(1, s.strip),
             _ => true,
         };
         by_lane && s.after.iter().all(|&j| self.done[j])
@@ -678,5 +735,63 @@ mod tests {
         assert!(close(m.replay(1), 16.0));
         assert!(close(m.replay(2), 10.0), "{}", m.replay(2));
         assert!(close(m.span(), 10.0));
+    }
+
+    /// An event of `cat` named `name`, `ts` to `ts + dur` µs.
+    fn event(cat: &str, name: &str, (ts, dur): (f64, f64), id: u64, deps: Vec<u64>) -> Event {
+        Event {
+            name: name.into(),
+            cat: cat.into(),
+            ph: "X".into(),
+            ts,
+            dur,
+            pid: 1,
+            tid: 1,
+            args: epfilt::trace::Args {
+                id,
+                lane: if cat == "segment" {
+                    "filter".into()
+                } else {
+                    String::new()
+                },
+                strip: (cat == "segment").then_some(id as usize / 10),
+                deps,
+            },
+        }
+    }
+
+    #[test]
+    fn two_strips_in_flight_overlap_a_strips_rest_with_the_next_ones_first_passes() {
+        // n filter strips, each a classification of one 1 s task then a
+        // scatter of one 1 s task (1 µs = 1 s here: only ratios matter).
+        // Built as it is, one strip at a time: 2n on any number of cores.
+        // Two in flight: strip k + 1's classification beside strip k's
+        // scatter, n + 1 on two cores; one core still takes 2n.
+        let n = 5;
+        let mut events = Vec::new();
+        for k in 0..n as u64 {
+            let (seg, t0) = (10 * k, 2.0 * k as f64);
+            events.push(event("segment", "filter", (t0, 2.0), seg, vec![]));
+            for (j, name) in ["classify", "scatter"].into_iter().enumerate() {
+                let (region, ts) = (seg + 1 + 2 * j as u64, t0 + j as f64);
+                events.push(event("region", name, (ts, 1.0), region, vec![seg]));
+                events.push(event("task", name, (ts, 1.0), region + 1, vec![region]));
+            }
+        }
+        let one = Model::from_events(&events).unwrap();
+        let two = Model::from_events_in_flight(&events).unwrap();
+        let secs = 1e-6;
+        assert_eq!(one.segments.len(), n);
+        assert_eq!(two.segments.len(), 2 * n);
+        assert!(close(one.work(), two.work()));
+        assert!(close(one.replay(2), 2.0 * n as f64 * secs));
+        assert!(close(two.replay(1), 2.0 * n as f64 * secs));
+        assert!(
+            close(two.replay(2), (n as f64 + 1.0) * secs),
+            "{}",
+            two.replay(2)
+        );
+        // The span: the chain of classifications, then the last scatter.
+        assert!(close(two.span(), (n as f64 + 1.0) * secs));
     }
 }

@@ -24,6 +24,11 @@ struct Args {
     /// the one 16-core machine measured). 0: the replay of the tasks alone.
     #[arg(long, default_value_t = JOIN_S * 1e6, value_parser = join_us)]
     join_us: f64,
+    /// Strips the filter works on at once: 1 (the pipeline as built) or 2
+    /// (a strip's first passes beside the rest of the one before: what that
+    /// change would give, `epfilt_lab::model`).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=2))]
+    strips_in_flight: u8,
     /// Print JSON: {"work_s", "span_s", "predicted_s": {"1": .., ...}, ...}.
     #[arg(long)]
     json: bool,
@@ -40,7 +45,11 @@ fn join_us(s: &str) -> Result<f64, String> {
 fn main() -> Result<()> {
     let a = Args::parse();
     let events = epfilt::trace::read(&a.trace).with_context(|| format!("{}", a.trace.display()))?;
-    let model = Model::from_events(&events).with_context(|| format!("{}", a.trace.display()))?;
+    let model = match a.strips_in_flight {
+        1 => Model::from_events(&events),
+        _ => Model::from_events_in_flight(&events),
+    }
+    .with_context(|| format!("{}", a.trace.display()))?;
     let p = Prediction::of(&model, &a.cores, a.join_us * 1e-6);
     if a.json {
         println!("{}", serde_json::to_string_pretty(&p)?);
