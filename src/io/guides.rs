@@ -297,16 +297,17 @@ fn guides_among(
     if req.none() {
         return Ok(found);
     }
-    let refuse = |k: GuideKind, why: String| {
-        Error::Channels {
+    let refuse = |k: GuideKind, why: String| Error::Channels {
         path: path.to_path_buf(),
         reason: format!(
-            "the {} guide: {why} (the file has: {}; name it with --guide {}=LAYER, or give --guides none)",
+            "the {} guide: {why} ({}; name it with --guide {}=LAYER, or give --guides none)",
             k.name(),
-            names.join(", "),
+            match names.is_empty() {
+                true => "the file has no channels besides the image's".to_string(),
+                false => format!("the file has: {}", names.join(", ")),
+            },
             k.name()
         ),
-    }
     };
     let all_layers = layers(&names);
     for kind in GuideKind::ALL {

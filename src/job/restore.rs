@@ -12,7 +12,7 @@ use crate::filter::restore::{RestoreParams, DEFAULT_SCALE, KEEP_GAIN, KEEP_GAIN_
 use crate::filter::Method;
 use crate::host::{cpu_seconds, peak_rss_bytes};
 use crate::io::output::OutputLayout;
-use crate::io::{find_guides, ExrInput, Format, GuideRequest, OutputSettings};
+use crate::io::{find_guides, ExrInput, Format, GuideKind, GuideRequest, OutputSettings};
 use crate::pipeline::counts::{MethodCounts, RestoreCounts};
 use crate::pipeline::ledger::ChannelLedger;
 use crate::pipeline::restore::{restore_planar, restore_stream, EnergyLayout};
@@ -46,6 +46,10 @@ pub struct RestoreJob {
     pub nonfinite: NonFinite,
     /// The output's compression and sample type.
     pub output_settings: OutputSettings,
+    /// Which emission guide to read beside the energy (`--guides`,
+    /// `--guide emission=LAYER`; default: found by name where the file has
+    /// one).
+    pub guides: GuideRequest,
     /// Stops the run.
     pub cancel: Option<Arc<AtomicBool>>,
 }
@@ -66,6 +70,7 @@ impl RestoreJob {
             threads: 0,
             nonfinite: NonFinite::Error,
             output_settings: OutputSettings::default(),
+            guides: GuideRequest::default(),
             cancel: None,
         }
     }
@@ -165,25 +170,70 @@ impl RestoreReport {
 }
 
 /// The energy image's rows: its `channels`, and the emission guide beside
-/// them where the file has one (read as guide channels after them). A file
-/// whose guides are ambiguous or hold ids gets none: the keep gain alone
-/// decides there.
+/// them where `req` finds one (read as guide channels after them). Found by
+/// name (`auto`), a file whose guides are ambiguous, not whole or hold ids
+/// gets none: the keep gain alone decides there. Asked for (`--guides
+/// emission`, `--guide emission=LAYER`), each of those is an error naming
+/// the file.
 fn emission_guide(
     path: &std::path::Path,
     energy: &mut ExrInput,
     channels: Vec<String>,
+    req: &GuideRequest,
 ) -> Result<EnergyLayout> {
     let luminance = energy.luminance();
     let beauty: Vec<String> = (channels.iter().zip(&luminance))
         .filter(|(_, l)| **l != 0.0)
         .map(|(c, _)| c.clone())
         .collect();
-    let auto = GuideRequest::parse("auto", &[])?;
-    let found = find_guides(path, energy.header(), &beauty, &auto).ok();
-    let names = found
-        .and_then(|f| f.emission)
-        .filter(|e| e.len() == beauty.len() && !e.iter().any(|c| energy.is_uint(c)));
     let mut layout = EnergyLayout::plain(channels, luminance);
+    let mut kinds = req
+        .kinds
+        .iter()
+        .flatten()
+        .chain(req.named.iter().map(|(k, _)| k));
+    if let Some(k) = kinds.find(|k| **k != GuideKind::Emission) {
+        return Err(Error::Config(format!(
+            "restore reads the emission guide only, not the {} guide (filter's)",
+            k.name()
+        )));
+    }
+    if req.none() {
+        return Ok(layout);
+    }
+    let asked = !req.named.is_empty() || req.kinds.is_some();
+    // The emission guide alone: another kind's trouble (two normal
+    // layers) is no reason to lose it.
+    let emission_only = GuideRequest {
+        kinds: Some(vec![GuideKind::Emission]),
+        named: req.named.clone(),
+    };
+    let find = || find_guides(path, energy.header(), &beauty, &emission_only);
+    let names = if asked {
+        let names = find()?.emission;
+        let bad = |why: String| Error::Channels {
+            path: path.to_path_buf(),
+            reason: format!("the emission guide: {why}"),
+        };
+        let names = names.ok_or_else(|| bad("not found".into()))?;
+        if let Some(c) = names.iter().find(|c| energy.is_uint(c)) {
+            return Err(bad(format!("{c} holds integers (ids), not light")));
+        }
+        if names.len() != beauty.len() {
+            return Err(bad(format!(
+                "{} channels for the {} of the image ({})",
+                names.len(),
+                beauty.len(),
+                beauty.join(", ")
+            )));
+        }
+        Some(names)
+    } else {
+        find()
+            .ok()
+            .and_then(|f| f.emission)
+            .filter(|e| e.len() == beauty.len() && !e.iter().any(|c| energy.is_uint(c)))
+    };
     if let Some(names) = names {
         energy.add_aux_channels(&names)?;
         let mut k = 0;
@@ -289,7 +339,7 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
     // The output's layout from the energy's own channels, before its guide
     // is read beside them.
     let layout = OutputLayout::of(&energy, &channels, &settings);
-    let energy_layout = emission_guide(&job.energy, &mut energy, channels.clone())?;
+    let energy_layout = emission_guide(&job.energy, &mut energy, channels.clone(), &job.guides)?;
     let guide = energy_layout.guide.clone();
     let mut output = layout.create(&job.output, false, 1, &channels, &settings)?;
     let cfg = config(job.threads, job.nonfinite, job.cancel.clone());

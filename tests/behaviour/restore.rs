@@ -236,55 +236,119 @@ fn restore_keeps_more_in_place_over_epfilts_output_and_takes_keep_gain() {
 /// render's keep gain of the denoiser's value, comes back in place (the
 /// guide's light beyond the denoiser's share around); without the guide it
 /// is spread through its block. The report names the guide.
-#[test]
-fn restore_keeps_the_emission_guides_lamp_in_place() {
-    let dir = tmpdir();
-    let (e, bare, d, out) = (
-        dir.path().join("e.exr"),
-        dir.path().join("bare.exr"),
-        dir.path().join("d.exr"),
-        dir.path().join("o.exr"),
-    );
-    let (w, h, lamp) = (24, 24, (12, 9));
-    let at = |x, y| (x, y) == lamp;
+/// The lamp of the emission tests: one pixel, 100 of its 101 emitted.
+const LAMP: (usize, usize) = (12, 9);
+
+/// A 24x24 render of 1 with [`LAMP`], its emission pass (layer `layer`,
+/// `None`: no pass) beside it, into `path`.
+fn lamp_render(path: &std::path::Path, layer: Option<&str>) {
+    let (w, h) = (24, 24);
+    let at = |x, y| (x, y) == LAMP;
     let plane = |f: &dyn Fn(usize, usize) -> f32| {
         FlatSamples::F32((0..w * h).map(|i| f(i % w, i / w)).collect())
     };
     let beauty = |x, y| if at(x, y) { 101.0 } else { 1.0 };
     let emission = |x, y| if at(x, y) { 100.0 } else { 0.0 };
     let mut channels = vec![
-        ("B", plane(&beauty)),
-        ("G", plane(&beauty)),
-        ("R", plane(&beauty)),
+        ("B".to_string(), plane(&beauty)),
+        ("G".to_string(), plane(&beauty)),
+        ("R".to_string(), plane(&beauty)),
     ];
-    write_flat(&bare, (w, h), channels.clone());
-    for name in ["emission.B", "emission.G", "emission.R"] {
-        channels.push((name, plane(&emission)));
+    for c in layer.map_or(&[][..], |_| &["B", "G", "R"][..]) {
+        channels.push((format!("{}.{c}", layer.unwrap()), plane(&emission)));
     }
-    write_flat(&e, (w, h), channels);
-    write(&d, (w, h), |_, _, _| 1.0);
-    let rep = dir.path().join("r.json");
-    let run = |energy: &std::path::Path| {
-        let o = restore(&d, energy, &out, &["--report", rep.to_str().unwrap()]);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let r = read_json(&rep);
-        for l in r["ledger"].as_array().unwrap() {
-            assert!(l["rel_error"].as_f64().unwrap() <= LEDGER_TOL, "{l}");
-        }
-        let v = crate::exr_io::read_planar(&out).at(lamp.0, lamp.1, 0);
-        (r, v)
-    };
-    let (r, spread) = run(&bare);
-    assert_eq!(r["emission_guide"].as_array().unwrap().len(), 0, "{r}");
-    let (r, kept) = run(&e);
-    let mut names: Vec<&str> = (r["emission_guide"].as_array().unwrap().iter())
-        .map(|v| v.as_str().unwrap())
+    let channels = channels
+        .iter()
+        .map(|(n, p)| (n.as_str(), p.clone()))
+        .collect();
+    write_flat(path, (w, h), channels);
+}
+
+/// Restore a flat denoiser output onto `energy` with `extra`: the report's
+/// emission guide (sorted) and the lamp's value, the ledger checked.
+fn restore_lamp(
+    dir: &std::path::Path,
+    energy: &std::path::Path,
+    extra: &[&str],
+) -> (Vec<String>, f32) {
+    let (d, out, rep) = (dir.join("d.exr"), dir.join("o.exr"), dir.join("r.json"));
+    write(&d, (24, 24), |_, _, _| 1.0);
+    let mut args = vec!["--report", rep.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    let o = restore(&d, energy, &out, &args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r = read_json(&rep);
+    for l in r["ledger"].as_array().unwrap() {
+        assert!(l["rel_error"].as_f64().unwrap() <= LEDGER_TOL, "{l}");
+    }
+    let mut names: Vec<String> = (r["emission_guide"].as_array().unwrap().iter())
+        .map(|v| v.as_str().unwrap().to_string())
         .collect();
     names.sort();
-    assert_eq!(names, ["emission.B", "emission.G", "emission.R"], "{r}");
-    // The lamp is spread over its block without the guide; with it, all
-    // but the denoiser's share around (a flat 1 over the 2-D kernel's
-    // centre weight, about 25) stays.
-    assert!(spread < 20.0, "{spread}");
-    assert!(kept > 70.0, "{kept}");
+    (
+        names,
+        crate::exr_io::read_planar(&out).at(LAMP.0, LAMP.1, 0),
+    )
+}
+
+/// Without the guide the lamp is spread over its block; with it, all but
+/// the denoiser's share around (a flat 1 over the 2-D kernel's centre
+/// weight, about 25) stays: below and above these.
+const SPREAD_BELOW: f32 = 20.0;
+const KEPT_ABOVE: f32 = 70.0;
+
+#[test]
+fn restore_keeps_the_emission_guides_lamp_in_place() {
+    let dir = tmpdir();
+    let (e, bare) = (dir.path().join("e.exr"), dir.path().join("bare.exr"));
+    lamp_render(&bare, None);
+    lamp_render(&e, Some("emission"));
+    let (names, spread) = restore_lamp(dir.path(), &bare, &[]);
+    assert!(names.is_empty(), "{names:?}");
+    assert!(spread < SPREAD_BELOW, "{spread}");
+    let (names, kept) = restore_lamp(dir.path(), &e, &[]);
+    assert_eq!(names, ["emission.B", "emission.G", "emission.R"]);
+    assert!(kept > KEPT_ABOVE, "{kept}");
+}
+
+#[test]
+fn restore_takes_the_emission_guide_it_is_told() {
+    let dir = tmpdir();
+    let (glow, e) = (dir.path().join("glow.exr"), dir.path().join("e.exr"));
+    lamp_render(&glow, Some("glow"));
+    lamp_render(&e, Some("emission"));
+    // A layer no renderer's name finds: not read unless named.
+    let (names, spread) = restore_lamp(dir.path(), &glow, &[]);
+    assert!(names.is_empty(), "{names:?}");
+    assert!(spread < SPREAD_BELOW, "{spread}");
+    let (names, kept) = restore_lamp(dir.path(), &glow, &["--guide", "emission=glow"]);
+    assert_eq!(names, ["glow.B", "glow.G", "glow.R"]);
+    assert!(kept > KEPT_ABOVE, "{kept}");
+    // --guides none leaves a pass found by name.
+    let (names, spread) = restore_lamp(dir.path(), &e, &["--guides", "none"]);
+    assert!(names.is_empty(), "{names:?}");
+    assert!(spread < SPREAD_BELOW, "{spread}");
+    // Asked for and absent, or a guide restore does not read: one line
+    // naming the cause, and no output.
+    let (d, out) = (dir.path().join("d.exr"), dir.path().join("absent.exr"));
+    for (extra, says) in [
+        (
+            &["--guides", "emission"][..],
+            "glow.exr: the emission guide",
+        ),
+        (
+            &["--guide", "emission=light"][..],
+            "glow.exr: the emission guide",
+        ),
+        (&["--guides", "albedo"][..], "emission guide only"),
+    ] {
+        let o = restore(&d, &glow, &out, extra);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            !o.status.success() && err.contains(says),
+            "{extra:?}: {err}"
+        );
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(!out.exists());
+    }
 }

@@ -108,7 +108,7 @@ def restore(denoised, energy, scale=None, *, keep_gain=None, emission=None, chan
     output (its fireflies already spread: bulbs and lamps come back). The rest is carried by the
     denoiser's picture and a smooth field, so that every block of ``scale`` x ``scale``
     pixels (default 32) and the total (report ``ledger``) hold ``energy``'s energy exactly:
-    what a block lacks goes back mostly to its brightest features, a surplus comes off evenly.
+    what a block lacks goes back mostly to its brightest features, a surplus comes off in proportion.
     ``emission``: the render's directly visible emission pass (same shape as ``energy``,
     e.g. ``epfilt.read(path, ["emission.R", "emission.G", "emission.B"])``'s last three
     channels), where the renderer wrote one: the light of lamps and bulbs beyond the

@@ -163,12 +163,12 @@ and channels) says how much there is. Where one pixel of the energy image
 holds far more than the denoiser put around it (a lamp or a highlight the
 denoiser dimmed), the excess stays in place: over 16 times on a render, over
 once on epfilt's ep-gauss or ep-box output (its fireflies already spread; read
-from its header), or --keep-gain; where the energy image has an emission
-guide pass, its light beyond the denoiser's share stays too. The rest is carried by the
-denoiser's picture and a smooth field, solved so that every block of
---scale x --scale pixels (from the top left) holds the energy image's energy:
-what a block lacks goes back mostly to its brightest features (a denoiser dims
-them), a surplus comes off evenly.
+from its header), or --keep-gain. Where the energy image has an emission guide
+pass (--guides), its light beyond the denoiser's share stays too. The rest is
+carried by the denoiser's picture and a smooth field, solved so that every
+block of --scale x --scale pixels (from the top left) holds the energy image's
+energy: what a block lacks goes back mostly to its brightest features (a
+denoiser dims them), a surplus comes off in proportion.
 The total is exact: the ledger balances to 1e-12 or nothing is written.
 Small --scale: energy exact in small regions, some of the render's grain
 back; large: the denoiser's look, energy exact over large regions.
@@ -194,6 +194,15 @@ pub struct RestoreArgs {
     /// (count them in the report). The denoiser's are nothing to shape with.
     #[arg(long, default_value = "error")]
     pub nonfinite: String,
+    /// The energy image's emission guide pass (its directly visible light):
+    /// auto (found by the names renderers give it), none, or emission (it
+    /// must be found).
+    #[arg(long, default_value = "auto")]
+    pub guides: String,
+    /// emission=LAYER: the layer of the emission guide, e.g.
+    /// emission=ViewLayer.Emit.
+    #[arg(long, value_name = "KIND=NAME")]
+    pub guide: Vec<String>,
     /// Output compression [default: the energy image's].
     #[arg(long)]
     pub compression: Option<String>,
