@@ -102,6 +102,9 @@ pub struct RestoreReport {
     /// an array), whose light beyond the denoiser's share around stays in
     /// place; empty where there is none.
     pub emission_guide: Vec<String>,
+    /// The energy image's channels the denoiser did not write (an alpha),
+    /// kept as the energy image has them.
+    pub copied_channels: Vec<String>,
     /// Per channel: the energy image's total, the result's, their relative
     /// difference (before and after rounding).
     pub ledger: Vec<ChannelLedger>,
@@ -131,7 +134,12 @@ impl RestoreReport {
     fn of(
         job: (&str, &str, &str),
         (w, h): (usize, usize),
-        (params, keep_gain_from, emission_guide): (RestoreParams, String, Vec<String>),
+        (params, keep_gain_from, emission_guide, copied_channels): (
+            RestoreParams,
+            String,
+            Vec<String>,
+            Vec<String>,
+        ),
         stats: &RunStats,
         threads: usize,
         cpu_start: Option<f64>,
@@ -151,6 +159,7 @@ impl RestoreReport {
             keep_gain: params.keep_gain,
             keep_gain_from,
             emission_guide,
+            copied_channels,
             ledger: stats.ledger.clone(),
             kept_share: if mass > 0.0 {
                 counts.kept_energy / mass
@@ -248,6 +257,41 @@ fn emission_guide(
     Ok(layout)
 }
 
+/// Per energy channel, its place among the denoiser's `denoised`: the same
+/// name, else the one of the same name after its layer (a render's
+/// `ViewLayer.Combined.R`, a denoiser's `R`). A channel of no colour the
+/// denoiser did not write (an alpha) is `None`: it stays as the energy has
+/// it. `None` where a colour channel has no match.
+fn match_channels(
+    energy: &[String],
+    luminance: &[f64],
+    denoised: &[String],
+) -> Option<Vec<Option<usize>>> {
+    use crate::io::reader::base_name;
+    let by_name = |c: &String| denoised.iter().position(|d| d == c);
+    let by_base = |c: &String| {
+        let mut same = (denoised.iter().enumerate()).filter(|(_, d)| base_name(d) == base_name(c));
+        match (same.next(), same.next()) {
+            (Some((j, _)), None) => Some(j),
+            _ => None,
+        }
+    };
+    let picks: Vec<Option<usize>> = energy
+        .iter()
+        .map(|c| by_name(c).or_else(|| by_base(c)))
+        .collect();
+    let mut used = vec![false; denoised.len()];
+    for (p, &l) in picks.iter().zip(luminance) {
+        match p {
+            None if l != 0.0 => return None,
+            // One denoiser channel for two of the energy's.
+            Some(j) if std::mem::replace(&mut used[*j], true) => return None,
+            _ => {}
+        }
+    }
+    Some(picks)
+}
+
 fn check_ledger(stats: &RunStats) -> Result<()> {
     for l in &stats.ledger {
         if !(l.rel_error <= RESTORE_LEDGER_LIMIT) {
@@ -317,14 +361,15 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
             size.1
         )));
     }
-    if denoised.channels() != channels {
-        return Err(mismatch(format!(
-            "channels {}, but {} has {}",
-            denoised.channels().join(","),
-            job.energy.display(),
-            channels.join(",")
-        )));
-    }
+    let picks =
+        match_channels(&channels, &energy.luminance(), &denoised.channels()).ok_or_else(|| {
+            mismatch(format!(
+                "channels {}, but {} has {}",
+                denoised.channels().join(","),
+                job.energy.display(),
+                channels.join(",")
+            ))
+        })?;
     let provenance = format!(
         "restore scale={scale} keep_gain={keep_gain} denoised={}",
         job.denoised
@@ -339,7 +384,14 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
     // The output's layout from the energy's own channels, before its guide
     // is read beside them.
     let layout = OutputLayout::of(&energy, &channels, &settings);
-    let energy_layout = emission_guide(&job.energy, &mut energy, channels.clone(), &job.guides)?;
+    let mut energy_layout =
+        emission_guide(&job.energy, &mut energy, channels.clone(), &job.guides)?;
+    let copied = (channels.iter().zip(&picks))
+        .filter(|(_, p)| p.is_none())
+        .map(|(c, _)| c.clone())
+        .collect();
+    energy_layout.denoised = picks;
+    energy_layout.denoised_channels = denoised.channels().len();
     let guide = energy_layout.guide.clone();
     let mut output = layout.create(&job.output, false, 1, &channels, &settings)?;
     let cfg = config(job.threads, job.nonfinite, job.cancel.clone());
@@ -370,7 +422,7 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
             &job.output.display().to_string(),
         ),
         size,
-        (params, keep_gain_from, guide),
+        (params, keep_gain_from, guide, copied),
         &stats,
         cfg.workers(),
         cpu_start,
@@ -447,7 +499,7 @@ pub fn restore_array(
     let report = RestoreReport::of(
         ("<array>", "<array>", "<array>"),
         (w, h),
-        (params, keep_gain_from.to_string(), guide),
+        (params, keep_gain_from.to_string(), guide, Vec::new()),
         &stats,
         cfg.workers(),
         cpu_start,

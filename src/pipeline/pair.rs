@@ -5,6 +5,17 @@
 use super::{Decoder, ReadAhead, Source, Strip};
 use crate::error::{Error, Result};
 
+/// Where a channel of a pair's second half comes from: a channel of the
+/// second source, or one of the first's again (`restore`: a channel the
+/// denoiser did not write, taken as the energy image has it).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Pick {
+    /// This channel of the first source.
+    First(usize),
+    /// This channel of the second.
+    Second(usize),
+}
+
 /// Sources `a` and `b`, `w` samples wide, of `na` and `nb` channels.
 pub struct Pair<A, B> {
     a: A,
@@ -12,12 +23,23 @@ pub struct Pair<A, B> {
     w: usize,
     na: usize,
     nb: usize,
+    /// The second half's channels (`None`: `b`'s, in order).
+    picks: Option<Vec<Pick>>,
 }
 
 impl<A: Source, B: Source> Pair<A, B> {
-    /// The pair of `a` (`na` channels) and `b` (`nb`), `w` samples wide.
-    pub fn new(a: A, b: B, w: usize, na: usize, nb: usize) -> Self {
-        Pair { a, b, w, na, nb }
+    /// The pair of `a` (`na` channels) and `b` (`nb`), `w` samples wide,
+    /// each strip's second half made of `picks`.
+    pub fn new(a: A, b: B, w: usize, (na, nb): (usize, usize), picks: Vec<Pick>) -> Self {
+        let whole = picks.len() == nb && (0..nb).all(|j| picks[j] == Pick::Second(j));
+        Pair {
+            a,
+            b,
+            w,
+            na,
+            nb,
+            picks: (!whole).then_some(picks),
+        }
     }
 }
 
@@ -39,10 +61,22 @@ impl<A: Source, B: Source> Source for Pair<A, B> {
                 "a strip of the wrong size (source bug)".into(),
             ));
         }
-        let mut data = Vec::with_capacity(sa.rows * (ra + rb));
+        let w = self.w;
+        let second = self.picks.as_ref().map_or(self.nb, Vec::len);
+        let mut data = Vec::with_capacity(sa.rows * (ra + second * w));
         for (x, y) in sa.data.chunks_exact(ra).zip(sb.data.chunks_exact(rb)) {
             data.extend_from_slice(x);
-            data.extend_from_slice(y);
+            match &self.picks {
+                None => data.extend_from_slice(y),
+                Some(picks) => {
+                    for p in picks {
+                        data.extend_from_slice(match *p {
+                            Pick::First(i) => &x[i * w..(i + 1) * w],
+                            Pick::Second(j) => &y[j * w..(j + 1) * w],
+                        });
+                    }
+                }
+            }
         }
         Ok(Some(Strip {
             y0: sa.y0,

@@ -26,7 +26,7 @@ use rayon::prelude::*;
 
 use super::counts::{MethodCounts, RestoreCounts};
 use super::memory::{MemorySink, MemorySource};
-use super::pair::Pair;
+use super::pair::{Pair, Pick};
 use super::stage::{Output, Stage, WindowUse};
 use super::stream::{Streamer, MAX_CHANNELS};
 use super::window::RowWindow;
@@ -45,6 +45,8 @@ struct Kept {
     /// Where each channel's emission guide is in the input rows (after the
     /// energy's channels), if the energy image has one.
     emission: Vec<Option<usize>>,
+    /// Channels the denoiser did not write: nothing kept, they stay whole.
+    copied: Vec<bool>,
     /// The first of the denoiser's channels in the input rows.
     d_at: usize,
     w: usize,
@@ -62,13 +64,14 @@ struct Kept {
 }
 
 impl Kept {
-    fn new(emission: Vec<Option<usize>>, w: usize, h: usize, gain: f64) -> Self {
+    fn new(emission: Vec<Option<usize>>, copied: Vec<bool>, w: usize, h: usize, gain: f64) -> Self {
         let taps = taps(KEEP_SIGMA);
         let nch = emission.len();
         Kept {
             nch,
             d_at: nch + emission.iter().flatten().count(),
             emission,
+            copied,
             w,
             h,
             gain,
@@ -97,7 +100,8 @@ impl Kept {
         for _ in a..b {
             self.kept_rows.push_stale(0.0);
         }
-        let (taps, centre, gain, emission) = (&self.taps, self.centre, self.gain, &self.emission);
+        let (taps, centre, gain) = (&self.taps, self.centre, self.gain);
+        let (emission, copied) = (&self.emission, &self.copied);
         let mut rows = self.kept_rows.range_mut(a, b);
         let per_row: Vec<(bool, RestoreCounts)> = rows
             .par_iter_mut()
@@ -108,10 +112,14 @@ impl Kept {
                 let mut c = RestoreCounts::default();
                 let mut any = false;
                 for ch in 0..nch {
+                    let l = &mut out[ch * w..(ch + 1) * w];
+                    if copied[ch] {
+                        l.fill(0.0);
+                        continue;
+                    }
                     let e = &row[ch * w..(ch + 1) * w];
                     let d = &row[(d_at + ch) * w..(d_at + ch + 1) * w];
                     let em = emission[ch].map(|k| &row[(nch + k) * w..(nch + k + 1) * w]);
-                    let l = &mut out[ch * w..(ch + 1) * w];
                     for x in 0..w {
                         let ev = f64::from(e[x]);
                         // Measured once, for the emission and the energy.
@@ -192,6 +200,8 @@ fn around(
 /// One row of blocks at a time: `c g + l`, `c = s + t (f - 1)`.
 pub struct RestoreStage {
     nch: usize,
+    /// Channels the denoiser did not write: kept as the energy has them.
+    copied: Vec<bool>,
     /// The first of the denoiser's channels in the input rows.
     d_at: usize,
     w: usize,
@@ -212,11 +222,18 @@ pub struct RestoreStage {
 impl RestoreStage {
     /// The stage for `nch` channels of a `w x h` image, blocks of
     /// `params.scale`, its keep gain.
-    pub fn new(emission: Vec<Option<usize>>, w: usize, h: usize, params: RestoreParams) -> Self {
+    pub fn new(
+        emission: Vec<Option<usize>>,
+        copied: Vec<bool>,
+        w: usize,
+        h: usize,
+        params: RestoreParams,
+    ) -> Self {
         let nch = emission.len();
-        let kept = Kept::new(emission, w, h, params.keep_gain);
+        let kept = Kept::new(emission, copied.clone(), w, h, params.keep_gain);
         RestoreStage {
             nch,
+            copied,
             d_at: kept.d_at,
             w,
             h,
@@ -355,6 +372,11 @@ impl RestoreStage {
         }
         let mut g = vec![0.0f64; nch * nbx];
         for ch in 0..nch {
+            if self.copied[ch] {
+                // Not the denoiser's: the energy's values stay (below).
+                g[ch * nbx..(ch + 1) * nbx].fill(f64::NAN);
+                continue;
+            }
             for i in 0..nbx {
                 let (t, r) = (fields[ch].target(jb, i), reached[ch * nbx + i]);
                 g[ch * nbx + i] = if r > 0.0 {
@@ -487,6 +509,12 @@ pub struct EnergyLayout {
     pub luminance: Vec<f64>,
     /// The guide's channel names, in their order (for the report).
     pub guide: Vec<String>,
+    /// Per channel, its place among the denoiser's channels; `None`: the
+    /// denoiser did not write it (an alpha), and it stays as the energy
+    /// image has it.
+    pub denoised: Vec<Option<usize>>,
+    /// The channels of the denoiser's rows.
+    pub denoised_channels: usize,
 }
 
 impl EnergyLayout {
@@ -494,6 +522,8 @@ impl EnergyLayout {
     pub fn plain(channels: Vec<String>, luminance: Vec<f64>) -> Self {
         EnergyLayout {
             emission: vec![None; channels.len()],
+            denoised: (0..channels.len()).map(Some).collect(),
+            denoised_channels: channels.len(),
             channels,
             luminance,
             guide: Vec::new(),
@@ -538,6 +568,8 @@ pub fn restore_stream<A: Source, B: Source, K: Sink>(
         channels,
         emission,
         luminance,
+        denoised: picks,
+        denoised_channels,
         ..
     } = energy_layout;
     let mut layout = StripLayout::new(grid, channels.clone(), luminance);
@@ -546,14 +578,20 @@ pub fn restore_stream<A: Source, B: Source, K: Sink>(
     layout.aux = guide
         .chain(channels.iter().map(|c| format!("denoised.{c}")))
         .collect();
-    let stage = RestoreStage::new(emission, w, h, params);
+    let copied: Vec<bool> = picks.iter().map(Option::is_none).collect();
+    let stage = RestoreStage::new(emission, copied, w, h, params);
     let streamer = Streamer::of_stage(
         &layout,
         Box::new(stage),
         cfg.nonfinite,
         sink.precisions(nch),
     );
-    let pair = Pair::new(energy, denoised, w, na, nch);
+    // A channel the denoiser did not write has the energy's own values in
+    // its place: the stage keeps them as they are.
+    let picks = (picks.iter().enumerate())
+        .map(|(ch, p)| p.map_or(Pick::First(ch), Pick::Second))
+        .collect();
+    let pair = Pair::new(energy, denoised, w, (na, denoised_channels), picks);
     run_streamer(pair, sink, &layout, streamer, cfg, progress)
 }
 
@@ -571,8 +609,9 @@ pub fn restore_planar(
 ) -> Result<(Vec<f32>, RunStats)> {
     let nch = energy_layout.channels.len();
     let na = energy_layout.row_channels();
+    let nd = energy_layout.denoised_channels;
     let pixels = w.checked_mul(h);
-    let n = pixels.and_then(|p| p.checked_mul(nch));
+    let n = pixels.and_then(|p| p.checked_mul(nd));
     if pixels.and_then(|p| p.checked_mul(na)) != Some(energy.len()) || n != Some(denoised.len()) {
         return Err(Error::Config(format!(
             "{} energy and {} denoised values for a {w}x{h} image of {nch} channels ({na} with the guide)",
@@ -583,7 +622,7 @@ pub fn restore_planar(
     let mut sink = MemorySink::with_precision(precision);
     let stats = restore_stream(
         MemorySource::new(energy, na * w),
-        MemorySource::new(denoised, nch * w),
+        MemorySource::new(denoised, nd * w),
         &mut sink,
         (w, h),
         energy_layout,
@@ -749,6 +788,47 @@ mod tests {
                 assert_eq!(c.unshaped as usize, e.iter().filter(|&&v| v > 0.0).count())
             }
             other => panic!("{other:?}"),
+        }
+    }
+
+    /// A channel the denoiser did not write (an alpha) stays as the energy
+    /// has it, bit for bit, beside one restored as before, at any strips.
+    #[test]
+    fn a_channel_the_denoiser_lacks_stays_as_the_energy_has_it() {
+        let (w, h) = (37, 29);
+        let (e, d) = images(w, h, 2);
+        // The denoiser's rows: its first channel only.
+        let d1: Vec<f32> = d.chunks(w).step_by(2).flatten().copied().collect();
+        let params = RestoreParams {
+            scale: 8,
+            keep_gain: KEEP_GAIN,
+        };
+        let one = |layout: EnergyLayout, d: Vec<f32>, strip_rows| {
+            let cfg = PipelineConfig {
+                strip_rows,
+                ..Default::default()
+            };
+            restore_planar(e.clone(), d, (w, h), layout, params, &cfg, Precision::F32).unwrap()
+        };
+        let names = vec!["R".to_string(), "A".to_string()];
+        let both = EnergyLayout::plain(names.clone(), vec![1.0, 0.0]);
+        let (full, _) = one(both.clone(), d.clone(), 0);
+        let alpha = EnergyLayout {
+            denoised: vec![Some(0), None],
+            denoised_channels: 1,
+            ..both
+        };
+        for strip_rows in [0, 1, 5] {
+            let (out, stats) = one(alpha.clone(), d1.clone(), strip_rows);
+            for (y, (o, (f, e))) in out
+                .chunks(w)
+                .zip(full.chunks(w).zip(e.chunks(w)))
+                .enumerate()
+            {
+                // Rows alternate R, A: R as with both channels, A the energy's.
+                assert_eq!(o, if y % 2 == 0 { f } else { e }, "row {y}");
+            }
+            assert!(stats.ledger.iter().all(|l| l.rel_error <= LEDGER_TOL));
         }
     }
 

@@ -352,3 +352,85 @@ fn restore_takes_the_emission_guide_it_is_told() {
         assert!(!out.exists());
     }
 }
+
+/// Every channel of `path`'s first layer, by name, as f32.
+fn read_channels(path: &std::path::Path) -> Vec<(String, Vec<f32>)> {
+    use exr::prelude::*;
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .expect("read");
+    (image.layer_data.channel_data.list.iter())
+        .map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect()))
+        .collect()
+}
+
+#[test]
+fn restore_matches_a_layered_render_to_a_plain_denoiser_output() {
+    // A Blender render: its beauty in a layer, with alpha and passes; the
+    // denoiser wrote plain R, G, B. Colour pairs by name after the layer,
+    // the alpha stays as the render has it, and the result is named as
+    // the render's beauty.
+    let dir = tmpdir();
+    let (e, d, out, rep) = (
+        dir.path().join("e.exr"),
+        dir.path().join("d.exr"),
+        dir.path().join("o.exr"),
+        dir.path().join("r.json"),
+    );
+    let (w, h) = (40, 30);
+    let plane = |f: &dyn Fn(usize, usize) -> f32| {
+        FlatSamples::F32((0..w * h).map(|i| f(i % w, i / w)).collect())
+    };
+    let alpha = |x: usize, y: usize| ((x * 3 + y * 5) % 7) as f32 / 6.0;
+    let c = |ch| move |x, y| render(x, y, ch);
+    write_flat(
+        &e,
+        (w, h),
+        vec![
+            ("ViewLayer.Combined.A", plane(&alpha)),
+            ("ViewLayer.Combined.B", plane(&c(2))),
+            ("ViewLayer.Combined.G", plane(&c(1))),
+            ("ViewLayer.Combined.R", plane(&c(0))),
+            ("ViewLayer.Depth.Z", plane(&|_, _| 3.0)),
+        ],
+    );
+    write(&d, (w, h), denoised);
+    let o = restore(&d, &e, &out, &["--report", rep.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r = read_json(&rep);
+    assert_eq!(
+        r["copied_channels"],
+        serde_json::json!(["ViewLayer.Combined.A"]),
+        "{r}"
+    );
+    for l in r["ledger"].as_array().unwrap() {
+        assert!(l["rel_error"].as_f64().unwrap() <= LEDGER_TOL, "{l}");
+    }
+    let got = read_channels(&out);
+    let names: Vec<&str> = got.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "ViewLayer.Combined.A",
+            "ViewLayer.Combined.B",
+            "ViewLayer.Combined.G",
+            "ViewLayer.Combined.R"
+        ]
+    );
+    let want: Vec<f32> = (0..w * h).map(|i| alpha(i % w, i / w)).collect();
+    assert_eq!(got[0].1, want, "the alpha, bit for bit");
+    // A colour channel the denoiser lacks is still an error.
+    write_flat(
+        &d,
+        (w, h),
+        vec![("G", plane(&|_, _| 1.0)), ("R", plane(&|_, _| 1.0))],
+    );
+    let o = restore(&d, &e, &dir.path().join("o2.exr"), &[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("channels"), "{err}");
+}

@@ -158,8 +158,10 @@ const RESTORE_EXAMPLES: &str = "Examples:
   epfilt restore denoised.exr render.exr out.exr --scale 64 --report r.json
 
 The denoiser's output (any denoiser: OIDN, OptiX, Arnold's noice, ...) shapes
-the light; the energy image (the render, or epfilt's output of it: same size
-and channels) says how much there is. Where one pixel of the energy image
+the light; the energy image (the render, or epfilt's output of it: same size,
+its beauty's colour channels in the denoiser's output by name, a layer's
+`ViewLayer.Combined.R` as a plain `R`; an alpha the denoiser did not write stays
+as the render has it) says how much there is. Where one pixel of the energy image
 holds far more than the denoiser put around it (a lamp or a highlight the
 denoiser dimmed), the excess stays in place: over 16 times on a render, over
 once on epfilt's ep-gauss or ep-box output (its fireflies already spread; read

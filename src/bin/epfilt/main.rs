@@ -222,6 +222,14 @@ fn restore(a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
                 )
             }
         );
+        if !r.copied_channels.is_empty() {
+            eprintln!(
+                "{}: {} kept as {} has it (not in the denoiser's output)",
+                r.output,
+                r.copied_channels.join(", "),
+                a.energy.display()
+            );
+        }
     }
     Ok(())
 }
