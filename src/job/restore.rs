@@ -12,7 +12,9 @@ use crate::filter::restore::{RestoreParams, DEFAULT_SCALE, KEEP_GAIN, KEEP_GAIN_
 use crate::filter::Method;
 use crate::host::{cpu_seconds, peak_rss_bytes};
 use crate::io::output::OutputLayout;
-use crate::io::{find_guides, ExrInput, Format, GuideKind, GuideRequest, OutputSettings};
+use crate::io::{
+    find_guides, ExrInput, Format, GuideKind, GuideRequest, OutputSettings, Selection,
+};
 use crate::pipeline::counts::{MethodCounts, RestoreCounts};
 use crate::pipeline::ledger::ChannelLedger;
 use crate::pipeline::restore::{restore_planar, restore_stream, EnergyLayout};
@@ -50,6 +52,9 @@ pub struct RestoreJob {
     /// `--guide emission=LAYER`; default: found by name where the file has
     /// one).
     pub guides: GuideRequest,
+    /// The energy image's part and beauty layer (`--part`, `--layer`); the
+    /// part is the denoiser's output's too where it has it.
+    pub select: Selection,
     /// Stops the run.
     pub cancel: Option<Arc<AtomicBool>>,
 }
@@ -71,6 +76,7 @@ impl RestoreJob {
             nonfinite: NonFinite::Error,
             output_settings: OutputSettings::default(),
             guides: GuideRequest::default(),
+            select: Selection::default(),
             cancel: None,
         }
     }
@@ -334,8 +340,14 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
         &[Format::Exr],
         "restore",
     )?;
-    let mut energy = ExrInput::open(&job.energy, None)?;
-    let denoised = ExrInput::open(&job.denoised, None)?;
+    let mut energy = job.select.open(&job.energy)?;
+    // A denoiser writes one image: the energy's part where it has parts
+    // too, else its only one.
+    let part = job.select.part.as_ref();
+    let denoised = match part.map(|p| ExrInput::open(&job.denoised, Some(p))) {
+        Some(Ok(d)) => d,
+        _ => ExrInput::open(&job.denoised, None)?,
+    };
     let (keep_gain, keep_gain_from) = match job.keep_gain {
         Some(g) => (g, "--keep-gain".to_string()),
         None => match crate::io::provenance::filtered_by(&energy) {

@@ -434,3 +434,48 @@ fn restore_matches_a_layered_render_to_a_plain_denoiser_output() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("channels"), "{err}");
 }
+
+#[test]
+fn restore_takes_a_part_and_a_layer_of_the_energy_image() {
+    let dir = tmpdir();
+    let s = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    let multi = std::path::Path::new(crate::parts::MULTI);
+    let (d, out) = (dir.path().join("d.exr"), dir.path().join("o.exr"));
+    // Without a part: one line saying how to choose, and no output.
+    let o = restore(multi, multi, &out, &[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("--part"), "{err}");
+    assert!(!out.exists());
+    // Its part in both files, then a single-part denoiser output of it.
+    let o = restore(multi, multi, &out, &["--part", "beauty_float_piz"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    epfilt_ok(&[
+        "filter",
+        &s(multi),
+        &s(&d),
+        "--part",
+        "0",
+        "-s",
+        "1",
+        "--method",
+        "gauss",
+        "-q",
+    ]);
+    let rep = dir.path().join("r.json");
+    let o = restore(&d, multi, &out, &["--part", "0", "--report", &s(&rep)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for l in read_json(&rep)["ledger"].as_array().unwrap() {
+        assert!(l["rel_error"].as_f64().unwrap() <= LEDGER_TOL, "{l}");
+    }
+    // A layer other than the beauty.
+    let layered = std::path::Path::new("tests/data/exr/small/aovs_multilayer.exr");
+    let o = restore(
+        layered,
+        layered,
+        &out,
+        &["--layer", "diffuse", "--report", &s(&rep)],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let names: Vec<String> = read_channels(&out).into_iter().map(|(n, _)| n).collect();
+    assert!(names.iter().all(|n| n.starts_with("diffuse.")), "{names:?}");
+}

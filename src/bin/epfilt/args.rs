@@ -184,6 +184,10 @@ pub struct RestoreArgs {
     pub energy: PathBuf,
     /// The result (.exr; never one of the inputs).
     pub output: PathBuf,
+    /// The energy image's part and beauty layer (the denoiser's output's
+    /// part too, where it has that part).
+    #[command(flatten)]
+    pub select: SelectArgs,
     /// The side of the blocks (pixels) whose energy is the energy image's.
     #[arg(long, default_value_t = epfilt::filter::restore::DEFAULT_SCALE)]
     pub scale: usize,
@@ -219,7 +223,7 @@ pub struct RestoreArgs {
     pub quiet: bool,
 }
 
-/// Which image of a file: shared by compare and preview.
+/// Which image of a file: shared by compare, preview and restore.
 #[derive(Args)]
 pub struct SelectArgs {
     /// Part of a multi-part file, by name or index.

@@ -181,6 +181,7 @@ fn restore(a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
     job.threads = capped_threads(a.threads);
     job.nonfinite = nonfinite;
     job.guides = epfilt::io::GuideRequest::parse(&a.guides, &a.guide).map_err(usage)?;
+    job.select = selection(&a.select);
     job.cancel = Some(cancel);
     if let Some(c) = &a.compression {
         job.output_settings.compression = Some(
