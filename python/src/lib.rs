@@ -301,18 +301,14 @@ fn filter<'py>(
     Ok((image, to_dict(py, &out.report)?))
 }
 
-/// Filter a file (or a frame sequence) into another, streamed; see the stub.
-#[pyfunction]
-#[pyo3(signature = (input, output, *, progress=None, **settings))]
-fn filter_file<'py>(
-    py: Python<'py>,
-    input: PathBuf,
-    output: PathBuf,
+/// The run's rows done and in all (what it reports) and the tick that
+/// passes them on to `progress(done, total)` with the GIL, when they change.
+fn ticker(
     progress: Option<PyObject>,
-    settings: Option<&Bound<'py, PyDict>>,
-) -> PyResult<Bound<'py, PyAny>> {
-    // Rows done and in all, as the run reports them; passed on to
-    // `progress(done, total)` with the GIL, when they change.
+) -> (
+    impl FnMut(Python<'_>) -> PyResult<()> + Send,
+    impl Fn(usize, usize) + Sync,
+) {
     let rows = Arc::new((AtomicUsize::new(0), AtomicUsize::new(0)));
     let seen = rows.clone();
     let mut last = (usize::MAX, usize::MAX);
@@ -333,6 +329,20 @@ fn filter_file<'py>(
         rows.1.store(total, Ordering::Relaxed);
         rows.0.store(done, Ordering::Relaxed);
     };
+    (tick, report_rows)
+}
+
+/// Filter a file (or a frame sequence) into another, streamed; see the stub.
+#[pyfunction]
+#[pyo3(signature = (input, output, *, progress=None, **settings))]
+fn filter_file<'py>(
+    py: Python<'py>,
+    input: PathBuf,
+    output: PathBuf,
+    progress: Option<PyObject>,
+    settings: Option<&Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let (tick, report_rows) = ticker(progress);
     let (opts, given) = FilterOptions::from_settings(settings_of(settings)?).map_err(to_py)?;
     let env = |k: &str| std::env::var(k).ok();
     let share = opts.share(&env).map_err(to_py)?;
@@ -499,6 +509,56 @@ fn restore<'py>(
     Ok((image, to_dict(py, &report)?))
 }
 
+/// `restore` from file to file, streamed; see the stub. (Python's keyword
+/// arguments, one each.)
+#[allow(clippy::too_many_arguments)]
+#[pyfunction]
+#[pyo3(signature = (denoised, energy, output, *, scale=None, keep_gain=None, guides="auto", guide=None, part=None, layer=None, compression=None, threads=0, nonfinite="error", progress=None))]
+fn restore_file<'py>(
+    py: Python<'py>,
+    denoised: PathBuf,
+    energy: PathBuf,
+    output: PathBuf,
+    scale: Option<usize>,
+    keep_gain: Option<f64>,
+    guides: &str,
+    guide: Option<Vec<String>>,
+    part: Option<String>,
+    layer: Option<String>,
+    compression: Option<String>,
+    threads: usize,
+    nonfinite: &str,
+    progress: Option<PyObject>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let mut job = epfilt::RestoreJob::new(denoised, energy, output);
+    job.scale = scale.unwrap_or(epfilt::filter::restore::DEFAULT_SCALE);
+    job.keep_gain = keep_gain;
+    job.threads = threads;
+    job.nonfinite = epfilt::pipeline::NonFinite::parse(nonfinite).map_err(to_py)?;
+    job.guides =
+        epfilt::io::GuideRequest::parse(guides, &guide.unwrap_or_default()).map_err(to_py)?;
+    job.select = epfilt::io::Selection {
+        part: part.as_deref().map(epfilt::io::PartSelect::parse),
+        layer,
+    };
+    if let Some(c) = compression {
+        job.output_settings.compression = Some(
+            epfilt::io::parse_compression(&c)
+                .ok_or_else(|| config_error(format!("unknown compression {c:?}")))?,
+        );
+    }
+    let (tick, report_rows) = ticker(progress);
+    let report = detached_with(
+        py,
+        move |cancel| {
+            job.cancel = Some(cancel);
+            epfilt::restore_file(&job, &report_rows)
+        },
+        tick,
+    )?;
+    to_dict(py, &report)
+}
+
 /// The native module (`epfilt._epfilt`); `epfilt/__init__.py` is the API.
 #[pymodule]
 fn _epfilt(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -508,6 +568,7 @@ fn _epfilt(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(compare, m)?)?;
     m.add_function(wrap_pyfunction!(read, m)?)?;
     m.add_function(wrap_pyfunction!(restore, m)?)?;
+    m.add_function(wrap_pyfunction!(restore_file, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

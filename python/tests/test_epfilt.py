@@ -387,3 +387,24 @@ def test_restore_keeps_the_emission_guides_lamp_in_place():
         assert l["rel_error"] <= LEDGER_TOL
     with pytest.raises(epfilt.ConfigError):
         epfilt.restore(denoised, energy, emission=emission[:, :-1])
+
+
+def test_restore_file_is_the_cli_streamed(variance_scene, tmp_path):
+    denoised = tmp_path / "d.exr"
+    cli_filter(variance_scene, denoised, "--method", "gauss", "-s", "1")
+    out, cli = tmp_path / "py.exr", tmp_path / "cli.exr"
+    seen = []
+    report = epfilt.restore_file(denoised, variance_scene, out, scale=16, threads=2,
+                                 progress=lambda done, total: seen.append((done, total)))
+    cli_report = tmp_path / "cli.json"
+    run("restore", "-q", denoised, variance_scene, cli, "--scale", "16", "--report", cli_report)
+    assert report["digest"] == json.loads(cli_report.read_text())["digest"]
+    assert epfilt.compare(out, cli)["identical"]
+    assert all(abs(l["rel_error"]) <= LEDGER_TOL for l in report["ledger"])
+    assert report["emission_guide"] == [] and report["copied_channels"] == []
+    if seen:
+        assert seen[-1] == (80, 80) and all(t == 80 for _, t in seen)
+    # Asked for, an absent guide is an error, and no output is left.
+    with pytest.raises(epfilt.Error, match="emission guide"):
+        epfilt.restore_file(denoised, variance_scene, tmp_path / "none.exr", guides="emission")
+    assert not (tmp_path / "none.exr").exists()

@@ -22,6 +22,7 @@ __all__ = [
     "filter",
     "filter_file",
     "restore",
+    "restore_file",
     "info",
     "compare",
     "read",
@@ -125,6 +126,27 @@ def restore(denoised, energy, scale=None, *, keep_gain=None, emission=None, chan
     """
     return _epfilt.restore(denoised, energy, scale, keep_gain=keep_gain, emission=emission,
                            channels=channels, threads=threads, nonfinite=nonfinite)
+
+
+def restore_file(denoised, energy, output, *, scale=None, keep_gain=None, guides="auto",
+                 guide=None, part=None, layer=None, compression=None, threads=0,
+                 nonfinite="error", progress=None):
+    """``restore`` from file to file, streamed: ``epfilt restore DENOISED ENERGY OUTPUT``.
+
+    Memory grows with the width and ``scale``, not the height, so a render too large for
+    ``read`` can be restored. The keep gain follows the energy file (1 where it is
+    ``filter``'s ep-gauss or ep-box output, read from its header, else 16) unless
+    ``keep_gain`` says. ``guides``/``guide``: the energy file's emission guide pass
+    ("auto": found by name; "none"; ``guide=["emission=ViewLayer.Emit"]`` names it).
+    ``part``/``layer``: the energy file's part and beauty layer. ``compression``: the
+    output's (default the energy file's). ``progress(done, total)``: output rows, as for
+    ``filter_file``. The output is written whole or not at all. Returns the ``--report``
+    fields as a dict.
+    """
+    return _epfilt.restore_file(str(denoised), str(energy), str(output), scale=scale,
+                                keep_gain=keep_gain, guides=guides, guide=guide, part=part,
+                                layer=layer, compression=compression, threads=threads,
+                                nonfinite=nonfinite, progress=progress)
 
 
 def info(path):

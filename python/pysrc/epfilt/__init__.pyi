@@ -45,6 +45,22 @@ def restore(
     threads: int = 0,
     nonfinite: str = "error",
 ) -> Tuple[npt.NDArray[np.float32], Dict[str, Any]]: ...
+def restore_file(
+    denoised: _Path,
+    energy: _Path,
+    output: _Path,
+    *,
+    scale: Optional[int] = None,
+    keep_gain: Optional[float] = None,
+    guides: str = "auto",
+    guide: Optional[Sequence[str]] = None,
+    part: Optional[str] = None,
+    layer: Optional[str] = None,
+    compression: Optional[str] = None,
+    threads: int = 0,
+    nonfinite: str = "error",
+    progress: Optional[Callable[[int, int], Any]] = None,
+) -> Dict[str, Any]: ...
 def info(path: _Path) -> Dict[str, Any]: ...
 def compare(a: _Path, b: _Path) -> Dict[str, Any]: ...
 def read(path: _Path, extra: Optional[Sequence[str]] = None) -> Tuple[npt.NDArray[np.float32], List[str]]: ...
