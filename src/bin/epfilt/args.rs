@@ -174,6 +174,8 @@ denoiser dims them), a surplus comes off in proportion.
 The total is exact: the ledger balances to 1e-12 or nothing is written.
 Small --scale: energy exact in small regions, some of the render's grain
 back; large: the denoiser's look, energy exact over large regions.
+--part and --layer choose the energy image's part and beauty layer (the
+denoiser's output takes the same part where it has it).
 One pass over both inputs; memory grows with the width and --scale.";
 
 #[derive(Args)]
