@@ -55,15 +55,7 @@ pub fn write_rgb(
 /// Read R, G, B (or Y) of the first layer with `exr`'s high-level reader, as
 /// planar f32 rows: an independent check of our block reader.
 pub fn read_planar(path: &Path) -> Img {
-    let image = read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_file(path)
-        .expect("read");
-    let layer = image.layer_data;
+    let layer = first_layer(path);
     let (w, h) = (layer.size.0, layer.size.1);
     let find = |n: &str| {
         layer
@@ -81,6 +73,27 @@ pub fn read_planar(path: &Path) -> Img {
     Img::new(w, h, nch, |x, y, c| {
         chans[c].sample_data.value_by_flat_index(y * w + x).to_f32()
     })
+}
+
+/// The first layer of `path`, every channel, with `exr`'s high-level reader.
+fn first_layer(path: &Path) -> Layer<AnyChannels<FlatSamples>> {
+    read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .expect("read")
+        .layer_data
+}
+
+/// Every channel of `path`'s first layer, by name (in the file's order), as
+/// f32.
+pub fn read_channels(path: &Path) -> Vec<(String, Vec<f32>)> {
+    (first_layer(path).channel_data.list.iter())
+        .map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect()))
+        .collect()
 }
 
 /// Write one unnamed layer of `channels` (any order, any sample types) with

@@ -6,7 +6,7 @@
 use exr::image::FlatSamples;
 
 use crate::common::{epfilt_ok, epfilt_run, read_json};
-use crate::exr_io::{tmpdir, write_flat};
+use crate::exr_io::{read_channels, tmpdir, write_flat};
 
 /// `restore`'s own bound on the ledger before rounding (the job refuses
 /// to write above it).
@@ -53,6 +53,26 @@ fn restore(
     ];
     args.extend_from_slice(extra);
     epfilt_run(&args)
+}
+
+/// [`restore`] with `extra` and a report beside `out`, which must succeed
+/// with the ledger balanced: the report.
+fn restore_report(
+    d: &std::path::Path,
+    e: &std::path::Path,
+    out: &std::path::Path,
+    extra: &[&str],
+) -> serde_json::Value {
+    let rep = out.with_extension("json");
+    let mut args = vec!["--report", rep.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    let o = restore(d, e, out, &args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r = read_json(&rep);
+    for l in r["ledger"].as_array().unwrap() {
+        assert!(l["rel_error"].as_f64().unwrap() <= LEDGER_TOL, "{l}");
+    }
+    r
 }
 
 #[test]
@@ -185,18 +205,7 @@ fn restore_keeps_more_in_place_over_epfilts_output_and_takes_keep_gain() {
         "ep-gauss",
         "-q",
     ]);
-    let rep = dir.path().join("r.json");
-    let run = |energy: &std::path::Path, extra: &[&str]| {
-        let mut args = vec!["--report", rep.to_str().unwrap()];
-        args.extend_from_slice(extra);
-        let o = restore(&d, energy, &out, &args);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let r = read_json(&rep);
-        for l in r["ledger"].as_array().unwrap() {
-            assert!(l["rel_error"].as_f64().unwrap() <= LEDGER_TOL, "{l}");
-        }
-        r
-    };
+    let run = |energy: &std::path::Path, extra: &[&str]| restore_report(&d, energy, &out, extra);
     // A render: the render's gain; epfilt's ep-gauss output, read from its
     // header: the lower one; the user's, whatever the energy image.
     let r = run(&e, &[]);
@@ -271,16 +280,9 @@ fn restore_lamp(
     energy: &std::path::Path,
     extra: &[&str],
 ) -> (Vec<String>, f32) {
-    let (d, out, rep) = (dir.join("d.exr"), dir.join("o.exr"), dir.join("r.json"));
+    let (d, out) = (dir.join("d.exr"), dir.join("o.exr"));
     write(&d, (24, 24), |_, _, _| 1.0);
-    let mut args = vec!["--report", rep.to_str().unwrap()];
-    args.extend_from_slice(extra);
-    let o = restore(&d, energy, &out, &args);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let r = read_json(&rep);
-    for l in r["ledger"].as_array().unwrap() {
-        assert!(l["rel_error"].as_f64().unwrap() <= LEDGER_TOL, "{l}");
-    }
+    let r = restore_report(&d, energy, &out, extra);
     let mut names: Vec<String> = (r["emission_guide"].as_array().unwrap().iter())
         .map(|v| v.as_str().unwrap().to_string())
         .collect();
@@ -351,22 +353,6 @@ fn restore_takes_the_emission_guide_it_is_told() {
         assert_eq!(err.trim().lines().count(), 1, "{err}");
         assert!(!out.exists());
     }
-}
-
-/// Every channel of `path`'s first layer, by name, as f32.
-fn read_channels(path: &std::path::Path) -> Vec<(String, Vec<f32>)> {
-    use exr::prelude::*;
-    let image = read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_file(path)
-        .expect("read");
-    (image.layer_data.channel_data.list.iter())
-        .map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect()))
-        .collect()
 }
 
 #[test]
