@@ -223,14 +223,12 @@ fn emission_guide(
         kinds: Some(vec![GuideKind::Emission]),
         named: req.named.clone(),
     };
-    let find = || find_guides(path, energy.header(), &beauty, &emission_only);
-    let names = if asked {
-        let names = find()?.emission;
-        let bad = |why: String| Error::Channels {
-            path: path.to_path_buf(),
-            reason: format!("the emission guide: {why}"),
-        };
-        let names = names.ok_or_else(|| bad("not found".into()))?;
+    let bad = |why: String| Error::Channels {
+        path: path.to_path_buf(),
+        reason: format!("the emission guide: {why}"),
+    };
+    let found = find_guides(path, energy.header(), &beauty, &emission_only).and_then(|f| {
+        let names = f.emission.ok_or_else(|| bad("not found".into()))?;
         if let Some(c) = names.iter().find(|c| energy.is_uint(c)) {
             return Err(bad(format!("{c} holds integers (ids), not light")));
         }
@@ -242,13 +240,9 @@ fn emission_guide(
                 beauty.join(", ")
             )));
         }
-        Some(names)
-    } else {
-        find()
-            .ok()
-            .and_then(|f| f.emission)
-            .filter(|e| e.len() == beauty.len() && !e.iter().any(|c| energy.is_uint(c)))
-    };
+        Ok(names)
+    });
+    let names = if asked { Some(found?) } else { found.ok() };
     if let Some(names) = names {
         energy.add_aux_channels(&names)?;
         let mut k = 0;

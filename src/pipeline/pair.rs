@@ -23,22 +23,21 @@ pub struct Pair<A, B> {
     w: usize,
     na: usize,
     nb: usize,
-    /// The second half's channels (`None`: `b`'s, in order).
-    picks: Option<Vec<Pick>>,
+    /// The second half's channels.
+    picks: Vec<Pick>,
 }
 
 impl<A: Source, B: Source> Pair<A, B> {
     /// The pair of `a` (`na` channels) and `b` (`nb`), `w` samples wide,
     /// each strip's second half made of `picks`.
     pub fn new(a: A, b: B, w: usize, (na, nb): (usize, usize), picks: Vec<Pick>) -> Self {
-        let whole = picks.len() == nb && (0..nb).all(|j| picks[j] == Pick::Second(j));
         Pair {
             a,
             b,
             w,
             na,
             nb,
-            picks: (!whole).then_some(picks),
+            picks,
         }
     }
 }
@@ -62,20 +61,14 @@ impl<A: Source, B: Source> Source for Pair<A, B> {
             ));
         }
         let w = self.w;
-        let second = self.picks.as_ref().map_or(self.nb, Vec::len);
-        let mut data = Vec::with_capacity(sa.rows * (ra + second * w));
+        let mut data = Vec::with_capacity(sa.rows * (ra + self.picks.len() * w));
         for (x, y) in sa.data.chunks_exact(ra).zip(sb.data.chunks_exact(rb)) {
             data.extend_from_slice(x);
-            match &self.picks {
-                None => data.extend_from_slice(y),
-                Some(picks) => {
-                    for p in picks {
-                        data.extend_from_slice(match *p {
-                            Pick::First(i) => &x[i * w..(i + 1) * w],
-                            Pick::Second(j) => &y[j * w..(j + 1) * w],
-                        });
-                    }
-                }
+            for p in &self.picks {
+                data.extend_from_slice(match *p {
+                    Pick::First(i) => &x[i * w..(i + 1) * w],
+                    Pick::Second(j) => &y[j * w..(j + 1) * w],
+                });
             }
         }
         Ok(Some(Strip {

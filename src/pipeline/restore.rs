@@ -255,7 +255,7 @@ impl RestoreStage {
     /// Rows `a..b` (their `l` known) into the fields' block sums.
     fn add_sums(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
         let (nch, w, d_at) = (self.nch, self.w, self.d_at);
-        let (fields, kept) = (&self.fields, &self.kept);
+        let (fields, kept, copied) = (&self.fields, &self.kept, &self.copied);
         let nbx = fields[0].nbx;
         let sums: Vec<Vec<(f64, f64)>> = (a..b)
             .into_par_iter()
@@ -265,7 +265,8 @@ impl RestoreStage {
                     let row = input.get(y);
                     let l = kept.row(y);
                     let mut out = vec![(0.0, 0.0); nch * nbx];
-                    for ch in 0..nch {
+                    // A copied channel's field stays empty: it is never read.
+                    for ch in (0..nch).filter(|&ch| !copied[ch]) {
                         let e = &row[ch * w..(ch + 1) * w];
                         let d = &row[(d_at + ch) * w..(d_at + ch + 1) * w];
                         for x in 0..w {
@@ -291,7 +292,7 @@ impl RestoreStage {
     /// carrier moments.
     fn add_moments(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
         let (nch, w, d_at) = (self.nch, self.w, self.d_at);
-        let fields = &self.fields;
+        let (fields, copied) = (&self.fields, &self.copied);
         let nbx = fields[0].nbx;
         let sums: Vec<Vec<(f64, [f64; 9])>> = (a..b)
             .into_par_iter()
@@ -300,7 +301,7 @@ impl RestoreStage {
                 |(s, t), y| {
                     let d_row = &input.get(y)[d_at * w..];
                     let mut out = vec![(0.0, [0.0; 9]); nch * nbx];
-                    for ch in 0..nch {
+                    for ch in (0..nch).filter(|&ch| !copied[ch]) {
                         for (s, &d) in s.iter_mut().zip(&d_row[ch * w..(ch + 1) * w]) {
                             *s = shape(d);
                         }
@@ -325,7 +326,7 @@ impl RestoreStage {
         for _ in a..b {
             self.out.push_stale(0.0);
         }
-        let (fields, bs) = (&self.fields, self.b());
+        let (fields, bs, copied) = (&self.fields, self.b(), &self.copied);
         let nbx = fields[0].nbx;
         // c = s + t (f - 1) per pixel, and per row its block sums.
         let mut rows = self.out.range_mut(a, b);
@@ -338,7 +339,8 @@ impl RestoreStage {
                     let y = a + i;
                     let d_row = &input.get(y)[d_at * w..];
                     let mut sums = vec![0.0; nch * nbx];
-                    for ch in 0..nch {
+                    // A copied channel is the energy's, written below.
+                    for ch in (0..nch).filter(|&ch| !copied[ch]) {
                         fields[ch].row(y, f);
                         let o = &mut out[ch * w..(ch + 1) * w];
                         for (o, &d) in o.iter_mut().zip(&d_row[ch * w..(ch + 1) * w]) {
