@@ -95,6 +95,9 @@ pub struct Report {
     pub tile: usize,
     /// Input rows per strip.
     pub strip_rows: usize,
+    /// Strips the filter worked on at once (two: a strip's first passes
+    /// beside the previous strip's later ones).
+    pub strips_in_flight: usize,
     /// Blocks the reader decodes ahead at most where `--max-memory` set
     /// them (`None`: as many as the job's default window).
     pub window_blocks: Option<usize>,
@@ -471,6 +474,7 @@ impl Report {
             digest: format!("{:016x}", stats.digest),
             tile: run.cfg.tile,
             strip_rows: layout.strip_rows(run.cfg),
+            strips_in_flight: crate::pipeline::strips_in_flight(run.cfg, params.method, g.s),
             window_blocks: (run.cfg.window_blocks > 0).then_some(run.cfg.window_blocks),
             write_ahead_bytes: run.cfg.write_ahead_bytes(),
             memory_estimate_bytes: 0,

@@ -424,6 +424,11 @@ options! {
     /// takes the geometry of the runs it predicts; does not change the
     /// result).
     geometry_threads: usize { Value, PERFORMANCE, parse: number, default: "0" }
+    /// Strips the Gaussian family works on at once, 0 = automatic (two
+    /// where there are two threads or more: a strip's first passes run
+    /// beside the previous strip's last ones; one holds a strip less;
+    /// does not change the result).
+    strips_in_flight: usize { Value, PERFORMANCE, parse: number, default: "0" }
 }
 
 /// `--quality`'s long help: every preset's knob values.
@@ -631,6 +636,7 @@ impl FilterOptions {
             threads,
             window_blocks: self.window_blocks,
             geometry_threads: self.geometry_threads,
+            strips_in_flight: self.strips_in_flight,
             cancel,
             nonfinite,
             ..PipelineConfig::default()

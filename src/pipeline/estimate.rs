@@ -195,10 +195,10 @@ pub const FEWEST_WINDOW_BLOCKS: usize = 2;
 pub const FEWEST_WRITE_AHEAD: usize = 1;
 
 /// How `cfg` runs `job` within `limit` bytes ([`estimate_bytes`]): as it is
-/// where it fits; else with shorter strips (halved down to one pixel row,
-/// unless `--strip-rows` gave them), and the reader's window and the sink's
-/// rows down to `FEWEST_WINDOW_BLOCKS` and one block, the first that fits,
-/// tallest strips first. None
+/// where it fits; else with one strip in flight and shorter strips (halved
+/// down to one pixel row, unless `--strip-rows` gave them), and the reader's
+/// window and the sink's rows down to `FEWEST_WINDOW_BLOCKS` and one block,
+/// the first that fits, tallest strips first. None
 /// of it changes the result. `Err` holds what the smallest of them needs
 /// (the halo's rows and one strip: the floor the job cannot go below).
 pub fn fit_memory(
@@ -235,6 +235,7 @@ pub fn fit_memory(
                 strip_rows,
                 window_blocks,
                 write_ahead,
+                strips_in_flight: 1,
                 ..cfg.clone()
             };
             let need = estimate_bytes(job, params, &c, block_bytes);
@@ -292,17 +293,24 @@ fn estimate_with(
     let [fine, r2, r4] = crate::filter::grid_reaches(params).map(|r| r as u64);
     let base_rows = search + spread + base + strip / s + 4;
     let acc_rows = spread + fine + strip / s + 4;
+    // With two strips in flight the later passes run a strip behind: the
+    // box luminance, its table, the horizontal pass and the noisy samples
+    // wait a strip longer.
+    let behind = match super::stages::strips_in_flight(cfg, params.method, job.grid.s) {
+        1 => 0,
+        _ => strip,
+    };
     let windows = in_row.saturating_mul(s * (halo.xbar_reach as u64 + 1) + strip)
-        + out_row.saturating_mul(s * (2 * halo.base_reach as u64 + 1) + strip)
+        + out_row.saturating_mul(s * (2 * halo.base_reach as u64 + 1) + strip + behind)
         + out_row.saturating_mul(base_rows + acc_rows)
         // The box luminance, f32 rows of the padded width.
         + (ow + 2 * halo.search_reach as u64)
-            .saturating_mul(4 * (2 * halo.search_reach as u64 + strip / s + 4));
+            .saturating_mul(4 * (2 * halo.search_reach as u64 + (strip + behind) / s + 4));
     // The summed-area table the bound reads (--bound-from): f64 rows of the
     // padded width, one more than the box luminance's.
     let table = if crate::filter::uses_bound(params) {
         (ow + 2 * halo.search_reach as u64 + 2)
-            .saturating_mul(8 * (2 * halo.search_reach as u64 + strip / s + 5))
+            .saturating_mul(8 * (2 * halo.search_reach as u64 + (strip + behind) / s + 5))
     } else {
         0
     };
@@ -323,7 +331,7 @@ fn estimate_with(
     // next strip's lists), `NOISY_SHARE` of their samples, each a position,
     // two luminances and its values, in lists with an eighth to spare.
     let pending = if params.method == Method::EpGauss {
-        let samples = (search + 2 * (strip / s) + 4)
+        let samples = (search + 2 * (strip / s) + behind / s + 4)
             .saturating_mul(s * s)
             .saturating_mul(ow);
         let each = super::spread::PENDING_SAMPLE_BYTES as u64 + 8 * nch;
@@ -551,6 +559,53 @@ mod tests {
                 .strip_rows,
             12
         );
+    }
+
+    #[test]
+    fn two_strips_in_flight_hold_a_strip_more_and_go_first_under_a_budget() {
+        let job = rgb(6144, 6144);
+        let block = 6144 * 3 * 4 * 16;
+        let two = PipelineConfig {
+            threads: 2,
+            strips_in_flight: 2,
+            ..PipelineConfig::default()
+        };
+        let one = PipelineConfig {
+            strips_in_flight: 1,
+            ..two.clone()
+        };
+        let strip = job.strip_rows(&two);
+        for m in [Method::EpGauss, Method::Gauss, Method::Box] {
+            let p = FilterParams::new(m, 3);
+            let (e2, e1) = (
+                estimate_bytes(&job, &p, &two, block),
+                estimate_bytes(&job, &p, &one, block),
+            );
+            // A strip more of the horizontal pass at the least (f64 rows
+            // of the output width, three channels).
+            assert!(e2 >= e1 + (strip * 2048 * 3 * 8) as u64, "{m:?}: {e2} {e1}");
+            // Between the two: the same strips, one in flight.
+            let c = fit_memory(&job, &p, &two, block, e1).unwrap().0;
+            assert_eq!(
+                (c.strips_in_flight(), job.strip_rows(&c)),
+                (1, strip),
+                "{m:?}"
+            );
+        }
+        // One worker, and the stages of other methods: one strip.
+        let lone = PipelineConfig {
+            threads: 1,
+            ..PipelineConfig::default()
+        };
+        assert_eq!(lone.strips_in_flight(), 1);
+        assert_eq!(strips_in_flight(&two, Method::Gauss, 3), 2);
+        for (m, s) in [
+            (Method::EpBox, 1),
+            (Method::EpGauss, 1),
+            (Method::Median, 3),
+        ] {
+            assert_eq!(strips_in_flight(&two, m, s), 1, "{m:?}");
+        }
     }
 
     #[test]

@@ -57,6 +57,7 @@ use crate::geometry::{Grid, Halo};
 pub use counts::{ExcessCounts, MethodCounts, SpreadCounts};
 pub use ledger::{ChannelLedger, Ledger};
 pub use stage::{Stage, WindowUse};
+pub use stages::strips_in_flight;
 pub use stream::{OutRows, Streamer};
 
 pub use estimate::{
@@ -248,6 +249,9 @@ pub struct PipelineConfig {
     /// memory of a chunk's reflected weights; 0: automatic). Does not change
     /// the result.
     pub spread_chunk: usize,
+    /// Strips the Gaussian family works on at once (0: automatic,
+    /// [`PipelineConfig::strips_in_flight`]). Does not change the result.
+    pub strips_in_flight: usize,
 }
 
 impl PipelineConfig {
@@ -265,6 +269,20 @@ impl PipelineConfig {
         match self.write_ahead {
             0 => WRITE_AHEAD_BYTES_PER_THREAD * self.geometry_workers(),
             n => n,
+        }
+    }
+
+    /// Strips the Gaussian family works on at once: `strips_in_flight`, or
+    /// two where there are two workers or more. With two, a strip's first
+    /// passes (box luminance, classification) run beside the previous
+    /// strip's later ones (spread, base rows), so that the end of one
+    /// parallel loop does not leave the workers waiting; the windows hold
+    /// a strip more. One worker gains nothing from it.
+    pub fn strips_in_flight(&self) -> usize {
+        match self.strips_in_flight {
+            0 if self.workers() > 1 => 2,
+            0 => 1,
+            n => n.min(2),
         }
     }
 
@@ -291,6 +309,7 @@ impl Default for PipelineConfig {
             nonfinite: NonFinite::Error,
             classify_samples: 0,
             spread_chunk: 0,
+            strips_in_flight: 0,
         }
     }
 }

@@ -12,6 +12,17 @@ use crate::filter::ep_box::{Spp, StatsLayout};
 use crate::filter::guides::EmissionParts;
 use crate::filter::{Method, ValidParams};
 
+/// Strips the stage of `method` at `s` works on at once under `cfg`: the
+/// Gaussian family's [`PipelineConfig::strips_in_flight`], one for the
+/// others.
+pub fn strips_in_flight(cfg: &PipelineConfig, method: Method, s: usize) -> usize {
+    match method {
+        Method::EpBox | Method::Median | Method::AlphaTrim => 1,
+        Method::EpGauss if s == 1 => 1,
+        _ => cfg.strips_in_flight(),
+    }
+}
+
 /// The stage of `params.method` for strips laid out as `job`, its
 /// accumulators cut in column tiles of `tile`.
 pub fn make(
@@ -99,6 +110,7 @@ pub fn make(
             }
             stage.set_classify_samples(cfg.classify_samples);
             stage.set_spread_chunk(cfg.spread_chunk);
+            stage.set_strips_in_flight(cfg.strips_in_flight());
             Box::new(stage)
         }
     })

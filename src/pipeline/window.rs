@@ -135,6 +135,25 @@ impl<T: Copy> RowWindow<T> {
         out
     }
 
+    /// Every row held, shared.
+    pub fn rows(&self) -> Rows<'_, T> {
+        Rows {
+            first: self.first,
+            rows: (self.first..self.end()).map(|y| self.get(y)).collect(),
+        }
+    }
+
+    /// From one borrow, the rows before `y` shared and the rows from `y`
+    /// mutable: one pass may read the first while another writes the rest.
+    pub fn split_at(&mut self, y: usize) -> (Rows<'_, T>, Vec<&mut [T]>) {
+        let first = self.first;
+        let y = y.clamp(first, self.end());
+        let mut old = self.range_mut(first, self.end());
+        let new = old.split_off(y - first);
+        let rows = old.into_iter().map(|r| &*r).collect();
+        (Rows { first, rows }, new)
+    }
+
     /// Drop rows below `y`, keeping the buffers of single rows for reuse.
     pub fn evict_below(&mut self, y: usize) {
         while self.first < y && !self.rows.is_empty() {
@@ -161,6 +180,40 @@ impl<T: Copy> RowWindow<T> {
             }
             self.base += 1;
         }
+    }
+}
+
+/// Rows `first..first + len` of a window, shared ([`RowWindow::rows`],
+/// [`RowWindow::split_at`]).
+#[derive(Clone, Debug)]
+pub struct Rows<'a, T> {
+    first: usize,
+    rows: Vec<&'a [T]>,
+}
+
+impl<'a, T> Rows<'a, T> {
+    /// Row `y` (absolute). Panics if not held: a halo bug, not an input error.
+    #[inline]
+    pub fn get(&self, y: usize) -> &'a [T] {
+        self.rows[y - self.first]
+    }
+
+    /// Row `y` where held.
+    #[inline]
+    pub fn try_get(&self, y: usize) -> Option<&'a [T]> {
+        y.checked_sub(self.first)
+            .and_then(|k| self.rows.get(k).copied())
+    }
+
+    /// Index of the first row.
+    pub fn first(&self) -> usize {
+        self.first
+    }
+
+    /// These rows and then `more` (rows from `self`'s end), as one view.
+    pub fn with(mut self, more: impl IntoIterator<Item = &'a [T]>) -> Self {
+        self.rows.extend(more);
+        self
     }
 }
 
@@ -201,6 +254,29 @@ mod tests {
         w.recycle_strips(tx);
         w.evict_below(6);
         assert_eq!((w.spare.len(), rx.try_recv().ok()), (1, None));
+    }
+
+    #[test]
+    fn a_split_shares_the_rows_above_and_lends_the_rest() {
+        let mut w = RowWindow::<u8>::new(2);
+        w.push_rows(vec![0, 0, 1, 1, 2, 2], 3);
+        w.push(3);
+        w.evict_below(1);
+        let (old, new) = w.split_at(2);
+        assert_eq!(
+            (old.first(), old.get(1), old.try_get(2)),
+            (1, &[1u8, 1][..], None)
+        );
+        assert_eq!(new.len(), 2);
+        for r in new {
+            r[1] = 7;
+        }
+        assert_eq!(old.with([&[5u8, 5][..]]).get(2), &[5, 5]);
+        assert_eq!((w.get(2), w.get(3)), (&[2u8, 7][..], &[3u8, 7][..]));
+        assert_eq!(w.rows().get(3), &[3, 7]);
+        // At the window's ends: all shared, or all lent.
+        assert_eq!(w.split_at(9).1.len(), 0);
+        assert_eq!(w.split_at(0).1.len(), 3);
     }
 
     #[test]

@@ -287,6 +287,19 @@ pub fn current_segment() -> u64 {
     SEGMENT.with(|s| s.get())
 }
 
+/// Run `f` on this thread as part of segment `seg` (one that
+/// [`current_segment`] gave on another thread): the regions a joined
+/// closure opens on a worker belong to the segment that joined.
+pub fn in_segment<R>(seg: u64, f: impl FnOnce() -> R) -> R {
+    if !on() {
+        return f();
+    }
+    let outer = SEGMENT.with(|s| s.replace(seg));
+    let r = f();
+    SEGMENT.with(|s| s.set(outer));
+    r
+}
+
 /// The segment this thread is in waited for event `id` (found while it ran,
 /// e.g. the decoding of the rows it hands over).
 pub fn wait_for(id: u64) {

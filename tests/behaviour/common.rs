@@ -172,7 +172,8 @@ pub const CUTS: [(usize, usize, usize); 9] = [
 /// The one invariance tester: runs `data` (planar, as `job` says) with
 /// `params` through every cut of `cuts` (tile, strip rows, threads) and
 /// demands one answer: the same output bits, the same digest of the
-/// unrounded output, the same ledger bits and the same counts. Returns the
+/// unrounded output, the same ledger bits and the same counts (with one
+/// strip in flight or two, [`epfilt::pipeline::PipelineConfig::strips_in_flight`]). Returns the
 /// first run's output and statistics, or what differed where (a `Result`, so
 /// a property test can report it as its failure).
 pub fn invariant(
@@ -189,6 +190,9 @@ pub fn invariant(
         // of the memory of tile + 1 samples at an edge (small images have
         // little interior: a few samples a chunk).
         let mut cut = cfg(tile, strip, threads);
+        // One strip in flight or two, on one thread or several: by the
+        // strip height's parity, so that every list of cuts has both.
+        cut.strips_in_flight = 1 + strip % 2;
         if tile < 32 {
             cut.classify_samples = 3 * tile + 1;
             cut.spread_chunk = tile + 1;

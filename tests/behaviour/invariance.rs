@@ -189,6 +189,8 @@ fn a_smaller_memory_budget_runs_smaller_and_gives_the_same_bytes() {
         };
         let full = filter_file(&job("full.exr", None), &|_, _| {}).expect("default run");
         assert_eq!(full.window_blocks, None, "{m:?}");
+        let by_default = if full.threads > 1 { 2 } else { 1 };
+        assert_eq!(full.strips_in_flight, by_default, "{m:?}");
         let floor = filter_file(&job("none.exr", Some(1)), &|_, _| {}).unwrap_err();
         let text = floor.to_string();
         assert!(
@@ -218,6 +220,9 @@ fn a_smaller_memory_budget_runs_smaller_and_gives_the_same_bytes() {
                 Ok(r) => {
                     assert!(r.memory_estimate_bytes <= limit, "{m:?} {k}");
                     assert!(r.strip_rows <= smallest, "{m:?} {k}");
+                    // Under any budget smaller than the default's, one strip
+                    // in flight: the second is the first thing given up.
+                    assert_eq!(r.strips_in_flight, 1, "{m:?} {k}");
                     smallest = r.strip_rows;
                     assert_eq!(r.digest, full.digest, "{m:?} {k}");
                     assert_eq!(image_bytes(&path(&out)), image_bytes(&path("full.exr")));

@@ -30,7 +30,7 @@ struct FindScratch {
 /// A pixel row's noisy samples (row-major), their values (`nch` each: what
 /// the emission guide leaves of them) and how many noisy samples were kept
 /// as features.
-type Found = (Vec<Noisy>, Vec<f64>, u64);
+pub(super) type Found = (Vec<Noisy>, Vec<f64>, u64);
 
 /// Samples of one input row that one classification task searches for
 /// noise: a pixel row of a wider image is cut into column ranges, searched
@@ -381,42 +381,37 @@ fn classify_rows(
         .collect()
 }
 
-impl GaussianStage {
-    /// Classify pixel rows `a..b`: their noisy samples join the pending
-    /// list, and their input rows' horizontal passes are made.
-    pub(super) fn classify(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
-        let Shape { grid, w, h, .. } = self.shape;
-        let s = grid.s;
-        let Windows { ybox, hpass, .. } = &mut self.win;
-        for _ in a * s..b * s {
-            hpass.push_stale(0.0); // every value is written below
-        }
-        let per_task = match self.classify_samples {
-            0 => FIND_TASK_SAMPLES,
-            n => n,
-        };
-        // Without ep-gauss there is no noise to search for: the pass alone,
-        // a task a row.
-        let parts = match self.rules.ep {
-            Some(_) => grid.in_w.div_ceil(per_task).clamp(1, w),
-            None => 1,
-        };
-        let yview = YView::new(ybox, h);
-        let ctx = FindCtx {
-            shape: &self.shape,
-            rules: &self.rules,
-            view: &yview,
-            input,
-        };
-        let found = classify_rows(&ctx, hpass.range_mut(a * s, b * s), a, parts);
-        for (list, vals, kept) in found {
-            // Kept samples failed the test too; the spread ones are counted
-            // when they are spread.
-            self.counts.noisy += kept;
-            self.counts.kept += kept;
-            self.pending.push(list, vals);
-        }
-    }
+/// Classify pixel rows `a..` (`hpass`: their input rows' horizontal
+/// passes, to make; `ybox`: the box luminance the test reads; `per_task`:
+/// samples of an input row a task searches, 0 automatic). Returns what each
+/// row found: its noisy samples, their values, how many were kept.
+pub(super) fn classify(
+    shape: &Shape,
+    rules: &Rules,
+    input: &RowWindow<f32>,
+    ybox: YView<'_>,
+    hpass: Vec<&mut [f64]>,
+    a: usize,
+    per_task: usize,
+) -> Vec<Found> {
+    let Shape { grid, w, .. } = *shape;
+    let per_task = match per_task {
+        0 => FIND_TASK_SAMPLES,
+        n => n,
+    };
+    // Without ep-gauss there is no noise to search for: the pass alone,
+    // a task a row.
+    let parts = match rules.ep {
+        Some(_) => grid.in_w.div_ceil(per_task).clamp(1, w),
+        None => 1,
+    };
+    let ctx = FindCtx {
+        shape,
+        rules,
+        view: &ybox,
+        input,
+    };
+    classify_rows(&ctx, hpass, a, parts)
 }
 
 /// `out[px] = max(out[px], ch[px * s .. (px + 1) * s])`, with the common

@@ -50,17 +50,17 @@ impl CoarseGrid {
     }
 }
 
-impl GaussianStage {
+impl Back {
     /// The coarse grids' rows that the accumulator's final rows `a..b` read
     /// (every one of them final), grown where new; returns the 2x rows that
     /// are read for the first time and must take the 4x grid's share first
     /// (its 4x rows are final too: each reaches every fine row the 2x rows
     /// it feeds reach), where the 4x grid is used.
-    /// [`GaussianStage::coarse_share`] then brings them up, a task a row:
+    /// [`Back::coarse_share`] then brings them up, a task a row:
     /// each task upsamples the coarse rows it reads across itself (one or
     /// two), then down.
     pub(super) fn coarse_rows_read(&mut self, a: usize, b: usize) -> Option<(usize, usize)> {
-        let Windows { c2, c4, .. } = &mut self.win;
+        let Back { c2, c4, .. } = self;
         let last = c2.last_read(a, b);
         c2.grow_to(last);
         // Rows the accumulator no longer reaches were released unread (no

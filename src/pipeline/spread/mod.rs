@@ -17,9 +17,10 @@
 //!    plus the accumulator (all noisy samples of rows `≤ y + spread_reach`
 //!    spread).
 //!
-//! Which parallel loop does a cursor's work may differ (the box luminance and
-//! the base rows run beside the skeleton's books, the spread beside the
-//! classification: `rows.rs`, `classify.rs`), never what it computes.
+//! The first two cursors are a strip's first passes ([`Front`]), the last
+//! two its later ones ([`Back`]); with two strips in flight a strip's first
+//! passes run beside the previous strip's later ones ([`GaussianStage::run`]).
+//! When a pass runs may differ, never what it computes.
 //!
 //! Each cursor advances only when what it reads is present, so the result does
 //! not depend on how rows arrive (strip height). Every output value is built
@@ -43,7 +44,7 @@ use coarse::CoarseGrid;
 
 use super::counts::{MethodCounts, SpreadCounts};
 use super::stage::{Output, Stage, WindowUse};
-use super::window::RowWindow;
+use super::window::{RowWindow, Rows};
 use super::ChannelMode;
 use crate::filter::ep_box::{cluster_count, StatsLayout};
 use crate::filter::ep_gauss::{
@@ -145,36 +146,30 @@ struct Noisy {
     xbar0: f64,
 }
 
-/// The box luminance rows a batch of searches reads, each looked up in the
-/// window once (a search fetches dozens of rows; the window's lookup is two
-/// ring-buffer indexings deep).
+/// The box luminance rows a batch of searches reads (a search fetches
+/// dozens of rows: each is a slice at hand, not a lookup in the window).
+#[derive(Clone)]
 struct YView<'a> {
-    rows: Vec<&'a [f32]>,
-    first: usize,
+    rows: Rows<'a, f32>,
     h: usize,
-    /// The summed-area table's rows (from `csum_first`) and block, where the
-    /// search reads them.
-    csums: Vec<&'a [f64]>,
-    csum_first: usize,
+    /// The summed-area table's rows and block, where the search reads them.
+    csums: Option<Rows<'a, f64>>,
     block: usize,
 }
 
 impl<'a> YView<'a> {
-    fn new(win: &'a RowWindow<f32>, h: usize) -> Self {
+    fn new(rows: Rows<'a, f32>, h: usize) -> Self {
         YView {
-            rows: (win.first()..win.end()).map(|y| win.get(y)).collect(),
-            first: win.first(),
+            rows,
             h,
-            csums: Vec::new(),
-            csum_first: 0,
+            csums: None,
             block: 1,
         }
     }
 
     /// With the summed-area table `csum` (blocks of `block` rows).
-    fn with_csums(mut self, csum: &'a RowWindow<f64>, block: usize) -> Self {
-        self.csums = (csum.first()..csum.end()).map(|y| csum.get(y)).collect();
-        self.csum_first = csum.first();
+    fn with_csums(mut self, csum: Rows<'a, f64>, block: usize) -> Self {
+        self.csums = Some(csum);
         self.block = block;
         self
     }
@@ -183,15 +178,14 @@ impl<'a> YView<'a> {
 impl LumRows for YView<'_> {
     #[inline]
     fn row(&self, vy: i64) -> &[f32] {
-        self.rows[mirror(vy, self.h) - self.first]
+        self.rows.get(mirror(vy, self.h))
     }
 }
 
 impl AreaSums for YView<'_> {
     #[inline]
     fn csum(&self, y: usize) -> Option<&[f64]> {
-        y.checked_sub(self.csum_first)
-            .and_then(|k| self.csums.get(k).copied())
+        self.csums.as_ref().and_then(|c| c.try_get(y))
     }
     fn height(&self) -> usize {
         self.h
@@ -238,8 +232,10 @@ struct Rules {
     emission: Option<EmissionParts>,
 }
 
-/// The rows held between strips, each window indexed by its own rows.
-struct Windows {
+/// What the first passes of a strip make (the box luminance, the
+/// classification with its horizontal pass) and hold for the later ones,
+/// each window indexed by its own rows.
+struct Front {
     /// The box luminance of pixel rows, `pad` mirrored pixels each side.
     ybox: RowWindow<f32>,
     /// The summed-area table of `ybox` (`--bound-from`), one row more above,
@@ -248,12 +244,54 @@ struct Windows {
     /// The horizontal pass of the base kernel over input rows, noisy
     /// samples taken out.
     hpass: RowWindow<f64>,
-    /// The vertical gather of `hpass`: output rows without the noise.
+    /// Pixel rows in (with their box luminance, for ep-gauss).
+    ready: usize,
+    /// Pixel rows classified (their input rows' horizontal passes made).
+    classified: usize,
+    /// Samples of an input row per classification task (0: automatic).
+    classify_samples: usize,
+}
+
+/// What the later passes of a strip make (the spread, the base rows, the
+/// final rows) and hold: the output rows and the noisy samples waiting.
+struct Back {
+    /// The vertical gather of the horizontal pass: output rows without the
+    /// noise.
     base_rows: RowWindow<f64>,
     /// The spread noise, on the output grid and the 2x and 4x coarse ones.
     acc: RowWindow<f64>,
     c2: CoarseGrid,
     c4: CoarseGrid,
+    pending: Pending,
+    /// Pixel rows whose noisy samples are spread.
+    spread_done: usize,
+    /// Output rows final (base rows made, every spread and coarse share in).
+    out_done: usize,
+    counts: SpreadCounts,
+    /// Noisy samples at an edge per spread chunk (0: [`SPREAD_CHUNK`]).
+    spread_chunk: usize,
+}
+
+/// The first passes' rows as the later passes read them: up to the rows
+/// in and classified when they start.
+struct Made<'a> {
+    ybox: Rows<'a, f32>,
+    csum: Option<(Rows<'a, f64>, usize)>,
+    hpass: Rows<'a, f64>,
+    ready: usize,
+    classified: usize,
+}
+
+impl<'a> Made<'a> {
+    /// The box luminance (and its summed-area table) as the width search
+    /// reads it, `h` rows high.
+    fn view(&self, h: usize) -> YView<'a> {
+        let view = YView::new(self.ybox.clone(), h);
+        match &self.csum {
+            Some((c, block)) => view.with_csums(c.clone(), *block),
+            None => view,
+        }
+    }
 }
 
 /// Bytes a pending noisy sample holds besides its values (the memory
@@ -293,24 +331,15 @@ fn grow_by_eighth<T>(q: &mut VecDeque<T>, more: usize) {
 }
 
 /// The Gaussian family's state between strips: the shape and rules (set
-/// once), the windows, the pending noisy samples, and three cursors over
-/// pixel rows.
+/// once), what the first passes hold and what the later ones hold.
 pub struct GaussianStage {
     shape: Shape,
     rules: Rules,
-    win: Windows,
-    pending: Pending,
-    /// Pixel rows classified (their input rows' horizontal passes made).
-    classified: usize,
-    /// Pixel rows whose noisy samples are spread.
-    spread_done: usize,
-    /// Output rows final (base rows made, every spread and coarse share in).
-    out_done: usize,
-    counts: SpreadCounts,
-    /// Samples of an input row per classification task (0: automatic).
-    classify_samples: usize,
-    /// Noisy samples at an edge per spread chunk (0: [`SPREAD_CHUNK`]).
-    spread_chunk: usize,
+    front: Front,
+    back: Back,
+    /// Strips worked on at once: with 2, a strip's first passes run beside
+    /// the previous strip's later ones ([`GaussianStage::run`]).
+    in_flight: usize,
 }
 
 impl GaussianStage {
@@ -399,35 +428,45 @@ impl GaussianStage {
                 real_counts: None,
                 emission: None,
             },
-            win: Windows {
+            front: Front {
                 ybox: RowWindow::new(w + 2 * pad),
                 csum,
                 hpass: RowWindow::new(nch * w),
+                ready: 0,
+                classified: 0,
+                classify_samples: 0,
+            },
+            back: Back {
                 base_rows: RowWindow::new(nch * w),
                 acc: RowWindow::new(nch * w),
                 c2: CoarseGrid::new(nch, (w, h), 2, coarse),
                 c4: CoarseGrid::new(nch, (w.div_ceil(2), h.div_ceil(2)), 2, coarse4),
+                pending: Pending::default(),
+                spread_done: 0,
+                out_done: 0,
+                counts: SpreadCounts::default(),
+                spread_chunk: 0,
             },
-            pending: Pending::default(),
-            classified: 0,
-            spread_done: 0,
-            out_done: 0,
-            counts: SpreadCounts::default(),
-            classify_samples: 0,
-            spread_chunk: 0,
+            in_flight: 1,
         }
     }
 
     /// Samples of an input row per classification task
     /// ([`super::PipelineConfig::classify_samples`]; 0: automatic).
     pub fn set_classify_samples(&mut self, n: usize) {
-        self.classify_samples = n;
+        self.front.classify_samples = n;
+    }
+
+    /// Strips worked on at once, 1 or 2
+    /// ([`super::PipelineConfig::strips_in_flight`]).
+    pub fn set_strips_in_flight(&mut self, n: usize) {
+        self.in_flight = n.clamp(1, 2);
     }
 
     /// Noisy samples whose kernels may reach an edge per spread chunk
     /// ([`super::PipelineConfig::spread_chunk`]; 0: automatic).
     pub fn set_spread_chunk(&mut self, n: usize) {
-        self.spread_chunk = n;
+        self.back.spread_chunk = n;
     }
 
     /// The emission guide (ep-gauss): each sample's emission part is set
@@ -480,16 +519,16 @@ impl Stage for GaussianStage {
     fn input_needed(&self) -> usize {
         // Classification of the next row reads the input rows just above it
         // (the support rule's reach).
-        (self.classified * self.shape.grid.s).saturating_sub(self.rules.support.reach())
+        (self.front.classified * self.shape.grid.s).saturating_sub(self.rules.support.reach())
     }
 
     fn output(&self, rows: (usize, usize)) -> Output<'_> {
-        let acc = self.rules.ep.as_ref().map(|_| &self.win.acc);
-        Output::of(&self.win.base_rows, acc, rows)
+        let acc = self.rules.ep.as_ref().map(|_| &self.back.acc);
+        Output::of(&self.back.base_rows, acc, rows)
     }
 
     fn release(&mut self, y: usize) {
-        let win = &mut self.win;
+        let win = &mut self.back;
         win.base_rows.evict_below(y);
         win.acc.evict_below(y);
         // Coarse row C reaches fine rows 2C - 1 ..= 2C + 2.
@@ -502,27 +541,27 @@ impl Stage for GaussianStage {
 
     fn counts(&self) -> MethodCounts {
         match self.rules.ep {
-            Some(_) => MethodCounts::EpGauss(self.counts),
+            Some(_) => MethodCounts::EpGauss(self.back.counts),
             None => MethodCounts::Plain,
         }
     }
 
     fn windows(&self) -> Vec<WindowUse> {
         let Shape { nch, w, pad, .. } = self.shape;
-        let win = &self.win;
+        let (front, win) = (&self.front, &self.back);
         let rows = |name, rows, row_bytes| WindowUse {
             name,
             rows,
             row_bytes,
         };
         vec![
-            rows("box luminance", win.ybox.high_water(), (w + 2 * pad) * 4),
+            rows("box luminance", front.ybox.high_water(), (w + 2 * pad) * 4),
             rows(
                 "summed-area table",
-                win.csum.as_ref().map_or(0, |c| c.0.high_water()),
+                front.csum.as_ref().map_or(0, |c| c.0.high_water()),
                 (w + 2 * pad + 2) * 8,
             ),
-            rows("horizontal pass", win.hpass.high_water(), nch * w * 8),
+            rows("horizontal pass", front.hpass.high_water(), nch * w * 8),
             rows("base rows", win.base_rows.high_water(), nch * w * 8),
             rows("accumulator", win.acc.high_water(), nch * w * 8),
             rows(
@@ -540,78 +579,231 @@ impl Stage for GaussianStage {
 }
 
 impl GaussianStage {
-    /// Advance every cursor as far as `rows_in` input rows allow; returns
-    /// the end of the final output rows. A strip's work, in order, each
-    /// pass a parallel loop over rows (or tiles) that reads only what the
-    /// passes before it made.
+    /// Advance as far as `rows_in` input rows allow; returns the end of the
+    /// final output rows. A strip's work is two lists of passes, each pass
+    /// a parallel loop over rows (or tiles) that reads only what the passes
+    /// before it made:
+    ///
+    /// - the first passes ([`front_passes`]): the box luminance of the new
+    ///   pixel rows, then their classification with the horizontal pass;
+    /// - the later ones ([`Back::run`]): the spread of the noisy samples
+    ///   whose width search has its rows, the base rows whose input rows
+    ///   are classified, and the rows no later sample reaches, final.
+    ///
+    /// With one strip in flight the later passes follow the first. With
+    /// two they run beside them (`rayon::join`), as far as the rows made
+    /// before this strip allow, and this strip's follow with the next
+    /// strip's first passes (or at once when it is the last): the windows
+    /// hold a strip more, and each pass computes what it would have, in the
+    /// same order.
     fn run(&mut self, input: &RowWindow<f32>, rows_in: usize) -> usize {
         let Shape { grid, h, halo, .. } = self.shape;
         let ep = self.rules.ep.is_some();
-        // 1. The box luminance of the pixel rows that are in (only ep-gauss
-        // reads it: the others go by the rows that are in).
-        let ready = rows_in / grid.s;
-        if ep && ready > self.win.ybox.end() {
-            self.box_luminance(input, self.win.ybox.end(), ready);
-        }
+        let s = grid.s;
+        let ready = rows_in / s;
         let all_in = ready == h;
-        // 2. Classification and the horizontal pass: a row's classification
-        // reads `Ybox` rows `xbar_reach` below and the input row just below
-        // it (the support of samples on its last row): one pixel row more
-        // than `xbar_reach` when that is 0.
+        // A row's classification reads `Ybox` rows `xbar_reach` below and
+        // the input row just below it (the support of samples on its last
+        // row): one pixel row more than `xbar_reach` when that is 0.
         let cls_target = if all_in {
             h
         } else {
             ready.saturating_sub(halo.xbar_reach.max(1))
         };
-        if cls_target > self.classified {
-            self.classify(input, self.classified, cls_target);
-            self.classified = cls_target;
+        let front = &mut self.front;
+        let (c0, c1) = (front.classified, cls_target.max(front.classified));
+        // Room for the first passes' rows (only ep-gauss reads the box
+        // luminance: the others go by the rows that are in).
+        let y0 = front.ybox.end();
+        let y1 = if ep { ready.max(y0) } else { y0 };
+        for _ in y0..y1 {
+            front.ybox.push_stale(0.0); // every value is written
+            if let Some((c, _)) = &mut front.csum {
+                c.push_stale(0.0);
+            }
         }
-        // 3. Spreading, once the width search's rows are in.
-        let sp_target = if all_in {
-            self.classified
+        for _ in c0 * s..c1 * s {
+            front.hpass.push_stale(0.0); // every value is written
+        }
+        let (ybox, ybox_new) = front.ybox.split_at(y0);
+        let (csum, csum_new) = match &mut front.csum {
+            Some((c, block)) => {
+                let (old, new) = c.split_at(y0);
+                (Some((old, *block)), new)
+            }
+            None => (None, Vec::new()),
+        };
+        let (hpass, hpass_new) = front.hpass.split_at(c0 * s);
+        let made = Made {
+            ybox: ybox.clone(),
+            csum: csum.clone(),
+            hpass,
+            ready: front.ready,
+            classified: c0,
+        };
+        let rows = FrontRows {
+            ybox: (ybox, y0, ybox_new),
+            csum: csum.map(|(old, block)| TableRows {
+                old,
+                new: csum_new,
+                block,
+            }),
+            hpass: hpass_new,
+            classify: (c0, c1),
+        };
+        let (shape, rules, back) = (&self.shape, &self.rules, &mut self.back);
+        let per_task = front.classify_samples;
+        let found = if self.in_flight > 1 {
+            let seg = crate::trace::current_segment();
+            rayon::join(
+                || {
+                    crate::trace::in_segment(seg, || {
+                        front_passes(shape, rules, input, rows, per_task)
+                    })
+                },
+                || crate::trace::in_segment(seg, || back.run(shape, rules, &made)),
+            )
+            .0
         } else {
-            self.classified.min(ready.saturating_sub(halo.search_reach))
+            front_passes(shape, rules, input, rows, per_task)
+        };
+        for (list, vals, kept) in found {
+            // Kept samples failed the test too; the spread ones are counted
+            // when they are spread.
+            back.counts.noisy += kept;
+            back.counts.kept += kept;
+            back.pending.push(list, vals);
+        }
+        let front = &mut self.front;
+        (front.ready, front.classified) = (ready, c1);
+        if self.in_flight == 1 || all_in {
+            let made = front.made();
+            self.back.run(&self.shape, &self.rules, &made);
+        }
+        self.evict(ready);
+        self.back.out_done
+    }
+
+    /// What no later pass reads goes.
+    fn evict(&mut self, ready: usize) {
+        let Shape { grid, halo, .. } = self.shape;
+        let (front, back) = (&mut self.front, &self.back);
+        let keep = if self.rules.ep.is_some() {
+            front
+                .classified
+                .saturating_sub(halo.xbar_reach)
+                .min(back.spread_done.saturating_sub(halo.search_reach))
+        } else {
+            ready
+        };
+        let keep = keep.min(ready);
+        front.ybox.evict_below(keep);
+        if let Some((c, _)) = &mut front.csum {
+            // The bound reads the row above its topmost.
+            c.evict_below(keep.saturating_sub(1));
+        }
+        let base_keep = back.base_rows.end().saturating_sub(halo.base_reach);
+        front.hpass.evict_below(base_keep * grid.s);
+    }
+}
+
+impl Back {
+    /// A strip's later passes, as far as the first passes' rows `made`
+    /// allow.
+    fn run(&mut self, shape: &Shape, rules: &Rules, made: &Made<'_>) {
+        let Shape { w, h, halo, .. } = *shape;
+        let ep = rules.ep.is_some();
+        let all_in = made.ready == h;
+        // Spreading, once the width search's rows are in.
+        let sp_target = if all_in {
+            made.classified
+        } else {
+            made.classified
+                .min(made.ready.saturating_sub(halo.search_reach))
         };
         if ep && sp_target > self.spread_done {
-            self.spread(sp_target);
+            self.spread(shape, rules, &made.view(h), sp_target);
             self.spread_done = sp_target;
         }
-        // 4. Base rows: the vertical gather, once its input rows are
+        // Base rows: the vertical gather, once its input rows are
         // classified.
-        let base_target = if self.classified == h {
+        let base_target = if made.classified == h {
             h
         } else {
-            self.classified.saturating_sub(halo.base_reach)
+            made.classified.saturating_sub(halo.base_reach)
         };
-        self.base_rows(base_target);
-        // 5. Final rows: base plus spread noise, once no later sample can
+        self.base_rows(shape, rules, &made.hpass, base_target);
+        // Final rows: base plus spread noise, once no later sample can
         // reach them, with the coarse grids' share added.
         let by_spread = match ep {
             true if self.spread_done < h => self.spread_done.saturating_sub(halo.spread_reach),
             _ => h,
         };
-        let out = self.win.base_rows.end().min(by_spread).max(self.out_done);
-        if out > self.out_done && self.win.c2.used {
-            self.coarse_share(self.out_done, out);
+        let out = self.base_rows.end().min(by_spread).max(self.out_done);
+        if out > self.out_done && self.c2.used {
+            self.coarse_share(w, self.out_done, out);
         }
         self.out_done = out;
-        // What no later pass reads goes.
-        let keep = if ep {
-            self.classified
-                .saturating_sub(halo.xbar_reach)
-                .min(self.spread_done.saturating_sub(halo.search_reach))
-        } else {
-            ready
-        };
-        let keep = keep.min(ready);
-        self.win.ybox.evict_below(keep);
-        if let Some((c, _)) = &mut self.win.csum {
-            // The bound reads the row above its topmost.
-            c.evict_below(keep.saturating_sub(1));
+    }
+}
+
+impl Front {
+    /// Every row made, as the later passes read them.
+    fn made(&self) -> Made<'_> {
+        Made {
+            ybox: self.ybox.rows(),
+            csum: self.csum.as_ref().map(|(c, block)| (c.rows(), *block)),
+            hpass: self.hpass.rows(),
+            ready: self.ready,
+            classified: self.classified,
         }
-        let base_keep = self.win.base_rows.end().saturating_sub(halo.base_reach);
-        self.win.hpass.evict_below(base_keep * grid.s);
-        out
+    }
+}
+
+/// The rows a strip's first passes write, beside the rows before them that
+/// they read: the box luminance from its first new row, the summed-area
+/// table's, and the horizontal pass of the pixel rows to classify.
+struct FrontRows<'a> {
+    ybox: (Rows<'a, f32>, usize, Vec<&'a mut [f32]>),
+    csum: Option<TableRows<'a>>,
+    hpass: Vec<&'a mut [f64]>,
+    classify: (usize, usize),
+}
+
+/// The summed-area table's rows a strip adds (`new`), the rows before them
+/// (`old`: a row adds the one above it) and its block.
+struct TableRows<'a> {
+    old: Rows<'a, f64>,
+    new: Vec<&'a mut [f64]>,
+    block: usize,
+}
+
+/// A strip's first passes: the box luminance of its new pixel rows (with the
+/// summed-area table's), then the classification of the pixel rows they
+/// allow (`per_task`: samples of an input row per task, 0 automatic).
+/// Returns what each classified row found, in order.
+fn front_passes(
+    shape: &Shape,
+    rules: &Rules,
+    input: &RowWindow<f32>,
+    rows: FrontRows<'_>,
+    per_task: usize,
+) -> Vec<classify::Found> {
+    let (ybox, y0, ybox_new) = rows.ybox;
+    let ybox_new = rows::box_luminance(shape, rules, input, y0, ybox_new, rows.csum);
+    let ybox = ybox.with(ybox_new);
+    let (a, b) = rows.classify;
+    if b > a {
+        classify::classify(
+            shape,
+            rules,
+            input,
+            YView::new(ybox, shape.h),
+            rows.hpass,
+            a,
+            per_task,
+        )
+    } else {
+        Vec::new()
     }
 }

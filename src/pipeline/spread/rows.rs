@@ -7,68 +7,80 @@ use rayon::prelude::*;
 
 use super::*;
 
-impl GaussianStage {
-    /// The box luminance of pixel rows `a..b` of `input`, mirrored `pad`
-    /// pixels each side, and the summed-area table's rows for them.
-    pub(super) fn box_luminance(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
-        let Windows { ybox, csum, .. } = &mut self.win;
-        for _ in a..b {
-            ybox.push_stale(0.0); // every value is written below
-        }
-        let csum_rows: Vec<Option<&mut [f64]>> = match csum {
-            Some((csum, _)) => {
-                for _ in a..b {
-                    csum.push_stale(0.0); // every value is written below
-                }
-                csum.range_mut(a, b).into_iter().map(Some).collect()
-            }
-            None => (a..b).map(|_| None).collect(),
-        };
-        let (shape, rules) = (&self.shape, &self.rules);
-        let region = crate::trace::region("box luminance");
-        ybox.range_mut(a, b)
-            .into_par_iter()
-            .zip(csum_rows)
-            .enumerate()
-            .for_each_init(Vec::<f64>::new, |core, (k, (row, csum_row))| {
-                let _task = region.task("box luminance");
-                ybox_row(shape, rules, input, a + k, row, core);
-                if let Some(c) = csum_row {
-                    csum_prefix(row, c);
-                }
-            });
-        drop(region);
-        self.make_csums(a, b);
+/// The box luminance of pixel rows `a..` of `input` into `rows` (`pad`
+/// mirrored pixels each side) and, with `csum` (the table's rows before `a`,
+/// its new rows, its block), the summed-area table's rows for them. Returns
+/// the rows made, to read.
+pub(super) fn box_luminance<'a>(
+    shape: &Shape,
+    rules: &Rules,
+    input: &RowWindow<f32>,
+    a: usize,
+    rows: Vec<&'a mut [f32]>,
+    csum: Option<TableRows<'_>>,
+) -> Vec<&'a [f32]> {
+    if rows.is_empty() {
+        return Vec::new();
     }
+    let (above, mut csum_rows, block) = match csum {
+        Some(t) => (Some(t.old), t.new.into_iter().map(Some).collect(), t.block),
+        None => (None, rows.iter().map(|_| None).collect::<Vec<_>>(), 1),
+    };
+    let region = crate::trace::region("box luminance");
+    let rows: Vec<&'a [f32]> = rows
+        .into_par_iter()
+        .zip(csum_rows.par_iter_mut())
+        .enumerate()
+        .map_init(Vec::<f64>::new, |core, (k, (row, csum_row))| {
+            let _task = region.task("box luminance");
+            ybox_row(shape, rules, input, a + k, row, core);
+            if let Some(c) = csum_row {
+                csum_prefix(row, c);
+            }
+            &*row
+        })
+        .collect();
+    drop(region);
+    if let Some(old) = above {
+        let mut new: Vec<&mut [f64]> = csum_rows.into_iter().flatten().collect();
+        make_csums(&old, &mut new, a, block);
+    }
+    rows
+}
 
-    /// The summed-area table's rows for the box luminance rows `a..b`
-    /// (`--bound-from`): each row's running sum (made with its row), plus
-    /// here the row above's where the row is not the first of its block, on
-    /// the image's grid of blocks, so the table does not depend on the
-    /// strips. The same operations in the same order as [`csum_row`]. On the
-    /// calling thread: a strip's additions cost less than a parallel loop.
-    fn make_csums(&mut self, a: usize, b: usize) {
-        let Some((csum, block)) = &mut self.win.csum else {
-            return;
-        };
-        let block = *block;
-        // Rows a - 1 (when held and in a's block) ..b, each added to the
-        // one above.
-        let first = if a % block != 0 { a - 1 } else { a };
-        let mut rows = csum.range_mut(first, b);
-        for (k, y) in (first..b).enumerate().skip(1) {
-            if y % block != 0 {
+/// The summed-area table's rows `a..` (`rows`; the rows before them in
+/// `old`) for the box luminance (`--bound-from`): each row's running sum
+/// (made with its row), plus here the row above's where the row is not the
+/// first of its block, on the image's grid of blocks, so the table does not
+/// depend on the strips. The same operations in the same order as
+/// [`csum_row`]. On the calling thread: a strip's additions cost less than a
+/// parallel loop.
+fn make_csums(old: &Rows<'_, f64>, rows: &mut [&mut [f64]], a: usize, block: usize) {
+    for k in 0..rows.len() {
+        if (a + k) % block == 0 {
+            continue;
+        }
+        match k {
+            0 => csum_add(old.get(a - 1), rows[0]),
+            _ => {
                 let (above, below) = rows.split_at_mut(k);
                 csum_add(above[k - 1], below[0]);
             }
         }
     }
+}
 
-    /// Base rows up to `target`: the vertical gather of the horizontal pass.
-    pub(super) fn base_rows(&mut self, target: usize) {
-        let Windows {
-            base_rows, hpass, ..
-        } = &mut self.win;
+impl Back {
+    /// Base rows up to `target`: the vertical gather of the horizontal pass
+    /// `hpass`.
+    pub(super) fn base_rows(
+        &mut self,
+        shape: &Shape,
+        rules: &Rules,
+        hpass: &Rows<'_, f64>,
+        target: usize,
+    ) {
+        let base_rows = &mut self.base_rows;
         let a = base_rows.end();
         if target <= a {
             return;
@@ -76,7 +88,6 @@ impl GaussianStage {
         for _ in a..target {
             base_rows.push_stale(0.0); // every value is written below
         }
-        let (shape, rules, hpass) = (&self.shape, &self.rules, &*hpass);
         let region = crate::trace::region("base rows");
         base_rows
             .range_mut(a, target)
@@ -91,10 +102,9 @@ impl GaussianStage {
     /// The coarse grids' share of the final accumulator rows `a..b`: first
     /// the 4x grid's into the 2x rows they read for the first time, then
     /// the 2x grid's into them ([`coarse::tent_row`]).
-    pub(super) fn coarse_share(&mut self, a: usize, b: usize) {
-        let w = self.shape.w;
+    pub(super) fn coarse_share(&mut self, w: usize, a: usize, b: usize) {
         let four = self.coarse_rows_read(a, b);
-        let Windows { acc, c2, c4, .. } = &mut self.win;
+        let Back { acc, c2, c4, .. } = self;
         let region = crate::trace::region("upsample");
         if let Some((f, l)) = four {
             upsample(c4, w.div_ceil(2), c2.acc.range_mut(f, l), f, &region);
@@ -177,7 +187,7 @@ fn ybox_row(
 fn base_row(
     shape: &Shape,
     rules: &Rules,
-    hpass: &RowWindow<f64>,
+    hpass: &Rows<'_, f64>,
     y: usize,
     row: &mut [f64],
     taps: &mut Vec<f64>,

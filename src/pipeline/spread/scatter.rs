@@ -186,15 +186,20 @@ impl EdgeBound {
     }
 }
 
-impl GaussianStage {
+impl Back {
     /// The end of the chunk of pending samples that starts at `c0` (before
     /// `end`): as many as fit the memory of [`SPREAD_CHUNK`] samples whose
     /// every kernel is reflected at an edge, so that a chunk of the
     /// interior, whose kernels are read in place, takes a whole strip's
     /// samples, and the worst case holds [`SPREAD_CHUNK`] samples' weights.
-    pub(super) fn chunk_end(&self, bound: EdgeBound, c0: usize, end: usize) -> usize {
-        let per_sample =
-            std::mem::size_of::<Spread>() + self.shape.nch * std::mem::size_of::<f64>();
+    pub(super) fn chunk_end(
+        &self,
+        shape: &Shape,
+        bound: EdgeBound,
+        c0: usize,
+        end: usize,
+    ) -> usize {
+        let per_sample = std::mem::size_of::<Spread>() + shape.nch * std::mem::size_of::<f64>();
         let weight = std::mem::size_of::<f64>();
         let chunk = match self.spread_chunk {
             0 => SPREAD_CHUNK,
@@ -204,7 +209,7 @@ impl GaussianStage {
         if (end - c0) <= chunk {
             return end;
         }
-        let Shape { grid, w, h, .. } = self.shape;
+        let Shape { grid, w, h, .. } = *shape;
         let inner = bound.inner(grid.s, (w, h));
         let mut used = 0;
         for (k, n) in self.pending.samples.range(c0..end).enumerate() {
@@ -217,10 +222,11 @@ impl GaussianStage {
     }
 
     /// Spread the pending samples of pixel rows before `target`, in the
-    /// pending (row-major) order, chunk by chunk: in one loop each sample's
-    /// width searched and its kernels placed, in the next the scatter into
-    /// the accumulators. The batch's samples then leave the pending list.
-    pub(super) fn spread(&mut self, target: usize) {
+    /// pending (row-major) order, chunk by chunk, the width search reading
+    /// `view`: in one loop each sample's width searched and its kernels
+    /// placed, in the next the scatter into the accumulators. The batch's
+    /// samples then leave the pending list.
+    pub(super) fn spread(&mut self, shape: &Shape, rules: &Rules, view: &YView<'_>, target: usize) {
         let Shape {
             grid,
             w,
@@ -229,8 +235,8 @@ impl GaussianStage {
             inv_s2,
             tile,
             ..
-        } = self.shape;
-        let Some(ep) = self.rules.ep.as_ref() else {
+        } = *shape;
+        let Some(ep) = rules.ep.as_ref() else {
             return;
         };
         let bound = EdgeBound::of(ep);
@@ -248,34 +254,22 @@ impl GaussianStage {
         // rows are the widest. The batch's first scatter fills them, a tile
         // each.
         let [fine, r2, r4] = [1, 2, 4].map(|f| ep.grid_reach(f));
-        let win = &mut self.win;
         let mut fresh = [
-            grow(&mut win.acc, (target + fine).min(h)),
+            grow(&mut self.acc, (target + fine).min(h)),
             grow(
-                &mut win.c2.acc,
+                &mut self.c2.acc,
                 (target.div_ceil(2) + r2 + 1).min(h.div_ceil(2)),
             ),
             grow(
-                &mut win.c4.acc,
+                &mut self.c4.acc,
                 (target.div_ceil(4) + r4 + 1).min(h.div_ceil(4)),
             ),
         ]
         .map(Some);
+        let place = SearchPlace::new(ep, view, &rules.modes, inv_s2, (grid.s, nch), (w, h));
         let mut next = 0;
         loop {
-            let c1 = self.chunk_end(bound, next, split);
-            let (ep, win) = (
-                self.rules.ep.as_ref().expect("checked above"),
-                &mut self.win,
-            );
-            let place = SearchPlace::new(
-                ep,
-                (&win.ybox, win.csum.as_ref()),
-                &self.rules.modes,
-                inv_s2,
-                (grid.s, nch),
-                (w, h),
-            );
+            let c1 = self.chunk_end(shape, bound, next, split);
             let region = crate::trace::region("search and place");
             let parts = place.run(
                 &self.pending.samples.as_slices().0[next..c1],
@@ -284,7 +278,13 @@ impl GaussianStage {
             );
             drop(region);
             let region = crate::trace::region("scatter");
-            let mut accs = Accs::new(ep, (&mut win.acc, &mut win.c2, &mut win.c4), w, nch, tile);
+            let mut accs = Accs::new(
+                ep,
+                (&mut self.acc, &mut self.c2, &mut self.c4),
+                w,
+                nch,
+                tile,
+            );
             accs.scatter(&parts, &mut fresh, &region);
             drop(region);
             for part in &parts {
@@ -302,7 +302,7 @@ impl GaussianStage {
 
 /// What a chunk's width search and placement read.
 pub(super) struct SearchPlace<'a> {
-    view: YView<'a>,
+    view: &'a YView<'a>,
     ctx: PlaceCtx<'a>,
 }
 
@@ -312,16 +312,12 @@ impl<'a> SearchPlace<'a> {
     /// x `h` pixels, S, channels).
     pub(super) fn new(
         ep: &'a EpGauss,
-        (ybox, csum): (&'a RowWindow<f32>, Option<&'a (RowWindow<f64>, usize)>),
+        view: &'a YView<'a>,
         modes: &'a [ChannelMode],
         inv_s2: f64,
         (s, nch): (usize, usize),
         (w, h): (usize, usize),
     ) -> Self {
-        let mut view = YView::new(ybox, h);
-        if let Some((csum, block)) = csum {
-            view = view.with_csums(csum, *block);
-        }
         SearchPlace {
             view,
             ctx: PlaceCtx {
@@ -345,7 +341,7 @@ impl<'a> SearchPlace<'a> {
         values: &[f64],
         region: &crate::trace::Span,
     ) -> Vec<Placed> {
-        let (ctx, view) = (&self.ctx, &self.view);
+        let (ctx, view) = (&self.ctx, self.view);
         let (s, nch, ep) = (ctx.s, ctx.nch, ctx.ep);
         samples
             .par_chunks(SEARCH_TASK)
@@ -652,7 +648,7 @@ mod tests {
             x0: 1.0,
             xbar0: 0.0,
         };
-        st.pending.samples = vec![sample; n].into();
+        st.back.pending.samples = vec![sample; n].into();
         st
     }
 
@@ -664,19 +660,25 @@ mod tests {
         let mid = stage_with(n, (200, 200));
         let bound = EdgeBound::of(mid.rules.ep.as_ref().unwrap());
         assert!(bound.margin < 200, "the test's middle is inside");
-        assert_eq!(mid.chunk_end(bound, 0, n), n);
+        assert_eq!(mid.back.chunk_end(&mid.shape, bound, 0, n), n);
         // In a corner every kernel may fold on both axes: SPREAD_CHUNK a
         // chunk, the memory it always had.
         let corner = stage_with(n, (0, 0));
-        assert_eq!(corner.chunk_end(bound, 0, n), SPREAD_CHUNK);
-        assert_eq!(corner.chunk_end(bound, SPREAD_CHUNK, n), 2 * SPREAD_CHUNK);
+        assert_eq!(
+            corner.back.chunk_end(&corner.shape, bound, 0, n),
+            SPREAD_CHUNK
+        );
+        assert_eq!(
+            corner.back.chunk_end(&corner.shape, bound, SPREAD_CHUNK, n),
+            2 * SPREAD_CHUNK
+        );
         // A configured chunk still makes progress of one sample at least.
         let mut tiny = stage_with(4, (0, 0));
         tiny.set_spread_chunk(1);
-        assert_eq!(tiny.chunk_end(bound, 0, 4), 1);
+        assert_eq!(tiny.back.chunk_end(&tiny.shape, bound, 0, 4), 1);
         // On one edge, one axis: about twice as many samples.
         let edge = stage_with(n, (0, 200));
-        let end = edge.chunk_end(bound, 0, n);
+        let end = edge.back.chunk_end(&edge.shape, bound, 0, n);
         assert!(end > SPREAD_CHUNK && end < 2 * SPREAD_CHUNK + 64, "{end}");
     }
 }
