@@ -24,9 +24,10 @@ struct Args {
     /// the one 16-core machine measured). 0: the replay of the tasks alone.
     #[arg(long, default_value_t = JOIN_S * 1e6, value_parser = join_us)]
     join_us: f64,
-    /// Strips the filter works on at once: 1 (the pipeline as built) or 2
-    /// (a strip's first passes beside the rest of the one before: what that
-    /// change would give, `epfilt_lab::model`).
+    /// Strips the filter works on at once, as `epfilt filter
+    /// --strips-in-flight` sets them: 1 or 2 (a strip's first passes beside
+    /// the rest of the one before, `epfilt_lab::model`). Give it a trace
+    /// taken with one strip in flight.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=2))]
     strips_in_flight: u8,
     /// Print JSON: {"work_s", "span_s", "predicted_s": {"1": .., ...}, ...}.
