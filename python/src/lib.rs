@@ -513,7 +513,7 @@ fn restore<'py>(
 /// arguments, one each.)
 #[allow(clippy::too_many_arguments)]
 #[pyfunction]
-#[pyo3(signature = (denoised, energy, output, *, scale=None, keep_gain=None, guides="auto", guide=None, part=None, layer=None, compression=None, threads=0, nonfinite="error", progress=None))]
+#[pyo3(signature = (denoised, energy, output, *, scale=None, keep_gain=None, guides="auto", guide=None, part=None, layer=None, compression=None, threads=0, max_memory=None, nonfinite="error", progress=None))]
 fn restore_file<'py>(
     py: Python<'py>,
     denoised: PathBuf,
@@ -527,10 +527,12 @@ fn restore_file<'py>(
     layer: Option<String>,
     compression: Option<String>,
     threads: usize,
+    max_memory: Option<u64>,
     nonfinite: &str,
     progress: Option<PyObject>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let mut job = epfilt::RestoreJob::new(denoised, energy, output);
+    job.max_memory = max_memory.map(|m| m.saturating_mul(1 << 20));
     job.scale = scale.unwrap_or(epfilt::filter::restore::DEFAULT_SCALE);
     job.keep_gain = keep_gain;
     job.threads = threads;

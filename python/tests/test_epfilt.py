@@ -408,3 +408,7 @@ def test_restore_file_is_the_cli_streamed(variance_scene, tmp_path):
     with pytest.raises(epfilt.Error, match="emission guide"):
         epfilt.restore_file(denoised, variance_scene, tmp_path / "none.exr", guides="emission")
     assert not (tmp_path / "none.exr").exists()
+    # Below its floor of memory: an error naming it, and no output.
+    with pytest.raises(epfilt.Error, match="at least about"):
+        epfilt.restore_file(denoised, variance_scene, tmp_path / "none.exr", max_memory=1)
+    assert not (tmp_path / "none.exr").exists()

@@ -10,7 +10,7 @@ use std::sync::Arc;
 use crate::error::{Error, Result};
 use crate::filter::restore::{RestoreParams, DEFAULT_SCALE, KEEP_GAIN, KEEP_GAIN_FILTERED};
 use crate::filter::Method;
-use crate::host::{cpu_seconds, peak_rss_bytes};
+use crate::host::{cpu_seconds, default_max_memory, peak_rss_bytes};
 use crate::io::output::OutputLayout;
 use crate::io::{
     find_guides, ExrInput, Format, GuideKind, GuideRequest, OutputSettings, Selection,
@@ -18,7 +18,10 @@ use crate::io::{
 use crate::pipeline::counts::{MethodCounts, RestoreCounts};
 use crate::pipeline::ledger::ChannelLedger;
 use crate::pipeline::restore::{restore_planar, restore_stream, EnergyLayout};
-use crate::pipeline::{NonFinite, PipelineConfig, Precision, Progress, RunStats, StageSeconds};
+use crate::pipeline::{
+    fit_restore_memory, NonFinite, PipelineConfig, Precision, Progress, RunStats, StageSeconds,
+    StripLayout, PROGRAM_BYTES,
+};
 
 use super::array::{interleaved, planar};
 use super::check_not_same_file;
@@ -57,6 +60,10 @@ pub struct RestoreJob {
     pub select: Selection,
     /// Stops the run.
     pub cancel: Option<Arc<AtomicBool>>,
+    /// Memory the run may use, bytes, by its estimate
+    /// ([`crate::pipeline::restore_bytes`]); `None`:
+    /// [`crate::host::default_max_memory`].
+    pub max_memory: Option<u64>,
 }
 
 impl RestoreJob {
@@ -78,6 +85,7 @@ impl RestoreJob {
             guides: GuideRequest::default(),
             select: Selection::default(),
             cancel: None,
+            max_memory: None,
         }
     }
 }
@@ -98,6 +106,11 @@ pub struct RestoreReport {
     pub height: usize,
     /// The side of the blocks whose energy is kept, pixels.
     pub scale: usize,
+    /// Input rows per strip (fewer under a small `--max-memory`).
+    pub strip_rows: usize,
+    /// What the run was estimated to hold, with the strips chosen
+    /// (checked against `--max-memory`; 0 where not estimated: arrays).
+    pub memory_estimate_bytes: u64,
     /// The keep gain, and what chose it: `--keep-gain`, the energy image
     /// being epfilt's output of a method that spreads fireflies, or a
     /// render.
@@ -162,6 +175,8 @@ impl RestoreReport {
             width: w,
             height: h,
             scale: params.scale,
+            strip_rows: 0,
+            memory_estimate_bytes: 0,
             keep_gain: params.keep_gain,
             keep_gain_from,
             emission_guide,
@@ -399,8 +414,12 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
     energy_layout.denoised = picks;
     energy_layout.denoised_channels = denoised.channels().len();
     let guide = energy_layout.guide.clone();
-    let mut output = layout.create(&job.output, false, 1, &channels, &settings)?;
     let cfg = config(job.threads, job.nonfinite, job.cancel.clone());
+    // Sized before the output exists or a row is read.
+    let strips = energy_layout.strips(size);
+    let blocks = [energy.block_bytes(), denoised.block_bytes()];
+    let (cfg, memory) = fit_memory(job, &strips, scale, &cfg, blocks)?;
+    let mut output = layout.create(&job.output, false, 1, &channels, &settings)?;
     let cpu_start = cpu_seconds();
     let stats = restore_stream(
         energy.source(),
@@ -421,7 +440,7 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
     })?;
     check_ledger(&stats)?;
     output.commit()?;
-    Ok(RestoreReport::of(
+    let report = RestoreReport::of(
         (
             &job.denoised.display().to_string(),
             &job.energy.display().to_string(),
@@ -432,7 +451,43 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
         &stats,
         cfg.workers(),
         cpu_start,
-    ))
+    );
+    Ok(RestoreReport {
+        strip_rows: strips.strip_rows(&cfg),
+        memory_estimate_bytes: memory,
+        ..report
+    })
+}
+
+/// How the restore runs within `--max-memory` ([`fit_restore_memory`]):
+/// refused, naming what it needs, only where its shortest strips and
+/// fewest blocks read ahead would need more.
+fn fit_memory(
+    job: &RestoreJob,
+    strips: &StripLayout,
+    scale: usize,
+    cfg: &PipelineConfig,
+    blocks: [u64; 2],
+) -> Result<(PipelineConfig, u64)> {
+    let limit = job.max_memory.unwrap_or_else(default_max_memory);
+    let floor = match fit_restore_memory(
+        strips,
+        scale,
+        cfg,
+        blocks,
+        limit.saturating_sub(PROGRAM_BYTES),
+    ) {
+        Ok((cfg, bytes)) => return Ok((cfg, bytes + PROGRAM_BYTES)),
+        Err(floor) => floor + PROGRAM_BYTES,
+    };
+    let (w, h) = (strips.grid.in_w, strips.grid.in_h);
+    Err(Error::Config(format!(
+        "{}: restoring this {w}x{h} image at --scale {scale} needs at least about {} MiB (the rows of {} rows of blocks and one strip), more than the {} MiB allowed (--max-memory); a smaller --scale holds fewer rows",
+        job.energy.display(),
+        floor.div_ceil(1 << 20),
+        crate::filter::restore::LOOKAHEAD + 3,
+        limit >> 20
+    )))
 }
 
 /// Restore on arrays: `denoised` and `energy` interleaved `[y][x][channel]`

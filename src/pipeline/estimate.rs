@@ -208,9 +208,22 @@ pub fn fit_memory(
     block_bytes: u64,
     limit: u64,
 ) -> std::result::Result<(PipelineConfig, u64), u64> {
-    let need = estimate_bytes(job, params, cfg, block_bytes);
-    if need <= limit {
-        return Ok((cfg.clone(), need));
+    fit(job, cfg, limit, |c| {
+        estimate_bytes(job, params, c, block_bytes)
+    })
+}
+
+/// The first of `cfg`'s geometries that `need` says fits in `limit`
+/// ([`fit_memory`]'s order), or the least any of them needs.
+fn fit(
+    job: &StripLayout,
+    cfg: &PipelineConfig,
+    limit: u64,
+    need: impl Fn(&PipelineConfig) -> u64,
+) -> std::result::Result<(PipelineConfig, u64), u64> {
+    let full = need(cfg);
+    if full <= limit {
+        return Ok((cfg.clone(), full));
     }
     let s = job.grid.s.max(1);
     let mut strips = Vec::new();
@@ -238,14 +251,82 @@ pub fn fit_memory(
                 strips_in_flight: 1,
                 ..cfg.clone()
             };
-            let need = estimate_bytes(job, params, &c, block_bytes);
-            if need <= limit {
-                return Ok((c, need));
+            let n = need(&c);
+            if n <= limit {
+                return Ok((c, n));
             }
-            floor = floor.min(need);
+            floor = floor.min(n);
         }
     }
     Err(floor)
+}
+
+/// Bytes `epfilt restore` (blocks of `scale` pixels) holds at most for
+/// `job` (its strips: the energy's channels, its guide's and the
+/// denoiser's), from its sizes alone, beside [`PROGRAM_BYTES`]: the input
+/// rows of the rows of blocks it holds ([`LOOKAHEAD`] ahead, the carrier's
+/// row below them, the row being finished, and the kept part's reach), the
+/// part kept beside them and as many final rows (the last strip finishes
+/// them all), the strips in flight, and each
+/// input's blocks read ahead (`block_bytes`: a decoded block of the energy
+/// image and of the denoiser's output).
+///
+/// [`LOOKAHEAD`]: crate::filter::restore::LOOKAHEAD
+pub fn restore_bytes(
+    job: &StripLayout,
+    scale: usize,
+    cfg: &PipelineConfig,
+    block_bytes: [u64; 2],
+) -> u64 {
+    use crate::filter::restore::{taps, KEEP_SIGMA, LOOKAHEAD};
+    let (w, h) = (job.grid.in_w as u64, job.grid.in_h);
+    let nch = job.channels.len() as u64;
+    let strip = job.strip_rows(cfg) as u64;
+    let reach = (taps(KEEP_SIGMA).len() / 2) as u64;
+    let held = reach + (LOOKAHEAD as u64 + 3).saturating_mul(scale as u64) + strip;
+    let in_row = w.saturating_mul(job.strip_channels() as u64 * 4);
+    let out_row = w.saturating_mul(nch * 8);
+    // The input rows, the part kept of each, and the final rows: the last
+    // strip finishes every row of blocks held at once, in f64 and then in
+    // f32 on their way out. Each field's tents across (four words a
+    // column).
+    let rows = (in_row
+        .saturating_add(2 * out_row)
+        .saturating_add(out_row / 2))
+    .saturating_mul(held)
+    .saturating_add(w.saturating_mul(32 * nch));
+    let strips = in_row.saturating_mul(strip).saturating_mul(STRIPS_HELD);
+    let mut blocks = 0u64;
+    let mut windows = 0u64;
+    for b in block_bytes {
+        let n = match cfg.window_blocks {
+            0 => window_blocks(cfg, b),
+            n => n as u64,
+        };
+        windows += n;
+        blocks = blocks
+            .saturating_add(scratch(job, cfg, b))
+            .saturating_add(read_ahead(in_row, h, b, n));
+    }
+    let largest = block_bytes[0].max(block_bytes[1]);
+    rows.saturating_add(strips)
+        .saturating_add(blocks)
+        .saturating_add(around(job, cfg, (largest, windows), w, strip))
+}
+
+/// How `cfg` runs `epfilt restore` of `job` within `limit` bytes
+/// ([`restore_bytes`]), in [`fit_memory`]'s order; `Err` holds what the
+/// smallest needs (the rows of blocks held and one strip).
+pub fn fit_restore_memory(
+    job: &StripLayout,
+    scale: usize,
+    cfg: &PipelineConfig,
+    block_bytes: [u64; 2],
+    limit: u64,
+) -> std::result::Result<(PipelineConfig, u64), u64> {
+    fit(job, cfg, limit, |c| {
+        restore_bytes(job, scale, c, block_bytes)
+    })
 }
 
 /// [`estimate_bytes`] with a reader's window of `blocks` blocks.
@@ -606,6 +687,37 @@ mod tests {
         ] {
             assert_eq!(strips_in_flight(&two, m, s), 1, "{m:?}");
         }
+    }
+
+    #[test]
+    fn restore_holds_its_rows_of_blocks_and_fits_a_budget_by_shorter_strips() {
+        let mut job = rgb(16384, 1024);
+        job.grid.s = 1;
+        job.aux = ["dR", "dG", "dB"].map(String::from).to_vec();
+        let block = 16384 * 6 * 4 * 16;
+        let cfg = PipelineConfig::default();
+        let at = |scale| restore_bytes(&job, scale, &cfg, [block, block]);
+        // Each scale's rows of blocks: the input rows (six f32 channels)
+        // and the part kept and the final rows (f64 and f32, three
+        // channels) of LOOKAHEAD + 3 rows of blocks, 16384 wide.
+        let row = 16384 * (6 * 4 + 2 * 3 * 8 + 3 * 4);
+        let step = (crate::filter::restore::LOOKAHEAD as u64 + 3) * 96 * row;
+        assert_eq!(at(128) - at(32), step);
+        // Under a budget between the floor and the default: shorter strips.
+        let full = at(32);
+        let floor = fit_restore_memory(&job, 32, &cfg, [block, block], 0).unwrap_err();
+        assert!(floor < full, "{floor} {full}");
+        let (c, need) =
+            fit_restore_memory(&job, 32, &cfg, [block, block], (floor + full) / 2).unwrap();
+        assert!(need <= (floor + full) / 2);
+        assert!(job.strip_rows(&c) < job.strip_rows(&cfg));
+        assert_eq!(
+            fit_restore_memory(&job, 32, &cfg, [block, block], full)
+                .unwrap()
+                .0
+                .strip_rows,
+            0
+        );
     }
 
     #[test]

@@ -532,6 +532,24 @@ impl EnergyLayout {
         }
     }
 
+    /// The strips of a `w x h` restore: the energy's channels, its guide's
+    /// and the denoiser's ([`crate::pipeline::restore_bytes`] sizes them).
+    pub fn strips(&self, (w, h): (usize, usize)) -> StripLayout {
+        let grid = Grid {
+            in_w: w,
+            in_h: h,
+            s: 1,
+        };
+        let channels = &self.channels;
+        let mut layout = StripLayout::new(grid, channels.clone(), self.luminance.clone());
+        let guide = (channels.iter().zip(&self.emission))
+            .filter_map(|(c, e)| e.map(|_| format!("emission.{c}")));
+        layout.aux = guide
+            .chain(channels.iter().map(|c| format!("denoised.{c}")))
+            .collect();
+        layout
+    }
+
     /// Channels the energy's rows hold: its own and the guide's.
     fn row_channels(&self) -> usize {
         self.channels.len() + self.emission.iter().flatten().count()
@@ -561,25 +579,13 @@ pub fn restore_stream<A: Source, B: Source, K: Sink>(
         )));
     }
     let params = params.check().map_err(Error::Config)?;
-    let grid = Grid {
-        in_w: w,
-        in_h: h,
-        s: 1,
-    };
+    let layout = energy_layout.strips((w, h));
     let EnergyLayout {
-        channels,
         emission,
-        luminance,
         denoised: picks,
         denoised_channels,
         ..
     } = energy_layout;
-    let mut layout = StripLayout::new(grid, channels.clone(), luminance);
-    let guide =
-        (channels.iter().zip(&emission)).filter_map(|(c, e)| e.map(|_| format!("emission.{c}")));
-    layout.aux = guide
-        .chain(channels.iter().map(|c| format!("denoised.{c}")))
-        .collect();
     let copied: Vec<bool> = picks.iter().map(Option::is_none).collect();
     let stage = RestoreStage::new(emission, copied, w, h, params);
     let streamer = Streamer::of_stage(

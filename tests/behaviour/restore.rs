@@ -465,3 +465,48 @@ fn restore_takes_a_part_and_a_layer_of_the_energy_image() {
     let names: Vec<String> = read_channels(&out).into_iter().map(|(n, _)| n).collect();
     assert!(names.iter().all(|n| n.starts_with("diffuse.")), "{names:?}");
 }
+
+/// `--max-memory`: a budget below the default estimate runs shorter strips
+/// and writes the same bytes; below the floor it is refused, naming the
+/// floor and the scale, and nothing is written. A larger scale holds more
+/// rows of the image: its floor is higher.
+#[test]
+fn restore_runs_within_its_memory_or_refuses_naming_the_floor() {
+    let dir = tmpdir();
+    let (e, d) = (dir.path().join("e.exr"), dir.path().join("d.exr"));
+    // Wide: the rows held are most of what a restore holds.
+    write(&e, (4096, 96), render);
+    write(&d, (4096, 96), denoised);
+    let out = dir.path().join("o.exr");
+    let full = restore_report(&d, &e, &out, &["--scale", "16"]);
+    let default_mib = full["memory_estimate_bytes"].as_u64().unwrap() >> 20;
+    let floor_of = |scale: &str| {
+        let none = dir.path().join("none.exr");
+        let o = restore(&d, &e, &none, &["--scale", scale, "--max-memory", "1"]);
+        assert_eq!(o.status.code(), Some(2));
+        let text = String::from_utf8_lossy(&o.stderr).to_string();
+        assert!(
+            text.contains("--scale") && text.contains("--max-memory"),
+            "{text}"
+        );
+        assert!(!none.exists(), "nothing written when refused");
+        text.split("at least about ")
+            .nth(1)
+            .and_then(|t| t.split(' ').next())
+            .and_then(|n| n.parse::<u64>().ok())
+            .expect("the error names its floor")
+    };
+    let floor = floor_of("16");
+    assert!(floor < default_mib, "{floor} {default_mib}");
+    assert!(floor_of("64") > floor, "a larger scale holds more rows");
+    // Between the floor and the default: shorter strips, the same bytes.
+    let budget = ((floor + default_mib) / 2).to_string();
+    let small = dir.path().join("small.exr");
+    let r = restore_report(&d, &e, &small, &["--scale", "16", "--max-memory", &budget]);
+    assert!(r["memory_estimate_bytes"].as_u64().unwrap() <= budget.parse::<u64>().unwrap() << 20);
+    assert!(
+        r["strip_rows"].as_u64() < full["strip_rows"].as_u64(),
+        "{r}"
+    );
+    assert_eq!(r["digest"], full["digest"]);
+}

@@ -130,7 +130,7 @@ def restore(denoised, energy, scale=None, *, keep_gain=None, emission=None, chan
 
 def restore_file(denoised, energy, output, *, scale=None, keep_gain=None, guides="auto",
                  guide=None, part=None, layer=None, compression=None, threads=0,
-                 nonfinite="error", progress=None):
+                 max_memory=None, nonfinite="error", progress=None):
     """``restore`` from file to file, streamed: ``epfilt restore DENOISED ENERGY OUTPUT``.
 
     Memory grows with the width and ``scale``, not the height, so a render too large for
@@ -140,13 +140,15 @@ def restore_file(denoised, energy, output, *, scale=None, keep_gain=None, guides
     ("auto": found by name; "none"; ``guide=["emission=ViewLayer.Emit"]`` names it).
     ``part``/``layer``: the energy file's part and beauty layer. ``compression``: the
     output's (default the energy file's). ``progress(done, total)``: output rows, as for
-    ``filter_file``. The output is written whole or not at all. Returns the ``--report``
-    fields as a dict.
+    ``filter_file``. ``max_memory``: MiB the run may hold by its estimate (default half
+    the machine's memory); below its floor it raises, naming the floor. The output is
+    written whole or not at all. Returns the ``--report`` fields as a dict.
     """
     return _epfilt.restore_file(str(denoised), str(energy), str(output), scale=scale,
                                 keep_gain=keep_gain, guides=guides, guide=guide, part=part,
                                 layer=layer, compression=compression, threads=threads,
-                                nonfinite=nonfinite, progress=progress)
+                                max_memory=max_memory, nonfinite=nonfinite,
+                                progress=progress)
 
 
 def info(path):

@@ -58,6 +58,7 @@ def restore_file(
     layer: Optional[str] = None,
     compression: Optional[str] = None,
     threads: int = 0,
+    max_memory: Optional[int] = None,
     nonfinite: str = "error",
     progress: Optional[Callable[[int, int], Any]] = None,
 ) -> Dict[str, Any]: ...

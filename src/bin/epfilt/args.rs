@@ -217,6 +217,13 @@ pub struct RestoreArgs {
     /// Worker threads, 0 = one per core (does not change the bytes).
     #[arg(long, default_value_t = 0, env = "EPFILT_THREADS")]
     pub threads: usize,
+    /// Memory the process may use, in MiB, by its estimate (the input rows
+    /// of the rows of blocks held, which grow with --scale and the width):
+    /// where the default strips need more, it runs with shorter ones (the
+    /// same bytes); refused only below the floor it names [default: half
+    /// the machine's memory].
+    #[arg(long, env = "EPFILT_MAX_MEMORY", value_name = "MIB")]
+    pub max_memory: Option<u64>,
     /// Write the summary as JSON to this file (- for standard output).
     #[arg(long)]
     pub report: Option<PathBuf>,

@@ -179,6 +179,7 @@ fn restore(a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
     job.scale = a.scale;
     job.keep_gain = a.keep_gain;
     job.threads = capped_threads(a.threads);
+    job.max_memory = a.max_memory.map(|m| m.saturating_mul(1 << 20));
     job.nonfinite = nonfinite;
     job.guides = epfilt::io::GuideRequest::parse(&a.guides, &a.guide).map_err(usage)?;
     job.select = selection(&a.select);
