@@ -17,9 +17,9 @@
 //!    plus the accumulator (all noisy samples of rows `≤ y + spread_reach`
 //!    spread).
 //!
-//! The first two cursors are a strip's first passes ([`Front`]), the last
-//! two its later ones ([`Back`]); with two strips in flight a strip's first
-//! passes run beside the previous strip's later ones ([`GaussianStage::run`]).
+//! The first two cursors are a strip's first passes (`Front`), the last
+//! two its later ones (`Back`); with two strips in flight a strip's first
+//! passes run beside the previous strip's later ones (`GaussianStage::run`).
 //! When a pass runs may differ, never what it computes.
 //!
 //! Each cursor advances only when what it reads is present, so the result does
