@@ -513,7 +513,7 @@ fn restore<'py>(
 /// arguments, one each.)
 #[allow(clippy::too_many_arguments)]
 #[pyfunction]
-#[pyo3(signature = (denoised, energy, output, *, scale=None, keep_gain=None, guides="auto", guide=None, part=None, layer=None, compression=None, threads=0, max_memory=None, nonfinite="error", progress=None))]
+#[pyo3(signature = (denoised, energy, output, *, scale=None, keep_gain=None, guides="auto", guide=None, part=None, layer=None, channel_rule=None, compression=None, threads=0, max_memory=None, nonfinite="error", progress=None))]
 fn restore_file<'py>(
     py: Python<'py>,
     denoised: PathBuf,
@@ -525,6 +525,7 @@ fn restore_file<'py>(
     guide: Option<Vec<String>>,
     part: Option<String>,
     layer: Option<String>,
+    channel_rule: Option<Vec<String>>,
     compression: Option<String>,
     threads: usize,
     max_memory: Option<u64>,
@@ -532,6 +533,10 @@ fn restore_file<'py>(
     progress: Option<PyObject>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let mut job = epfilt::RestoreJob::new(denoised, energy, output);
+    job.channel_rules = (channel_rule.unwrap_or_default().iter())
+        .map(|r| epfilt::filter::channels::RuleOverride::parse(r))
+        .collect::<epfilt::Result<_>>()
+        .map_err(to_py)?;
     job.max_memory = max_memory.map(|m| m.saturating_mul(1 << 20));
     job.scale = scale.unwrap_or(epfilt::filter::restore::DEFAULT_SCALE);
     job.keep_gain = keep_gain;

@@ -402,6 +402,13 @@ def test_restore_file_is_the_cli_streamed(variance_scene, tmp_path):
     assert epfilt.compare(out, cli)["identical"]
     assert all(abs(l["rel_error"]) <= LEDGER_TOL for l in report["ledger"])
     assert report["emission_guide"] == [] and report["copied_channels"] == []
+    # The variance pass is carried as the render has it, unless dropped.
+    carried = report["carried_channels"]
+    assert carried and all(c.startswith("variance.") for c in carried), carried
+    bare = epfilt.restore_file(denoised, variance_scene, tmp_path / "bare.exr", scale=16,
+                               channel_rule=["variance.*=drop"])
+    assert bare["carried_channels"] == [] and bare["digest"] != report["digest"]
+    assert epfilt.compare(tmp_path / "bare.exr", out)["identical"]
     if seen:
         assert seen[-1] == (80, 80) and all(t == 80 for _, t in seen)
     # Asked for, an absent guide is an error, and no output is left.

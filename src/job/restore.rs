@@ -8,6 +8,7 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use crate::error::{Error, Result};
+use crate::filter::channels::{rule_for, ChannelRule, RuleOverride};
 use crate::filter::restore::{RestoreParams, DEFAULT_SCALE, KEEP_GAIN, KEEP_GAIN_FILTERED};
 use crate::filter::Method;
 use crate::host::{cpu_seconds, default_max_memory, peak_rss_bytes};
@@ -18,6 +19,7 @@ use crate::io::{
 use crate::pipeline::counts::{MethodCounts, RestoreCounts};
 use crate::pipeline::ledger::ChannelLedger;
 use crate::pipeline::restore::{restore_planar, restore_stream, EnergyLayout};
+use crate::pipeline::stream::MAX_CHANNELS;
 use crate::pipeline::{
     fit_restore_memory, NonFinite, PipelineConfig, Precision, Progress, RunStats, StageSeconds,
     StripLayout, PROGRAM_BYTES,
@@ -64,6 +66,12 @@ pub struct RestoreJob {
     /// ([`crate::pipeline::restore_bytes`]); `None`:
     /// [`crate::host::default_max_memory`].
     pub max_memory: Option<u64>,
+    /// The energy image's channels beside the beauty (depth, normals, ids,
+    /// light AOVs) are carried into the output as it has them, bit for
+    /// bit, but for those a `drop` rule matches (`--channel-rule`, the
+    /// last match wins, as `filter`'s; any other rule carries), and the
+    /// other views' of a stereo file.
+    pub channel_rules: Vec<RuleOverride>,
 }
 
 impl RestoreJob {
@@ -86,6 +94,7 @@ impl RestoreJob {
             select: Selection::default(),
             cancel: None,
             max_memory: None,
+            channel_rules: Vec::new(),
         }
     }
 }
@@ -124,6 +133,9 @@ pub struct RestoreReport {
     /// The energy image's channels the denoiser did not write (an alpha),
     /// kept as the energy image has them.
     pub copied_channels: Vec<String>,
+    /// The energy image's channels beside the beauty (depth, normals, ids,
+    /// light AOVs), carried into the result as it has them.
+    pub carried_channels: Vec<String>,
     /// Per channel: the energy image's total, the result's, their relative
     /// difference (before and after rounding).
     pub ledger: Vec<ChannelLedger>,
@@ -181,6 +193,7 @@ impl RestoreReport {
             keep_gain_from,
             emission_guide,
             copied_channels,
+            carried_channels: Vec::new(),
             ledger: stats.ledger.clone(),
             kept_share: if mass > 0.0 {
                 counts.kept_energy / mass
@@ -368,7 +381,9 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
         },
     };
     let params = RestoreParams { scale, keep_gain };
+    let carried = carry(job, &mut energy)?;
     let (size, channels) = (energy.size(), energy.channels());
+    let beauty = channels.len() - carried.len();
     let mismatch = |what: String| Error::Value {
         path: job.denoised.clone(),
         reason: format!("{what}: restore needs the denoiser's output of that very image"),
@@ -382,15 +397,22 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
             size.1
         )));
     }
-    let picks =
-        match_channels(&channels, &energy.luminance(), &denoised.channels()).ok_or_else(|| {
-            mismatch(format!(
-                "channels {}, but {} has {}",
-                denoised.channels().join(","),
-                job.energy.display(),
-                channels.join(",")
-            ))
-        })?;
+    let luminance = energy.luminance();
+    let mut picks = match_channels(
+        &channels[..beauty],
+        &luminance[..beauty],
+        &denoised.channels(),
+    )
+    .ok_or_else(|| {
+        mismatch(format!(
+            "channels {}, but {} has {}",
+            denoised.channels().join(","),
+            job.energy.display(),
+            channels[..beauty].join(",")
+        ))
+    })?;
+    // The channels beside the beauty stay as the energy image has them.
+    picks.resize(channels.len(), None);
     let provenance = format!(
         "restore scale={scale} keep_gain={keep_gain} denoised={}",
         job.denoised
@@ -407,16 +429,28 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
     let layout = OutputLayout::of(&energy, &channels, &settings);
     let mut energy_layout =
         emission_guide(&job.energy, &mut energy, channels.clone(), &job.guides)?;
-    let copied = (channels.iter().zip(&picks))
+    let copied = (channels[..beauty].iter().zip(&picks))
         .filter(|(_, p)| p.is_none())
         .map(|(c, _)| c.clone())
         .collect();
     energy_layout.denoised = picks;
     energy_layout.denoised_channels = denoised.channels().len();
+    energy_layout.data = (0..channels.len()).map(|c| c >= beauty).collect();
     let guide = energy_layout.guide.clone();
     let cfg = config(job.threads, job.nonfinite, job.cancel.clone());
     // Sized before the output exists or a row is read.
     let strips = energy_layout.strips(size);
+    if strips.strip_channels() > MAX_CHANNELS {
+        return Err(Error::Channels {
+            path: job.energy.clone(),
+            reason: format!(
+                "{} channels to restore and carry, and restore reads {} in all (the energy's, its guide's and the denoiser's), at most {MAX_CHANNELS}: drop some with --channel-rule 'PATTERN=drop' (carried: {})",
+                channels.len(),
+                strips.strip_channels(),
+                carried.join(", ")
+            ),
+        });
+    }
     let blocks = [energy.block_bytes(), denoised.block_bytes()];
     let (cfg, memory) = fit_memory(job, &strips, scale, &cfg, blocks)?;
     let mut output = layout.create(&job.output, false, 1, &channels, &settings)?;
@@ -455,8 +489,32 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
     Ok(RestoreReport {
         strip_rows: strips.strip_rows(&cfg),
         memory_estimate_bytes: memory,
+        // The carried channels are copies, out of the ledger.
+        ledger: report.ledger[..beauty].to_vec(),
+        carried_channels: carried,
         ..report
     })
+}
+
+/// Carry the energy image's channels beside the beauty into the output:
+/// restore changes the beauty alone, so each is copied as the file has it,
+/// bit for bit, whatever its rule but `drop` (`job.channel_rules`, as
+/// `filter`'s; a stereo file's other views are dropped). Their names, in
+/// strip order after the beauty's.
+fn carry(job: &RestoreJob, energy: &mut ExrInput) -> Result<Vec<String>> {
+    let scope = crate::io::reader::view_scope(&job.energy, energy.header(), None, false)?;
+    let carried = energy
+        .carry_channels(
+            |name, uint| match rule_for(name, uint, &job.channel_rules, &scope) {
+                ChannelRule::Drop => ChannelRule::Drop,
+                // Copied, which is what `nearest` does at S = 1.
+                _ => ChannelRule::Nearest,
+            },
+        )
+        .into_iter()
+        .map(|(name, _)| name)
+        .collect();
+    Ok(carried)
 }
 
 /// How the restore runs within `--max-memory` ([`fit_restore_memory`]):

@@ -517,6 +517,10 @@ pub struct EnergyLayout {
     pub denoised: Vec<Option<usize>>,
     /// The channels of the denoiser's rows.
     pub denoised_channels: usize,
+    /// Per channel, whether it is data carried beside the beauty (copied,
+    /// with no denoiser's pick): out of the ledger, and its non-finite
+    /// values (a sky's depth) pass as they are.
+    pub data: Vec<bool>,
 }
 
 impl EnergyLayout {
@@ -526,6 +530,7 @@ impl EnergyLayout {
             emission: vec![None; channels.len()],
             denoised: (0..channels.len()).map(Some).collect(),
             denoised_channels: channels.len(),
+            data: vec![false; channels.len()],
             channels,
             luminance,
             guide: Vec::new(),
@@ -542,6 +547,7 @@ impl EnergyLayout {
         };
         let channels = &self.channels;
         let mut layout = StripLayout::new(grid, channels.clone(), self.luminance.clone());
+        layout.data = self.data.clone();
         let guide = (channels.iter().zip(&self.emission))
             .filter_map(|(c, e)| e.map(|_| format!("emission.{c}")));
         layout.aux = guide

@@ -166,9 +166,9 @@ impl Streamer {
     }
 
     /// The skeleton around a stage built by its caller (`epfilt restore`'s):
-    /// the books count `job.channels` (the strips' first channels) and
-    /// apply `nonfinite` to them; `job.aux` are data the stage reads as it
-    /// sees fit.
+    /// the books count `job.channels` (the strips' first channels) but its
+    /// `data` and apply `nonfinite` to them; `job.aux` are data the stage
+    /// reads as it sees fit.
     pub fn of_stage(
         job: &StripLayout,
         stage: Box<dyn Stage>,
@@ -178,7 +178,7 @@ impl Streamer {
         let nall = job.strip_channels();
         let mut books = Books::new(job.channels.clone(), nall);
         books.set_nonfinite(nonfinite);
-        let mut data = vec![false; job.channels.len()];
+        let mut data = job.data.clone();
         data.resize(nall, true);
         books.set_data(data);
         Streamer {

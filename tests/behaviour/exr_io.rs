@@ -96,6 +96,14 @@ pub fn read_channels(path: &Path) -> Vec<(String, Vec<f32>)> {
         .collect()
 }
 
+/// Every channel of `path`'s first layer, by name, as the file stores it
+/// (its sample type and bits).
+pub fn read_samples(path: &Path) -> Vec<(String, FlatSamples)> {
+    (first_layer(path).channel_data.list.into_iter())
+        .map(|c| (c.name.to_string(), c.sample_data))
+        .collect()
+}
+
 /// Write one unnamed layer of `channels` (any order, any sample types) with
 /// the `exr` crate's high-level API.
 pub fn write_flat(path: &Path, size: (usize, usize), channels: Vec<(&str, FlatSamples)>) {

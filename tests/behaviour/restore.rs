@@ -6,7 +6,7 @@
 use exr::image::FlatSamples;
 
 use crate::common::{epfilt_ok, epfilt_run, read_json};
-use crate::exr_io::{read_channels, tmpdir, write_flat};
+use crate::exr_io::{read_channels, read_samples, tmpdir, write_flat};
 
 /// `restore`'s own bound on the ledger before rounding (the job refuses
 /// to write above it).
@@ -405,7 +405,8 @@ fn restore_matches_a_layered_render_to_a_plain_denoiser_output() {
             "ViewLayer.Combined.A",
             "ViewLayer.Combined.B",
             "ViewLayer.Combined.G",
-            "ViewLayer.Combined.R"
+            "ViewLayer.Combined.R",
+            "ViewLayer.Depth.Z"
         ]
     );
     let want: Vec<f32> = (0..w * h).map(|i| alpha(i % w, i / w)).collect();
@@ -419,6 +420,90 @@ fn restore_matches_a_layered_render_to_a_plain_denoiser_output() {
     let o = restore(&d, &e, &dir.path().join("o2.exr"), &[]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("channels"), "{err}");
+}
+
+#[test]
+fn restore_carries_the_renders_other_channels_as_they_are() {
+    // A render's passes beside the beauty (a sky's infinite depth, half
+    // normals, integer ids, a light AOV) come out bit for bit and of their
+    // own types; they change nothing in the beauty, stay out of the
+    // ledger, and a drop rule leaves them out.
+    let dir = tmpdir();
+    let (e, d) = (dir.path().join("e.exr"), dir.path().join("d.exr"));
+    let (w, h) = (37, 29);
+    let f32s = |f: &dyn Fn(usize, usize) -> f32| {
+        FlatSamples::F32((0..w * h).map(|i| f(i % w, i / w)).collect())
+    };
+    let depth = |x: usize, y: usize| if y < 5 { f32::INFINITY } else { (x + y) as f32 };
+    let normal = FlatSamples::F16(
+        (0..w * h)
+            .map(|i| half::f16::from_f32(((i % 13) as f32 - 6.0) / 6.0))
+            .collect(),
+    );
+    let ids = FlatSamples::U32(
+        (0..w * h)
+            .map(|i| (i as u32).wrapping_mul(2654435761) >> 8)
+            .collect(),
+    );
+    let c = |ch| move |x, y| render(x, y, ch);
+    write_flat(
+        &e,
+        (w, h),
+        vec![
+            ("B", f32s(&c(2))),
+            ("G", f32s(&c(1))),
+            ("R", f32s(&c(0))),
+            ("Z", f32s(&depth)),
+            ("N.X", normal),
+            ("id", ids),
+            ("diffuse.R", f32s(&|x, y| 0.25 * render(x, y, 0))),
+        ],
+    );
+    write(&d, (w, h), denoised);
+    let run = |out: &str, extra: &[&str]| {
+        let (out, rep) = (dir.path().join(out), dir.path().join(format!("{out}.json")));
+        let mut args = vec!["--report", rep.to_str().unwrap()];
+        args.extend(extra);
+        let o = restore(&d, &e, &out, &args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        (read_samples(&out), read_json(&rep))
+    };
+    let (all, r) = run("all.exr", &[]);
+    let (bare, _) = run("bare.exr", &["--channel-rule", "*=drop"]);
+    let names = |s: &[(String, FlatSamples)]| s.iter().map(|(n, _)| n.clone()).collect::<Vec<_>>();
+    assert_eq!(names(&bare), ["B", "G", "R"]);
+    assert_eq!(
+        r["carried_channels"],
+        serde_json::json!(["N.X", "Z", "diffuse.R", "id"]),
+        "{r}"
+    );
+    let ledger: Vec<&str> = (r["ledger"].as_array().unwrap().iter())
+        .map(|l| l["channel"].as_str().unwrap())
+        .collect();
+    assert_eq!(ledger, ["R", "G", "B"], "the copies are out of the ledger");
+    let bits = |s: &FlatSamples| -> (&'static str, Vec<u32>) {
+        match s {
+            FlatSamples::F16(v) => ("f16", v.iter().map(|x| u32::from(x.to_bits())).collect()),
+            FlatSamples::F32(v) => ("f32", v.iter().map(|x| x.to_bits()).collect()),
+            FlatSamples::U32(v) => ("u32", v.clone()),
+        }
+    };
+    let input = read_samples(&e);
+    for (name, samples) in &all {
+        let (_, want) = input.iter().find(|(n, _)| n == name).unwrap();
+        match bare.iter().find(|(n, _)| n == name) {
+            // The beauty is what it is without the passes.
+            Some((_, b)) => assert_eq!(bits(samples), bits(b), "{name}"),
+            None => assert_eq!(bits(samples), bits(want), "{name}, as the render has it"),
+        }
+    }
+    assert_eq!(all.len(), input.len());
+    let (some, r) = run(
+        "some.exr",
+        &["--channel-rule", "*.*=drop", "--channel-rule", "id=drop"],
+    );
+    assert_eq!(names(&some), ["B", "G", "R", "Z"]);
+    assert_eq!(r["carried_channels"], serde_json::json!(["Z"]), "{r}");
 }
 
 #[test]
@@ -462,8 +547,19 @@ fn restore_takes_a_part_and_a_layer_of_the_energy_image() {
         &["--layer", "diffuse", "--report", &s(&rep)],
     );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r = read_json(&rep);
+    let ledger: Vec<&str> = (r["ledger"].as_array().unwrap().iter())
+        .map(|l| l["channel"].as_str().unwrap())
+        .collect();
+    assert_eq!(ledger, ["diffuse.R", "diffuse.G", "diffuse.B"], "{r}");
+    // The rest of the file, the render's beauty too, as it has them.
+    let carried = r["carried_channels"].as_array().unwrap();
+    assert!(
+        carried.iter().any(|c| c == "R") && !carried.iter().any(|c| c == "diffuse.R"),
+        "{r}"
+    );
     let names: Vec<String> = read_channels(&out).into_iter().map(|(n, _)| n).collect();
-    assert!(names.iter().all(|n| n.starts_with("diffuse.")), "{names:?}");
+    assert_eq!(names.len(), 18, "{names:?}");
 }
 
 /// `--max-memory`: a budget below the default estimate runs shorter strips

@@ -129,8 +129,8 @@ def restore(denoised, energy, scale=None, *, keep_gain=None, emission=None, chan
 
 
 def restore_file(denoised, energy, output, *, scale=None, keep_gain=None, guides="auto",
-                 guide=None, part=None, layer=None, compression=None, threads=0,
-                 max_memory=None, nonfinite="error", progress=None):
+                 guide=None, part=None, layer=None, channel_rule=None, compression=None,
+                 threads=0, max_memory=None, nonfinite="error", progress=None):
     """``restore`` from file to file, streamed: ``epfilt restore DENOISED ENERGY OUTPUT``.
 
     Memory grows with the width and ``scale``, not the height, so a render too large for
@@ -138,7 +138,9 @@ def restore_file(denoised, energy, output, *, scale=None, keep_gain=None, guides
     ``filter``'s ep-gauss or ep-box output, read from its header, else 16) unless
     ``keep_gain`` says. ``guides``/``guide``: the energy file's emission guide pass
     ("auto": found by name; "none"; ``guide=["emission=ViewLayer.Emit"]`` names it).
-    ``part``/``layer``: the energy file's part and beauty layer. ``compression``: the
+    ``part``/``layer``: the energy file's part and beauty layer; its other channels (depth,
+    normals, ids, light AOVs) are carried as it has them, bit for bit, but those a
+    ``channel_rule=["PATTERN=drop"]`` matches (the report's ``carried_channels``). ``compression``: the
     output's (default the energy file's). ``progress(done, total)``: output rows, as for
     ``filter_file``. ``max_memory``: MiB the run may hold by its estimate (default half
     the machine's memory); below its floor it raises, naming the floor. The output is
@@ -146,7 +148,8 @@ def restore_file(denoised, energy, output, *, scale=None, keep_gain=None, guides
     """
     return _epfilt.restore_file(str(denoised), str(energy), str(output), scale=scale,
                                 keep_gain=keep_gain, guides=guides, guide=guide, part=part,
-                                layer=layer, compression=compression, threads=threads,
+                                layer=layer, channel_rule=channel_rule,
+                                compression=compression, threads=threads,
                                 max_memory=max_memory, nonfinite=nonfinite,
                                 progress=progress)
 

@@ -56,6 +56,7 @@ def restore_file(
     guide: Optional[Sequence[str]] = None,
     part: Optional[str] = None,
     layer: Optional[str] = None,
+    channel_rule: Optional[Sequence[str]] = None,
     compression: Optional[str] = None,
     threads: int = 0,
     max_memory: Optional[int] = None,

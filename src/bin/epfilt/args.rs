@@ -175,7 +175,9 @@ The total is exact: the ledger balances to 1e-12 or nothing is written.
 Small --scale: energy exact in small regions, some of the render's grain
 back; large: the denoiser's look, energy exact over large regions.
 --part and --layer choose the energy image's part and beauty layer (the
-denoiser's output takes the same part where it has it).
+denoiser's output takes the same part where it has it); its other channels
+(depth, normals, ids, light AOVs) are carried as it has them, bit for bit,
+unless --channel-rule 'PATTERN=drop' leaves them out.
 One pass over both inputs; memory grows with the width and --scale.";
 
 #[derive(Args)]
@@ -211,6 +213,12 @@ pub struct RestoreArgs {
     /// emission=ViewLayer.Emit.
     #[arg(long, value_name = "KIND=NAME")]
     pub guide: Vec<String>,
+    /// The energy image's channels beside the beauty (depth, normals, ids,
+    /// light AOVs) are carried into the result as it has them, bit for
+    /// bit: PATTERN=drop leaves those it matches out (glob on the full name;
+    /// repeatable, the last match wins; any other rule carries).
+    #[arg(long, value_name = "PATTERN=RULE")]
+    pub channel_rule: Vec<String>,
     /// Output compression [default: the energy image's].
     #[arg(long)]
     pub compression: Option<String>,

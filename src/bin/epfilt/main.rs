@@ -183,6 +183,10 @@ fn restore(a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
     job.nonfinite = nonfinite;
     job.guides = epfilt::io::GuideRequest::parse(&a.guides, &a.guide).map_err(usage)?;
     job.select = selection(&a.select);
+    job.channel_rules = (a.channel_rule.iter())
+        .map(|r| epfilt::filter::channels::RuleOverride::parse(r))
+        .collect::<Result<_, _>>()
+        .map_err(usage)?;
     job.cancel = Some(cancel);
     if let Some(c) = &a.compression {
         job.output_settings.compression = Some(
@@ -230,6 +234,15 @@ fn restore(a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
                 r.output,
                 r.copied_channels.join(", "),
                 a.energy.display()
+            );
+        }
+        if !r.carried_channels.is_empty() {
+            eprintln!(
+                "{}: {} channels beside the beauty carried as {} has them ({})",
+                r.output,
+                r.carried_channels.len(),
+                a.energy.display(),
+                named(&r.carried_channels)
             );
         }
     }
@@ -427,6 +440,15 @@ enum Exit {
     Usage(anyhow::Error),
     /// The work failed: status 1 (or the signal's status when interrupted).
     Failure(anyhow::Error),
+}
+
+/// Up to eight names, then how many more: a Blender render carries dozens.
+fn named(names: &[String]) -> String {
+    const SHOWN: usize = 8;
+    match names.len().checked_sub(SHOWN) {
+        Some(more) if more > 0 => format!("{}, and {more} more", names[..SHOWN].join(", ")),
+        _ => names.join(", "),
+    }
 }
 
 fn usage(e: impl Into<anyhow::Error>) -> Exit {
