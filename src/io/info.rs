@@ -109,6 +109,9 @@ pub fn describe(path: &Path) -> crate::Result<FileInfo> {
     if super::rgbe::is_rgbe(map.bytes()) {
         return describe_rgbe(path);
     }
+    if super::pfm::is_pfm(map.bytes()) {
+        return describe_pfm(path);
+    }
     let meta = super::reader::parse_headers(path, map.bytes())?;
     let raw = raw_attributes(map.bytes());
     let parts = meta
@@ -316,6 +319,48 @@ fn describe_rgbe(path: &Path) -> crate::Result<FileInfo> {
             primaries: r.primaries.is_some(),
             lines: r.lines.clone(),
         }),
+    })
+}
+
+fn describe_pfm(path: &Path) -> crate::Result<FileInfo> {
+    let input = super::ExrInput::open(path, None)?;
+    let (w, h) = input.size();
+    let names = input.channels();
+    let part = PartInfo {
+        index: 0,
+        name: None,
+        width: w,
+        height: h,
+        data_window: [0, 0, w as i64 - 1, h as i64 - 1],
+        display_window: [0, 0, w as i64 - 1, h as i64 - 1],
+        compression: "none".into(),
+        layout: "scan lines, bottom row first".into(),
+        line_order: "Decreasing".into(),
+        deep: false,
+        channels: (names.iter())
+            .map(|n| ChannelInfo {
+                name: n.clone(),
+                sample_type: "float".into(),
+                sampling: [1, 1],
+            })
+            .collect(),
+        filtered: names.clone(),
+        carried: Vec::new(),
+        dropped: Vec::new(),
+        views: Vec::new(),
+        note: None,
+        verdict: verdict_and_guides(path, input.header(), &[]).0,
+        guides: "none".into(),
+        luminance: luminance_weights(None),
+        luminance_from_chromaticities: false,
+        pixel_aspect: 1.0,
+        attributes: Default::default(),
+    };
+    Ok(FileInfo {
+        path: path.display().to_string(),
+        format: "pfm".into(),
+        parts: vec![part],
+        radiance: None,
     })
 }
 

@@ -49,11 +49,13 @@ impl MappedFile {
                 super::Format::sniff(&map),
                 Some(super::Format::Exr | super::Format::Rgbe)
             )
+            && !super::pfm::is_pfm(&map)
         {
             return Err(Error::InvalidFile {
                 path: path.into(),
-                reason: "standard input holds neither an OpenEXR file nor a Radiance picture"
-                    .into(),
+                reason:
+                    "standard input holds no OpenEXR file, Radiance picture or portable float map"
+                        .into(),
             });
         }
         Ok(MappedFile { map })

@@ -28,6 +28,7 @@ pub mod info;
 pub mod mapped;
 pub mod output;
 pub mod parts;
+pub mod pfm;
 pub mod provenance;
 pub mod reader;
 pub mod rgbe;

@@ -35,7 +35,7 @@ pub struct PartInfo {
 /// The parts of the EXR file `path` (one for a Radiance picture).
 pub fn list(path: &Path) -> Result<Vec<PartInfo>> {
     let map = MappedFile::open(path)?;
-    if super::rgbe::is_rgbe(map.bytes()) {
+    if super::rgbe::is_rgbe(map.bytes()) || super::pfm::is_pfm(map.bytes()) {
         return Ok(vec![PartInfo {
             index: 0,
             name: String::new(),

@@ -97,6 +97,8 @@ pub fn input_fingerprint(path: &Path) -> Result<String> {
     // from its first MiB (reading it fails later, with the reason).
     let data = if super::rgbe::is_rgbe(bytes) {
         super::rgbe::parse_header(path, bytes).map(|h| h.data)
+    } else if super::pfm::is_pfm(bytes) {
+        super::pfm::parse_header(path, bytes).map(|h| h.data)
     } else {
         super::reader::parse_layout(path, bytes).map(|l| l.1)
     };

@@ -506,6 +506,51 @@ fn restore_carries_the_renders_other_channels_as_they_are() {
     assert_eq!(r["carried_channels"], serde_json::json!(["Z"]), "{r}");
 }
 
+/// `f` as a portable float map, OIDN's format: rows from the bottom up,
+/// big-endian floats (a positive scale).
+fn write_pfm(
+    path: &std::path::Path,
+    (w, h): (usize, usize),
+    f: impl Fn(usize, usize, usize) -> f32,
+) {
+    let mut b = format!("PF\n{w} {h}\n1.0\n").into_bytes();
+    for y in (0..h).rev() {
+        for x in 0..w {
+            for c in 0..3 {
+                b.extend(f(x, y, c).to_be_bytes());
+            }
+        }
+    }
+    std::fs::write(path, b).unwrap();
+}
+
+#[test]
+fn restore_reads_oidns_portable_float_map() {
+    // `oidnDenoise` writes PFM: the same picture as a PFM and as an EXR
+    // gives the same result, bit for bit; a truncated map is one line
+    // naming the file, and nothing is written.
+    let dir = tmpdir();
+    let p = |n: &str| dir.path().join(n);
+    let (w, h) = (41, 23);
+    let tinted = |x, y, c: usize| denoised(x, y, c) * (1.0 + 0.1 * c as f32) + 0.01 * x as f32;
+    write(&p("e.exr"), (w, h), render);
+    write(&p("d.exr"), (w, h), tinted);
+    write_pfm(&p("d.pfm"), (w, h), tinted);
+    let from_exr = restore_report(&p("d.exr"), &p("e.exr"), &p("o1.exr"), &[]);
+    let from_pfm = restore_report(&p("d.pfm"), &p("e.exr"), &p("o2.exr"), &[]);
+    assert_eq!(from_exr["digest"], from_pfm["digest"]);
+    let bytes = std::fs::read(p("d.pfm")).unwrap();
+    std::fs::write(p("cut.pfm"), &bytes[..bytes.len() - 5]).unwrap();
+    let o = restore(&p("cut.pfm"), &p("e.exr"), &p("o3.exr"), &[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("cut.pfm") && err.contains("truncated"),
+        "{err}"
+    );
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(!p("o3.exr").exists());
+}
+
 #[test]
 fn restore_takes_a_part_and_a_layer_of_the_energy_image() {
     let dir = tmpdir();

@@ -182,7 +182,7 @@ One pass over both inputs; memory grows with the width and --scale.";
 
 #[derive(Args)]
 pub struct RestoreArgs {
-    /// The denoiser's output (EXR or Radiance picture).
+    /// The denoiser's output (EXR, Radiance picture or OIDN's PFM).
     pub denoised: PathBuf,
     /// The image whose energy is right: the render, or epfilt's output of it.
     pub energy: PathBuf,

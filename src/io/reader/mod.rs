@@ -124,6 +124,9 @@ pub struct ExrInput {
     /// A Radiance picture's header: the file is RGBE / XYZE, and `meta` a
     /// header made to describe it (three f32 channels, no blocks).
     rgbe: Option<super::rgbe::RgbeHeader>,
+    /// A portable float map's header: the file is PFM, and `meta` a header
+    /// made to describe it.
+    pfm: Option<super::pfm::PfmHeader>,
 }
 
 /// The index of the part `part` names in `meta` (the only one when none is
@@ -295,6 +298,9 @@ impl ExrInput {
             }
             return Self::open_rgbe(path, map, part, layer);
         }
+        if super::pfm::is_pfm(map.bytes()) {
+            return Self::open_pfm(path, map, part, layer, view);
+        }
         let bytes = map.bytes();
         let mut read = PeekRead::new(Tracking::new(bytes));
         let meta = parse_headers_from(path, &mut read)?;
@@ -327,6 +333,7 @@ impl ExrInput {
             aux: 0,
             carried: Vec::new(),
             rgbe: None,
+            pfm: None,
         };
         // What a decoder allocates per block comes from the header: bound it
         // before any command reads pixels (filter checks its whole job
@@ -397,6 +404,67 @@ impl ExrInput {
             aux: 0,
             carried: Vec::new(),
             rgbe: Some(rh),
+            pfm: None,
+        })
+    }
+
+    /// A portable float map (OIDN's), described as a single-part file of
+    /// f32 channels (R, G, B, or Y for a grey map).
+    fn open_pfm(
+        path: &Path,
+        map: MappedFile,
+        part: Option<&PartSelect>,
+        layer: Option<&str>,
+        view: Option<&str>,
+    ) -> Result<Self> {
+        let refuse = |what: String| {
+            Err(Error::Config(format!(
+                "{}: a portable float map has {what}",
+                path.display()
+            )))
+        };
+        if matches!(part, Some(PartSelect::Index(i)) if *i != 0)
+            || matches!(part, Some(PartSelect::Name(_)))
+        {
+            return refuse("one part (--part 0)".into());
+        }
+        if let Some(l) = layer {
+            return refuse(format!("no layers (--layer {l:?})"));
+        }
+        if let Some(v) = view {
+            return refuse(format!("no views (--view {v:?})"));
+        }
+        let ph = super::pfm::parse_header(path, map.bytes())?;
+        let header = ph.exr_header();
+        let sorted = channel_names(&header);
+        let selected = (ph.names().iter())
+            .map(|n| Selected {
+                name: n.to_string(),
+                index: sorted.iter().position(|s| s == n).unwrap_or(0),
+            })
+            .collect();
+        let meta = MetaData {
+            requirements: Requirements {
+                file_format_version: 2,
+                is_single_layer_and_tiled: false,
+                has_long_names: false,
+                has_deep_data: false,
+                has_multiple_layers: false,
+            },
+            headers: exr::prelude::SmallVec::from_vec(vec![header]),
+        };
+        Ok(ExrInput {
+            path: path.into(),
+            map,
+            meta,
+            part: 0,
+            selected,
+            rows: Vec::new(),
+            dropped: Vec::new(),
+            aux: 0,
+            carried: Vec::new(),
+            rgbe: None,
+            pfm: Some(ph),
         })
     }
 
@@ -582,6 +650,13 @@ impl ExrInput {
 
     /// A source of rows over this file.
     pub fn source(&self) -> InputSource<'_> {
+        if let Some(ph) = &self.pfm {
+            return InputSource::Pfm(super::pfm::PfmSource::new(
+                &self.path,
+                self.map.bytes(),
+                ph.clone(),
+            ));
+        }
         if let Some(rh) = &self.rgbe {
             return InputSource::Rgbe(super::rgbe::RgbeSource::new(
                 &self.path,

@@ -153,6 +153,8 @@ pub enum InputSource<'a> {
     Exr(ExrSource<'a>),
     /// Radiance scanlines.
     Rgbe(crate::io::rgbe::RgbeSource<'a>),
+    /// A portable float map's rows.
+    Pfm(crate::io::pfm::PfmSource<'a>),
 }
 
 impl Source for InputSource<'_> {
@@ -160,6 +162,7 @@ impl Source for InputSource<'_> {
         match self {
             InputSource::Exr(s) => s.next_strip(max_rows),
             InputSource::Rgbe(s) => s.next_strip(max_rows),
+            InputSource::Pfm(s) => s.next_strip(max_rows),
         }
     }
 
@@ -173,7 +176,7 @@ impl Source for InputSource<'_> {
     {
         match self {
             InputSource::Exr(s) => s.decoder(ahead, pool),
-            InputSource::Rgbe(_) => None,
+            InputSource::Rgbe(_) | InputSource::Pfm(_) => None,
         }
     }
 
