@@ -286,16 +286,19 @@ pub fn restore_bytes(
     let held = reach + (LOOKAHEAD as u64 + 3).saturating_mul(scale as u64) + strip;
     let in_row = w.saturating_mul(job.strip_channels() as u64 * 4);
     let out_row = w.saturating_mul(nch * 8);
-    // The input rows, the part kept of each, and the final rows: the last
-    // strip finishes every row of blocks held at once, in f64 and then in
-    // f32 on their way out. Each field's tents across (four words a
-    // column).
-    let rows = (in_row
-        .saturating_add(2 * out_row)
-        .saturating_add(out_row / 2))
-    .saturating_mul(held)
-    .saturating_add(w.saturating_mul(32 * nch));
-    let strips = in_row.saturating_mul(strip).saturating_mul(STRIPS_HELD);
+    // The input rows and the part kept of each; the final rows in f64,
+    // the rows of blocks a strip finishes (once the input is all in, one
+    // row of blocks a call), and in f32 on their way out (two such
+    // batches queued for the writer and one it writes). Each field's
+    // tents across (four words a column).
+    let finished = (scale as u64).saturating_add(strip);
+    let rows = (in_row.saturating_add(out_row))
+        .saturating_mul(held)
+        .saturating_add((out_row + 3 * (out_row / 2)).saturating_mul(finished))
+        .saturating_add(w.saturating_mul(32 * nch));
+    // And the two inputs' own strips, before the pair puts them side by
+    // side.
+    let strips = in_row.saturating_mul(strip).saturating_mul(STRIPS_HELD + 1);
     let mut blocks = 0u64;
     let mut windows = 0u64;
     for b in block_bytes {
@@ -698,10 +701,12 @@ mod tests {
         let cfg = PipelineConfig::default();
         let at = |scale| restore_bytes(&job, scale, &cfg, [block, block]);
         // Each scale's rows of blocks: the input rows (six f32 channels)
-        // and the part kept and the final rows (f64 and f32, three
-        // channels) of LOOKAHEAD + 3 rows of blocks, 16384 wide.
-        let row = 16384 * (6 * 4 + 2 * 3 * 8 + 3 * 4);
-        let step = (crate::filter::restore::LOOKAHEAD as u64 + 3) * 96 * row;
+        // and the part kept (f64, three channels) of LOOKAHEAD + 3 rows of
+        // blocks, 16384 wide; the final rows (f64, and f32 three times) of
+        // one row of blocks.
+        let held = 16384 * (6 * 4 + 3 * 8);
+        let finished = 16384 * (3 * 8 + 3 * 3 * 4);
+        let step = ((crate::filter::restore::LOOKAHEAD as u64 + 3) * held + finished) * 96;
         assert_eq!(at(128) - at(32), step);
         // Under a budget between the floor and the default: shorter strips.
         let full = at(32);

@@ -441,8 +441,11 @@ impl Stage for RestoreStage {
         let (bs, h) = (self.b(), self.h);
         let nby = self.fields[0].nby;
         // A row of blocks is finished once its field and the next row's are
-        // fixed (its lower half reads both).
-        while self.out.end() < h {
+        // fixed (its lower half reads both). Once the input is all in, one
+        // row of blocks a call: the skeleton calls again, so the rows of
+        // blocks still held are never all final rows at once.
+        let from = self.out.end();
+        while self.out.end() < h && !(all_in && self.out.end() > from) {
             let j = self.out.end() / bs;
             let next = (j + 1).min(nby - 1);
             if !self.fields[0].can_fix(next, self.momented) {
@@ -775,6 +778,30 @@ mod tests {
                 );
                 assert_eq!(o, out);
             }
+        }
+    }
+
+    /// Once the input is all in, the rows of blocks still held are
+    /// finished one a call: the final rows held never reach more than one
+    /// row of blocks and the rows a strip brings, however many rows of
+    /// blocks the field looks ahead. The input comes in one strip here,
+    /// the worst case: before, every row was final at once.
+    #[test]
+    fn the_last_rows_of_blocks_are_finished_one_at_a_time() {
+        let (w, h, scale) = (23, 200, 8);
+        for strip_rows in [1, 16, h] {
+            let cfg = PipelineConfig {
+                threads: 2,
+                strip_rows,
+                ..Default::default()
+            };
+            let (_, stats) = run((w, h, 2), scale, &cfg, false);
+            let out = stats.windows.iter().find(|u| u.name == "output").unwrap();
+            assert!(
+                out.rows <= scale + strip_rows.min(h - LOOKAHEAD * scale),
+                "strips of {strip_rows}: {} final rows held",
+                out.rows
+            );
         }
     }
 

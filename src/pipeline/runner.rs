@@ -103,21 +103,34 @@ pub fn run_streamer<S: Source, K: Sink>(
         let writer = scope.spawn(move || write_rows(sink, io, total, row_rx));
         let mut filter_result = Ok(());
         let mut writer_failed = false;
+        let mut drained = false;
         for k in 0.. {
             let t = Instant::now();
-            let Ok(strip) = strip_rx.recv() else { break };
+            let strip = if drained { None } else { strip_rx.recv().ok() };
             stages.filter_waiting_for_input += t.elapsed().as_secs_f64();
             if cancelled() {
                 filter_result = Err(Error::Interrupted);
                 break;
             }
             let t = Instant::now();
-            let pushed = strip.and_then(|s| {
-                pool.install(|| {
-                    let _segment = crate::trace::segment("filter", k, &[]);
-                    streamer.push(s)
-                })
-            });
+            let pushed = match strip {
+                Some(strip) => strip.and_then(|s| {
+                    pool.install(|| {
+                        let _segment = crate::trace::segment("filter", k, &[]);
+                        streamer.push(s)
+                    })
+                }),
+                // The input is all in: a stage may hand its last rows over
+                // a few at a time (restore's rows of blocks).
+                None if streamer.rows_out() < total => {
+                    drained = true;
+                    match pool.install(|| streamer.drain()) {
+                        Ok(None) => break,
+                        r => r,
+                    }
+                }
+                None => break,
+            };
             stages.filter += t.elapsed().as_secs_f64();
             match pushed {
                 Ok(Some(rows)) => {

@@ -53,6 +53,10 @@ pub trait Stage: Send {
     fn arrive(&mut self, input: &mut RowWindow<f32>, a: usize, b: usize);
     /// Go as far as `rows_in` input rows allow (`all_in`: the image is
     /// complete); returns the end of the output rows that are now final.
+    /// With `all_in` a stage may stop short, to hand its last rows over a
+    /// few at a time rather than hold them all at once: the skeleton calls
+    /// again, with no new rows, until every row is final (a call that
+    /// makes none final ends the run with an error).
     fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> usize;
     /// The first input row the stage will still read.
     fn input_needed(&self) -> usize;

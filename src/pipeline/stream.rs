@@ -216,6 +216,26 @@ impl Streamer {
         let end = self
             .stage
             .advance(&self.input, self.rows_in, self.rows_in == in_h);
+        self.finish_to(end)
+    }
+
+    /// With every input row in but not every output row final: advance
+    /// the stage again (it may hand its last rows over a few at a time);
+    /// `None` when that made no row final.
+    pub fn drain(&mut self) -> Result<Option<OutRows>> {
+        if self.rows_in < self.grid.in_h {
+            return Ok(None);
+        }
+        let end = self.stage.advance(&self.input, self.rows_in, true);
+        if end <= self.out_done {
+            return Ok(None);
+        }
+        self.finish_to(end)
+    }
+
+    /// Release the input the stage no longer reads, and finish the output
+    /// rows up to `end`.
+    fn finish_to(&mut self, end: usize) -> Result<Option<OutRows>> {
         self.input.evict_below(self.stage.input_needed());
         let done = (self.out_done, end.max(self.out_done));
         let rows = self.stage.output(done);
