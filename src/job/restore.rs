@@ -19,6 +19,7 @@ use crate::io::{
 use crate::pipeline::counts::{MethodCounts, RestoreCounts};
 use crate::pipeline::ledger::ChannelLedger;
 use crate::pipeline::restore::{restore_planar, restore_stream, EnergyLayout};
+use crate::pipeline::stage::WindowUse;
 use crate::pipeline::stream::MAX_CHANNELS;
 use crate::pipeline::{
     fit_restore_memory, NonFinite, PipelineConfig, Precision, Progress, RunStats, StageSeconds,
@@ -159,6 +160,9 @@ pub struct RestoreReport {
     pub threads: usize,
     /// The process's peak resident memory.
     pub peak_rss_bytes: Option<u64>,
+    /// Every rolling window: its name, the most rows it held and the bytes
+    /// of a row.
+    pub windows: Vec<WindowUse>,
 }
 
 impl RestoreReport {
@@ -208,6 +212,7 @@ impl RestoreReport {
             cpu_seconds: cpu_seconds().zip(cpu_start).map(|(c, s)| c - s),
             threads,
             peak_rss_bytes: peak_rss_bytes(),
+            windows: stats.windows.clone(),
         }
     }
 }
