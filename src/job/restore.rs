@@ -389,35 +389,7 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
     let carried = carry(job, &mut energy)?;
     let (size, channels) = (energy.size(), energy.channels());
     let beauty = channels.len() - carried.len();
-    let mismatch = |what: String| Error::Value {
-        path: job.denoised.clone(),
-        reason: format!("{what}: restore needs the denoiser's output of that very image"),
-    };
-    if denoised.size() != size {
-        let (dw, dh) = denoised.size();
-        return Err(mismatch(format!(
-            "{dw}x{dh} pixels, but {} has {}x{}",
-            job.energy.display(),
-            size.0,
-            size.1
-        )));
-    }
-    let luminance = energy.luminance();
-    let mut picks = match_channels(
-        &channels[..beauty],
-        &luminance[..beauty],
-        &denoised.channels(),
-    )
-    .ok_or_else(|| {
-        mismatch(format!(
-            "channels {}, but {} has {}",
-            denoised.channels().join(","),
-            job.energy.display(),
-            channels[..beauty].join(",")
-        ))
-    })?;
-    // The channels beside the beauty stay as the energy image has them.
-    picks.resize(channels.len(), None);
+    let picks = pair(job, &energy, &denoised, beauty)?;
     let provenance = format!(
         "restore scale={scale} keep_gain={keep_gain} denoised={}",
         job.denoised
@@ -499,6 +471,48 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
         carried_channels: carried,
         ..report
     })
+}
+
+/// The denoiser's output against the energy image's: the same size, and
+/// per energy channel its place among the denoiser's ([`match_channels`]
+/// for the first `beauty`; the channels carried beside it are `None`, as
+/// the energy image has them). A mismatch is an error naming the file.
+fn pair(
+    job: &RestoreJob,
+    energy: &ExrInput,
+    denoised: &ExrInput,
+    beauty: usize,
+) -> Result<Vec<Option<usize>>> {
+    let (size, channels) = (energy.size(), energy.channels());
+    let mismatch = |what: String| Error::Value {
+        path: job.denoised.clone(),
+        reason: format!("{what}: restore needs the denoiser's output of that very image"),
+    };
+    if denoised.size() != size {
+        let (dw, dh) = denoised.size();
+        return Err(mismatch(format!(
+            "{dw}x{dh} pixels, but {} has {}x{}",
+            job.energy.display(),
+            size.0,
+            size.1
+        )));
+    }
+    let luminance = energy.luminance();
+    let mut picks = match_channels(
+        &channels[..beauty],
+        &luminance[..beauty],
+        &denoised.channels(),
+    )
+    .ok_or_else(|| {
+        mismatch(format!(
+            "channels {}, but {} has {}",
+            denoised.channels().join(","),
+            job.energy.display(),
+            channels[..beauty].join(",")
+        ))
+    })?;
+    picks.resize(channels.len(), None);
+    Ok(picks)
 }
 
 /// Carry the energy image's channels beside the beauty into the output:

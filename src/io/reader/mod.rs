@@ -21,6 +21,7 @@ use rayon::prelude::*;
 mod ahead;
 mod blocks;
 mod layers;
+mod pictures;
 mod source;
 
 pub use blocks::*;
@@ -350,122 +351,6 @@ impl ExrInput {
             ));
         }
         Ok(input)
-    }
-
-    /// A Radiance picture, described as a single-part file of three f32
-    /// channels (R, G, B, or X, Y, Z for XYZE) with the picture's primaries.
-    fn open_rgbe(
-        path: &Path,
-        map: MappedFile,
-        part: Option<&PartSelect>,
-        layer: Option<&str>,
-    ) -> Result<Self> {
-        if matches!(part, Some(PartSelect::Index(i)) if *i != 0)
-            || matches!(part, Some(PartSelect::Name(_)))
-        {
-            return Err(Error::Config(format!(
-                "{}: a Radiance picture has one part (--part 0)",
-                path.display()
-            )));
-        }
-        if let Some(l) = layer {
-            return Err(Error::Config(format!(
-                "{}: a Radiance picture has no layers (--layer {l:?})",
-                path.display()
-            )));
-        }
-        let rh = super::rgbe::parse_header(path, map.bytes())?;
-        let (header, names, sorted) = rh.exr_header();
-        let selected = names
-            .iter()
-            .map(|n| Selected {
-                name: n.to_string(),
-                index: sorted.iter().position(|s| s == n).unwrap_or(0),
-            })
-            .collect();
-        let meta = MetaData {
-            requirements: Requirements {
-                file_format_version: 2,
-                is_single_layer_and_tiled: false,
-                has_long_names: false,
-                has_deep_data: false,
-                has_multiple_layers: false,
-            },
-            headers: exr::prelude::SmallVec::from_vec(vec![header]),
-        };
-        Ok(ExrInput {
-            path: path.into(),
-            map,
-            meta,
-            part: 0,
-            selected,
-            rows: Vec::new(),
-            dropped: Vec::new(),
-            aux: 0,
-            carried: Vec::new(),
-            rgbe: Some(rh),
-            pfm: None,
-        })
-    }
-
-    /// A portable float map (OIDN's), described as a single-part file of
-    /// f32 channels (R, G, B, or Y for a grey map).
-    fn open_pfm(
-        path: &Path,
-        map: MappedFile,
-        part: Option<&PartSelect>,
-        layer: Option<&str>,
-        view: Option<&str>,
-    ) -> Result<Self> {
-        let refuse = |what: String| {
-            Err(Error::Config(format!(
-                "{}: a portable float map has {what}",
-                path.display()
-            )))
-        };
-        if matches!(part, Some(PartSelect::Index(i)) if *i != 0)
-            || matches!(part, Some(PartSelect::Name(_)))
-        {
-            return refuse("one part (--part 0)".into());
-        }
-        if let Some(l) = layer {
-            return refuse(format!("no layers (--layer {l:?})"));
-        }
-        if let Some(v) = view {
-            return refuse(format!("no views (--view {v:?})"));
-        }
-        let ph = super::pfm::parse_header(path, map.bytes())?;
-        let header = ph.exr_header();
-        let sorted = channel_names(&header);
-        let selected = (ph.names().iter())
-            .map(|n| Selected {
-                name: n.to_string(),
-                index: sorted.iter().position(|s| s == n).unwrap_or(0),
-            })
-            .collect();
-        let meta = MetaData {
-            requirements: Requirements {
-                file_format_version: 2,
-                is_single_layer_and_tiled: false,
-                has_long_names: false,
-                has_deep_data: false,
-                has_multiple_layers: false,
-            },
-            headers: exr::prelude::SmallVec::from_vec(vec![header]),
-        };
-        Ok(ExrInput {
-            path: path.into(),
-            map,
-            meta,
-            part: 0,
-            selected,
-            rows: Vec::new(),
-            dropped: Vec::new(),
-            aux: 0,
-            carried: Vec::new(),
-            rgbe: None,
-            pfm: Some(ph),
-        })
     }
 
     /// The Radiance header of an RGBE / XYZE input.
