@@ -127,21 +127,28 @@ impl PfmHeader {
     /// The map described as an OpenEXR header (one part of f32 channels, R,
     /// G, B or Y, Rec. 709 primaries), what the rest of epfilt reads.
     pub(crate) fn exr_header(&self) -> Header {
-        let mut sorted = self.names().to_vec();
-        sorted.sort_unstable();
-        let list: exr::prelude::SmallVec<[ChannelDescription; 5]> = sorted
-            .iter()
-            .map(|n| ChannelDescription::new(Text::from(*n), SampleType::F32, false))
-            .collect();
-        let mut header = Header::new(Text::from(""), Vec2(self.w, self.h), list).with_encoding(
-            Compression::ZIP16,
-            exr::meta::BlockDescription::ScanLines,
-            exr::meta::attribute::LineOrder::Increasing,
-        );
-        header.channels = ChannelList::new(header.channels.list.clone());
-        header.own_attributes.layer_name = None;
-        header
+        float_header((self.w, self.h), self.names())
     }
+}
+
+/// A one-part header of f32 scan lines describing a picture that is not an
+/// EXR (`w x h`, channels `names` in any order, listed sorted as OpenEXR
+/// has them), what the rest of epfilt reads.
+pub(crate) fn float_header((w, h): (usize, usize), names: &[&str]) -> Header {
+    let mut sorted = names.to_vec();
+    sorted.sort_unstable();
+    let list: exr::prelude::SmallVec<[ChannelDescription; 5]> = sorted
+        .iter()
+        .map(|n| ChannelDescription::new(Text::from(*n), SampleType::F32, false))
+        .collect();
+    let mut header = Header::new(Text::from(""), Vec2(w, h), list).with_encoding(
+        Compression::ZIP16,
+        exr::meta::BlockDescription::ScanLines,
+        exr::meta::attribute::LineOrder::Increasing,
+    );
+    header.channels = ChannelList::new(header.channels.list.clone());
+    header.own_attributes.layer_name = None;
+    header
 }
 
 /// A [`Source`] of the map's rows, top first: `[row][channel][x]`.

@@ -23,9 +23,8 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use exr::math::Vec2;
-use exr::meta::attribute::{ChannelDescription, ChannelList, Chromaticities, SampleType, Text};
+use exr::meta::attribute::Chromaticities;
 use exr::meta::header::Header;
-use exr::prelude::Compression;
 
 use crate::error::{Error, Result};
 use crate::pipeline::{Precision, Sink, Source, Strip};
@@ -93,17 +92,7 @@ impl RgbeHeader {
         };
         let mut sorted = names;
         sorted.sort_unstable();
-        let list: exr::prelude::SmallVec<[ChannelDescription; 5]> = sorted
-            .iter()
-            .map(|n| ChannelDescription::new(Text::from(*n), SampleType::F32, false))
-            .collect();
-        let mut header = Header::new(Text::from(""), Vec2(self.w, self.h), list).with_encoding(
-            Compression::ZIP16,
-            exr::meta::BlockDescription::ScanLines,
-            exr::meta::attribute::LineOrder::Increasing,
-        );
-        header.channels = ChannelList::new(header.channels.list.clone());
-        header.own_attributes.layer_name = None;
+        let mut header = super::pfm::float_header((self.w, self.h), &names);
         if let Some(p) = self.primaries {
             let v = |i: usize| Vec2(p[i] as f32, p[i + 1] as f32);
             header.shared_attributes.chromaticities = Some(Chromaticities {

@@ -4,11 +4,14 @@
 
 use std::path::Path;
 
+use exr::meta::header::Header;
 use exr::meta::{MetaData, Requirements};
 
 use super::{channel_names, ExrInput, PartSelect, Selected};
 use crate::error::{Error, Result};
 use crate::io::mapped::MappedFile;
+use crate::io::pfm::PfmHeader;
+use crate::io::rgbe::RgbeHeader;
 
 impl ExrInput {
     /// A Radiance picture, described as a single-part file of three f32
@@ -34,37 +37,8 @@ impl ExrInput {
             )));
         }
         let rh = crate::io::rgbe::parse_header(path, map.bytes())?;
-        let (header, names, sorted) = rh.exr_header();
-        let selected = names
-            .iter()
-            .map(|n| Selected {
-                name: n.to_string(),
-                index: sorted.iter().position(|s| s == n).unwrap_or(0),
-            })
-            .collect();
-        let meta = MetaData {
-            requirements: Requirements {
-                file_format_version: 2,
-                is_single_layer_and_tiled: false,
-                has_long_names: false,
-                has_deep_data: false,
-                has_multiple_layers: false,
-            },
-            headers: exr::prelude::SmallVec::from_vec(vec![header]),
-        };
-        Ok(ExrInput {
-            path: path.into(),
-            map,
-            meta,
-            part: 0,
-            selected,
-            rows: Vec::new(),
-            dropped: Vec::new(),
-            aux: 0,
-            carried: Vec::new(),
-            rgbe: Some(rh),
-            pfm: None,
-        })
+        let (header, names, _) = rh.exr_header();
+        Ok(Self::picture(path, map, header, &names, (Some(rh), None)))
     }
 
     /// A portable float map (OIDN's), described as a single-part file of
@@ -95,8 +69,26 @@ impl ExrInput {
         }
         let ph = crate::io::pfm::parse_header(path, map.bytes())?;
         let header = ph.exr_header();
+        Ok(Self::picture(
+            path,
+            map,
+            header,
+            ph.names(),
+            (None, Some(ph)),
+        ))
+    }
+
+    /// The input over a picture described by `header`: one part, its
+    /// channels `names` in the picture's order.
+    fn picture(
+        path: &Path,
+        map: MappedFile,
+        header: Header,
+        names: &[&str],
+        (rgbe, pfm): (Option<RgbeHeader>, Option<PfmHeader>),
+    ) -> Self {
         let sorted = channel_names(&header);
-        let selected = (ph.names().iter())
+        let selected = (names.iter())
             .map(|n| Selected {
                 name: n.to_string(),
                 index: sorted.iter().position(|s| s == n).unwrap_or(0),
@@ -112,7 +104,7 @@ impl ExrInput {
             },
             headers: exr::prelude::SmallVec::from_vec(vec![header]),
         };
-        Ok(ExrInput {
+        ExrInput {
             path: path.into(),
             map,
             meta,
@@ -122,8 +114,8 @@ impl ExrInput {
             dropped: Vec::new(),
             aux: 0,
             carried: Vec::new(),
-            rgbe: None,
-            pfm: Some(ph),
-        })
+            rgbe,
+            pfm,
+        }
     }
 }
