@@ -9,16 +9,19 @@ use std::sync::Arc;
 
 use crate::error::{Error, Result};
 use crate::filter::channels::{rule_for, ChannelRule, RuleOverride};
-use crate::filter::restore::{RestoreParams, DEFAULT_SCALE, KEEP_GAIN, KEEP_GAIN_FILTERED};
+use crate::filter::restore::{
+    RestoreParams, DEFAULT_SCALE, EMISSION_KEEP_GAIN, KEEP_GAIN, KEEP_GAIN_FILTERED,
+};
 use crate::filter::Method;
 use crate::host::{cpu_seconds, default_max_memory, peak_rss_bytes};
 use crate::io::output::OutputLayout;
 use crate::io::{
-    find_guides, ExrInput, Format, GuideKind, GuideRequest, OutputSettings, Selection,
+    find_guides, find_stats, ExrInput, Format, GuideKind, GuideRequest, OutputSettings, Selection,
+    StatsRequest,
 };
 use crate::pipeline::counts::{MethodCounts, RestoreCounts};
 use crate::pipeline::ledger::ChannelLedger;
-use crate::pipeline::restore::{restore_planar, restore_stream, EnergyLayout};
+use crate::pipeline::restore::{restore_planar, restore_stream, EnergyLayout, Reliable};
 use crate::pipeline::stage::WindowUse;
 use crate::pipeline::stream::MAX_CHANNELS;
 use crate::pipeline::{
@@ -131,6 +134,11 @@ pub struct RestoreReport {
     /// an array), whose light beyond the denoiser's share around stays in
     /// place; empty where there is none.
     pub emission_guide: Vec<String>,
+    /// The energy image's variance pass and sample count, where it has no
+    /// emission guide: a pixel whose mean is sure (its relative standard
+    /// error under a third) stays in place as a guide's light does; empty
+    /// where none was read.
+    pub variance_guide: String,
     /// The energy image's channels the denoiser did not write (an alpha),
     /// kept as the energy image has them.
     pub copied_channels: Vec<String>,
@@ -197,6 +205,7 @@ impl RestoreReport {
             keep_gain_from,
             emission_guide,
             copied_channels,
+            variance_guide: String::new(),
             carried_channels: Vec::new(),
             ledger: stats.ledger.clone(),
             kept_share: if mass > 0.0 {
@@ -410,6 +419,15 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
         .filter(|(_, p)| p.is_none())
         .map(|(c, _)| c.clone())
         .collect();
+    // A render's own statistics stand in for a guide it lacks (with a gain
+    // of one, everything over the denoiser is kept already).
+    let mut variance_guide = String::new();
+    if energy_layout.guide.is_empty() && !job.guides.none() && keep_gain > EMISSION_KEEP_GAIN {
+        if let Some((r, from)) = statistics(&job.energy, &mut energy, &energy_layout.luminance)? {
+            energy_layout.reliable = Some(r);
+            variance_guide = from;
+        }
+    }
     energy_layout.denoised = picks;
     energy_layout.denoised_channels = denoised.channels().len();
     energy_layout.data = (0..channels.len()).map(|c| c >= beauty).collect();
@@ -468,6 +486,7 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
         memory_estimate_bytes: memory,
         // The carried channels are copies, out of the ledger.
         ledger: report.ledger[..beauty].to_vec(),
+        variance_guide,
         carried_channels: carried,
         ..report
     })
@@ -513,6 +532,32 @@ fn pair(
     })?;
     picks.resize(channels.len(), None);
     Ok(picks)
+}
+
+/// The energy image's variance pass and sample count, found as `ep-box`
+/// finds them (`None` where it has none), read after its channels: with
+/// the words for the report.
+fn statistics(
+    path: &std::path::Path,
+    energy: &mut ExrInput,
+    lum: &[f64],
+) -> Result<Option<(Reliable, String)>> {
+    let Ok(found) = find_stats(path, energy.header(), &StatsRequest::default()) else {
+        return Ok(None);
+    };
+    // Three variances need R, G and B (`attach` refuses the rest).
+    if found.variance.len() == 3 && lum.iter().filter(|&&l| l != 0.0).count() != 3 {
+        return Ok(None);
+    }
+    let before = energy.aux_channels().len();
+    let stats = found.attach(energy, path)?;
+    let channels = energy.aux_channels()[before..].to_vec();
+    let from = format!(
+        "{}; samples: {}",
+        found.variance.join(", "),
+        found.spp_from()
+    );
+    Ok(Some((Reliable::new(stats, lum, channels), from)))
 }
 
 /// Carry the energy image's channels beside the beauty into the output:

@@ -314,6 +314,57 @@ fn restore_keeps_the_emission_guides_lamp_in_place() {
 }
 
 #[test]
+fn restore_keeps_a_lamp_its_samples_agree_on_without_a_guide() {
+    // No guide passes, but a variance pass and a sample count: the lamp's
+    // samples all saw it (a small standard error), so it stays; with a
+    // firefly's variance (one sample saw it) it spreads, as with --guides
+    // none.
+    let dir = tmpdir();
+    let (w, h) = (24, 24);
+    let at = |x, y| (x, y) == LAMP;
+    let n = 16.0f32;
+    let render = |path: &std::path::Path, rse: f32| {
+        let plane = |f: &dyn Fn(usize, usize) -> f32| {
+            FlatSamples::F32((0..w * h).map(|i| f(i % w, i / w)).collect())
+        };
+        let beauty = |x, y| if at(x, y) { 101.0 } else { 1.0 };
+        // The sample variance whose mean's relative standard error is `rse`.
+        let var = |x, y| (rse * beauty(x, y)).powi(2) * n;
+        let mut channels = Vec::new();
+        for c in ["B", "G", "R"] {
+            channels.push((c.to_string(), plane(&beauty)));
+            channels.push((format!("variance.{c}"), plane(&var)));
+        }
+        channels.push(("sampleCount".to_string(), plane(&|_, _| n)));
+        let channels = channels
+            .iter()
+            .map(|(n, p)| (n.as_str(), p.clone()))
+            .collect();
+        write_flat(path, (w, h), channels);
+    };
+    let (sure, firefly) = (dir.path().join("sure.exr"), dir.path().join("firefly.exr"));
+    render(&sure, 0.05);
+    render(&firefly, 1.0);
+    let (d, out) = (dir.path().join("d.exr"), dir.path().join("o.exr"));
+    write(&d, (w, h), |_, _, _| 1.0);
+    let lamp = |energy: &std::path::Path, extra: &[&str]| {
+        let r = restore_report(&d, energy, &out, extra);
+        let v = crate::exr_io::read_planar(&out).at(LAMP.0, LAMP.1, 0);
+        (r["variance_guide"].as_str().unwrap().to_string(), v)
+    };
+    let (from, kept) = lamp(&sure, &[]);
+    assert!(
+        from.contains("variance.R") && from.contains("sampleCount"),
+        "{from}"
+    );
+    assert!(kept > KEPT_ABOVE, "{kept}");
+    let (_, spread) = lamp(&firefly, &[]);
+    assert!(spread < SPREAD_BELOW, "{spread}");
+    let (from, spread) = lamp(&sure, &["--guides", "none"]);
+    assert!(from.is_empty() && spread < SPREAD_BELOW, "{from} {spread}");
+}
+
+#[test]
 fn restore_takes_the_emission_guide_it_is_told() {
     let dir = tmpdir();
     let (glow, e) = (dir.path().join("glow.exr"), dir.path().join("e.exr"));

@@ -166,7 +166,9 @@ holds far more than the denoiser put around it (a lamp or a highlight the
 denoiser dimmed), the excess stays in place: over 16 times on a render, over
 once on epfilt's ep-gauss or ep-box output (its fireflies already spread; read
 from its header), or --keep-gain. Where the energy image has an emission guide
-pass (--guides), its light beyond the denoiser's share stays too. The rest is
+pass (--guides), its light beyond the denoiser's share stays too; without
+one, a render's variance pass (and sample count) stands in: a pixel whose
+mean is three standard errors above zero is a lamp, not a firefly. The rest is
 carried by the denoiser's picture and a smooth field, solved so that every
 block of --scale x --scale pixels (from the top left) holds the energy image's
 energy: what a block lacks goes back mostly to its brightest features (a
@@ -205,8 +207,9 @@ pub struct RestoreArgs {
     #[arg(long, default_value = "error")]
     pub nonfinite: String,
     /// The energy image's emission guide pass (its directly visible light):
-    /// auto (found by the names renderers give it), none, or emission (it
-    /// must be found).
+    /// auto (found by the names renderers give it; without one, a variance
+    /// pass and its sample count stand in: a pixel whose samples agree
+    /// stays), none (neither), or emission (it must be found).
     #[arg(long, default_value = "auto")]
     pub guides: String,
     /// emission=LAYER: the layer of the emission guide, e.g.

@@ -219,13 +219,18 @@ fn restore(a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
             r.keep_gain_from,
             r.counts.kept,
             r.counts.unshaped,
-            if r.emission_guide.is_empty() {
-                String::new()
-            } else {
+            if !r.emission_guide.is_empty() {
                 format!(
                     ", or was the emission guide's ({}) beyond the denoiser's share",
                     r.emission_guide.join(", ")
                 )
+            } else if !r.variance_guide.is_empty() {
+                format!(
+                    ", or was sure by the variance pass ({}) beyond the denoiser's share",
+                    r.variance_guide
+                )
+            } else {
+                String::new()
             }
         );
         if !r.copied_channels.is_empty() {

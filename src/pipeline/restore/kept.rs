@@ -5,6 +5,7 @@ use std::collections::VecDeque;
 
 use rayon::prelude::*;
 
+use super::Reliable;
 use crate::filter::restore::{kept, reflect, shape, taps, EMISSION_KEEP_GAIN, KEEP_SIGMA};
 use crate::pipeline::counts::RestoreCounts;
 use crate::pipeline::window::RowWindow;
@@ -17,6 +18,8 @@ pub(super) struct Kept {
     emission: Vec<Option<usize>>,
     /// Channels the denoiser did not write: nothing kept, they stay whole.
     copied: Vec<bool>,
+    /// The energy image's statistics, where they stand in for a guide.
+    reliable: Option<Reliable>,
     /// The first of the denoiser's channels in the input rows.
     pub(super) d_at: usize,
     w: usize,
@@ -37,17 +40,19 @@ impl Kept {
     pub(super) fn new(
         emission: Vec<Option<usize>>,
         copied: Vec<bool>,
-        w: usize,
-        h: usize,
+        reliable: Option<Reliable>,
+        (w, h): (usize, usize),
         gain: f64,
     ) -> Self {
         let taps = taps(KEEP_SIGMA);
         let nch = emission.len();
+        let stats = reliable.as_ref().map_or(0, |r| r.channels.len());
         Kept {
             nch,
-            d_at: nch + emission.iter().flatten().count(),
+            d_at: nch + emission.iter().flatten().count() + stats,
             emission,
             copied,
+            reliable,
             w,
             h,
             gain,
@@ -82,49 +87,62 @@ impl Kept {
             self.kept_rows.push_stale(0.0);
         }
         let (taps, centre, gain) = (&self.taps, self.centre, self.gain);
-        let (emission, copied) = (&self.emission, &self.copied);
+        let (emission, copied, reliable) = (&self.emission, &self.copied, &self.reliable);
         let mut rows = self.kept_rows.range_mut(a, b);
         let per_row: Vec<(bool, RestoreCounts)> = rows
             .par_iter_mut()
             .enumerate()
-            .map(|(i, out)| {
-                let y = a + i;
-                let row = input.get(y);
-                let mut c = RestoreCounts::default();
-                let mut any = false;
-                for ch in 0..nch {
-                    let l = &mut out[ch * w..(ch + 1) * w];
-                    if copied[ch] {
-                        l.fill(0.0);
-                        continue;
+            .map_init(
+                || vec![false; w],
+                |sure, (i, out)| {
+                    let y = a + i;
+                    let row = input.get(y);
+                    let mut c = RestoreCounts::default();
+                    let mut any = false;
+                    if let Some(r) = reliable {
+                        r.mark(row, w, sure);
                     }
-                    let e = &row[ch * w..(ch + 1) * w];
-                    let d = &row[(d_at + ch) * w..(d_at + ch + 1) * w];
-                    let em = emission[ch].map(|k| &row[(nch + k) * w..(nch + k + 1) * w]);
-                    for x in 0..w {
-                        let ev = f64::from(e[x]);
-                        // Measured once, for the emission and the energy.
-                        let mut q_at = None;
-                        let mut q = || {
-                            *q_at.get_or_insert_with(|| {
-                                around(input, (x, y), (w, h), (d_at + ch) * w, taps)
-                            })
-                        };
-                        let own = shape(d[x]);
-                        let lit = em.map_or(0.0, |em| {
-                            let v = shape(em[x]);
-                            kept(v, own, &mut q, centre, EMISSION_KEEP_GAIN).clamp(0.0, ev.max(0.0))
-                        });
-                        l[x] = lit + kept(ev - lit, own, &mut q, centre, gain);
-                        if l[x] != 0.0 {
-                            any = true;
-                            c.count(ev, l[x] == ev);
-                            c.kept_energy += l[x].abs();
+                    for ch in 0..nch {
+                        let l = &mut out[ch * w..(ch + 1) * w];
+                        if copied[ch] {
+                            l.fill(0.0);
+                            continue;
+                        }
+                        let e = &row[ch * w..(ch + 1) * w];
+                        let d = &row[(d_at + ch) * w..(d_at + ch + 1) * w];
+                        let em = emission[ch].map(|k| &row[(nch + k) * w..(nch + k + 1) * w]);
+                        for x in 0..w {
+                            let ev = f64::from(e[x]);
+                            // Measured once, for the emission and the energy.
+                            let mut q_at = None;
+                            let mut q = || {
+                                *q_at.get_or_insert_with(|| {
+                                    around(input, (x, y), (w, h), (d_at + ch) * w, taps)
+                                })
+                            };
+                            let own = shape(d[x]);
+                            // The guide's light, or all of a pixel its samples
+                            // agree on.
+                            let guide = match em {
+                                Some(em) => Some(shape(em[x])),
+                                None if reliable.is_some() && sure[x] => Some(ev.max(0.0)),
+                                None => None,
+                            };
+                            let lit = guide.map_or(0.0, |v| {
+                                kept(v, own, &mut q, centre, EMISSION_KEEP_GAIN)
+                                    .clamp(0.0, ev.max(0.0))
+                            });
+                            l[x] = lit + kept(ev - lit, own, &mut q, centre, gain);
+                            if l[x] != 0.0 {
+                                any = true;
+                                c.count(ev, l[x] == ev);
+                                c.kept_energy += l[x].abs();
+                            }
                         }
                     }
-                }
-                (any, c)
-            })
+                    (any, c)
+                },
+            )
             .collect();
         // Summed in row order: the counts' energy is the same for any strips.
         for (any, c) in per_row {

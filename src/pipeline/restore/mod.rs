@@ -32,7 +32,8 @@ use super::{
     run_streamer, PipelineConfig, Precision, Progress, RunStats, Sink, Source, StripLayout,
 };
 use crate::error::{Error, Result};
-use crate::filter::restore::{shape, FieldRows, RestoreParams, LOOKAHEAD};
+use crate::filter::ep_box::StatsLayout;
+use crate::filter::restore::{shape, FieldRows, RestoreParams, LOOKAHEAD, RELIABLE_RSE};
 use crate::geometry::{Grid, Halo};
 
 mod kept;
@@ -66,12 +67,12 @@ impl RestoreStage {
     pub fn new(
         emission: Vec<Option<usize>>,
         copied: Vec<bool>,
-        w: usize,
-        h: usize,
+        reliable: Option<Reliable>,
+        (w, h): (usize, usize),
         params: RestoreParams,
     ) -> Self {
         let nch = emission.len();
-        let kept = Kept::new(emission, copied.clone(), w, h, params.keep_gain);
+        let kept = Kept::new(emission, copied.clone(), reliable, (w, h), params.keep_gain);
         RestoreStage {
             nch,
             copied,
@@ -343,6 +344,51 @@ impl Stage for RestoreStage {
     }
 }
 
+/// The energy image's own statistics (a variance pass and its sample
+/// count, as `ep-box` finds them), read where it has no emission guide: a
+/// pixel whose mean is sure (relative standard error under
+/// [`RELIABLE_RSE`](crate::filter::restore::RELIABLE_RSE)) is kept as a
+/// guide's light is.
+#[derive(Clone, Debug)]
+pub struct Reliable {
+    /// Where the statistics are in the energy's rows.
+    stats: StatsLayout,
+    /// The colour channels (luminance weight not 0) and their weights.
+    colour: Vec<(usize, f64)>,
+    /// The statistics' channels, read after the energy's.
+    channels: Vec<String>,
+}
+
+impl Reliable {
+    /// The statistics at `stats` (in the energy's rows, after its channels
+    /// of luminance weights `lum`), read from the channels `channels`.
+    pub fn new(stats: StatsLayout, lum: &[f64], channels: Vec<String>) -> Self {
+        let colour = (lum.iter().copied().enumerate())
+            .filter(|(_, l)| *l != 0.0)
+            .collect();
+        Reliable {
+            stats,
+            colour,
+            channels,
+        }
+    }
+
+    /// Per pixel of an energy row (`w` wide), whether its mean is sure.
+    fn mark(&self, row: &[f32], w: usize, sure: &mut [bool]) {
+        let mut weights = [0.0f64; 3];
+        for (wt, (_, l)) in weights.iter_mut().zip(&self.colour) {
+            *wt = *l;
+        }
+        for (x, s) in sure.iter_mut().enumerate().take(w) {
+            let y: f64 = (self.colour.iter())
+                .map(|&(c, l)| l * f64::from(row[c * w + x]))
+                .sum();
+            let (n, se2) = self.stats.pixel(&weights, y, |i| f64::from(row[i * w + x]));
+            *s = y > 0.0 && n >= 2.0 && se2 < (RELIABLE_RSE * y).powi(2);
+        }
+    }
+}
+
 /// The energy image's rows: its `channels`, then the emission guide of
 /// those `emission` names (`Some(k)`: the `k`-th guide channel after them).
 #[derive(Clone, Debug)]
@@ -361,6 +407,9 @@ pub struct EnergyLayout {
     pub denoised: Vec<Option<usize>>,
     /// The channels of the denoiser's rows.
     pub denoised_channels: usize,
+    /// The energy image's statistics, read after its channels where it has
+    /// no emission guide.
+    pub reliable: Option<Reliable>,
     /// Per channel, whether it is data carried beside the beauty (copied,
     /// with no denoiser's pick): out of the ledger, and its non-finite
     /// values (a sky's depth) pass as they are.
@@ -375,6 +424,7 @@ impl EnergyLayout {
             denoised: (0..channels.len()).map(Some).collect(),
             denoised_channels: channels.len(),
             data: vec![false; channels.len()],
+            reliable: None,
             channels,
             luminance,
             guide: Vec::new(),
@@ -394,7 +444,12 @@ impl EnergyLayout {
         layout.data = self.data.clone();
         let guide = (channels.iter().zip(&self.emission))
             .filter_map(|(c, e)| e.map(|_| format!("emission.{c}")));
+        let stats = self
+            .reliable
+            .iter()
+            .flat_map(|r| r.channels.iter().cloned());
         layout.aux = guide
+            .chain(stats)
             .chain(channels.iter().map(|c| format!("denoised.{c}")))
             .collect();
         layout
@@ -402,7 +457,8 @@ impl EnergyLayout {
 
     /// Channels the energy's rows hold: its own and the guide's.
     fn row_channels(&self) -> usize {
-        self.channels.len() + self.emission.iter().flatten().count()
+        let stats = self.reliable.as_ref().map_or(0, |r| r.channels.len());
+        self.channels.len() + self.emission.iter().flatten().count() + stats
     }
 }
 
@@ -434,10 +490,11 @@ pub fn restore_stream<A: Source, B: Source, K: Sink>(
         emission,
         denoised: picks,
         denoised_channels,
+        reliable,
         ..
     } = energy_layout;
     let copied: Vec<bool> = picks.iter().map(Option::is_none).collect();
-    let stage = RestoreStage::new(emission, copied, w, h, params);
+    let stage = RestoreStage::new(emission, copied, reliable, (w, h), params);
     let streamer = Streamer::of_stage(
         &layout,
         Box::new(stage),
@@ -718,6 +775,65 @@ mod tests {
     /// own value: spread through its block without the emission guide,
     /// kept in place with it (beyond the denoiser's share around), and the
     /// energy exact either way.
+    /// Without a guide, a render's variance pass tells a bulb (every sample
+    /// bright: its mean is sure) from a firefly (one bright sample: its
+    /// standard error is its mean), which the gain alone cannot.
+    #[test]
+    fn a_sure_pixel_stays_and_a_firefly_spreads() {
+        use crate::filter::ep_box::{Spp, VarianceKind};
+        let (w, h, n) = (16, 16, 16.0);
+        let (bulb, firefly) = (4 * 16 + 4, 11 * 16 + 11);
+        let mut e = vec![1.0f32; w * h];
+        e[bulb] = 101.0;
+        e[firefly] = 101.0;
+        // Sample variances: a tenth of the mean for the bulb's standard
+        // error, all of it for the firefly's (one hit among n), the rest
+        // flat.
+        let var = |i: usize, v: f32| match i {
+            i if i == bulb => (0.1 * v).powi(2) * n as f32,
+            i if i == firefly => v * v * n as f32,
+            _ => 0.01,
+        };
+        let mut rows = Vec::new();
+        for (y, row) in e.chunks(w).enumerate() {
+            rows.extend_from_slice(row);
+            rows.extend(row.iter().enumerate().map(|(x, &v)| var(y * w + x, v)));
+        }
+        let stats = StatsLayout {
+            variance: vec![1],
+            kind: VarianceKind::Sample,
+            mean_y: None,
+            spp: Spp::Fixed(n),
+        };
+        let layout = EnergyLayout {
+            reliable: Some(Reliable::new(stats, &[1.0], vec!["var.Y".into()])),
+            ..EnergyLayout::plain(vec!["Y".into()], vec![1.0])
+        };
+        let params = RestoreParams {
+            scale: 8,
+            keep_gain: KEEP_GAIN,
+        };
+        let cfg = PipelineConfig::default();
+        let (out, stats) = restore_planar(
+            rows,
+            vec![1.0f32; w * h],
+            (w, h),
+            layout,
+            params,
+            &cfg,
+            Precision::F32,
+        )
+        .unwrap();
+        let around = 1.0 / taps(KEEP_SIGMA)[taps(KEEP_SIGMA).len() / 2].powi(2);
+        assert!(out[bulb] as f64 >= 100.0 - around, "{} {around}", out[bulb]);
+        assert!(out[firefly] < 20.0, "{}", out[firefly]);
+        assert!(
+            stats.ledger[0].rel_error <= LEDGER_TOL,
+            "{:?}",
+            stats.ledger
+        );
+    }
+
     #[test]
     fn the_emission_guide_keeps_a_lamp_the_denoiser_removed() {
         let (w, h, lamp) = (16, 16, 8 * 16 + 8);
