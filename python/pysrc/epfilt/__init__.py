@@ -137,7 +137,9 @@ def restore_file(denoised, energy, output, *, scale=None, keep_gain=None, guides
     ``read`` can be restored. The keep gain follows the energy file (1 where it is
     ``filter``'s ep-gauss or ep-box output, read from its header, else 16) unless
     ``keep_gain`` says. ``guides``/``guide``: the energy file's emission guide pass
-    ("auto": found by name; "none"; ``guide=["emission=ViewLayer.Emit"]`` names it).
+    ("auto": found by name, and without one a variance pass with its sample count stands
+    in, the report's ``variance_guide``; "none": neither; ``guide=["emission=ViewLayer.Emit"]``
+    names it).
     ``part``/``layer``: the energy file's part and beauty layer; its other channels (depth,
     normals, ids, light AOVs) are carried as it has them, bit for bit, but those a
     ``channel_rule=["PATTERN=drop"]`` matches (the report's ``carried_channels``). ``compression``: the
