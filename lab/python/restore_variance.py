@@ -64,10 +64,17 @@ def main():
                 capture_output=True, check=True, text=True).stdout)
             return epfilt.read(o_path)[0][:, :, :3], rep
 
-        print("| render | OIDN's error | as written | guide | no guide, variance | kept | "
+        print("| render | reference spp | OIDN's error | as written | guide | no guide, variance | kept | "
               "no guide, gain only | kept |")
-        print("|---|---|---|---|---|---|---|---|")
+        print("|---|---|---|---|---|---|---|---|---|")
         for folder in a.renders:
+            # The references' sample counts, as the folder's manifest gives them
+            # (`render-scenes --quick` renders them at 1/16 of the samples).
+            try:
+                with open(os.path.join(folder, "manifest.json")) as f:
+                    spp = {e["file"]: e.get("spp") for e in json.load(f)["files"]}
+            except (OSError, ValueError, KeyError):
+                spp = {}
             for path in sorted(glob.glob(os.path.join(folder, "*_px_*_spp*.exr"))):
                 m = re.match(r"(.*)_px_(\d+)_spp(\d+)\.exr$", os.path.basename(path))
                 ref_path = os.path.join(folder, f"{m.group(1)}_ref_{m.group(2)}.exr")
@@ -83,7 +90,8 @@ def main():
                 var, rv = restore(e_path)
                 gain, rg = restore(e_path, "--guides", "none")
                 guide = "emission" if rw["emission_guide"] else "variance" if rw["variance_guide"] else "none"
-                print(f"| {os.path.basename(path)[:-4]} | {oidn:.4f} | {rel_mse(written, ref) / oidn:.3f} | "
+                ref_spp = spp.get(os.path.basename(ref_path), "?")
+                print(f"| {os.path.basename(path)[:-4]} | {ref_spp} | {oidn:.4f} | {rel_mse(written, ref) / oidn:.3f} | "
                       f"{guide} | {rel_mse(var, ref) / oidn:.3f} | {rv['kept_share']:.3f} | "
                       f"{rel_mse(gain, ref) / oidn:.3f} | {rg['kept_share']:.3f} |", flush=True)
                 print(f"{m.group(0)}: done", file=sys.stderr)
