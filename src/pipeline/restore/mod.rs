@@ -347,8 +347,7 @@ impl Stage for RestoreStage {
 /// The energy image's own statistics (a variance pass and its sample
 /// count, as `ep-box` finds them), read where it has no emission guide: a
 /// pixel whose mean is sure (relative standard error under
-/// [`RELIABLE_RSE`](crate::filter::restore::RELIABLE_RSE)) is kept as a
-/// guide's light is.
+/// [`RELIABLE_RSE`]) is kept as a guide's light is.
 #[derive(Clone, Debug)]
 pub struct Reliable {
     /// Where the statistics are in the energy's rows.
