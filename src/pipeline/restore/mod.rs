@@ -449,9 +449,20 @@ impl EnergyLayout {
             .flat_map(|r| r.channels.iter().cloned());
         layout.aux = guide
             .chain(stats)
-            .chain(channels.iter().map(|c| format!("denoised.{c}")))
+            .chain(
+                channels[..self.denoised_slots()]
+                    .iter()
+                    .map(|c| format!("denoised.{c}")),
+            )
             .collect();
         layout
+    }
+
+    /// Channels of the denoiser's half of a strip: one per energy channel up
+    /// to the last one restored (the data carried after it is never read
+    /// there; a render's dozens of passes would double the strips).
+    fn denoised_slots(&self) -> usize {
+        self.data.iter().rposition(|d| !d).map_or(0, |i| i + 1)
     }
 
     /// Channels the energy's rows hold: its own and the guide's.
@@ -477,10 +488,11 @@ pub fn restore_stream<A: Source, B: Source, K: Sink>(
 ) -> Result<RunStats> {
     let nch = energy_layout.channels.len();
     let na = energy_layout.row_channels();
-    if w == 0 || h == 0 || nch == 0 || na + nch > MAX_CHANNELS {
+    let slots = energy_layout.denoised_slots();
+    if w == 0 || h == 0 || nch == 0 || na + slots > MAX_CHANNELS {
         return Err(Error::Config(format!(
             "restore needs a non-empty image with at most {MAX_CHANNELS} channels in all (the energy's, its guide's and the denoiser's), not {w}x{h} with {}",
-            na + nch
+            na + slots
         )));
     }
     let params = params.check().map_err(Error::Config)?;
@@ -490,9 +502,13 @@ pub fn restore_stream<A: Source, B: Source, K: Sink>(
         denoised: picks,
         denoised_channels,
         reliable,
+        data,
         ..
     } = energy_layout;
-    let copied: Vec<bool> = picks.iter().map(Option::is_none).collect();
+    // Data is the energy's, whatever the denoiser wrote.
+    let copied: Vec<bool> = (picks.iter().zip(&data))
+        .map(|(p, &d)| p.is_none() || d)
+        .collect();
     let stage = RestoreStage::new(emission, copied, reliable, (w, h), params);
     let streamer = Streamer::of_stage(
         &layout,
@@ -502,7 +518,7 @@ pub fn restore_stream<A: Source, B: Source, K: Sink>(
     );
     // A channel the denoiser did not write has the energy's own values in
     // its place: the stage keeps them as they are.
-    let picks = (picks.iter().enumerate())
+    let picks = (picks[..slots].iter().enumerate())
         .map(|(ch, p)| p.map_or(Pick::First(ch), Pick::Second))
         .collect();
     let pair = Pair::new(energy, denoised, w, (na, denoised_channels), picks);
