@@ -168,6 +168,8 @@ pub fn one_line(e: &(dyn std::error::Error + 'static)) -> String {
 pub enum Side {
     /// A sample read from the input.
     Input,
+    /// A sample of a run's second input (`restore`'s denoiser output).
+    SecondInput,
     /// A value being written to the output.
     Output,
 }

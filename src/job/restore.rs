@@ -7,11 +7,9 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Side};
 use crate::filter::channels::{rule_for, ChannelRule, RuleOverride};
-use crate::filter::restore::{
-    RestoreParams, DEFAULT_SCALE, EMISSION_KEEP_GAIN, KEEP_GAIN, KEEP_GAIN_FILTERED,
-};
+use crate::filter::restore::{LevelSummary, RestoreParams, DEFAULT_SCALE, KEEP_GAIN_FILTERED};
 use crate::filter::Method;
 use crate::host::{cpu_seconds, default_max_memory, peak_rss_bytes};
 use crate::io::output::OutputLayout;
@@ -21,15 +19,17 @@ use crate::io::{
 };
 use crate::pipeline::counts::{MethodCounts, RestoreCounts};
 use crate::pipeline::ledger::ChannelLedger;
-use crate::pipeline::restore::{restore_planar, restore_stream, EnergyLayout, Reliable};
+use crate::pipeline::restore::{
+    restore_planar, restore_stream, EnergyLayout, RenderStats, RestoreRun,
+};
 use crate::pipeline::stage::WindowUse;
 use crate::pipeline::stream::MAX_CHANNELS;
 use crate::pipeline::{
-    fit_restore_memory, NonFinite, PipelineConfig, Precision, Progress, RunStats, StageSeconds,
-    StripLayout, PROGRAM_BYTES,
+    fit_restore_memory, NonFinite, PipelineConfig, Precision, Progress, StageSeconds, StripLayout,
+    PROGRAM_BYTES,
 };
 
-use super::array::{interleaved, planar};
+use super::array::{interleaved, planar, ArrayStats};
 use super::check_not_same_file;
 
 /// `restore`'s ledger must balance to this before rounding: every energy
@@ -48,8 +48,9 @@ pub struct RestoreJob {
     pub output: PathBuf,
     /// The side of the blocks whose energy is kept, pixels.
     pub scale: usize,
-    /// The keep gain (`None`: [`KEEP_GAIN_FILTERED`] where `energy` is
-    /// epfilt's ep-gauss or ep-box output, else [`KEEP_GAIN`]).
+    /// A keep gain beside the evidence (`None`: [`KEEP_GAIN_FILTERED`]
+    /// where `energy` is epfilt's ep-gauss or ep-box output, else none: a
+    /// render's pixels stay in place on evidence alone).
     pub keep_gain: Option<f64>,
     /// Worker threads (0: one per core).
     pub threads: usize,
@@ -124,21 +125,35 @@ pub struct RestoreReport {
     /// What the run was estimated to hold, with the strips chosen
     /// (checked against `--max-memory`; 0 where not estimated: arrays).
     pub memory_estimate_bytes: u64,
-    /// The keep gain, and what chose it: `--keep-gain`, the energy image
-    /// being epfilt's output of a method that spreads fireflies, or a
-    /// render.
-    pub keep_gain: f64,
+    /// The keep gain beside the evidence, and what chose it: `--keep-gain`,
+    /// or the energy image being epfilt's output of a method that spreads
+    /// fireflies; `null` for a render (its pixels stay in place on evidence
+    /// alone: the guide, agreeing samples, the denoiser's own peak).
+    pub keep_gain: Option<f64>,
     /// What chose [`Self::keep_gain`].
     pub keep_gain_from: String,
     /// The energy image's emission guide (its channels, or `emission` for
     /// an array), whose light beyond the denoiser's share around stays in
     /// place; empty where there is none.
     pub emission_guide: Vec<String>,
-    /// The energy image's variance pass and sample count, where it has no
-    /// emission guide: a pixel whose mean is sure (its relative standard
-    /// error under a third) stays in place as a guide's light does; empty
-    /// where none was read.
-    pub variance_guide: String,
+    /// The energy image's variance pass and sample count, where it has
+    /// them: the uncertainty of its blocks' energy, and evidence that keeps
+    /// a pixel whose samples agree (its relative standard error under one
+    /// half; not with `--guides none`); empty where none was read.
+    pub variance_pass: String,
+    /// What measured the render's uncertainty: `variance pass`, or
+    /// `residual` (its difference from the denoiser's output, where it has
+    /// no variance pass).
+    pub uncertainty_from: String,
+    /// Per level of blocks, from `--scale` up to the whole image: its block
+    /// side (pixels), the blocks (over channels), those whose target lies
+    /// nearer the render's energy than the denoiser's, and those whose
+    /// target is the render's energy exactly.
+    pub levels: Vec<LevelSummary>,
+    /// The block sides at which every block's energy is the render's (the
+    /// whole image's always; its side is the image's, rounded up to a
+    /// power of two times `--scale`).
+    pub exact_scales: Vec<usize>,
     /// The energy image's channels the denoiser did not write (an alpha),
     /// kept as the energy image has them.
     pub copied_channels: Vec<String>,
@@ -158,9 +173,12 @@ pub struct RestoreReport {
     pub digest: String,
     /// Seconds of the run.
     pub seconds: f64,
-    /// Seconds each stage was busy: reading and decoding both inputs,
-    /// restoring, encoding and writing.
+    /// Seconds each stage of the second pass was busy: reading and
+    /// decoding both inputs, restoring, encoding and writing.
     pub stage_seconds: StageSeconds,
+    /// Seconds of the first pass (both inputs read and checked, the
+    /// blocks' sums taken).
+    pub survey_seconds: f64,
     /// CPU seconds (user + system) the run used, where the platform tells
     /// it.
     pub cpu_seconds: Option<f64>,
@@ -183,10 +201,11 @@ impl RestoreReport {
             Vec<String>,
             Vec<String>,
         ),
-        stats: &RunStats,
+        restored: &RestoreRun,
         threads: usize,
         cpu_start: Option<f64>,
     ) -> Self {
+        let stats = &restored.run;
         let counts = match stats.method {
             MethodCounts::Restore(c) => c,
             _ => RestoreCounts::default(),
@@ -205,7 +224,13 @@ impl RestoreReport {
             keep_gain_from,
             emission_guide,
             copied_channels,
-            variance_guide: String::new(),
+            variance_pass: String::new(),
+            uncertainty_from: "residual".into(),
+            exact_scales: (restored.levels.iter())
+                .filter(|l| l.exact == l.blocks)
+                .map(|l| l.side)
+                .collect(),
+            levels: restored.levels.clone(),
             carried_channels: Vec::new(),
             ledger: stats.ledger.clone(),
             kept_share: if mass > 0.0 {
@@ -216,8 +241,9 @@ impl RestoreReport {
             counts,
             nonfinite_zeroed: stats.nonfinite_zeroed.iter().sum(),
             digest: format!("{:016x}", stats.digest),
-            seconds: stats.seconds,
+            seconds: stats.seconds + restored.survey_seconds,
             stage_seconds: stats.stages,
+            survey_seconds: restored.survey_seconds,
             cpu_seconds: cpu_seconds().zip(cpu_start).map(|(c, s)| c - s),
             threads,
             peak_rss_bytes: peak_rss_bytes(),
@@ -334,8 +360,8 @@ fn match_channels(
     Some(picks)
 }
 
-fn check_ledger(stats: &RunStats) -> Result<()> {
-    for l in &stats.ledger {
+fn check_ledger(restored: &RestoreRun) -> Result<()> {
+    for l in &restored.run.ledger {
         if !(l.rel_error <= RESTORE_LEDGER_LIMIT) {
             return Err(Error::Ledger {
                 channel: l.channel.clone(),
@@ -360,7 +386,7 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
     // Both checked before anything is read.
     let asked = RestoreParams {
         scale: job.scale,
-        keep_gain: job.keep_gain.unwrap_or(KEEP_GAIN),
+        keep_gain: job.keep_gain,
     }
     .check()
     .map_err(Error::Config)?;
@@ -385,13 +411,16 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
         _ => ExrInput::open(&job.denoised, None)?,
     };
     let (keep_gain, keep_gain_from) = match job.keep_gain {
-        Some(g) => (g, "--keep-gain".to_string()),
+        Some(g) => (Some(g), "--keep-gain".to_string()),
         None => match crate::io::provenance::filtered_by(&energy) {
             Some(m) if Method::parse(&m).is_ok_and(Method::spreads_noise) => (
-                KEEP_GAIN_FILTERED,
+                Some(KEEP_GAIN_FILTERED),
                 format!("the energy image is epfilt's {m} output"),
             ),
-            _ => (KEEP_GAIN, "the energy image is a render".to_string()),
+            _ => (
+                None,
+                "the energy image is a render: evidence alone".to_string(),
+            ),
         },
     };
     let params = RestoreParams { scale, keep_gain };
@@ -399,8 +428,9 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
     let (size, channels) = (energy.size(), energy.channels());
     let beauty = channels.len() - carried.len();
     let picks = pair(job, &energy, &denoised, beauty)?;
+    let gain = keep_gain.map_or("none".to_string(), |g| g.to_string());
     let provenance = format!(
-        "restore scale={scale} keep_gain={keep_gain} denoised={}",
+        "restore scale={scale} keep_gain={gain} denoised={}",
         job.denoised
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
@@ -419,14 +449,13 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
         .filter(|(_, p)| p.is_none())
         .map(|(c, _)| c.clone())
         .collect();
-    // A render's own statistics stand in for a guide it lacks (with a gain
-    // of one, everything over the denoiser is kept already).
-    let mut variance_guide = String::new();
-    if energy_layout.guide.is_empty() && !job.guides.none() && keep_gain > EMISSION_KEEP_GAIN {
-        if let Some((r, from)) = statistics(&job.energy, &mut energy, &energy_layout.luminance)? {
-            energy_layout.reliable = Some(r);
-            variance_guide = from;
-        }
+    // A render's own statistics measure its uncertainty, and keep in place
+    // the pixels whose samples agree (not with `--guides none`).
+    let mut variance_pass = String::new();
+    if let Some((r, from)) = statistics(&job.energy, &mut energy, &energy_layout.luminance)? {
+        energy_layout.stats = Some(r);
+        energy_layout.sure_keeps = !job.guides.none();
+        variance_pass = from;
     }
     energy_layout.denoised = picks;
     energy_layout.denoised_channels = denoised.channels().len();
@@ -451,8 +480,7 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
     let mut output = layout.create(&job.output, false, 1, &channels, &settings)?;
     let cpu_start = cpu_seconds();
     let stats = restore_stream(
-        energy.source(),
-        denoised.source(),
+        || Ok((energy.source(), denoised.source())),
         &mut output,
         size,
         energy_layout,
@@ -461,8 +489,11 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
         progress,
     )
     .map_err(|e| match e {
-        Error::StreamValue { reason, .. } => Error::Value {
-            path: job.energy.clone(),
+        Error::StreamValue { side, reason } => Error::Value {
+            path: match side {
+                Side::SecondInput => job.denoised.clone(),
+                Side::Input | Side::Output => job.energy.clone(),
+            },
             reason,
         },
         e => e,
@@ -486,7 +517,12 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
         memory_estimate_bytes: memory,
         // The carried channels are copies, out of the ledger.
         ledger: report.ledger[..beauty].to_vec(),
-        variance_guide,
+        uncertainty_from: if variance_pass.is_empty() {
+            report.uncertainty_from.clone()
+        } else {
+            "variance pass".into()
+        },
+        variance_pass,
         carried_channels: carried,
         ..report
     })
@@ -541,7 +577,7 @@ fn statistics(
     path: &std::path::Path,
     energy: &mut ExrInput,
     lum: &[f64],
-) -> Result<Option<(Reliable, String)>> {
+) -> Result<Option<(RenderStats, String)>> {
     let Ok(found) = find_stats(path, energy.header(), &StatsRequest::default()) else {
         return Ok(None);
     };
@@ -557,7 +593,7 @@ fn statistics(
         found.variance.join(", "),
         found.spp_from()
     );
-    Ok(Some((Reliable::new(stats, lum, channels), from)))
+    Ok(Some((RenderStats::new(stats, lum, channels), from)))
 }
 
 /// Carry the energy image's channels beside the beauty into the output:
@@ -604,88 +640,214 @@ fn fit_memory(
     };
     let (w, h) = (strips.grid.in_w, strips.grid.in_h);
     Err(Error::Config(format!(
-        "{}: restoring this {w}x{h} image at --scale {scale} needs at least about {} MiB (the rows of {} rows of blocks and one strip), more than the {} MiB allowed (--max-memory); a smaller --scale holds fewer rows",
+        "{}: restoring this {w}x{h} image at --scale {scale} needs at least about {} MiB (the rows of {} rows of blocks, one strip and every block's target), more than the {} MiB allowed (--max-memory); a smaller --scale holds fewer rows",
         job.energy.display(),
         floor.div_ceil(1 << 20),
-        crate::filter::restore::LOOKAHEAD + 3,
+        crate::filter::restore::LOOKAHEAD + 2,
         limit >> 20
     )))
 }
 
-/// Restore on arrays: `denoised` and `energy` interleaved `[y][x][channel]`
-/// of `channels` (names, for the ledger), `w x h`; `emission`, the energy
-/// image's emission guide of the same shape, where the renderer wrote one.
-/// Returns the result in the same layout and the report.
-#[allow(clippy::too_many_arguments)]
+/// Images in memory to restore: interleaved `[y][x][channel]`, `w x h`.
+#[derive(Clone, Copy, Debug)]
+pub struct RestoreArrays<'a> {
+    /// The denoiser's output, `channels` per pixel.
+    pub denoised: &'a [f32],
+    /// The image whose energy is right, the same shape.
+    pub energy: &'a [f32],
+    /// The energy image's emission guide, the same shape, where the
+    /// renderer wrote one.
+    pub emission: Option<&'a [f32]>,
+    /// The energy image's variance pass (of single samples, as `filter`'s
+    /// `variance=`): one value per pixel (of the luminance) or one per
+    /// colour channel, with its sample counts.
+    pub stats: Option<ArrayStats<'a>>,
+    /// One sample count for the image, where `stats` has none per pixel.
+    pub spp: Option<f64>,
+    /// Width and height.
+    pub size: (usize, usize),
+    /// Channel names (for the ledger; `R G B` and `R G B A` weigh the
+    /// luminance as a file's Rec. 709 would).
+    pub channels: &'a [String],
+}
+
+/// Restore on arrays ([`RestoreArrays`]) at `scale` with `keep_gain`
+/// (`None`: evidence alone, as a render takes). Returns the result in the
+/// energy's layout and the report.
 pub fn restore_array(
-    denoised: &[f32],
-    energy: &[f32],
-    emission: Option<&[f32]>,
-    (w, h): (usize, usize),
-    channels: &[String],
+    input: &RestoreArrays<'_>,
     (scale, keep_gain): (usize, Option<f64>),
     threads: usize,
     nonfinite: NonFinite,
     cancel: Option<Arc<AtomicBool>>,
 ) -> Result<(Vec<f32>, RestoreReport)> {
-    let (keep_gain, keep_gain_from) = match keep_gain {
-        Some(g) => (g, "keep_gain"),
-        None => (
-            KEEP_GAIN,
-            "the energy image is a render (arrays say nothing else)",
-        ),
+    let keep_gain_from = match keep_gain {
+        Some(_) => "keep_gain",
+        None => "the energy image is a render: evidence alone (arrays say nothing else)",
     };
     let params = RestoreParams { scale, keep_gain }
         .check()
         .map_err(Error::Config)?;
+    let (w, h) = input.size;
+    let channels = input.channels;
     let nch = channels.len();
-    let n = w.checked_mul(h).and_then(|p| p.checked_mul(nch));
+    let pixels = w.checked_mul(h);
+    let n = pixels.and_then(|p| p.checked_mul(nch));
     let lens = [
-        Some(denoised.len()),
-        Some(energy.len()),
-        emission.map(<[f32]>::len),
+        Some(input.denoised.len()),
+        Some(input.energy.len()),
+        input.emission.map(<[f32]>::len),
     ];
     if lens.iter().flatten().any(|&l| Some(l) != n) {
         return Err(Error::Config(format!(
             "denoised has {} values, energy {} and emission {}; a {w}x{h} image of {nch} channels has {}",
-            denoised.len(),
-            energy.len(),
-            emission.map_or("none".into(), |e| e.len().to_string()),
+            input.denoised.len(),
+            input.energy.len(),
+            input.emission.map_or("none".into(), |e| e.len().to_string()),
             n.map_or("too many".into(), |n| n.to_string())
         )));
     }
-    let mut layout = EnergyLayout::plain(channels.to_vec(), vec![0.0; nch]);
-    let mut rows = planar(energy, w, nch);
-    if let Some(em) = emission {
-        // Each row: the energy's channels, then the guide's.
-        let em = planar(em, w, nch);
-        rows = (rows.chunks(nch * w).zip(em.chunks(nch * w)))
-            .flat_map(|(e, g)| e.iter().chain(g).copied())
-            .collect();
+    let luminance = array_luminance(channels);
+    let mut layout = EnergyLayout::plain(channels.to_vec(), luminance.clone());
+    // Each row: the energy's channels, then the guide's, then the
+    // statistics'.
+    let mut parts = vec![(planar(input.energy, w, nch), nch)];
+    if let Some(em) = input.emission {
+        parts.push((planar(em, w, nch), nch));
         layout.emission = (0..nch).map(Some).collect();
         layout.guide = vec!["emission".to_string()];
     }
+    let mut variance_pass = String::new();
+    if let Some(st) = input.stats {
+        let at = parts.iter().map(|p| p.1).sum();
+        let (stats, rows, from) = array_stats(&st, input.spp, (w, h), &luminance, at)?;
+        parts.extend(rows);
+        layout.stats = Some(stats);
+        variance_pass = from;
+    } else if input.spp.is_some() {
+        return Err(Error::Config("spp= without variance=".into()));
+    }
+    let rows = (0..h)
+        .flat_map(|y| {
+            (parts.iter()).flat_map(move |(p, c)| p[y * c * w..(y + 1) * c * w].iter().copied())
+        })
+        .collect();
     let cfg = config(threads, nonfinite, cancel);
     let cpu_start = cpu_seconds();
     let guide = layout.guide.clone();
-    let (out, stats) = restore_planar(
+    let (out, restored) = restore_planar(
         rows,
-        planar(denoised, w, nch),
+        planar(input.denoised, w, nch),
         (w, h),
         layout,
         params,
         &cfg,
         Precision::F32,
     )?;
-    check_ledger(&stats)?;
+    check_ledger(&restored)?;
     let inter = interleaved(&out, w, nch);
     let report = RestoreReport::of(
         ("<array>", "<array>", "<array>"),
         (w, h),
         (params, keep_gain_from.to_string(), guide, Vec::new()),
-        &stats,
+        &restored,
         cfg.workers(),
         cpu_start,
     );
-    Ok((inter, report))
+    let uncertainty_from = if variance_pass.is_empty() {
+        report.uncertainty_from.clone()
+    } else {
+        "variance pass".to_string()
+    };
+    Ok((
+        inter,
+        RestoreReport {
+            variance_pass,
+            uncertainty_from,
+            ..report
+        },
+    ))
+}
+
+/// An array's luminance weights: Rec. 709 for `R G B` (and an alpha after
+/// them), one for a lone `Y`, else none (its statistics then weigh each
+/// channel alike).
+fn array_luminance(channels: &[String]) -> Vec<f64> {
+    let rgb = crate::io::luminance_weights(None);
+    let names: Vec<&str> = channels.iter().map(String::as_str).collect();
+    match names.as_slice() {
+        ["R", "G", "B"] => rgb.to_vec(),
+        ["R", "G", "B", "A"] => vec![rgb[0], rgb[1], rgb[2], 0.0],
+        ["Y"] | ["Y", "A"] => {
+            let mut l = vec![0.0; names.len()];
+            l[0] = 1.0;
+            l
+        }
+        _ => vec![1.0 / names.len().max(1) as f64; names.len()],
+    }
+}
+
+/// An array's variance pass and sample counts as the energy rows' channels
+/// from `at` on: the statistics, their planar rows (with their channel
+/// counts) and the words for the report. Sizes are checked first.
+#[allow(clippy::type_complexity)]
+fn array_stats(
+    st: &ArrayStats<'_>,
+    spp: Option<f64>,
+    (w, h): (usize, usize),
+    luminance: &[f64],
+    at: usize,
+) -> Result<(RenderStats, Vec<(Vec<f32>, usize)>, String)> {
+    use crate::filter::ep_box::{Spp, StatsLayout, VarianceKind};
+    let nv = st.variance_channels;
+    let colour = luminance.iter().filter(|&&l| l > 0.0).count();
+    if !(nv == 1 || (nv == 3 && colour == 3)) || st.variance.len() != w * h * nv {
+        return Err(Error::Config(format!(
+            "variance holds {} values for {w}x{h} pixels: give one per pixel (of the luminance) or, for an R G B image, three",
+            st.variance.len()
+        )));
+    }
+    let mut rows = vec![(planar(st.variance, w, nv), nv)];
+    let mut names: Vec<String> = match nv {
+        1 => vec!["variance".into()],
+        _ => ["R", "G", "B"]
+            .iter()
+            .map(|c| format!("variance.{c}"))
+            .collect(),
+    };
+    let samples = match (st.spp, spp) {
+        (Some(counts), _) if counts.len() == w * h => {
+            rows.push((counts.to_vec(), 1));
+            names.push("spp".into());
+            Spp::Channel(at + nv)
+        }
+        (Some(counts), _) => {
+            return Err(Error::Config(format!(
+                "spp holds {} counts for {w}x{h} pixels",
+                counts.len()
+            )))
+        }
+        (None, Some(n)) if n >= 1.0 && n.is_finite() => Spp::Fixed(n),
+        (None, Some(n)) => return Err(Error::Config(format!("spp must be at least 1, not {n}"))),
+        (None, None) => {
+            return Err(Error::Config(
+                "the variance needs the sample count: spp= (an array or a number)".into(),
+            ))
+        }
+    };
+    let from = format!(
+        "{}; samples: {}",
+        names[..nv].join(", "),
+        match samples {
+            Spp::Fixed(n) => format!("spp={n}"),
+            _ => "spp (per pixel)".into(),
+        }
+    );
+    let layout = StatsLayout {
+        variance: (at..at + nv).collect(),
+        kind: VarianceKind::Sample,
+        mean_y: None,
+        spp: samples,
+    };
+    Ok((RenderStats::new(layout, luminance, names), rows, from))
 }

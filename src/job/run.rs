@@ -53,7 +53,7 @@ impl FilterPlan<'_> {
         let (stats, band) = self.stream(&mut output, progress).map_err(|e| match e {
             Error::StreamValue { side, reason } => Error::Value {
                 path: match side {
-                    Side::Input => self.job.input.clone(),
+                    Side::Input | Side::SecondInput => self.job.input.clone(),
                     Side::Output => self.job.output.clone(),
                 },
                 reason,

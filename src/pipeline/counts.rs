@@ -78,12 +78,19 @@ pub struct ExcessCounts {
 /// What `epfilt restore` counted, in pixel channels.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct RestoreCounts {
-    /// Where one pixel's energy was more than
-    /// [`crate::filter::restore::KEEP_GAIN`] times what the denoiser put
-    /// around it: the excess was kept in place.
+    /// Pixel channels some of whose energy was kept in place (beyond what
+    /// the denoiser put around them).
     pub kept: u64,
-    /// Where the denoiser had (next to) nothing around a pixel with
-    /// energy: all of it kept in place.
+    /// Of them: on the emission guide's word.
+    pub kept_guide: u64,
+    /// On the render's variance (its samples agree).
+    pub kept_variance: u64,
+    /// Where the denoiser kept a peak.
+    pub kept_denoiser: u64,
+    /// By the keep gain (epfilt's output, or `--keep-gain`).
+    pub kept_gain: u64,
+    /// Where the denoiser had nothing around a pixel with energy that
+    /// something vouched for: all of it kept in place.
     pub unshaped: u64,
     /// Negative energy values, kept in place.
     pub negative: u64,
@@ -92,6 +99,10 @@ pub struct RestoreCounts {
     pub unshaped_blocks: u64,
     /// The energy kept in place (absolute, summed over channels).
     pub kept_energy: f64,
+    /// The denoiser's non-finite values, zeroed (`--nonfinite zero`).
+    pub denoised_nonfinite: u64,
+    /// The denoiser's negative values (no light to shape with: taken as 0).
+    pub denoised_negative: u64,
 }
 
 impl RestoreCounts {
@@ -111,10 +122,16 @@ impl RestoreCounts {
 impl std::ops::AddAssign for RestoreCounts {
     fn add_assign(&mut self, o: RestoreCounts) {
         self.kept += o.kept;
+        self.kept_guide += o.kept_guide;
+        self.kept_variance += o.kept_variance;
+        self.kept_denoiser += o.kept_denoiser;
+        self.kept_gain += o.kept_gain;
         self.unshaped += o.unshaped;
         self.negative += o.negative;
         self.unshaped_blocks += o.unshaped_blocks;
         self.kept_energy += o.kept_energy;
+        self.denoised_nonfinite += o.denoised_nonfinite;
+        self.denoised_negative += o.denoised_negative;
     }
 }
 

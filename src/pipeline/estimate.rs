@@ -261,15 +261,25 @@ fn fit(
     Err(floor)
 }
 
+/// Bytes per block and restored channel of `epfilt restore`'s targets:
+/// the first pass's sums (three f64) and the field's target, shape and
+/// carrier choice (four), held through the second pass; and, one channel
+/// at a time, what the targets' solve holds beside them (each child's
+/// estimate, box, weight and state, the denoiser's split, its variance
+/// per unit and the bias, about eleven words).
+const RESTORE_BLOCK_BYTES: u64 = 7 * 8;
+const RESTORE_SOLVE_BYTES: u64 = 11 * 8;
+
 /// Bytes `epfilt restore` (blocks of `scale` pixels) holds at most for
 /// `job` (its strips: the energy's channels, its guide's and the
 /// denoiser's), from its sizes alone, beside [`PROGRAM_BYTES`]: the input
-/// rows of the rows of blocks it holds ([`LOOKAHEAD`] ahead, the carrier's
-/// row below them, the row being finished, and the kept part's reach), the
-/// part kept beside them and as many final rows (the last strip finishes
-/// them all), the strips in flight, and each
+/// rows of the rows of blocks it holds ([`LOOKAHEAD`] ahead of the row
+/// after the one being finished, that row and the kept part's reach), the
+/// part kept beside them and the final rows, the strips in flight, each
 /// input's blocks read ahead (`block_bytes`: a decoded block of the energy
-/// image and of the denoiser's output).
+/// image and of the denoiser's output), and every block's targets (the
+/// one part that grows with the height: a few words per `scale x scale`
+/// pixels).
 ///
 /// [`LOOKAHEAD`]: crate::filter::restore::LOOKAHEAD
 pub fn restore_bytes(
@@ -283,7 +293,7 @@ pub fn restore_bytes(
     let nch = job.channels.len() as u64;
     let strip = job.strip_rows(cfg) as u64;
     let reach = (taps(KEEP_SIGMA).len() / 2) as u64;
-    let held = reach + (LOOKAHEAD as u64 + 3).saturating_mul(scale as u64) + strip;
+    let held = reach + (LOOKAHEAD as u64 + 2).saturating_mul(scale as u64) + strip;
     let in_row = w.saturating_mul(job.strip_channels() as u64 * 4);
     let out_row = w.saturating_mul(nch * 8);
     // The input rows and the part kept of each; the final rows in f64,
@@ -312,8 +322,11 @@ pub fn restore_bytes(
             .saturating_add(read_ahead(in_row, h, b, n));
     }
     let largest = block_bytes[0].max(block_bytes[1]);
+    let grid = (w.div_ceil(scale as u64)).saturating_mul(h.div_ceil(scale) as u64);
+    let targets = grid.saturating_mul(nch * RESTORE_BLOCK_BYTES + RESTORE_SOLVE_BYTES);
     rows.saturating_add(strips)
         .saturating_add(blocks)
+        .saturating_add(targets)
         .saturating_add(around(job, cfg, (largest, windows), w, strip))
 }
 
@@ -701,13 +714,15 @@ mod tests {
         let cfg = PipelineConfig::default();
         let at = |scale| restore_bytes(&job, scale, &cfg, [block, block]);
         // Each scale's rows of blocks: the input rows (six f32 channels)
-        // and the part kept (f64, three channels) of LOOKAHEAD + 3 rows of
+        // and the part kept (f64, three channels) of LOOKAHEAD + 2 rows of
         // blocks, 16384 wide; the final rows (f64, and f32 three times) of
-        // one row of blocks.
+        // one row of blocks. Less each scale's targets: a few words per
+        // block and channel (16384 blocks of 32, 1024 of 128).
         let held = 16384 * (6 * 4 + 3 * 8);
         let finished = 16384 * (3 * 8 + 3 * 3 * 4);
-        let step = ((crate::filter::restore::LOOKAHEAD as u64 + 3) * held + finished) * 96;
-        assert_eq!(at(128) - at(32), step);
+        let step = ((crate::filter::restore::LOOKAHEAD as u64 + 2) * held + finished) * 96;
+        let per_block = 3 * RESTORE_BLOCK_BYTES + RESTORE_SOLVE_BYTES;
+        assert_eq!(at(128) + (16384 - 1024) * per_block - at(32), step);
         // Under a budget between the floor and the default: shorter strips.
         let full = at(32);
         let floor = fit_restore_memory(&job, 32, &cfg, [block, block], 0).unwrap_err();

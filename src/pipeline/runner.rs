@@ -192,7 +192,7 @@ pub fn run_streamer<S: Source, K: Sink>(
 /// error ends them); returns its busy seconds. A source that decodes does so
 /// ahead, on a thread of its own ([`Source::decoder`]), while this one hands
 /// the strips over.
-fn read_strips<S: Source>(
+pub(crate) fn read_strips<S: Source>(
     mut source: S,
     pool: &rayon::ThreadPool,
     ahead: ReadAhead<'_>,

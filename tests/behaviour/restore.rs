@@ -165,9 +165,27 @@ fn restore_refuses_nan_energy_unless_told_and_keeps_what_the_denoiser_lacks() {
         _ => denoised(x, y, c),
     });
     let before = std::fs::read(&e).unwrap();
+    // The first non-finite value in row order is the denoiser's: refused,
+    // naming its file and pixel, before anything is written.
     let o = restore(&d, &e, &out, &[]);
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success() && err.contains("e.exr"), "{err}");
+    assert!(
+        !o.status.success() && err.contains("d.exr") && err.contains("(0, 0)"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    // The energy's alone: that file named.
+    let clean = dir.path().join("clean.exr");
+    write(&clean, (16, 12), |x, y, c| match (x, y) {
+        (x, _) if x < 8 => 0.0,
+        _ => denoised(x, y, c),
+    });
+    let o = restore(&clean, &e, &out, &[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("e.exr") && err.contains("(3, 4)"),
+        "{err}"
+    );
     assert!(!out.exists());
     let rep = dir.path().join("r.json");
     let o = restore(
@@ -179,6 +197,8 @@ fn restore_refuses_nan_energy_unless_told_and_keeps_what_the_denoiser_lacks() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let r = read_json(&rep);
     assert_eq!(r["nonfinite_zeroed"], 1);
+    // The denoiser's NaN pixel: its three channels.
+    assert_eq!(r["counts"]["denoised_nonfinite"], 3);
     assert!(r["counts"]["unshaped"].as_u64().unwrap() > 0, "{r}");
     for l in r["ledger"].as_array().unwrap() {
         assert!(l["rel_error"].as_f64().unwrap() <= LEDGER_TOL, "{l}");
@@ -206,10 +226,10 @@ fn restore_keeps_more_in_place_over_epfilts_output_and_takes_keep_gain() {
         "-q",
     ]);
     let run = |energy: &std::path::Path, extra: &[&str]| restore_report(&d, energy, &out, extra);
-    // A render: the render's gain; epfilt's ep-gauss output, read from its
-    // header: the lower one; the user's, whatever the energy image.
+    // A render: no gain, evidence alone; epfilt's ep-gauss output, read
+    // from its header: a gain of one; the user's, whatever the image.
     let r = run(&e, &[]);
-    assert_eq!(r["keep_gain"], 16.0);
+    assert!(r["keep_gain"].is_null(), "{r}");
     assert!(
         r["keep_gain_from"].as_str().unwrap().contains("render"),
         "{r}"
@@ -350,7 +370,7 @@ fn restore_keeps_a_lamp_its_samples_agree_on_without_a_guide() {
     let lamp = |energy: &std::path::Path, extra: &[&str]| {
         let r = restore_report(&d, energy, &out, extra);
         let v = crate::exr_io::read_planar(&out).at(LAMP.0, LAMP.1, 0);
-        (r["variance_guide"].as_str().unwrap().to_string(), v)
+        (r["variance_pass"].as_str().unwrap().to_string(), v)
     };
     let (from, kept) = lamp(&sure, &[]);
     assert!(
@@ -360,8 +380,10 @@ fn restore_keeps_a_lamp_its_samples_agree_on_without_a_guide() {
     assert!(kept > KEPT_ABOVE, "{kept}");
     let (_, spread) = lamp(&firefly, &[]);
     assert!(spread < SPREAD_BELOW, "{spread}");
+    // --guides none: the pass still measures the render's uncertainty, but
+    // keeps nothing in place.
     let (from, spread) = lamp(&sure, &["--guides", "none"]);
-    assert!(from.is_empty() && spread < SPREAD_BELOW, "{from} {spread}");
+    assert!(!from.is_empty() && spread < SPREAD_BELOW, "{from} {spread}");
 }
 
 #[test]

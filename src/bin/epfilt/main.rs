@@ -205,32 +205,38 @@ fn restore(a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
             r.nonfinite_zeroed
         ));
     }
+    if r.counts.denoised_nonfinite > 0 {
+        warn(&format!(
+            "{}: {} non-finite values taken as zero",
+            a.denoised.display(),
+            r.counts.denoised_nonfinite
+        ));
+    }
     if !a.quiet {
         let worst = r.ledger.iter().map(|l| l.rel_error).fold(0.0, f64::max);
+        let finest = r.levels.first().copied().unwrap_or_default();
+        let c = &r.counts;
         eprintln!(
-            "{}: {}x{} restored in blocks of {} in {:.2} s; energy exact to {worst:.1e}; {:.2}% of it kept in place where it was over {} times what the denoiser put around it ({}; {} pixel channels, {} empty){}",
+            "{}: {}x{} restored in {:.2} s; energy exact to {worst:.1e} over {}; of the {}-pixel blocks' targets {:.0}% follow the render, the rest the denoiser (uncertainty: {}); {:.2}% of the energy kept in place on evidence ({} guide, {} agreeing samples, {} the denoiser's peaks{})",
             r.output,
             r.width,
             r.height,
-            r.scale,
             r.seconds,
-            100.0 * r.kept_share,
-            r.keep_gain,
-            r.keep_gain_from,
-            r.counts.kept,
-            r.counts.unshaped,
-            if !r.emission_guide.is_empty() {
-                format!(
-                    ", or was the emission guide's ({}) beyond the denoiser's share",
-                    r.emission_guide.join(", ")
-                )
-            } else if !r.variance_guide.is_empty() {
-                format!(
-                    ", or was sure by the variance pass ({}) beyond the denoiser's share",
-                    r.variance_guide
-                )
+            exact_scales(&r),
+            r.scale,
+            100.0 * finest.following_render as f64 / finest.blocks.max(1) as f64,
+            if r.variance_pass.is_empty() {
+                "its residual against the denoiser".to_string()
             } else {
-                String::new()
+                format!("the variance pass, {}", r.variance_pass)
+            },
+            100.0 * r.kept_share,
+            c.kept_guide,
+            c.kept_variance,
+            c.kept_denoiser,
+            match r.keep_gain {
+                Some(g) => format!(", {} over {g} times the denoiser's share: {}", c.kept_gain, r.keep_gain_from),
+                None => String::new(),
             }
         );
         if !r.copied_channels.is_empty() {
@@ -252,6 +258,21 @@ fn restore(a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
         }
     }
     Ok(())
+}
+
+/// Where a restore's energy is exact, in words: the whole image, and the
+/// block sides below it where every block is the render's.
+fn exact_scales(r: &epfilt::job::restore::RestoreReport) -> String {
+    let top = r.levels.last().map_or(0, |l| l.side);
+    let below: Vec<String> = (r.exact_scales.iter())
+        .filter(|&&s| s != top)
+        .map(|s| format!("{s}-pixel blocks"))
+        .collect();
+    if below.is_empty() {
+        "the whole image".into()
+    } else {
+        format!("the whole image and its {}", below.join(", "))
+    }
 }
 
 fn preview(a: PreviewArgs) -> Result<(), Exit> {

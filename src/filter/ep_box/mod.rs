@@ -557,10 +557,7 @@ impl StatsLayout {
     /// variance channels).
     #[inline]
     pub fn pixel(&self, lum: &[f64], y: f64, ch: impl Fn(usize) -> f64) -> (f64, f64) {
-        let n = match self.spp {
-            Spp::Fixed(n) => n,
-            Spp::Channel(i) => ch(i),
-        };
+        let n = self.samples(&ch);
         let nv = self.variance.len().min(3);
         let mut var = [0.0f64; 3];
         for (v, &i) in var.iter_mut().zip(&self.variance) {
@@ -572,6 +569,14 @@ impl StatsLayout {
         };
         let weights = if nv == 3 { &lum[..3] } else { &lum[..1] };
         (n, se2(self.kind, &var[..nv], weights, mean_y, n))
+    }
+
+    /// A pixel's sample count, whose channel `c` holds `ch(c)`.
+    pub fn samples(&self, ch: impl Fn(usize) -> f64) -> f64 {
+        match self.spp {
+            Spp::Fixed(n) => n,
+            Spp::Channel(i) => ch(i),
+        }
     }
 }
 

@@ -1,25 +1,47 @@
-//! The part of the energy kept in place (`l`), row by row: step 1 of the
-//! stage ([`super::RestoreStage`]).
+//! The part of the energy kept in place (`l`), row by row, on evidence
+//! ([`crate::filter::restore`]'s first part): both passes compute it the
+//! same way.
 
 use std::collections::VecDeque;
 
 use rayon::prelude::*;
 
-use super::Reliable;
-use crate::filter::restore::{kept, reflect, shape, taps, EMISSION_KEEP_GAIN, KEEP_SIGMA};
+use super::RenderStats;
+use crate::filter::restore::{
+    denoiser_peak, kept, reflect, shape, taps, EMISSION_KEEP_GAIN, KEEP_SIGMA,
+};
 use crate::pipeline::counts::RestoreCounts;
 use crate::pipeline::window::RowWindow;
+
+/// Where the input rows hold what the kept part reads.
+#[derive(Clone, Debug)]
+pub(super) struct KeptLayout {
+    /// Per energy channel, its emission guide's place among the channels
+    /// after the energy's, if the energy image has one.
+    pub emission: Vec<Option<usize>>,
+    /// Channels the denoiser did not write: nothing kept, they stay whole.
+    pub copied: Vec<bool>,
+    /// The energy image's statistics (its variance pass), if read.
+    pub stats: Option<RenderStats>,
+    /// Whether agreeing samples count as evidence (`--guides none`: not).
+    pub sure_keeps: bool,
+    /// A gain that keeps beside the evidence (epfilt's output, the user's).
+    pub gain: Option<f64>,
+}
+
+impl KeptLayout {
+    /// The first of the denoiser's channels in the input rows: after the
+    /// energy's, its guide's and its statistics'.
+    pub fn d_at(&self) -> usize {
+        let stats = self.stats.as_ref().map_or(0, |r| r.channels.len());
+        self.emission.len() + self.emission.iter().flatten().count() + stats
+    }
+}
 
 /// The shape's blur and the part of the energy kept in place, row by row.
 pub(super) struct Kept {
     nch: usize,
-    /// Where each channel's emission guide is in the input rows (after the
-    /// energy's channels), if the energy image has one.
-    emission: Vec<Option<usize>>,
-    /// Channels the denoiser did not write: nothing kept, they stay whole.
-    copied: Vec<bool>,
-    /// The energy image's statistics, where they stand in for a guide.
-    reliable: Option<Reliable>,
+    layout: KeptLayout,
     /// The first of the denoiser's channels in the input rows.
     pub(super) d_at: usize,
     w: usize,
@@ -27,8 +49,6 @@ pub(super) struct Kept {
     taps: Vec<f64>,
     /// The 2-D kernel's centre weight.
     centre: f64,
-    /// The keep gain.
-    gain: f64,
     /// Per row whose column is in: `l`, `[channel][x]`, and whether the row
     /// has any (most have none).
     pub(super) kept_rows: RowWindow<f64>,
@@ -36,26 +56,27 @@ pub(super) struct Kept {
     pub(super) counts: RestoreCounts,
 }
 
+/// Why a pixel's light stays in place, most specific first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Evidence {
+    /// Its emission guide.
+    Guide,
+    /// Its samples agree.
+    Variance,
+    /// The denoiser kept a peak there.
+    Denoiser,
+}
+
 impl Kept {
-    pub(super) fn new(
-        emission: Vec<Option<usize>>,
-        copied: Vec<bool>,
-        reliable: Option<Reliable>,
-        (w, h): (usize, usize),
-        gain: f64,
-    ) -> Self {
+    pub(super) fn new(layout: KeptLayout, (w, h): (usize, usize)) -> Self {
         let taps = taps(KEEP_SIGMA);
-        let nch = emission.len();
-        let stats = reliable.as_ref().map_or(0, |r| r.channels.len());
+        let nch = layout.emission.len();
         Kept {
             nch,
-            d_at: nch + emission.iter().flatten().count() + stats,
-            emission,
-            copied,
-            reliable,
+            d_at: layout.d_at(),
+            layout,
             w,
             h,
-            gain,
             centre: taps[taps.len() / 2].powi(2),
             taps,
             kept_rows: RowWindow::new(nch * w),
@@ -77,7 +98,7 @@ impl Kept {
         rows_in: usize,
         all_in: bool,
     ) -> (usize, usize) {
-        let (nch, w, h, r, d_at) = (self.nch, self.w, self.h, self.r(), self.d_at);
+        let (h, r) = (self.h, self.r());
         let a = self.kept_rows.end();
         let b = if all_in { h } else { rows_in.saturating_sub(r) };
         if b <= a {
@@ -86,62 +107,23 @@ impl Kept {
         for _ in a..b {
             self.kept_rows.push_stale(0.0);
         }
-        let (taps, centre, gain) = (&self.taps, self.centre, self.gain);
-        let (emission, copied, reliable) = (&self.emission, &self.copied, &self.reliable);
+        let this = Rows {
+            nch: self.nch,
+            w: self.w,
+            h,
+            d_at: self.d_at,
+            layout: &self.layout,
+            taps: &self.taps,
+            centre: self.centre,
+            input,
+        };
         let mut rows = self.kept_rows.range_mut(a, b);
         let per_row: Vec<(bool, RestoreCounts)> = rows
             .par_iter_mut()
             .enumerate()
             .map_init(
-                || vec![false; w],
-                |sure, (i, out)| {
-                    let y = a + i;
-                    let row = input.get(y);
-                    let mut c = RestoreCounts::default();
-                    let mut any = false;
-                    if let Some(r) = reliable {
-                        r.mark(row, w, sure);
-                    }
-                    for ch in 0..nch {
-                        let l = &mut out[ch * w..(ch + 1) * w];
-                        if copied[ch] {
-                            l.fill(0.0);
-                            continue;
-                        }
-                        let e = &row[ch * w..(ch + 1) * w];
-                        let d = &row[(d_at + ch) * w..(d_at + ch + 1) * w];
-                        let em = emission[ch].map(|k| &row[(nch + k) * w..(nch + k + 1) * w]);
-                        for x in 0..w {
-                            let ev = f64::from(e[x]);
-                            // Measured once, for the emission and the energy.
-                            let mut q_at = None;
-                            let mut q = || {
-                                *q_at.get_or_insert_with(|| {
-                                    around(input, (x, y), (w, h), (d_at + ch) * w, taps)
-                                })
-                            };
-                            let own = shape(d[x]);
-                            // The guide's light, or all of a pixel its samples
-                            // agree on.
-                            let guide = match em {
-                                Some(em) => Some(shape(em[x])),
-                                None if reliable.is_some() && sure[x] => Some(ev.max(0.0)),
-                                None => None,
-                            };
-                            let lit = guide.map_or(0.0, |v| {
-                                kept(v, own, &mut q, centre, EMISSION_KEEP_GAIN)
-                                    .clamp(0.0, ev.max(0.0))
-                            });
-                            l[x] = lit + kept(ev - lit, own, &mut q, centre, gain);
-                            if l[x] != 0.0 {
-                                any = true;
-                                c.count(ev, l[x] == ev);
-                                c.kept_energy += l[x].abs();
-                            }
-                        }
-                    }
-                    (any, c)
-                },
+                || vec![false; self.w],
+                |sure, (i, out)| this.row(a + i, out, sure),
             )
             .collect();
         // Summed in row order: the counts' energy is the same for any strips.
@@ -155,6 +137,11 @@ impl Kept {
     /// The first input row still read: `r` above the next row of `l`.
     pub(super) fn input_needed(&self) -> usize {
         self.kept_rows.end().saturating_sub(self.r())
+    }
+
+    /// Rows whose `l` is known.
+    pub(super) fn end(&self) -> usize {
+        self.kept_rows.end()
     }
 
     /// `l` of row `y` (`None`: all zero).
@@ -172,10 +159,161 @@ impl Kept {
     }
 }
 
+/// What a row's `l` reads, shared by the row tasks.
+struct Rows<'a> {
+    nch: usize,
+    w: usize,
+    h: usize,
+    d_at: usize,
+    layout: &'a KeptLayout,
+    taps: &'a [f64],
+    centre: f64,
+    input: &'a RowWindow<f32>,
+}
+
+impl Rows<'_> {
+    /// Row `y`'s `l` into `out` (`[channel][x]`): whether it has any, and
+    /// what it counted. `sure` is scratch.
+    fn row(&self, y: usize, out: &mut [f64], sure: &mut [bool]) -> (bool, RestoreCounts) {
+        let (nch, w, d_at) = (self.nch, self.w, self.d_at);
+        let row = self.input.get(y);
+        let mut c = RestoreCounts::default();
+        let mut any = false;
+        let reliable = self
+            .layout
+            .stats
+            .as_ref()
+            .filter(|_| self.layout.sure_keeps);
+        if let Some(r) = reliable {
+            r.mark(row, w, sure);
+        }
+        for ch in 0..nch {
+            let l = &mut out[ch * w..(ch + 1) * w];
+            if self.layout.copied[ch] {
+                l.fill(0.0);
+                continue;
+            }
+            let e = &row[ch * w..(ch + 1) * w];
+            let d = &row[(d_at + ch) * w..(d_at + ch + 1) * w];
+            let em = self.layout.emission[ch].map(|k| &row[(nch + k) * w..(nch + k + 1) * w]);
+            for x in 0..w {
+                let ev = f64::from(e[x]);
+                let own = shape(d[x]);
+                l[x] = if ev <= 0.0 {
+                    // A render's rare negative samples: nothing to scale a
+                    // shape by.
+                    ev
+                } else if ev <= own {
+                    // Within the denoiser's own value: never kept (the
+                    // common case, settled without looking around).
+                    0.0
+                } else {
+                    self.pixel(
+                        ev,
+                        own,
+                        (x, y),
+                        ch,
+                        (em, sure[x] && reliable.is_some()),
+                        &mut c,
+                    )
+                };
+                if l[x] != 0.0 {
+                    any = true;
+                    c.count(ev, l[x] == ev);
+                    c.kept_energy += l[x].abs();
+                }
+            }
+        }
+        (any, c)
+    }
+
+    /// `l` of a pixel of energy `ev` over the denoiser's own `own`: the
+    /// light beyond the denoiser's share around that the evidence speaks
+    /// for (the guide's light, or all of it where its samples agree or the
+    /// denoiser kept a peak), and what the gain keeps of the rest.
+    fn pixel(
+        &self,
+        ev: f64,
+        own: f64,
+        (x, y): (usize, usize),
+        ch: usize,
+        (em, sure): (Option<&[f32]>, bool),
+        c: &mut RestoreCounts,
+    ) -> f64 {
+        let offset = (self.d_at + ch) * self.w;
+        // Measured once, for every rule that reads it.
+        let mut q_at = None;
+        let mut q = || {
+            *q_at.get_or_insert_with(|| {
+                around(self.input, (x, y), (self.w, self.h), offset, self.taps)
+            })
+        };
+        let evidence = if em.is_some_and(|em| shape(em[x]) > 0.0) {
+            Some(Evidence::Guide)
+        } else if sure {
+            Some(Evidence::Variance)
+        } else if denoiser_peak(own, ring(self.input, (x, y), (self.w, self.h), offset)) {
+            Some(Evidence::Denoiser)
+        } else {
+            None
+        };
+        // The denoiser has no light anywhere around (its kernel's reach):
+        // nothing to shape this energy with, so it stays where it is.
+        if evidence.is_none() && own == 0.0 && q() <= 0.0 {
+            return ev;
+        }
+        let lit = match evidence {
+            // The guide's light alone (the rest of the pixel is reflected
+            // light, which no guide vouches for).
+            Some(Evidence::Guide) => {
+                let g = em.map_or(0.0, |em| shape(em[x]));
+                kept(g, own, &mut q, self.centre, EMISSION_KEEP_GAIN).clamp(0.0, ev)
+            }
+            Some(_) => kept(ev, own, &mut q, self.centre, EMISSION_KEEP_GAIN).clamp(0.0, ev),
+            None => 0.0,
+        };
+        let gained = self.layout.gain.map_or(0.0, |g| {
+            kept(ev - lit, own, &mut q, self.centre, g).max(0.0)
+        });
+        if lit > 0.0 {
+            match evidence {
+                Some(Evidence::Guide) => c.kept_guide += 1,
+                Some(Evidence::Variance) => c.kept_variance += 1,
+                Some(Evidence::Denoiser) => c.kept_denoiser += 1,
+                None => {}
+            }
+        }
+        if gained > 0.0 {
+            c.kept_gain += 1;
+        }
+        lit + gained
+    }
+}
+
+/// The mean of the denoiser's shape over the eight pixels around `at`
+/// (reflected at the edges), from the input rows' channel at `offset`.
+fn ring(
+    input: &RowWindow<f32>,
+    (x, y): (usize, usize),
+    (w, h): (usize, usize),
+    offset: usize,
+) -> f64 {
+    let mut sum = 0.0;
+    for dy in -1..=1isize {
+        let d = &input.get(reflect(y as isize + dy, h))[offset..offset + w];
+        for dx in -1..=1isize {
+            if dx != 0 || dy != 0 {
+                sum += shape(d[reflect(x as isize + dx, w)]);
+            }
+        }
+    }
+    sum / 8.0
+}
+
 /// The denoiser's energy around pixel `at` of a `size` image: its shape
 /// under the 2-D kernel `taps x taps`, reflected at the edges, from the
 /// input rows' channel at `offset`. Only for the few pixels whose energy
-/// exceeds the gain on the denoiser's own value.
+/// exceeds the denoiser's own value and that something vouches for.
 fn around(
     input: &RowWindow<f32>,
     (x, y): (usize, usize),
