@@ -261,25 +261,19 @@ fn fit(
     Err(floor)
 }
 
-/// Bytes per block and restored channel of `epfilt restore`'s targets:
-/// the first pass's sums (three f64) and the field's target, shape and
-/// carrier choice (four), held through the second pass; and, one channel
-/// at a time, what the targets' solve holds beside them (each child's
-/// estimate, box, weight and state, the denoiser's split, its variance
-/// per unit and the bias, about eleven words).
+/// Bytes per block and channel of `epfilt restore`'s targets: the first
+/// pass's sums (three f64) and the field's target, shape and choice (four);
+/// and, one channel at a time, the targets' solve (about eleven words).
 const RESTORE_BLOCK_BYTES: u64 = 7 * 8;
 const RESTORE_SOLVE_BYTES: u64 = 11 * 8;
 
 /// Bytes `epfilt restore` (blocks of `scale` pixels) holds at most for
-/// `job` (its strips: the energy's channels, its guide's and the
-/// denoiser's), from its sizes alone, beside [`PROGRAM_BYTES`]: the input
-/// rows of the rows of blocks it holds ([`LOOKAHEAD`] ahead of the row
-/// after the one being finished, that row and the kept part's reach), the
-/// part kept beside them and the final rows, the strips in flight, each
-/// input's blocks read ahead (`block_bytes`: a decoded block of the energy
-/// image and of the denoiser's output), and every block's targets (the
-/// one part that grows with the height: a few words per `scale x scale`
-/// pixels).
+/// `job` (its strips), from its sizes alone, beside [`PROGRAM_BYTES`]: the
+/// input rows of the rows of blocks held ([`LOOKAHEAD`] ahead of the one
+/// after the row being finished, and the kept part's reach), the part kept
+/// and the final rows, the strips in flight, each input's blocks read ahead
+/// (`block_bytes`), and every block's targets (the one part that grows with
+/// the height: a few words per `scale x scale` pixels).
 ///
 /// [`LOOKAHEAD`]: crate::filter::restore::LOOKAHEAD
 pub fn restore_bytes(
@@ -296,11 +290,9 @@ pub fn restore_bytes(
     let held = reach + (LOOKAHEAD as u64 + 2).saturating_mul(scale as u64) + strip;
     let in_row = w.saturating_mul(job.strip_channels() as u64 * 4);
     let out_row = w.saturating_mul(nch * 8);
-    // The input rows and the part kept of each; the final rows in f64,
-    // the rows of blocks a strip finishes (once the input is all in, one
-    // row of blocks a call), and in f32 on their way out (two such
-    // batches queued for the writer and one it writes). Each field's
-    // tents across (four words a column).
+    // The input rows and the part kept of each; the final rows in f64 of
+    // a row of blocks and a strip, and in f32 on their way out (two queued
+    // for the writer, one written). Each field's tents (four words a column).
     let finished = (scale as u64).saturating_add(strip);
     let rows = (in_row.saturating_add(out_row))
         .saturating_mul(held)
@@ -324,10 +316,10 @@ pub fn restore_bytes(
     let largest = block_bytes[0].max(block_bytes[1]);
     let grid = (w.div_ceil(scale as u64)).saturating_mul(h.div_ceil(scale) as u64);
     let targets = grid.saturating_mul(nch * RESTORE_BLOCK_BYTES + RESTORE_SOLVE_BYTES);
-    rows.saturating_add(strips)
-        .saturating_add(blocks)
-        .saturating_add(targets)
-        .saturating_add(around(job, cfg, (largest, windows), w, strip))
+    let ahead = around(job, cfg, (largest, windows), w, strip);
+    [strips, blocks, targets, ahead]
+        .iter()
+        .fold(rows, |a, &b| a.saturating_add(b))
 }
 
 /// How `cfg` runs `epfilt restore` of `job` within `limit` bytes
@@ -713,11 +705,10 @@ mod tests {
         let block = 16384 * 6 * 4 * 16;
         let cfg = PipelineConfig::default();
         let at = |scale| restore_bytes(&job, scale, &cfg, [block, block]);
-        // Each scale's rows of blocks: the input rows (six f32 channels)
-        // and the part kept (f64, three channels) of LOOKAHEAD + 2 rows of
-        // blocks, 16384 wide; the final rows (f64, and f32 three times) of
-        // one row of blocks. Less each scale's targets: a few words per
-        // block and channel (16384 blocks of 32, 1024 of 128).
+        // Each scale's rows of blocks: the input rows (six f32 channels) and
+        // the part kept (f64, three channels) of LOOKAHEAD + 2 rows of blocks;
+        // the final rows (f64, and f32 three times) of one row of blocks.
+        // Less its targets (16384 blocks of 32, 1024 of 128).
         let held = 16384 * (6 * 4 + 3 * 8);
         let finished = 16384 * (3 * 8 + 3 * 3 * 4);
         let step = ((crate::filter::restore::LOOKAHEAD as u64 + 2) * held + finished) * 96;
