@@ -211,6 +211,54 @@ fn channel_names(names: Option<Vec<String>>, c: usize) -> PyResult<Vec<String>> 
     }
 }
 
+/// A variance pass given as arrays: the variance of single samples,
+/// (h, w) of the luminance or (h, w, k) per colour channel, and its values
+/// per pixel; the sample counts per pixel (an (h, w) array); one count for
+/// the image (a number).
+type Statistics = (Option<(Vec<f32>, usize)>, Option<Vec<f32>>, Option<f64>);
+
+/// `variance=` and `spp=` checked against an image of (h, w) pixels.
+fn statistics_of(
+    variance: Option<&Bound<'_, PyAny>>,
+    spp: Option<&Bound<'_, PyAny>>,
+    (h, w): (usize, usize),
+) -> PyResult<Statistics> {
+    let (mut counts, mut fixed) = (None, None);
+    if let Some(n) = spp {
+        if n.hasattr("shape")? {
+            let (v, shape, _) = samples_of(n, "spp")?;
+            if shape != [h, w] {
+                return Err(config_error(format!(
+                    "spp has shape {shape:?}, not ({h}, {w})"
+                )));
+            }
+            counts = Some(v);
+        } else {
+            fixed = Some(n.extract::<f64>()?);
+        }
+    }
+    let variance = match variance {
+        Some(v) => {
+            let (v, shape, _) = samples_of(v, "variance")?;
+            let nv = match shape[..] {
+                [vh, vw] if (vh, vw) == (h, w) => 1,
+                [vh, vw, k] if (vh, vw) == (h, w) => k,
+                _ => {
+                    return Err(config_error(format!(
+                        "variance has shape {shape:?}, not ({h}, {w}) or ({h}, {w}, 3)"
+                    )))
+                }
+            };
+            Some((v, nv))
+        }
+        None if counts.is_some() || fixed.is_some() => {
+            return Err(config_error("spp= without variance="))
+        }
+        None => None,
+    };
+    Ok((variance, counts, fixed))
+}
+
 /// Filter samples held in a numpy array; see the stub.
 #[pyfunction]
 #[pyo3(signature = (samples, supersample=None, method=None, *, channels=None, variance=None, spp=None, **settings))]
@@ -239,38 +287,11 @@ fn filter<'py>(
     if let Some(s) = supersample {
         pairs.push(("supersample".into(), Setting::Value(s.to_string())));
     }
-    // One count for the image is the `spp` setting; an array, per pixel.
-    let mut spp_counts = None;
-    if let Some(n) = spp {
-        if n.hasattr("shape")? {
-            let (v, shape, _) = samples_of(n, "spp")?;
-            if shape != [h, w] {
-                return Err(config_error(format!(
-                    "spp has shape {shape:?}, not ({h}, {w})"
-                )));
-            }
-            spp_counts = Some(v);
-        } else {
-            pairs.push(("spp".into(), Setting::Value(n.str()?.to_string())));
-        }
+    let (variance, spp_counts, spp_fixed) = statistics_of(variance, spp, (h, w))?;
+    // One count for the image is the `spp` setting.
+    if let Some(n) = spp_fixed {
+        pairs.push(("spp".into(), Setting::Value(n.to_string())));
     }
-    let variance = match variance {
-        Some(v) => {
-            let (v, shape, _) = samples_of(v, "variance")?;
-            let nv = match shape[..] {
-                [vh, vw] if (vh, vw) == (h, w) => 1,
-                [vh, vw, k] if (vh, vw) == (h, w) => k,
-                _ => {
-                    return Err(config_error(format!(
-                        "variance has shape {shape:?}, not ({h}, {w}) or ({h}, {w}, 3)"
-                    )))
-                }
-            };
-            Some((v, nv))
-        }
-        None if spp_counts.is_some() => return Err(config_error("spp= without variance=")),
-        None => None,
-    };
     let (opts, given) = FilterOptions::from_settings(pairs).map_err(to_py)?;
     let out = detached(py, |cancel| {
         let input = ArrayInput {
@@ -453,7 +474,7 @@ fn read<'py>(
 /// (Python's keyword arguments, one each.)
 #[allow(clippy::too_many_arguments)]
 #[pyfunction]
-#[pyo3(signature = (denoised, energy, scale=None, *, keep_gain=None, emission=None, channels=None, threads=0, nonfinite="error"))]
+#[pyo3(signature = (denoised, energy, scale=None, *, keep_gain=None, emission=None, variance=None, spp=None, channels=None, threads=0, nonfinite="error"))]
 fn restore<'py>(
     py: Python<'py>,
     denoised: &Bound<'py, PyAny>,
@@ -461,6 +482,8 @@ fn restore<'py>(
     scale: Option<usize>,
     keep_gain: Option<f64>,
     emission: Option<&Bound<'py, PyAny>>,
+    variance: Option<&Bound<'py, PyAny>>,
+    spp: Option<&Bound<'py, PyAny>>,
     channels: Option<Vec<String>>,
     threads: usize,
     nonfinite: &str,
@@ -489,21 +512,25 @@ fn restore<'py>(
             "arrays must have shape (height, width, channels), not {eshape:?}"
         )));
     };
+    let (variance, spp_counts, spp_fixed) = statistics_of(variance, spp, (h, w))?;
     let channels = channel_names(channels, c)?;
     let nonfinite = epfilt::pipeline::NonFinite::parse(nonfinite).map_err(to_py)?;
     let scale = scale.unwrap_or(epfilt::filter::restore::DEFAULT_SCALE);
     let (out, report) = detached(py, |cancel| {
-        epfilt::job::restore::restore_array(
-            &d,
-            &e,
-            em.as_deref(),
-            (w, h),
-            &channels,
-            (scale, keep_gain),
-            threads,
-            nonfinite,
-            Some(cancel),
-        )
+        let input = epfilt::job::restore::RestoreArrays {
+            denoised: &d,
+            energy: &e,
+            emission: em.as_deref(),
+            stats: variance.as_ref().map(|(v, nv)| ArrayStats {
+                variance: v,
+                variance_channels: *nv,
+                spp: spp_counts.as_deref(),
+            }),
+            spp: spp_fixed,
+            size: (w, h),
+            channels: &channels,
+        };
+        epfilt::job::restore::restore_array(&input, (scale, keep_gain), threads, nonfinite, Some(cancel))
     })?;
     let image = PyArray1::from_vec(py, out).reshape([h, w, c])?.into_any();
     Ok((image, to_dict(py, &report)?))

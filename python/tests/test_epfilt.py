@@ -363,12 +363,44 @@ def test_restore_puts_the_energy_back_at_any_thread_count():
         epfilt.restore(denoised, bad)
     _, rep = epfilt.restore(denoised, bad, nonfinite="zero")
     assert rep["nonfinite_zeroed"] == 1
-    # Arrays say nothing of how they were made: the render's gain unless told.
-    assert report["keep_gain"] == 16.0
+    # Arrays say nothing of how they were made: a render's evidence alone
+    # unless told; the firefly is not kept in place.
+    assert report["keep_gain"] is None
+    assert out[5, 9, 0] < 5.0
     _, low = epfilt.restore(denoised, energy, 8, keep_gain=2.0)
     assert low["keep_gain"] == 2.0 and low["kept_share"] >= report["kept_share"]
     with pytest.raises(epfilt.ConfigError):
         epfilt.restore(denoised, energy, keep_gain=0.5)
+
+
+def test_restore_reads_a_variance_pass_as_restore_file_does(variance_scene):
+    render, names = epfilt.read(variance_scene, ["variance.R", "variance.G", "variance.B"])
+    energy, variance = render[:, :, :3].copy(), render[:, :, 3:].copy()
+    spp = epfilt.info(variance_scene)["parts"][0]["attributes"]["spp"][1]
+    denoised = np.full_like(energy, energy.mean())
+    out, report = epfilt.restore(denoised, energy, 16, variance=variance, spp=float(spp))
+    assert report["uncertainty_from"] == "variance pass" and "variance.R" in report["variance_pass"]
+    assert report["levels"][-1]["exact"] == report["levels"][-1]["blocks"]
+    _, residual = epfilt.restore(denoised, energy, 16)
+    assert residual["uncertainty_from"] == "residual" and residual["digest"] != report["digest"]
+    for l in report["ledger"]:
+        assert l["rel_error"] <= LEDGER_TOL
+    with pytest.raises(epfilt.ConfigError):
+        epfilt.restore(denoised, energy, variance=variance)  # no spp
+    with pytest.raises(epfilt.ConfigError):
+        epfilt.restore(denoised, energy, spp=16)  # no variance
+
+
+def test_denoise_file_runs_oidn_with_the_renders_passes(tmp_path):
+    pytest.importorskip("pyoidn", reason="denoise_file needs pip install epfilt[oidn]")
+    render = tmp_path / "r.exr"
+    run("synth", "-q", "--spp", "16", "--size", "64x48", "-o", render)
+    out = tmp_path / "out.exr"
+    report = epfilt.denoise_file(render, out, denoised=tmp_path / "oidn.pfm", scale=16)
+    assert out.exists() and (tmp_path / "oidn.pfm").exists()
+    assert report["oidn"]["passes"] == []  # a synth render has no albedo or normal pass
+    for l in report["ledger"]:
+        assert l["rel_error"] <= LEDGER_TOL
 
 
 def test_restore_keeps_the_emission_guides_lamp_in_place():
@@ -409,8 +441,9 @@ def test_restore_file_is_the_cli_streamed(variance_scene, tmp_path):
                                channel_rule=["variance.*=drop"])
     assert bare["carried_channels"] == [] and bare["digest"] != report["digest"]
     assert epfilt.compare(tmp_path / "bare.exr", out)["identical"]
+    # Two passes over the 80 rows.
     if seen:
-        assert seen[-1] == (80, 80) and all(t == 80 for _, t in seen)
+        assert seen[-1] == (160, 160) and all(t == 160 for _, t in seen)
     # Asked for, an absent guide is an error, and no output is left.
     with pytest.raises(epfilt.Error, match="emission guide"):
         epfilt.restore_file(denoised, variance_scene, tmp_path / "none.exr", guides="emission")

@@ -187,6 +187,19 @@ impl FoundGuides {
         v
     }
 
+    /// Each kind found with its channels, by the kind's name.
+    pub fn by_kind(&self) -> std::collections::BTreeMap<String, Vec<String>> {
+        let kinds = [
+            (GuideKind::Emission, self.emission.clone()),
+            (GuideKind::Albedo, self.albedo.clone().map(Vec::from)),
+            (GuideKind::Normal, self.normal.clone().map(Vec::from)),
+            (GuideKind::Depth, self.depth.clone().map(|d| vec![d])),
+        ];
+        (kinds.into_iter())
+            .filter_map(|(k, ch)| ch.map(|ch| (k.name().to_string(), ch)))
+            .collect()
+    }
+
     /// What was found, in words (`emission (emission.R, ...), depth (Z)`;
     /// `none` for nothing).
     pub fn describe(&self) -> String {

@@ -68,6 +68,9 @@ pub struct PartInfo {
     /// The guide passes found by name ([`crate::io::guides`]): `none`, or
     /// each kind with its channels.
     pub guides: String,
+    /// The same by kind (`emission`, `albedo`, `normal`, `depth`): its
+    /// channels, in R G B or X Y Z order.
+    pub guide_channels: BTreeMap<String, Vec<String>>,
     /// Luminance weights of R, G, B.
     pub luminance: [f64; 3],
     /// Whether they come from the file's chromaticities (else Rec. 709).
@@ -193,7 +196,7 @@ fn describe_part(
         }
     }
     let ch = h.shared_attributes.chromaticities.as_ref();
-    let (verdict, guides, emission) = verdict_and_guides(path, h, &filtered);
+    let (verdict, (guides, guide_channels), emission) = verdict_and_guides(path, h, &filtered);
     // The emission guide's channels are carried as they are (filter's plan).
     for (name, rule) in carried.iter_mut() {
         if emission.contains(name) {
@@ -225,6 +228,7 @@ fn describe_part(
         note,
         verdict,
         guides,
+        guide_channels,
         luminance: luminance_weights(ch),
         luminance_from_chromaticities: ch.is_some(),
         pixel_aspect: h.shared_attributes.pixel_aspect,
@@ -239,7 +243,7 @@ fn verdict_and_guides(
     path: &Path,
     h: &exr::meta::header::Header,
     filtered: &[String],
-) -> (String, String, Vec<String>) {
+) -> (String, (String, BTreeMap<String, Vec<String>>), Vec<String>) {
     let words = |e: crate::Error| {
         let e = e.to_string();
         let prefix = format!("{}: ", path.display());
@@ -256,8 +260,8 @@ fn verdict_and_guides(
         .collect();
     let (guides, emission) =
         match super::find_guides(path, h, &beauty, &super::GuideRequest::default()) {
-            Ok(g) => (g.describe(), g.emission.unwrap_or_default()),
-            Err(e) => (format!("none ({})", words(e)), Vec::new()),
+            Ok(g) => ((g.describe(), g.by_kind()), g.emission.unwrap_or_default()),
+            Err(e) => ((format!("none ({})", words(e)), BTreeMap::new()), Vec::new()),
         };
     (verdict, guides, emission)
 }
@@ -299,6 +303,7 @@ fn describe_rgbe(path: &Path) -> crate::Result<FileInfo> {
         note: None,
         verdict: verdict_and_guides(path, input.header(), &[]).0,
         guides: "none".into(),
+        guide_channels: BTreeMap::new(),
         luminance: lw,
         luminance_from_chromaticities: r.primaries.is_some(),
         pixel_aspect: 1.0,
@@ -351,6 +356,7 @@ fn describe_pfm(path: &Path) -> crate::Result<FileInfo> {
         note: None,
         verdict: verdict_and_guides(path, input.header(), &[]).0,
         guides: "none".into(),
+        guide_channels: BTreeMap::new(),
         luminance: luminance_weights(None),
         luminance_from_chromaticities: false,
         pixel_aspect: 1.0,

@@ -23,6 +23,7 @@ __all__ = [
     "filter_file",
     "restore",
     "restore_file",
+    "denoise_file",
     "info",
     "compare",
     "read",
@@ -95,37 +96,98 @@ def filter_file(input, output, *, progress=None, **settings):
     return _epfilt.filter_file(str(input), str(output), progress=progress, **settings)
 
 
-def restore(denoised, energy, scale=None, *, keep_gain=None, emission=None, channels=None,
-            threads=0, nonfinite="error"):
-    """A denoiser's output with ``energy``'s energy put back, and the report.
+def restore(denoised, energy, scale=None, *, keep_gain=None, emission=None, variance=None,
+            spp=None, channels=None, threads=0, nonfinite="error"):
+    """A denoiser's output with ``energy``'s energy put back, closer to the truth than
+    either, and the report.
 
     ``denoised`` is any denoiser's output (OIDN, OptiX, ...) and ``energy`` the image
     whose energy is right (the render, or ``filter``'s output of it), both float32 or
-    float16 arrays of the same shape (height, width, channels). Where one pixel of
-    ``energy`` holds far more than the denoiser put around it (a lamp it dimmed), the
-    excess stays in place (report ``counts``, ``kept_share``): over ``keep_gain`` times,
-    16 by default (a render: its fireflies, which the denoiser rightly removed, stay
-    below it); pass ``keep_gain=1`` where ``energy`` is ``filter``'s ep-gauss or ep-box
-    output (its fireflies already spread: bulbs and lamps come back). The rest is carried by the
-    denoiser's picture and a smooth field, so that every block of ``scale`` x ``scale``
-    pixels (default 32) and the total (report ``ledger``) hold ``energy``'s energy exactly:
-    what a block lacks goes back mostly to its brightest features, a surplus comes off in proportion.
-    ``emission``: the render's directly visible emission pass (same shape as ``energy``,
-    e.g. ``epfilt.read(path, ["emission.R", "emission.G", "emission.B"])``'s last three
-    channels), where the renderer wrote one: the light of lamps and bulbs beyond the
-    denoiser's share around stays in place whatever ``keep_gain`` says (report
-    ``emission_guide``). ``nonfinite``: "error" refuses NaN or infinite energy values, "zero" counts them as
-    zero. The result is float32.
+    float16 arrays of the same shape (height, width, channels). The render is an unbiased
+    but noisy estimate of every region's energy, the denoiser's a steady but biased one:
+    each block of ``scale`` x ``scale`` pixels (default 32), and each block of twice,
+    four times ... that side up to the whole image, gets the render's energy where the
+    render is sure and the denoiser's where it is not, children summing to their parent
+    and the whole to the render's total exactly (report ``levels``, ``ledger``). The
+    render's uncertainty comes from ``variance`` (the sample variance of single samples:
+    (H, W) of the luminance or (H, W, 3) per channel, with ``spp``, a number or an (H, W)
+    array of counts, as ``filter`` takes them) or, without it, from its residual against
+    the denoiser. A bright pixel the denoiser dimmed stays in place only on evidence
+    (report ``counts``, ``kept_share``): ``emission``, the render's directly visible
+    emission pass (same shape as ``energy``); agreeing samples (``variance``); or a peak
+    the denoiser kept. A firefly, which has none, joins its region's energy. Pass
+    ``keep_gain=1`` where ``energy`` is ``filter``'s ep-gauss or ep-box output (its
+    fireflies already spread: what still exceeds the denoiser is a feature).
+    ``nonfinite``: "error" refuses NaN or infinite values (of either image, naming the
+    pixel), "zero" counts them as zero. The result is float32.
 
-    With Intel OIDN (``pip install epfilt[oidn]``: pyoidn, colour only)::
+    With Intel OIDN as its users run it, with the render's albedo and normal
+    (``pip install epfilt[oidn]``; ``denoise_file`` does all of this for a file)::
 
         import numpy as np, pyoidn, epfilt
-        render, names = epfilt.read("render.exr")              # R, G, B
-        denoised = pyoidn.denoise(render, hdr=True, quality="high")
+        render, _ = epfilt.read("render.exr")                      # R, G, B
+        aux, _ = epfilt.read("render.exr", ["albedo.R", "albedo.G", "albedo.B", "N.X", "N.Y", "N.Z"])
+        albedo, normal = aux[:, :, 3:6].copy(), aux[:, :, 6:9].copy()
+        denoised = pyoidn.denoise(render, albedo, normal, hdr=True, quality="high")
         restored, report = epfilt.restore(np.asarray(denoised, np.float32), render)
     """
     return _epfilt.restore(denoised, energy, scale, keep_gain=keep_gain, emission=emission,
-                           channels=channels, threads=threads, nonfinite=nonfinite)
+                           variance=variance, spp=spp, channels=channels, threads=threads,
+                           nonfinite=nonfinite)
+
+
+def denoise_file(render, output, *, denoised=None, quality="high", **restore_settings):
+    """Intel OIDN, run as its users run it, then ``restore_file``: ``render`` (an EXR that
+    fits in memory) denoised with its albedo and normal passes where it has them (found by
+    the names renderers give them, as ``info`` reports them in ``guide_channels``), and
+    the result written to ``output`` with the render's energy put back. ``denoised``: a
+    path to keep OIDN's own output at (else a temporary file). ``quality``: OIDN's.
+    ``restore_settings`` go to ``restore_file`` (``scale``, ``threads``, ...). Returns
+    ``restore_file``'s report with ``oidn`` added: the passes OIDN was given.
+
+    Needs ``pyoidn`` (``pip install epfilt[oidn]``): ImportError names it otherwise.
+    """
+    import os
+    import tempfile
+
+    import numpy as np
+
+    try:
+        import pyoidn
+    except ImportError as e:  # a message that says what to install
+        raise ImportError("denoise_file runs Intel OIDN: pip install epfilt[oidn] (pyoidn)") from e
+    part = info(render)["parts"][0]
+    guides = part.get("guide_channels", {})
+    aux = [guides[k] for k in ("albedo", "normal") if len(guides.get(k, ())) == 3]
+    samples, names = read(render, [c for k in aux for c in k])
+    colour = [i for i, n in enumerate(names[: len(names) - 3 * len(aux)])
+              if n.rsplit(".", 1)[-1] in ("R", "G", "B")]
+    if len(colour) != 3:
+        raise ConfigError(f"{render}: OIDN denoises R, G, B; the beauty has {names}")
+    rgb = np.ascontiguousarray(samples[:, :, colour])
+    passes = {}
+    base = len(names) - 3 * len(aux)
+    for k, kind in enumerate(k for k in ("albedo", "normal") if len(guides.get(k, ())) == 3):
+        passes[kind] = np.ascontiguousarray(samples[:, :, base + 3 * k:base + 3 * k + 3])
+    result = np.asarray(pyoidn.denoise(rgb, passes.get("albedo"), passes.get("normal"),
+                                       hdr=True, quality=quality), np.float32)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = denoised or os.path.join(tmp, "denoised.pfm")
+        _write_pfm(path, result)
+        report = restore_file(path, render, output, **restore_settings)
+    report["oidn"] = {"passes": sorted(passes), "quality": quality}
+    return report
+
+
+def _write_pfm(path, rgb):
+    """A portable float map (OIDN's own format, which every command reads): bottom row
+    first, little-endian."""
+    import numpy as np
+
+    h, w, _ = rgb.shape
+    with open(path, "wb") as f:
+        f.write(f"PF\n{w} {h}\n-1.0\n".encode("ascii"))
+        f.write(np.ascontiguousarray(rgb[::-1], dtype="<f4").tobytes())
 
 
 def restore_file(denoised, energy, output, *, scale=None, keep_gain=None, guides="auto",
@@ -133,18 +195,21 @@ def restore_file(denoised, energy, output, *, scale=None, keep_gain=None, guides
                  threads=0, max_memory=None, nonfinite="error", progress=None):
     """``restore`` from file to file, streamed: ``epfilt restore DENOISED ENERGY OUTPUT``.
 
-    Memory grows with the width and ``scale``, not the height, so a render too large for
-    ``read`` can be restored. The keep gain follows the energy file (1 where it is
-    ``filter``'s ep-gauss or ep-box output, read from its header, else 16) unless
-    ``keep_gain`` says. ``guides``/``guide``: the energy file's emission guide pass
-    ("auto": found by name, and without one a variance pass with its sample count stands
-    in, the report's ``variance_guide``; "none": neither; ``guide=["emission=ViewLayer.Emit"]``
+    Both files are read twice (first every block's energy, then the result): memory grows
+    with the width and ``scale`` (and, a few words per block, with the height), so a render
+    too large for ``read`` can be restored. The render's variance pass and sample count,
+    where it has them (found as ``filter`` finds them), measure its uncertainty (the
+    report's ``variance_pass``, ``uncertainty_from``, ``levels``). A keep gain applies
+    beside the evidence only where the energy file is ``filter``'s ep-gauss or ep-box
+    output (1, read from its header) or ``keep_gain`` says. ``guides``/``guide``: the
+    energy file's emission guide pass ("auto": found by name; agreeing samples of a
+    variance pass keep pixels too; "none": neither; ``guide=["emission=ViewLayer.Emit"]``
     names it).
     ``part``/``layer``: the energy file's part and beauty layer; its other channels (depth,
     normals, ids, light AOVs) are carried as it has them, bit for bit, but those a
     ``channel_rule=["PATTERN=drop"]`` matches (the report's ``carried_channels``). ``compression``: the
     output's (default the energy file's). ``progress(done, total)``: output rows, as for
-    ``filter_file``. ``max_memory``: MiB the run may hold by its estimate (default half
+    ``filter_file`` (the two passes' rows: twice the height). ``max_memory``: MiB the run may hold by its estimate (default half
     the machine's memory); below its floor it raises, naming the floor. The output is
     written whole or not at all. Returns the ``--report`` fields as a dict.
     """

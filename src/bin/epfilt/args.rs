@@ -153,34 +153,40 @@ pub struct SynthArgs {
 }
 
 const RESTORE_EXAMPLES: &str = "Examples:
-  epfilt restore denoised.exr render.exr restored.exr
-  epfilt filter render.exr clean.exr && epfilt restore denoised.exr clean.exr out.exr
+  oidnDenoise --hdr render.pfm --alb albedo.pfm --nrm normal.pfm -o denoised.pfm
+  epfilt restore denoised.pfm render.exr restored.exr
   epfilt restore denoised.exr render.exr out.exr --scale 64 --report r.json
 
 The denoiser's output (any denoiser: OIDN, OptiX, Arnold's noice, ...) shapes
 the light; the energy image (the render, or epfilt's output of it: same size,
 its beauty's colour channels in the denoiser's output by name, a layer's
 `ViewLayer.Combined.R` as a plain `R`; an alpha the denoiser did not write stays
-as the render has it) says how much there is. Where one pixel of the energy image
-holds far more than the denoiser put around it (a lamp or a highlight the
-denoiser dimmed), the excess stays in place: over 16 times on a render, over
-once on epfilt's ep-gauss or ep-box output (its fireflies already spread; read
-from its header), or --keep-gain. Where the energy image has an emission guide
-pass (--guides), its light beyond the denoiser's share stays too; without
-one, a render's variance pass (and sample count) stands in: a pixel whose
-mean is three standard errors above zero is a lamp, not a firefly. The rest is
-carried by the denoiser's picture and a smooth field, solved so that every
-block of --scale x --scale pixels (from the top left) holds the energy image's
-energy: what a block lacks goes back mostly to its brightest features (a
-denoiser dims them), a surplus comes off in proportion.
+as the render has it) says how much there is. The render is an unbiased but
+noisy estimate of every region's energy, the denoiser's a steady but biased
+one. Each block of --scale x --scale pixels (from the top left), and each of
+twice, four times... that side up to the whole image, gets a target: the
+render's energy where the render is sure (relative standard error under 1%)
+or the denoiser is far from it beyond its noise, the denoiser's where the two
+agree within the render's noise, in between by how sure each is; children
+sum to their parent, the whole to the render's total. The render's
+uncertainty is its variance pass (and sample count, found as ep-box finds
+them) or, without one, its residual against the denoiser. The report's levels
+say, per block side, how many targets follow the render.
+A bright pixel stays in place only on evidence: the emission guide (--guides;
+its light beyond the denoiser's share around), a variance pass whose samples
+agree there (a bulb, never a firefly: one bright sample), or a peak the
+denoiser kept. A firefly joins its region's energy. On epfilt's ep-gauss or
+ep-box output (read from its header), or with --keep-gain, a gain keeps too.
+The rest is carried by the denoiser's picture and a smooth field: what a block
+lacks goes back mostly to its brightest features (a denoiser dims them), a
+surplus comes off in proportion.
 The total is exact: the ledger balances to 1e-12 or nothing is written.
-Small --scale: energy exact in small regions, some of the render's grain
-back; large: the denoiser's look, energy exact over large regions.
 --part and --layer choose the energy image's part and beauty layer (the
 denoiser's output takes the same part where it has it); its other channels
 (depth, normals, ids, light AOVs) are carried as it has them, bit for bit,
 unless --channel-rule 'PATTERN=drop' leaves them out.
-One pass over both inputs; memory grows with the width and --scale.";
+Two passes over both inputs (every block's sums, then the result); memory
+grows with the width and --scale, and a few words per block.";
 
 #[derive(Args)]
 pub struct RestoreArgs {
@@ -194,22 +200,24 @@ pub struct RestoreArgs {
     /// part too, where it has that part).
     #[command(flatten)]
     pub select: SelectArgs,
-    /// The side of the blocks (pixels) whose energy is the energy image's.
+    /// The side (pixels) of the smallest blocks with an energy target.
     #[arg(long, default_value_t = epfilt::filter::restore::DEFAULT_SCALE)]
     pub scale: usize,
-    /// Keep a pixel's energy in place where it is over this many times what
-    /// the denoiser put around it (1 to 1e6) [default: 1 where the energy
-    /// image is epfilt's ep-gauss or ep-box output, else 16].
+    /// Also keep a pixel's energy in place where it is over this many times
+    /// what the denoiser put around it, evidence or not (1 to 1e6; keeps a
+    /// render's fireflies) [default: 1 where the energy image is epfilt's
+    /// ep-gauss or ep-box output, else none: evidence alone].
     #[arg(long)]
     pub keep_gain: Option<f64>,
-    /// NaN and infinite energy values: error (refuse the input) or zero
-    /// (count them in the report). The denoiser's are nothing to shape with.
+    /// NaN and infinite values of either image: error (refuse, naming the
+    /// file and pixel) or zero (count them in the report).
     #[arg(long, default_value = "error")]
     pub nonfinite: String,
     /// The energy image's emission guide pass (its directly visible light):
-    /// auto (found by the names renderers give it; without one, a variance
-    /// pass and its sample count stand in: a pixel whose samples agree
-    /// stays), none (neither), or emission (it must be found).
+    /// auto (found by the names renderers give it; a variance pass's
+    /// agreeing samples keep pixels too), none (neither keeps; a variance
+    /// pass still measures the render's uncertainty), or emission (it must
+    /// be found).
     #[arg(long, default_value = "auto")]
     pub guides: String,
     /// emission=LAYER: the layer of the emission guide, e.g.
