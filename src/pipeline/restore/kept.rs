@@ -115,6 +115,7 @@ impl Kept {
             layout: &self.layout,
             taps: &self.taps,
             centre: self.centre,
+            cross: self.taps[self.r() + 1] / self.taps[self.r()],
             input,
         };
         let mut rows = self.kept_rows.range_mut(a, b);
@@ -168,6 +169,8 @@ struct Rows<'a> {
     layout: &'a KeptLayout,
     taps: &'a [f64],
     centre: f64,
+    /// A four-neighbour's weight under the kernel over the centre's.
+    cross: f64,
     input: &'a RowWindow<f32>,
 }
 
@@ -194,8 +197,14 @@ impl Rows<'_> {
                 continue;
             }
             let e = &row[ch * w..(ch + 1) * w];
-            let d = &row[(d_at + ch) * w..(d_at + ch + 1) * w];
+            let offset = (d_at + ch) * w;
+            let d = &row[offset..offset + w];
             let em = self.layout.emission[ch].map(|k| &row[(nch + k) * w..(nch + k + 1) * w]);
+            // The rows above and below, for the share's lower bound.
+            let (up, down) = (
+                &self.input.get(reflect(y as isize - 1, self.h))[offset..offset + w],
+                &self.input.get(reflect(y as isize + 1, self.h))[offset..offset + w],
+            );
             for x in 0..w {
                 let ev = f64::from(e[x]);
                 let own = shape(d[x]);
@@ -206,6 +215,11 @@ impl Rows<'_> {
                 } else if ev <= own {
                     // Within the denoiser's own value: never kept (the
                     // common case, settled without looking around).
+                    0.0
+                } else if ev <= own + self.cross * cross(d, up, down, x) {
+                    // Within a lower bound of the denoiser's share around
+                    // (its own value and its four neighbours' under the
+                    // kernel): nothing any rule keeps.
                     0.0
                 } else {
                     self.pixel(
@@ -288,6 +302,15 @@ impl Rows<'_> {
         }
         lit + gained
     }
+}
+
+/// The denoiser's shape at the four pixels beside `x` (reflected at the
+/// ends of its row `d`; `up` and `down` the rows around).
+#[inline]
+fn cross(d: &[f32], up: &[f32], down: &[f32], x: usize) -> f64 {
+    let w = d.len();
+    let (l, r) = (reflect(x as isize - 1, w), reflect(x as isize + 1, w));
+    shape(d[l]) + shape(d[r]) + shape(up[x]) + shape(down[x])
 }
 
 /// The mean of the denoiser's shape over the eight pixels around `at`
