@@ -2,7 +2,8 @@
 
 For every `<scene>_px_<res>_spp<N>.exr` beside its `<scene>_ref_<res>.exr` in the folders given:
 
-* **OIDN**: Intel Open Image Denoise (`pyoidn`, the RT filter, HDR, colour only, quality high);
+* **OIDN**: Intel Open Image Denoise (`pyoidn`, the RT filter, HDR, quality high), with the
+  render's albedo and normal passes where it has them, as its users run it;
 * **epfilt**: `epfilt.filter_file` with its defaults (the file decides: ep-box where it holds
   variance, else ep-gauss; the guide passes it finds);
 * **ep-gauss**: the same with `method="ep-gauss"`, what a render without a variance pass gets;
@@ -136,8 +137,25 @@ def restore_by_luminance(denoised, energy, emission):
     return out, float(np.abs(moved).max())
 
 
-def oidn(x):
-    return np.ascontiguousarray(pyoidn.denoise(x, hdr=True, quality="high"), dtype=np.float32)
+def aux_of(path):
+    """The render's albedo and normal passes (found as `epfilt info` reports them), each None
+    where it has none: OIDN as its users run it."""
+    guides = epfilt.info(path)["parts"][0].get("guide_channels", {})
+    out = []
+    for kind in ("albedo", "normal"):
+        names = guides.get(kind, [])
+        if len(names) == 3:
+            samples, _ = epfilt.read(path, names)
+            out.append(np.ascontiguousarray(samples[:, :, -3:]))
+        else:
+            out.append(None)
+    return tuple(out)
+
+
+def oidn(x, aux=(None, None)):
+    albedo, normal = aux
+    return np.ascontiguousarray(pyoidn.denoise(x, albedo, normal, hdr=True, quality="high"),
+                                dtype=np.float32)
 
 
 def inputs(folders):
@@ -180,7 +198,8 @@ def main():
                    "input_rel_mse": rel_mse(inp, ref),
                    "input_energy_vs_ref": float(inp.astype(np.float64).sum() / ref.astype(np.float64).sum() - 1),
                    "input_peaks": measures(inp, inp, ref, top)["peaks"]}
-            denoised = oidn(inp)
+            aux = aux_of(path)
+            denoised = oidn(inp, aux)
             em = emission_of(path)
             row["emission_guide"] = em is not None
             restored, rep = epfilt.restore(denoised, inp, emission=em)
@@ -191,7 +210,7 @@ def main():
             row["floor_render"] = block_floor(inp, ref) / oidn_rel
             row["floor_ep"] = block_floor(ep, ref) / oidn_rel
             for name, img in (("oidn", denoised), ("epfilt", ep), ("ep_gauss", gauss),
-                              ("epfilt_oidn", oidn(ep)), ("oidn_restore", restored),
+                              ("epfilt_oidn", oidn(ep, aux)), ("oidn_restore", restored),
                               ("oidn_restore_ep", onto_ep)):
                 for key, v in measures(img, inp, ref, top).items():
                     row[f"{name}_{key}"] = v
@@ -222,7 +241,7 @@ def main():
           "render had); **energy**: the output's total over the input's, less 1; **peaks**: the mean "
           "luminance of the reference's brightest 0.1% of pixels, output over reference (1: kept at their "
           "true values; the input's own in its column); **blocks**: the largest relative change of a 32 x 32 "
-          "block's energy against the input. OIDN: colour only, HDR, quality high. epfilt: `filter_file` "
+          "block's energy against the input. OIDN: with the render's albedo and normal where it has them, HDR, quality high. epfilt: `filter_file` "
           "at its defaults (method and guides from the file; the method is named beside each input); "
           "ep-gauss: the same without the variance, as a render without a variance pass gets.\n", file=md)
     names = (("oidn", "OIDN"), ("epfilt", "epfilt"), ("ep_gauss", "ep-gauss"),

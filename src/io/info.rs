@@ -261,7 +261,10 @@ fn verdict_and_guides(
     let (guides, emission) =
         match super::find_guides(path, h, &beauty, &super::GuideRequest::default()) {
             Ok(g) => ((g.describe(), g.by_kind()), g.emission.unwrap_or_default()),
-            Err(e) => ((format!("none ({})", words(e)), BTreeMap::new()), Vec::new()),
+            Err(e) => (
+                (format!("none ({})", words(e)), BTreeMap::new()),
+                Vec::new(),
+            ),
         };
     (verdict, guides, emission)
 }

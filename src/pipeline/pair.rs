@@ -25,6 +25,9 @@ pub struct Pair<A, B> {
     nb: usize,
     /// The second half's channels.
     picks: Vec<Pick>,
+    /// Buffers of strips the run is done with, to fill again (a new buffer
+    /// is faulted in page by page).
+    recycled: Option<crossbeam_channel::Receiver<Vec<f32>>>,
 }
 
 impl<A: Source, B: Source> Pair<A, B> {
@@ -38,6 +41,7 @@ impl<A: Source, B: Source> Pair<A, B> {
             na,
             nb,
             picks,
+            recycled: None,
         }
     }
 }
@@ -61,7 +65,11 @@ impl<A: Source, B: Source> Source for Pair<A, B> {
             ));
         }
         let w = self.w;
-        let mut data = Vec::with_capacity(sa.rows * (ra + self.picks.len() * w));
+        let mut data = (self.recycled.as_ref())
+            .and_then(|r| r.try_recv().ok())
+            .unwrap_or_default();
+        data.clear();
+        data.reserve(sa.rows * (ra + self.picks.len() * w));
         for (x, y) in sa.data.chunks_exact(ra).zip(sb.data.chunks_exact(rb)) {
             data.extend_from_slice(x);
             for p in &self.picks {
@@ -87,7 +95,9 @@ impl<A: Source, B: Source> Source for Pair<A, B> {
         Self: 's,
     {
         // Each source decodes ahead on its own thread; the strips' buffers
-        // are the pair's, so neither gets them back.
+        // are the pair's, so neither gets them back: the pair fills them
+        // again.
+        self.recycled = ahead.recycled.clone();
         let own = ReadAhead {
             strip_rows: ahead.strip_rows,
             recycled: None,

@@ -49,10 +49,14 @@ pub(super) struct Kept {
     taps: Vec<f64>,
     /// The 2-D kernel's centre weight.
     centre: f64,
-    /// Per row whose column is in: `l`, `[channel][x]`, and whether the row
-    /// has any (most have none).
-    pub(super) kept_rows: RowWindow<f64>,
-    any: VecDeque<bool>,
+    /// Per row from `first` whose rows around are in: its `l`,
+    /// `[channel][x]`, where it has any (most rows have none).
+    rows: VecDeque<Option<Vec<f64>>>,
+    first: usize,
+    /// Buffers of rows released, for the next rows that keep something.
+    spare: std::sync::Mutex<Vec<Vec<f64>>>,
+    /// Most rows with a part kept held at once.
+    pub(super) high_water: usize,
     pub(super) counts: RestoreCounts,
 }
 
@@ -79,8 +83,10 @@ impl Kept {
             h,
             centre: taps[taps.len() / 2].powi(2),
             taps,
-            kept_rows: RowWindow::new(nch * w),
-            any: VecDeque::new(),
+            rows: VecDeque::new(),
+            first: 0,
+            spare: Default::default(),
+            high_water: 0,
             counts: RestoreCounts::default(),
         }
     }
@@ -99,13 +105,10 @@ impl Kept {
         all_in: bool,
     ) -> (usize, usize) {
         let (h, r) = (self.h, self.r());
-        let a = self.kept_rows.end();
+        let a = self.end();
         let b = if all_in { h } else { rows_in.saturating_sub(r) };
         if b <= a {
             return (a, a);
-        }
-        for _ in a..b {
-            self.kept_rows.push_stale(0.0);
         }
         let this = Rows {
             nch: self.nch,
@@ -118,44 +121,63 @@ impl Kept {
             cross: self.taps[self.r() + 1] / self.taps[self.r()],
             input,
         };
-        let mut rows = self.kept_rows.range_mut(a, b);
-        let per_row: Vec<(bool, RestoreCounts)> = rows
-            .par_iter_mut()
-            .enumerate()
+        let (n, spare) = (self.nch * self.w, &self.spare);
+        let per_row: Vec<(Option<Vec<f64>>, RestoreCounts)> = (a..b)
+            .into_par_iter()
             .map_init(
-                || vec![false; self.w],
-                |sure, (i, out)| this.row(a + i, out, sure),
+                || (vec![false; self.w], vec![0.0; n]),
+                |(sure, l), y| {
+                    let (any, c) = this.row(y, l, sure);
+                    // Kept only where it holds something: a buffer of a row
+                    // released, else a new one.
+                    let kept = any.then(|| {
+                        let mut v = spare
+                            .lock()
+                            .map(|mut s| s.pop())
+                            .ok()
+                            .flatten()
+                            .unwrap_or_default();
+                        v.clear();
+                        v.extend_from_slice(l);
+                        v
+                    });
+                    (kept, c)
+                },
             )
             .collect();
         // Summed in row order: the counts' energy is the same for any strips.
-        for (any, c) in per_row {
-            self.any.push_back(any);
+        for (kept, c) in per_row {
+            self.rows.push_back(kept);
             self.counts += c;
         }
+        let held = self.rows.iter().filter(|r| r.is_some()).count();
+        self.high_water = self.high_water.max(held);
         (a, b)
     }
 
     /// The first input row still read: `r` above the next row of `l`.
     pub(super) fn input_needed(&self) -> usize {
-        self.kept_rows.end().saturating_sub(self.r())
+        self.end().saturating_sub(self.r())
     }
 
     /// Rows whose `l` is known.
     pub(super) fn end(&self) -> usize {
-        self.kept_rows.end()
+        self.first + self.rows.len()
     }
 
     /// `l` of row `y` (`None`: all zero).
     pub(super) fn row(&self, y: usize) -> Option<&[f64]> {
-        self.any[y - self.kept_rows.first()].then(|| self.kept_rows.get(y))
+        self.rows[y - self.first].as_deref()
     }
 
     /// Rows below `y` are no longer read.
     pub(super) fn release(&mut self, y: usize) {
-        let before = self.kept_rows.first();
-        self.kept_rows.evict_below(y);
-        for _ in before..self.kept_rows.first() {
-            self.any.pop_front();
+        let mut spare = self.spare.lock().ok();
+        while self.first < y && !self.rows.is_empty() {
+            if let (Some(v), Some(s)) = (self.rows.pop_front().flatten(), spare.as_mut()) {
+                s.push(v);
+            }
+            self.first += 1;
         }
     }
 }
@@ -205,23 +227,21 @@ impl Rows<'_> {
                 &self.input.get(reflect(y as isize - 1, self.h))[offset..offset + w],
                 &self.input.get(reflect(y as isize + 1, self.h))[offset..offset + w],
             );
+            // A lower bound of the denoiser's share around each pixel (its
+            // own value and its four neighbours' under the kernel), in a
+            // loop the compiler vectorises: a pixel within it (noise, the
+            // common case) keeps nothing under any rule.
+            bounds(d, (up, down), self.cross, l);
             for x in 0..w {
                 let ev = f64::from(e[x]);
-                let own = shape(d[x]);
                 l[x] = if ev <= 0.0 {
                     // A render's rare negative samples: nothing to scale a
                     // shape by.
                     ev
-                } else if ev <= own {
-                    // Within the denoiser's own value: never kept (the
-                    // common case, settled without looking around).
-                    0.0
-                } else if ev <= own + self.cross * cross(d, up, down, x) {
-                    // Within a lower bound of the denoiser's share around
-                    // (its own value and its four neighbours' under the
-                    // kernel): nothing any rule keeps.
+                } else if ev <= l[x] {
                     0.0
                 } else {
+                    let own = shape(d[x]);
                     self.pixel(
                         ev,
                         own,
@@ -304,13 +324,30 @@ impl Rows<'_> {
     }
 }
 
-/// The denoiser's shape at the four pixels beside `x` (reflected at the
-/// ends of its row `d`; `up` and `down` the rows around).
-#[inline]
-fn cross(d: &[f32], up: &[f32], down: &[f32], x: usize) -> f64 {
+/// Per pixel of the denoiser's row `d` (`up` and `down` the rows around,
+/// reflected at the ends): its shape and `cross` times its four
+/// neighbours', into `out`.
+fn bounds(d: &[f32], (up, down): (&[f32], &[f32]), cross: f64, out: &mut [f64]) {
     let w = d.len();
-    let (l, r) = (reflect(x as isize - 1, w), reflect(x as isize + 1, w));
-    shape(d[l]) + shape(d[r]) + shape(up[x]) + shape(down[x])
+    let at = |x: usize| {
+        let (l, r) = (reflect(x as isize - 1, w), reflect(x as isize + 1, w));
+        shape(d[x]) + cross * (shape(d[l]) + shape(d[r]) + shape(up[x]) + shape(down[x]))
+    };
+    if w < 3 {
+        for (x, o) in out.iter_mut().enumerate() {
+            *o = at(x);
+        }
+        return;
+    }
+    out[0] = at(0);
+    out[w - 1] = at(w - 1);
+    let inner = out[1..w - 1]
+        .iter_mut()
+        .zip(d.windows(3))
+        .zip(up[1..].iter().zip(&down[1..]));
+    for ((o, dd), (&u, &v)) in inner {
+        *o = shape(dd[1]) + cross * (shape(dd[0]) + shape(dd[2]) + shape(u) + shape(v));
+    }
 }
 
 /// The mean of the denoiser's shape over the eight pixels around `at`

@@ -285,7 +285,7 @@ impl Stage for RestoreStage {
         vec![
             WindowUse {
                 name: "energy kept in place",
-                rows: self.kept.kept_rows.high_water(),
+                rows: self.kept.high_water,
                 row_bytes: row,
             },
             WindowUse {

@@ -58,14 +58,17 @@ pub(super) fn survey<S: Source>(
         0 => crate::pipeline::window_blocks(cfg, block_bytes),
         n => n as u64,
     };
+    // The strips' buffers go back to the reader, as in any run.
+    let (recycle, recycled) = crossbeam_channel::bounded(crate::pipeline::STRIPS_RECYCLED);
     let ahead = ReadAhead {
         strip_rows,
         window_blocks: &window,
-        recycled: None,
+        recycled: Some(recycled),
     };
     let (tx, rx) = crossbeam_channel::bounded::<Result<Strip>>(2);
     let (w, h) = plan.size;
     let mut state = Sums::new(plan);
+    state.input.recycle_strips(recycle);
     std::thread::scope(|scope| {
         let reader =
             scope.spawn(move || crate::pipeline::runner::read_strips(source, io, ahead, tx));
