@@ -236,6 +236,9 @@ fn describe_part(
     }
 }
 
+/// The guides found, in words and by kind.
+type Guides = (String, BTreeMap<String, Vec<String>>);
+
 /// What `filter` decides for a part (header `h`, beauty channels
 /// `filtered`) and the guides it finds there, in words, and the emission
 /// guide's channels.
@@ -243,7 +246,7 @@ fn verdict_and_guides(
     path: &Path,
     h: &exr::meta::header::Header,
     filtered: &[String],
-) -> (String, (String, BTreeMap<String, Vec<String>>), Vec<String>) {
+) -> (String, Guides, Vec<String>) {
     let words = |e: crate::Error| {
         let e = e.to_string();
         let prefix = format!("{}: ", path.display());
