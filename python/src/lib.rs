@@ -530,7 +530,13 @@ fn restore<'py>(
             size: (w, h),
             channels: &channels,
         };
-        epfilt::job::restore::restore_array(&input, (scale, keep_gain), threads, nonfinite, Some(cancel))
+        epfilt::job::restore::restore_array(
+            &input,
+            (scale, keep_gain),
+            threads,
+            nonfinite,
+            Some(cancel),
+        )
     })?;
     let image = PyArray1::from_vec(py, out).reshape([h, w, c])?.into_any();
     Ok((image, to_dict(py, &report)?))
