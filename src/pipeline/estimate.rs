@@ -262,9 +262,9 @@ fn fit(
 }
 
 /// Bytes per block and channel of `epfilt restore`'s targets: the first
-/// pass's sums (three f64) and the field's target, shape and choice (four);
-/// and, one channel at a time, the targets' solve (about eleven words).
-const RESTORE_BLOCK_BYTES: u64 = 7 * 8;
+/// pass's sums (three f64) and the field's target and shape (two); and,
+/// one channel at a time, the targets' solve (about eleven words).
+const RESTORE_BLOCK_BYTES: u64 = 5 * 8;
 const RESTORE_SOLVE_BYTES: u64 = 11 * 8;
 
 /// Bytes `epfilt restore` (blocks of `scale` pixels) holds at most for

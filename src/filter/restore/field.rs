@@ -69,12 +69,11 @@ pub struct FieldRows {
     pub nbx: usize,
     /// Blocks per column.
     pub nby: usize,
-    /// Per block (row-major): its target, what the denoiser's shape holds
-    /// there, and the carrier's choice (the shape's mean, and 1 where the
-    /// target is more than the shape, else 0).
+    /// Per block (row-major): its target and what the denoiser's shape
+    /// holds there.
     target: Vec<f64>,
     shape: Vec<f64>,
-    means: Vec<(f64, f64)>,
+    w: usize,
     /// The block row of `rows[0]`.
     first: usize,
     rows: VecDeque<BlockRow>,
@@ -88,14 +87,6 @@ impl FieldRows {
     pub fn new(w: usize, h: usize, b: usize, target: Vec<f64>, shape: Vec<f64>) -> Self {
         let (nbx, nby) = (w.div_ceil(b), h.div_ceil(b));
         assert_eq!((target.len(), shape.len()), (nbx * nby, nbx * nby));
-        let means = (0..nby)
-            .flat_map(|j| (0..nbx).map(move |i| (i, j)))
-            .map(|(i, j)| {
-                let n = (b.min(w - i * b) * b.min(h - j * b)) as f64;
-                let (t, s) = (target[j * nbx + i], shape[j * nbx + i]);
-                (s / n, if t > s { 1.0 } else { 0.0 })
-            })
-            .collect();
         FieldRows {
             b,
             h,
@@ -103,11 +94,20 @@ impl FieldRows {
             nby,
             target,
             shape,
-            means,
+            w,
             first: 0,
             rows: Default::default(),
             tents_x: (0..w).map(|x| tent(x, w, b)).collect(),
         }
+    }
+
+    /// Block `(i, j)`'s carrier choice: the mean of its shape, and 1 where
+    /// its target is more than the shape holds, else 0.
+    fn choice(&self, i: usize, j: usize) -> (f64, f64) {
+        let b = self.b;
+        let n = (b.min(self.w - i * b) * b.min(self.h - j * b)) as f64;
+        let (t, s) = (self.target[j * self.nbx + i], self.shape[j * self.nbx + i]);
+        (s / n, if t > s { 1.0 } else { 0.0 })
     }
 
     fn block_row(&mut self, jb: usize) -> &mut BlockRow {
@@ -129,11 +129,10 @@ impl FieldRows {
     pub fn carrier(&self, y: usize, s: &[f64], t: &mut [f64]) {
         let (j0, j1, wy0, wy1) = tent(y, self.h, self.b);
         let nbx = self.nbx;
-        let (r0, r1) = (&self.means[j0 * nbx..], &self.means[j1 * nbx..]);
         // Block by block: the means and choices of its row's neighbours
         // blended down the column once, then across per pixel.
         let down = |i: usize| {
-            let (a, b) = (r0[i], r1[i]);
+            let (a, b) = (self.choice(i, j0), self.choice(i, j1));
             (wy0 * a.0 + wy1 * b.0, wy0 * a.1 + wy1 * b.1)
         };
         let cols = (t.chunks_mut(self.b).zip(s.chunks(self.b))).zip(self.tents_x.chunks(self.b));

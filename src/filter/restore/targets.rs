@@ -98,17 +98,18 @@ pub const SURE_RSE: f64 = 0.01;
 /// their box (each pass clamps one at least, and a parent has four).
 const SPLIT_PASSES: usize = 5;
 
-/// A grid of `nbx x nby` blocks (row-major) of one channel.
+/// A grid of `nbx x nby` blocks (row-major) of one channel: the finest
+/// the caller's, the ones above (a third more) the solve's own.
 #[derive(Clone, Debug)]
-struct Level {
+struct Level<'a> {
     nbx: usize,
     nby: usize,
-    sums: Vec<BlockSums>,
+    sums: std::borrow::Cow<'a, [BlockSums]>,
 }
 
-impl Level {
+impl Level<'_> {
     /// The 2 x 2 sums of `self`: the level above.
-    fn parent(&self) -> Level {
+    fn parent(&self) -> Level<'static> {
         let (nbx, nby) = (self.nbx.div_ceil(2), self.nby.div_ceil(2));
         let mut sums = vec![BlockSums::default(); nbx * nby];
         for j in 0..self.nby {
@@ -116,7 +117,11 @@ impl Level {
                 sums[(j / 2) * nbx + i / 2] += self.sums[j * self.nbx + i];
             }
         }
-        Level { nbx, nby, sums }
+        Level {
+            nbx,
+            nby,
+            sums: sums.into(),
+        }
     }
 }
 
@@ -133,7 +138,7 @@ pub fn targets(
     let mut levels = vec![Level {
         nbx,
         nby,
-        sums: sums.to_vec(),
+        sums: sums.into(),
     }];
     while levels.last().is_some_and(|l| l.nbx > 1 || l.nby > 1) {
         let p = levels.last().map(Level::parent).expect("a level");
@@ -177,7 +182,7 @@ struct Child {
 
 /// The children's targets of `level`, whose parents' targets (at `parent`)
 /// are `tp`.
-fn split(level: &Level, parent: &Level, tp: &[f64]) -> (Vec<f64>, LevelSummary) {
+fn split(level: &Level<'_>, parent: &Level<'_>, tp: &[f64]) -> (Vec<f64>, LevelSummary) {
     let (nbx, nby) = (level.nbx, level.nby);
     let at = |i: usize, j: usize| (j / 2) * parent.nbx + i / 2;
     // What the children the denoiser left dark keep (the render's energy),
@@ -272,7 +277,7 @@ fn split(level: &Level, parent: &Level, tp: &[f64]) -> (Vec<f64>, LevelSummary) 
             bring_to(&mut kids, &ids, tp[pj * parent.nbx + pi]);
         }
     }
-    summary.exact = (kids.iter().zip(&level.sums))
+    summary.exact = (kids.iter().zip(level.sums.iter()))
         .filter(|(k, s)| k.x == s.rest)
         .count() as u64;
     (kids.into_iter().map(|k| k.x).collect(), summary)
@@ -384,7 +389,8 @@ mod tests {
                 nby,
                 sums: (t.iter().zip(&sums))
                     .map(|(&x, s)| BlockSums { rest: x, ..*s })
-                    .collect(),
+                    .collect::<Vec<_>>()
+                    .into(),
             };
             while level.nbx > 1 || level.nby > 1 {
                 level = level.parent();

@@ -199,8 +199,11 @@ pub fn restore_stream<A: Source, B: Source, K: Sink>(
     };
     let surveyed = survey::survey(pair()?, plan, cfg, strip_rows, &half)?;
     let (nbx, nby) = (w.div_ceil(params.scale), h.div_ceil(params.scale));
+    let survey_seconds = surveyed.seconds;
     let mut levels: Vec<LevelSummary> = Vec::new();
-    let fields = (surveyed.sums.iter())
+    // Each channel's sums give way to its targets and shape as they are
+    // solved: what the second pass holds is two words per block.
+    let fields = (surveyed.sums.into_iter())
         .map(|sums| {
             if sums.is_empty() {
                 return FieldRows::new(
@@ -211,29 +214,11 @@ pub fn restore_stream<A: Source, B: Source, K: Sink>(
                     vec![0.0; nbx * nby],
                 );
             }
-            let (t, l) = targets(sums, nbx, nby, params.scale);
-            if levels.is_empty() {
-                levels = l;
-            } else {
-                for (a, b) in levels.iter_mut().zip(l) {
-                    // The channels' mean squares, weighed by their blocks.
-                    let n = (a.blocks + b.blocks) as f64;
-                    a.render_rse = ((a.render_rse.powi(2) * a.blocks as f64
-                        + b.render_rse.powi(2) * b.blocks as f64)
-                        / n)
-                        .sqrt();
-                    a.blocks += b.blocks;
-                    a.following_render += b.following_render;
-                    a.exact += b.exact;
-                }
-            }
-            FieldRows::new(
-                w,
-                h,
-                params.scale,
-                t,
-                sums.iter().map(|s| s.shape).collect(),
-            )
+            let shape: Vec<f64> = sums.iter().map(|s| s.shape).collect();
+            let (t, l) = targets(&sums, nbx, nby, params.scale);
+            drop(sums);
+            merge_levels(&mut levels, l);
+            FieldRows::new(w, h, params.scale, t, shape)
         })
         .collect();
     let stage = RestoreStage::new(kept, (w, h), fields, surveyed.counts);
@@ -248,8 +233,26 @@ pub fn restore_stream<A: Source, B: Source, K: Sink>(
     Ok(RestoreRun {
         run,
         levels,
-        survey_seconds: surveyed.seconds,
+        survey_seconds,
     })
+}
+
+/// Add one channel's levels into `levels` (the first channel's as they are).
+fn merge_levels(levels: &mut Vec<LevelSummary>, l: Vec<LevelSummary>) {
+    if levels.is_empty() {
+        *levels = l;
+        return;
+    }
+    for (a, b) in levels.iter_mut().zip(l) {
+        // The channels' mean squares, weighed by their blocks.
+        let n = (a.blocks + b.blocks) as f64;
+        a.render_rse =
+            ((a.render_rse.powi(2) * a.blocks as f64 + b.render_rse.powi(2) * b.blocks as f64) / n)
+                .sqrt();
+        a.blocks += b.blocks;
+        a.following_render += b.following_render;
+        a.exact += b.exact;
+    }
 }
 
 /// [`restore_stream`] of two whole images in memory (planar
