@@ -3,9 +3,8 @@
 use serde::Serialize;
 
 use crate::filter::{FilterParams, Method};
-use crate::host::{cpu_seconds, peak_rss_bytes};
+use crate::host::peak_rss_bytes;
 use crate::io::StatsChannels;
-use crate::job::{FilterPlan, Outcome};
 use crate::pipeline::{
     ChannelLedger, MemoryRun, MethodCounts, PipelineConfig, RunStats, StageSeconds, StripLayout,
     WindowUse,
@@ -267,13 +266,19 @@ impl EpBoxReport {
 }
 
 /// What a run was and did, for [`Report::of_run`].
-struct RunFacts<'a> {
-    layout: &'a StripLayout,
-    cfg: &'a PipelineConfig,
-    params: &'a FilterParams,
-    stats: &'a RunStats,
-    found: Option<&'a StatsChannels>,
-    l_ave: Option<f64>,
+pub struct RunFacts<'a> {
+    /// The strips' layout.
+    pub layout: &'a StripLayout,
+    /// The pipeline's settings.
+    pub cfg: &'a PipelineConfig,
+    /// The method's.
+    pub params: &'a FilterParams,
+    /// What the run did.
+    pub stats: &'a RunStats,
+    /// The per-pixel statistics read, if any.
+    pub found: Option<&'a StatsChannels>,
+    /// ep-box's first pass: the mean luminance.
+    pub l_ave: Option<f64>,
 }
 
 /// The method's own counts (noisy, spread, capped, kept): ep-gauss in
@@ -325,68 +330,6 @@ impl Report {
         self.settings.insert("view".into(), "all".into());
     }
 
-    /// The report of a run: what its plan settled and what the run did.
-    pub fn of(plan: &FilterPlan<'_>, outcome: &Outcome) -> Report {
-        let (job, stats) = (plan.job, &outcome.stats);
-        let g = &plan.geometry;
-        let s = job.params.supersample;
-        let pipe_job = &plan.pipe_job;
-        let channel_rules = (plan.channels.iter())
-            .zip(plan.input.channel_rules())
-            .zip(&pipe_job.luminance)
-            .map(|((c, r), &l)| {
-                let name = match r {
-                    Some(r) => r.name(),
-                    None if l != 0.0 => "colour",
-                    None => "alpha",
-                };
-                (c.clone(), name.to_string())
-            })
-            .collect();
-        let settings = (outcome.settings.iter())
-            .map(|(k, v)| (k.to_string(), v.clone()))
-            .collect();
-        let run = RunFacts {
-            layout: pipe_job,
-            cfg: &plan.pipeline,
-            params: &plan.params,
-            stats,
-            found: plan.found.as_ref(),
-            l_ave: outcome.l_ave,
-        };
-        let mut report = Report {
-            input: job.input.display().to_string(),
-            output: job.output.display().to_string(),
-            supersample_from: job
-                .verdict
-                .as_ref()
-                .map_or("--supersample".into(), |v| v.supersample_from.clone()),
-            method_from: job
-                .verdict
-                .as_ref()
-                .map_or("--method".into(), |v| v.method_from.clone()),
-            guides: plan.guides.describe(),
-            width: g.read_w,
-            height: g.read_h,
-            out_width: g.w / s,
-            out_height: g.h / s,
-            channel_rules,
-            channels: plan.channels.clone(),
-            dropped_channels: plan.input.dropped_channels().to_vec(),
-            megapixels_per_second: (g.w * g.h) as f64 / stats.seconds.max(1e-9) / 1e6,
-            cpu_seconds: cpu_seconds().map(|c| c - plan.cpu_start),
-            compression: outcome.compression.clone(),
-            energy_on_disk_decoded: outcome.lossy,
-            band: outcome.band.clone(),
-            ..Report::of_run(&run, settings, plan.warnings.clone())
-        };
-        // The file's ledger: after rounding, what the file holds (a lossy
-        // codec's decoded, a picture's RGBE), not the run's.
-        report.memory_estimate_bytes = plan.memory_bytes;
-        report.set_ledger(&outcome.ledger);
-        report
-    }
-
     /// The settings of an in-memory run, as a file's run records them.
     pub fn array_settings(
         settings: Vec<(&'static str, serde_json::Value)>,
@@ -420,7 +363,7 @@ impl Report {
 
     /// What every run's report holds, from its layout, settings and
     /// counts; a file's run then says what its files and plan settled.
-    fn of_run(
+    pub fn of_run(
         run: &RunFacts<'_>,
         settings: serde_json::Map<String, serde_json::Value>,
         warnings: Vec<String>,

@@ -5,6 +5,7 @@
 
 use crate::error::{Error, Result, Side};
 use crate::filter::Method;
+use crate::host::cpu_seconds;
 use crate::io::output::Output;
 use crate::io::provenance;
 use crate::io::OutputSettings;
@@ -12,7 +13,7 @@ use crate::pipeline::band::{BandSink, BandSource, FinishHook};
 use crate::pipeline::edge::{Coverage, Cropped};
 use crate::pipeline::ledger::ChannelLedger;
 use crate::pipeline::{run, ChannelMode, Progress, RunStats};
-use crate::report::{BandReport, Report};
+use crate::report::{BandReport, Report, RunFacts};
 
 use super::plan::{BandPlan, FilterPlan};
 use super::LEDGER_LIMIT;
@@ -85,7 +86,7 @@ impl FilterPlan<'_> {
             band,
         };
         output.commit()?;
-        Ok(Report::of(&self, &outcome))
+        Ok(report(&self, &outcome))
     }
 
     /// ep-box without `--ltvis`: `L_tvis = L_ave / N_MID` from a first pass
@@ -302,4 +303,66 @@ impl FilterPlan<'_> {
         }
         Ok(())
     }
+}
+
+/// The report of a run: what its plan settled and what the run did.
+fn report(plan: &FilterPlan<'_>, outcome: &Outcome) -> Report {
+    let (job, stats) = (plan.job, &outcome.stats);
+    let g = &plan.geometry;
+    let s = job.params.supersample;
+    let pipe_job = &plan.pipe_job;
+    let channel_rules = (plan.channels.iter())
+        .zip(plan.input.channel_rules())
+        .zip(&pipe_job.luminance)
+        .map(|((c, r), &l)| {
+            let name = match r {
+                Some(r) => r.name(),
+                None if l != 0.0 => "colour",
+                None => "alpha",
+            };
+            (c.clone(), name.to_string())
+        })
+        .collect();
+    let settings = (outcome.settings.iter())
+        .map(|(k, v)| (k.to_string(), v.clone()))
+        .collect();
+    let run = RunFacts {
+        layout: pipe_job,
+        cfg: &plan.pipeline,
+        params: &plan.params,
+        stats,
+        found: plan.found.as_ref(),
+        l_ave: outcome.l_ave,
+    };
+    let mut report = Report {
+        input: job.input.display().to_string(),
+        output: job.output.display().to_string(),
+        supersample_from: job
+            .verdict
+            .as_ref()
+            .map_or("--supersample".into(), |v| v.supersample_from.clone()),
+        method_from: job
+            .verdict
+            .as_ref()
+            .map_or("--method".into(), |v| v.method_from.clone()),
+        guides: plan.guides.describe(),
+        width: g.read_w,
+        height: g.read_h,
+        out_width: g.w / s,
+        out_height: g.h / s,
+        channel_rules,
+        channels: plan.channels.clone(),
+        dropped_channels: plan.input.dropped_channels().to_vec(),
+        megapixels_per_second: (g.w * g.h) as f64 / stats.seconds.max(1e-9) / 1e6,
+        cpu_seconds: cpu_seconds().map(|c| c - plan.cpu_start),
+        compression: outcome.compression.clone(),
+        energy_on_disk_decoded: outcome.lossy,
+        band: outcome.band.clone(),
+        ..Report::of_run(&run, settings, plan.warnings.clone())
+    };
+    // The file's ledger: after rounding, what the file holds (a lossy
+    // codec's decoded, a picture's RGBE), not the run's.
+    report.memory_estimate_bytes = plan.memory_bytes;
+    report.set_ledger(&outcome.ledger);
+    report
 }

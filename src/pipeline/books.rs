@@ -9,9 +9,19 @@ use rayon::prelude::*;
 use super::edge::Coverage;
 use super::ledger::{Ledger, Sums};
 use super::stage::Output;
-use super::stream::OutRows;
 use super::{NonFinite, Precision, Strip};
 use crate::error::{Error, Result, Side};
+
+/// A finished batch of output rows, `[row][channel][x]`.
+#[derive(Debug)]
+pub struct OutRows {
+    /// First output row.
+    pub y0: usize,
+    /// Number of rows.
+    pub rows: usize,
+    /// Values, already rounded to the output precision.
+    pub data: Vec<f32>,
+}
 
 /// Names, ledger, digest and non-finite counts of one run.
 #[derive(Debug)]

@@ -54,11 +54,12 @@ use crate::filter::ep_box::StatsLayout;
 use crate::filter::guides::{GuideLayout, SurfaceRule};
 use crate::filter::{FilterParams, Method};
 use crate::geometry::{Grid, Halo};
+pub use books::OutRows;
 pub use counts::{ExcessCounts, MethodCounts, SpreadCounts};
 pub use ledger::{ChannelLedger, Ledger};
 pub use stage::{Stage, WindowUse};
 pub use stages::strips_in_flight;
-pub use stream::{OutRows, Streamer};
+pub use stream::Streamer;
 
 pub use estimate::{
     auto_strip_rows, estimate_bytes, fit_memory, fit_restore_memory, read_ahead_blocks,

@@ -17,7 +17,7 @@
 //! came; every stage's cursors advance to the same targets whatever the
 //! batching (each checks its own "rows final" condition).
 
-use super::books::{Books, Finish, Take};
+use super::books::{Books, Finish, OutRows, Take};
 use super::counts::MethodCounts;
 use super::edge::Coverage;
 use super::stage::{Output, Stage, WindowUse};
@@ -30,17 +30,6 @@ use crate::geometry::{Grid, Halo};
 /// Most channels one job filters: the beauty (R, G, B, A) and what it
 /// carries beside it.
 pub const MAX_CHANNELS: usize = 1024;
-
-/// A finished batch of output rows, `[row][channel][x]`.
-#[derive(Debug)]
-pub struct OutRows {
-    /// First output row.
-    pub y0: usize,
-    /// Number of rows.
-    pub rows: usize,
-    /// Values, already rounded to the output precision.
-    pub data: Vec<f32>,
-}
 
 /// The skeleton: input window, cursors, books, precision, and one stage.
 pub struct Streamer {

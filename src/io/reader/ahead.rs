@@ -7,7 +7,7 @@
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use super::source::{decode_rows_into, release_span};
+use super::decode::{decode_rows_into, release_span};
 use super::*;
 
 /// A decoded block row's values and the file's byte range they came from

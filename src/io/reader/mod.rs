@@ -20,6 +20,7 @@ use rayon::prelude::*;
 
 mod ahead;
 mod blocks;
+mod decode;
 mod layers;
 mod pictures;
 mod source;
