@@ -106,7 +106,7 @@ impl RestoreJob {
 /// The energy image's rows: its `channels`, and the emission guide beside
 /// them where `req` finds one (read as guide channels after them). Found by
 /// name (`auto`), a file whose guides are ambiguous, not whole or hold ids
-/// gets none: the keep gain alone decides there. Asked for (`--guides
+/// gets none: the other evidence decides there. Asked for (`--guides
 /// emission`, `--guide emission=LAYER`), each of those is an error naming
 /// the file.
 fn emission_guide(
