@@ -18,7 +18,7 @@
 //!    keeps too ([`KEEP_GAIN_FILTERED`]). A firefly, one bright sample the
 //!    denoiser rightly removed, has none of these: its energy joins its
 //!    region's target and is never kept as a lamp.
-//! 2. **A target per block** ([`targets`]): the rest `a = e - l` of every
+//! 2. **A target per block** ([`targets()`]): the rest `a = e - l` of every
 //!    `--scale` block combined with the denoiser's by how sure each is,
 //!    from the whole image (the render's total) down, children summing to
 //!    their parent.

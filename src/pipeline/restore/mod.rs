@@ -2,10 +2,10 @@
 //! the denoiser's output ([`crate::filter::restore`]), in two passes over
 //! both inputs.
 //!
-//! 1. **The survey** ([`survey`]): every value checked and each `--scale`
+//! 1. **The survey** (`survey.rs`): every value checked and each `--scale`
 //!    block's sums taken (the render's energy less what is kept in place,
 //!    the denoiser's, the render's variance). The targets
-//!    ([`crate::filter::restore::targets`]) need them all: the whole
+//!    ([`crate::filter::restore::targets()`]) need them all: the whole
 //!    image's total is the top of their tree.
 //! 2. **The restore** ([`RestoreStage`]), behind the skeleton as the
 //!    filters are: each block's target carried in the denoiser's shape.
