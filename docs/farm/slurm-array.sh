@@ -18,6 +18,9 @@
 # The paths are variables so the same script runs anywhere (docs/farm.md; CI
 # runs it locally with the SLURM_* variables set).
 set -euo pipefail
+# Half the job's --mem, in MiB: what epfilt plans for (it also reads the
+# job's cgroup limit where Slurm confines it, and takes half of that).
+export EPFILT_MAX_MEMORY=${EPFILT_MAX_MEMORY:-1024}
 EPFILT=${EPFILT:-epfilt}
 FRAMES=${FRAMES:-/shared/shots/sh010/render}
 OUT=${OUT:-/shared/shots/sh010/filtered}

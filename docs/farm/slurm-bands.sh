@@ -21,6 +21,9 @@
 # another input or other settings, naming it, and --skip-existing lets a
 # requeued task keep a band that is already complete.
 set -euo pipefail
+# Half the job's --mem, in MiB: what epfilt plans for (it also reads the
+# job's cgroup limit where Slurm confines it, and takes half of that).
+export EPFILT_MAX_MEMORY=${EPFILT_MAX_MEMORY:-1024}
 EPFILT=${EPFILT:-epfilt}
 IN=${IN:-/shared/shots/sh010/matte.exr}
 OUT=${OUT:-/shared/shots/sh010/matte.filtered.exr}

@@ -8,6 +8,9 @@
 # the band array (sbatch --dependency=afterok:<array job> --kill-on-invalid-dep=yes).
 # merge copies compressed blocks: it runs at the speed of the disk, in a few MiB.
 set -euo pipefail
+# Half the job's --mem, in MiB: what epfilt plans for (it also reads the
+# job's cgroup limit where Slurm confines it, and takes half of that).
+export EPFILT_MAX_MEMORY=${EPFILT_MAX_MEMORY:-256}
 EPFILT=${EPFILT:-epfilt}
 OUT=${OUT:-/shared/shots/sh010/matte.filtered.exr}
 shopt -s nullglob

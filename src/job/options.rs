@@ -406,7 +406,8 @@ options! {
     /// refused only below the floor it names. The estimate counts the
     /// program, the mapped input and the writer's rows; the measured peak
     /// stays within it where at most one sample in ten is noisy
-    /// (docs/bench/memory.md) [default: half the machine's memory].
+    /// (docs/bench/memory.md) [default: half the machine's memory, or of the
+    /// container's or job's cgroup limit where less].
     max_memory: Option<u64> {
         Value, PERFORMANCE, parse: number, env: "EPFILT_MAX_MEMORY", files_only: true
     }

@@ -210,7 +210,7 @@ def restore_file(denoised, energy, output, *, scale=None, keep_gain=None, guides
     ``channel_rule=["PATTERN=drop"]`` matches (the report's ``carried_channels``). ``compression``: the
     output's (default the energy file's). ``progress(done, total)``: output rows, as for
     ``filter_file`` (the two passes' rows: twice the height). ``max_memory``: MiB the run may hold by its estimate (default half
-    the machine's memory); below its floor it raises, naming the floor. The output is
+    the machine's memory, or of its cgroup limit where less); below its floor it raises, naming the floor. The output is
     written whole or not at all. Returns the ``--report`` fields as a dict.
     """
     return _epfilt.restore_file(str(denoised), str(energy), str(output), scale=scale,

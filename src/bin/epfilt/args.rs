@@ -240,7 +240,7 @@ pub struct RestoreArgs {
     /// of the rows of blocks held, which grow with --scale and the width):
     /// where the default strips need more, it runs with shorter ones (the
     /// same bytes); refused only below the floor it names [default: half
-    /// the machine's memory].
+    /// the machine's memory, or of its cgroup limit where less].
     #[arg(long, env = "EPFILT_MAX_MEMORY", value_name = "MIB")]
     pub max_memory: Option<u64>,
     /// Write the summary as JSON to this file (- for standard output).
