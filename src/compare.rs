@@ -107,11 +107,10 @@ pub fn compare_files(a: &Path, b: &Path, select: &Selection) -> Result<Compariso
             (true, false) => "size",
             _ => "channels",
         };
-        return Err(Error::Config(format!(
-            "{}; {}: they differ in {what}",
-            say(a, &ia),
-            say(b, &ib)
-        )));
+        return Err(Error::Mismatch {
+            path: a.to_path_buf(),
+            reason: format!("{}; {}: they differ in {what}", say(a, &ia), say(b, &ib)),
+        });
     }
     let (w, _) = ia.size();
     let nch = ia.channels().len();

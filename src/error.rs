@@ -69,6 +69,15 @@ pub enum Error {
         reason: String,
     },
 
+    /// Two images that must match do not: their sizes or channels differ.
+    #[error("{reason}")]
+    Mismatch {
+        /// The image compared.
+        path: PathBuf,
+        /// What differs, naming both files.
+        reason: String,
+    },
+
     /// An operating-system error on a file.
     #[error("{path}: {source}")]
     Io {

@@ -37,7 +37,8 @@ fn to_py(e: epfilt::Error) -> PyErr {
         | E::Unsupported { .. }
         | E::Channels { .. }
         | E::Value { .. }
-        | E::StreamValue { .. } => "InputError",
+        | E::StreamValue { .. }
+        | E::Mismatch { .. } => "InputError",
         E::Io { .. } | E::Output { .. } => "IoError",
         _ => "Error",
     };

@@ -196,7 +196,9 @@ fn preview_and_compare_take_part_and_layer() {
 }
 
 #[test]
-fn compare_thresholds_set_the_exit_status_and_sizes_are_said_in_words() {
+fn compare_statuses_are_idiffs_and_sizes_are_said_in_words() {
+    // idiff's: 0 within every limit, 1 warn, 2 fail, 3 sizes differ, 4 a
+    // file unreadable.
     let dir = tmpdir();
     let d = dir.path();
     let a = small_exr(d, "a.exr", 3);
@@ -204,12 +206,30 @@ fn compare_thresholds_set_the_exit_status_and_sizes_are_said_in_words() {
     let o = epfilt(&["compare", s(&a), s(&b), "--max-rmse", "1e9"]);
     assert_eq!(o.status.code(), Some(0), "{}", err(&o));
     let o = epfilt(&["compare", s(&a), s(&b), "--max-rmse", "1e-9"]);
-    assert_eq!(o.status.code(), Some(1), "{}", err(&o));
+    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
     assert!(err(&o).contains("rmse"), "{}", err(&o));
     let o = epfilt(&["compare", s(&a), s(&a), "--max-rel-mse", "0"]);
     assert_eq!(o.status.code(), Some(0), "{}", err(&o));
     let o = epfilt(&["compare", s(&a), s(&b), "--max-energy-error", "1e-12"]);
+    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
+    // A warning limit alone: 1; beyond a failing one too: 2.
+    let o = epfilt(&["compare", s(&a), s(&b), "--warn-rmse", "1e-9"]);
     assert_eq!(o.status.code(), Some(1), "{}", err(&o));
+    let o = epfilt(&[
+        "compare",
+        s(&a),
+        s(&b),
+        "--warn-rmse",
+        "1e-9",
+        "--max-rmse",
+        "1e-9",
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
+    // A file that is not there: 4, naming it.
+    let gone = d.join("gone.exr");
+    let o = epfilt(&["compare", s(&gone), s(&a)]);
+    assert_eq!(o.status.code(), Some(4), "{}", err(&o));
+    assert!(err(&o).contains("gone.exr"), "{}", err(&o));
     // Different sizes: in words, not tuples.
     let big = d.join("big.exr");
     write_rgb(
@@ -221,7 +241,7 @@ fn compare_thresholds_set_the_exit_status_and_sizes_are_said_in_words() {
         LineOrder::Increasing,
     );
     let o = epfilt(&["compare", s(&a), s(&big)]);
-    assert_eq!(o.status.code(), Some(USAGE), "{}", err(&o));
+    assert_eq!(o.status.code(), Some(3), "{}", err(&o));
     let e = err(&o);
     assert!(e.contains("30x21") && e.contains("33x21"), "{e}");
     assert!(!e.contains("(30, 21)") && !e.contains("[\""), "{e}");

@@ -16,8 +16,9 @@ Radiance picture, told apart by its first bytes). It is spooled to an unnamed te
 $TMPDIR first, since an EXR's offset table may point anywhere in it; the file disappears when \
 epfilt ends. A reader that closes the pipe early ends the run quietly with status 0.\n\n\
 Exit status: 0 done; 1 the work failed (a damaged or unsupported input, an I/O error, an \
-unbalanced ledger, a compare threshold exceeded); 2 a usage error (bad arguments); 130 / 143 \
-interrupted by SIGINT / SIGTERM (unfinished outputs removed).";
+unbalanced ledger); 2 a usage error (bad arguments); 130 / 143 interrupted by SIGINT / SIGTERM \
+(unfinished outputs removed). compare's are idiff's: 0 within every limit, 1 beyond a --warn-* \
+limit, 2 beyond a --max-* limit, 3 images of different sizes or channels, 4 a file unreadable.";
 
 /// Examples of `filter`, under its `--help`.
 const FILTER_EXAMPLES: &str = "Examples:
@@ -65,7 +66,8 @@ pub enum Command {
     #[command(after_long_help = RESTORE_EXAMPLES)]
     Restore(Box<RestoreArgs>),
     /// Compare an image with a reference: RMSE, relative MSE, PSNR, energy
-    /// ratio; with --max-*, exit 1 when a threshold is exceeded (as idiff does).
+    /// ratio; statuses as idiff's (1 beyond --warn-*, 2 beyond --max-*, 3
+    /// sizes or channels differ, 4 a file unreadable).
     Compare(Box<CompareArgs>),
     /// Write an sRGB PNG of one image, or a labelled montage of several
     /// (`preview A.exr B.exr ... OUT.png --montage`).
@@ -274,15 +276,26 @@ pub struct CompareArgs {
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
-    /// Exit 1 when the RMSE is above this.
+    /// Fail (status 2) when the RMSE is above this.
     #[arg(long)]
     pub max_rmse: Option<f64>,
-    /// Exit 1 when the relative MSE is above this.
+    /// Fail (status 2) when the relative MSE is above this.
     #[arg(long)]
     pub max_rel_mse: Option<f64>,
-    /// Exit 1 when any channel's energy ratio is further than this from 1.
+    /// Fail (status 2) when any channel's energy ratio is further than this
+    /// from 1.
     #[arg(long)]
     pub max_energy_error: Option<f64>,
+    /// Warn (status 1) when the RMSE is above this.
+    #[arg(long)]
+    pub warn_rmse: Option<f64>,
+    /// Warn (status 1) when the relative MSE is above this.
+    #[arg(long)]
+    pub warn_rel_mse: Option<f64>,
+    /// Warn (status 1) when any channel's energy ratio is further than this
+    /// from 1.
+    #[arg(long)]
+    pub warn_energy_error: Option<f64>,
 }
 
 #[derive(Args)]

@@ -33,10 +33,14 @@ fn main() {
     let code = match dispatch(cli, cancel) {
         Ok(()) => 0,
         // The reader of standard output went away: what it wanted it has.
-        Err(Exit::Failure(e)) | Err(Exit::Usage(e)) if is_broken_pipe(&e) => 0,
+        Err(Exit::Failure(e) | Exit::Usage(e) | Exit::Status(_, e)) if is_broken_pipe(&e) => 0,
         Err(Exit::Usage(e)) => {
             eprintln!("epfilt: {}", one_line(&e));
             2
+        }
+        Err(Exit::Status(code, e)) => {
+            eprintln!("epfilt: {}", one_line(&e));
+            code
         }
         Err(Exit::Failure(e)) => {
             eprintln!("epfilt: {}", one_line(&e));
@@ -146,31 +150,57 @@ fn selection(a: &SelectArgs) -> Selection {
     }
 }
 
+/// `compare`'s statuses, as OpenImageIO's idiff has them.
+mod compare_status {
+    /// Beyond a `--warn-*` limit, within every `--max-*` one.
+    pub const WARN: i32 = 1;
+    /// Beyond a `--max-*` limit.
+    pub const FAIL: i32 = 2;
+    /// The images differ in size or channels.
+    pub const MISMATCH: i32 = 3;
+    /// A file could not be read.
+    pub const FILE: i32 = 4;
+}
+
 fn compare(a: CompareArgs) -> Result<(), Exit> {
     let select = selection(&a.select);
-    let cmp = epfilt::compare::compare_files(&a.a, &a.b, &select).map_err(fail)?;
+    let cmp = epfilt::compare::compare_files(&a.a, &a.b, &select).map_err(|e| {
+        let code = match e {
+            epfilt::Error::Mismatch { .. } => compare_status::MISMATCH,
+            _ => compare_status::FILE,
+        };
+        Exit::Status(code, e.into())
+    })?;
     if a.json {
         emit(&(serde_json::to_string_pretty(&cmp).map_err(fail)? + "\n"))?;
     } else {
-        let names = select.open(&a.b).map_err(fail)?.channels();
+        let names = (select.open(&a.b))
+            .map_err(|e| Exit::Status(compare_status::FILE, e.into()))?
+            .channels();
         emit(&cmp.table(&names))?;
     }
-    let limits = epfilt::compare::Thresholds {
-        max_rmse: a.max_rmse,
-        max_rel_mse: a.max_rel_mse,
-        max_energy_error: a.max_energy_error,
+    let limits = |rmse, rel_mse, energy| epfilt::compare::Thresholds {
+        max_rmse: rmse,
+        max_rel_mse: rel_mse,
+        max_energy_error: energy,
     };
-    let over = cmp.exceeded(&limits);
-    if over.is_empty() {
-        Ok(())
-    } else {
-        Err(Exit::Failure(anyhow::anyhow!(
-            "{} against {}: {}",
-            a.a.display(),
-            a.b.display(),
-            over.join("; ")
-        )))
+    let fail_at = limits(a.max_rmse, a.max_rel_mse, a.max_energy_error);
+    let warn_at = limits(a.warn_rmse, a.warn_rel_mse, a.warn_energy_error);
+    for (over, code) in [
+        (cmp.exceeded(&fail_at), compare_status::FAIL),
+        (cmp.exceeded(&warn_at), compare_status::WARN),
+    ] {
+        if !over.is_empty() {
+            let what = format!(
+                "{} against {}: {}",
+                a.a.display(),
+                a.b.display(),
+                over.join("; ")
+            );
+            return Err(Exit::Status(code, anyhow::anyhow!(what)));
+        }
     }
+    Ok(())
 }
 
 fn restore(a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
@@ -466,6 +496,8 @@ enum Exit {
     Usage(anyhow::Error),
     /// The work failed: status 1 (or the signal's status when interrupted).
     Failure(anyhow::Error),
+    /// A status of the command's own (`compare`'s, as idiff's).
+    Status(i32, anyhow::Error),
 }
 
 /// Up to eight names, then how many more: a Blender render carries dozens.
