@@ -43,12 +43,26 @@ fn to_py(e: epfilt::Error) -> PyErr {
         _ => "Error",
     };
     let line = epfilt::error::one_line(&e);
+    // An operating system's error: its errno and file, and the OSError
+    // subclass Python gives that errno (FileNotFoundError, ...).
+    let os = match &e {
+        E::Io { path, source } => source
+            .raw_os_error()
+            .map(|n| (n, source.to_string(), path.display().to_string())),
+        _ => None,
+    };
     Python::with_gil(|py| {
-        match py
-            .import("epfilt")
-            .and_then(|m| m.getattr(class))
-            .and_then(|c| c.call1((line.clone(),)))
-        {
+        let made = match &os {
+            Some((errno, text, file)) => py
+                .import("epfilt")
+                .and_then(|m| m.getattr("_os_error"))
+                .and_then(|f| f.call1((*errno, format!("{text} ({line})"), file.clone()))),
+            None => py
+                .import("epfilt")
+                .and_then(|m| m.getattr(class))
+                .and_then(|c| c.call1((line.clone(),))),
+        };
+        match made {
             Ok(exc) => PyErr::from_value(exc),
             Err(import_failed) => import_failed,
         }
@@ -175,13 +189,51 @@ fn samples_of(a: &Bound<'_, PyAny>, what: &str) -> PyResult<(Vec<f32>, Vec<usize
             true,
         ));
     }
+    // float64 (what imageio and OIIO often hand out) is rounded to float32,
+    // as a float EXR holds it: the result is float32.
+    if let Ok(arr) = a.downcast::<PyArrayDyn<f64>>() {
+        let ro: PyReadonlyArrayDyn<'_, f64> = arr.readonly();
+        let v = ro.as_array();
+        return Ok((
+            v.iter().map(|&x| x as f32).collect(),
+            v.shape().to_vec(),
+            false,
+        ));
+    }
     let dtype = a
         .getattr("dtype")
         .and_then(|d| d.str().map(|s| s.to_string()))
         .unwrap_or_else(|_| a.get_type().to_string());
     Err(config_error(format!(
-        "{what} must be a numpy array of float32 or float16, not {dtype} (convert with .astype(numpy.float32))"
+        "{what} must be a numpy array of float32, float16 or float64, not {dtype} (convert with .astype(numpy.float32))"
     )))
+}
+
+/// An image's (height, width, channels) from its array's shape: (H, W, C),
+/// or (H, W) as one channel (whether it was: the result takes its shape).
+fn image_shape(shape: &[usize], what: &str) -> PyResult<([usize; 3], bool)> {
+    match shape[..] {
+        [h, w, c] => Ok(([h, w, c], false)),
+        [h, w] => Ok(([h, w, 1], true)),
+        _ => Err(config_error(format!(
+            "{what} must have shape (height, width, channels) or (height, width), not {shape:?}"
+        ))),
+    }
+}
+
+/// `values` as an array of the image's shape (`flat`: (H, W)).
+fn shaped<'py, T: numpy::Element>(
+    py: Python<'py>,
+    values: Vec<T>,
+    [h, w, c]: [usize; 3],
+    flat: bool,
+) -> PyResult<Bound<'py, PyAny>> {
+    let arr = PyArray1::from_vec(py, values);
+    Ok(if flat {
+        arr.reshape([h, w])?.into_any()
+    } else {
+        arr.reshape([h, w, c])?.into_any()
+    })
 }
 
 /// The channel names of an image of `c` channels.
@@ -275,11 +327,7 @@ fn filter<'py>(
     settings: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
     let (data, shape, half) = samples_of(samples, "samples")?;
-    let [h, w, c] = shape[..] else {
-        return Err(config_error(format!(
-            "samples must have shape (height, width, channels), not {shape:?}"
-        )));
-    };
+    let ([h, w, c], flat) = image_shape(&shape, "samples")?;
     let channels = channel_names(channels, c)?;
     let mut pairs = settings_of(settings)?;
     if let Some(m) = method {
@@ -314,11 +362,9 @@ fn filter<'py>(
     let image = match out.precision {
         Precision::F16 => {
             let v: Vec<f16> = out.samples.iter().map(|&x| f16::from_f32(x)).collect();
-            PyArray1::from_vec(py, v).reshape(dims)?.into_any()
+            shaped(py, v, dims, flat)?
         }
-        _ => PyArray1::from_vec(py, out.samples)
-            .reshape(dims)?
-            .into_any(),
+        _ => shaped(py, out.samples, dims, flat)?,
     };
     Ok((image, to_dict(py, &out.report)?))
 }
@@ -508,11 +554,7 @@ fn restore<'py>(
             "denoised has shape {dshape:?} and energy {eshape:?}: restore needs the denoiser's output of that very image"
         )));
     }
-    let [h, w, c] = eshape[..] else {
-        return Err(config_error(format!(
-            "arrays must have shape (height, width, channels), not {eshape:?}"
-        )));
-    };
+    let ([h, w, c], flat) = image_shape(&eshape, "energy")?;
     let (variance, spp_counts, spp_fixed) = statistics_of(variance, spp, (h, w))?;
     let channels = channel_names(channels, c)?;
     let nonfinite = epfilt::pipeline::NonFinite::parse(nonfinite).map_err(to_py)?;
@@ -539,7 +581,7 @@ fn restore<'py>(
             Some(cancel),
         )
     })?;
-    let image = PyArray1::from_vec(py, out).reshape([h, w, c])?.into_any();
+    let image = shaped(py, out, [h, w, c], flat)?;
     Ok((image, to_dict(py, &report)?))
 }
 

@@ -142,11 +142,11 @@ def test_strided_and_half_inputs(scene, tmp_path):
 def test_errors_raise_the_right_exceptions(scene, tmp_path):
     samples, _ = epfilt.read(scene)
     with pytest.raises(epfilt.ConfigError, match="shape"):
-        epfilt.filter(samples[:, :, 0])
+        epfilt.filter(samples[:, 0, 0])
     with pytest.raises(ValueError):  # ConfigError is a ValueError too
         epfilt.filter(samples[:, :10], supersample=3)
-    with pytest.raises(epfilt.ConfigError, match="float32 or float16"):
-        epfilt.filter(samples.astype(np.float64))
+    with pytest.raises(epfilt.ConfigError, match="float32, float16 or float64"):
+        epfilt.filter(samples.astype(np.int16))
     with pytest.raises(epfilt.ConfigError, match='unknown setting "tolerence"'):
         epfilt.filter(samples, tolerence=0.1)
     with pytest.raises(epfilt.ConfigError, match="tolerance"):
@@ -371,6 +371,30 @@ def test_restore_puts_the_energy_back_at_any_thread_count():
     assert low["keep_gain"] == 2.0 and low["kept_share"] >= report["kept_share"]
     with pytest.raises(epfilt.ConfigError):
         epfilt.restore(denoised, energy, keep_gain=0.5)
+
+
+def test_float64_and_two_dimensional_arrays_are_taken():
+    rng = np.random.default_rng(3)
+    grey = rng.random((30, 40)) + 0.5  # float64, (H, W)
+    grey[7, 9] = 400.0
+    out, report = epfilt.filter(grey)
+    assert out.shape == grey.shape and out.dtype == np.float32
+    as32, _ = epfilt.filter(grey.astype(np.float32)[:, :, None])
+    assert np.array_equal(out, as32[:, :, 0])
+    restored, rep = epfilt.restore(np.full_like(grey, grey.mean()), grey, 8)
+    assert restored.shape == grey.shape
+    for l in rep["ledger"]:
+        assert l["rel_error"] <= LEDGER_TOL
+    with pytest.raises(epfilt.ConfigError):
+        epfilt.filter(grey.astype(np.int32))
+
+
+def test_os_errors_are_oserrors_with_errno_and_filename(tmp_path):
+    missing = tmp_path / "missing.exr"
+    with pytest.raises(FileNotFoundError) as e:
+        epfilt.filter_file(missing, tmp_path / "out.exr")
+    assert isinstance(e.value, epfilt.IoError) and isinstance(e.value, epfilt.Error)
+    assert e.value.errno == 2 and e.value.filename == str(missing)
 
 
 def test_restore_reads_a_variance_pass_as_restore_file_does(variance_scene):

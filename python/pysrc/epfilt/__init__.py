@@ -6,7 +6,7 @@ sum to one, so the image's energy is exact, and real features (lamps, rims,
 highlights) are kept.
 
     import numpy as np, epfilt
-    image, report = epfilt.filter(samples, supersample=3)        # (H, W, C) float32/float16, 3x3 super-sampled
+    image, report = epfilt.filter(samples, supersample=3)        # (H, W, C) float32/16/64, 3x3 super-sampled
     report = epfilt.filter_file("render_3x.exr", "out.exr", tolerance=0.08)
 
 Settings are the command line's options with underscores (``support_region=8``,
@@ -48,14 +48,34 @@ class ConfigError(Error, ValueError):
 
 
 class IoError(Error, OSError):
-    """Reading or writing a file failed, or the output path cannot be written."""
+    """Reading or writing a file failed, or the output path cannot be written. Where the
+    operating system said why, ``errno`` and ``filename`` are set, and the error is also the
+    ``OSError`` subclass Python gives that errno (a missing file is a ``FileNotFoundError``)."""
+
+
+_OS_ERRORS = {}
+
+
+def _os_error(errno, strerror, filename):
+    """An ``IoError`` for an operating system's ``errno`` on ``filename``: also the OSError
+    subclass Python maps that errno to (called by the native module)."""
+    base = type(OSError(errno, strerror))
+    if base is OSError:
+        return IoError(errno, strerror, filename)
+    cls = _OS_ERRORS.get(base)
+    if cls is None:
+        cls = type(base.__name__, (IoError, base), {"__module__": __name__, "__doc__": IoError.__doc__})
+        _OS_ERRORS[base] = cls
+    return cls(errno, strerror, filename)
 
 
 def filter(samples, supersample=None, method=None, *, channels=None, variance=None, spp=None, **settings):
     """Filter samples held in memory: a render at final resolution, or a super-sampled one.
 
-    samples: numpy array (height, width, channels) of float32 or float16, any strides;
-        1 channel is Y, 2 Y A, 3 R G B, 4 R G B A (or name them with ``channels``).
+    samples: numpy array (height, width, channels), or (height, width) for one channel, of
+        float32 or float16 (the result keeps it), or float64 (rounded to float32, as a float
+        EXR holds it; the result is float32), any strides; 1 channel is Y, 2 Y A, 3 R G B,
+        4 R G B A (or name them with ``channels``).
     supersample: samples per output pixel along each axis (default: 1, the array is at pixel
         resolution and is never reduced unless asked). The height and width must be multiples of it.
     method: ``ep-gauss``, ``ep-box``, ``gauss``, ``box``, ``clamp``, ``median``, ``alpha-trim``
@@ -102,8 +122,9 @@ def restore(denoised, energy, scale=None, *, keep_gain=None, emission=None, vari
     either, and the report.
 
     ``denoised`` is any denoiser's output (OIDN, OptiX, ...) and ``energy`` the image
-    whose energy is right (the render, or ``filter``'s output of it), both float32 or
-    float16 arrays of the same shape (height, width, channels). The render is an unbiased
+    whose energy is right (the render, or ``filter``'s output of it), both float32,
+    float16 or float64 (rounded to float32) arrays of the same shape (height, width,
+    channels), or (height, width) for one channel. The render is an unbiased
     but noisy estimate of every region's energy, the denoiser's a steady but biased one:
     each block of ``scale`` x ``scale`` pixels (default 32), and each block of twice,
     four times ... that side up to the whole image, gets the render's energy where the

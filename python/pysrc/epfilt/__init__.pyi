@@ -9,7 +9,7 @@ import numpy.typing as npt
 __version__: str
 
 _Path = Union[str, "PathLike[str]"]
-_Samples = Union[npt.NDArray[np.float32], npt.NDArray[np.float16]]
+_Samples = Union[npt.NDArray[np.float32], npt.NDArray[np.float16], npt.NDArray[np.float64]]
 _Setting = Union[str, int, float, bool, Sequence[str], None]
 
 class Error(Exception): ...
