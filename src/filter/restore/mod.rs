@@ -105,8 +105,8 @@ impl RestoreParams {
 pub const KEEP_SIGMA: f64 = 2.0;
 
 /// Kernel radius in units of its standard deviation: three, where what is
-/// cut off (about 1%) no longer changes what the denoiser put around a
-/// pixel enough to matter.
+/// cut off (the Gaussian's tails beyond three deviations) no longer changes
+/// what the denoiser put around a pixel enough to matter.
 pub const REACH_SIGMAS: f64 = 3.0;
 
 /// The default `--scale`: the smallest blocks with a target are 32 x 32

@@ -66,7 +66,7 @@ pub(super) fn survey<S: Source>(
         recycled: Some(recycled),
     };
     let (tx, rx) = crossbeam_channel::bounded::<Result<Strip>>(2);
-    let (w, h) = plan.size;
+    let h = plan.size.1;
     let mut state = Sums::new(plan);
     state.input.recycle_strips(recycle);
     std::thread::scope(|scope| {
@@ -98,7 +98,6 @@ pub(super) fn survey<S: Source>(
             state.rows_in
         )));
     }
-    let _ = w;
     Ok(Survey {
         counts: state.counts,
         sums: state.grid,
