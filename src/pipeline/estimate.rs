@@ -346,18 +346,9 @@ fn estimate_with(
     blocks: u64,
 ) -> u64 {
     let halo = crate::filter::halo(params);
-    // ep-gauss at S = 1 holds what ep-box holds (input rows, per-pixel
-    // windows, kept and accumulator rows), and the surface guides per pixel.
     let pixel = params.method == Method::EpGauss && job.grid.s == 1;
     if params.method == Method::EpBox || pixel {
-        let surfaces = if pixel && job.guides.surface() {
-            let (w, strip) = (job.grid.in_w as u64, job.strip_rows(cfg) as u64);
-            w.saturating_mul(12)
-                .saturating_mul(2 * halo.search_reach as u64 + strip + 2)
-        } else {
-            0
-        };
-        return estimate_box_bytes(job, cfg, (block_bytes, blocks), halo).saturating_add(surfaces);
+        return estimate_pixel_bytes(job, cfg, (block_bytes, blocks), halo, pixel);
     }
     let s = job.grid.s as u64;
     let nch = job.channels.len() as u64;
@@ -466,31 +457,57 @@ fn around(
         .saturating_add(block_bytes.saturating_mul(blocks))
 }
 
-fn estimate_box_bytes(
+/// The pixel-resolution stages (ep-box; ep-gauss at S = 1): input rows
+/// from the row being written to the treatment's reach past the rows
+/// treated; the per-pixel windows (ep-box's from the passes' reach behind
+/// the rows treated to the rows in; ep-gauss's a few rows about the rows
+/// treated, and its lights and surface guides over the spreads' reach);
+/// the sources waiting for their rows to be written ([`NOISY_SHARE_INV`]
+/// of those rows' pixels) and the rows being made; each task's band arrays
+/// (ep-box); strips in flight; the codec's blocks.
+fn estimate_pixel_bytes(
     job: &StripLayout,
     cfg: &PipelineConfig,
     (block_bytes, blocks): (u64, u64),
     halo: Halo,
+    gauss: bool,
 ) -> u64 {
     let w = job.grid.in_w as u64;
     let (nch, nall) = (job.channels.len() as u64, job.strip_channels() as u64);
     let strip = job.strip_rows(cfg) as u64;
-    let (p, r) = (halo.search_reach as u64, halo.spread_reach as u64);
+    let (mut p, r) = (halo.search_reach as u64, halo.spread_reach as u64);
+    if gauss {
+        let choose = job.guides.emission.is_some() || job.guides.surface();
+        p = super::pixel::treat_lag(choose, r as usize) as u64;
+    }
     let threads = cfg.workers() as u64;
-    // Input rows with their luminance, guard bound, raw flags and decision;
-    // kept and accumulator rows; each task's band arrays; strips in flight;
-    // the codec's blocks.
-    let per_in = w.saturating_mul(nall * 4 + 8 + 8 + 1 + 1);
-    let windows = per_in.saturating_mul(2 * p + strip + 2)
-        + w.saturating_mul(nch * 8)
-            .saturating_mul(2 * (2 * r + strip + 2));
-    let bands = w
-        .saturating_mul(9 + 4)
-        .saturating_mul((32 + 2 * p) * threads.max(1));
+    let held = p + r + strip + 2;
+    let input = w.saturating_mul(nall * 4).saturating_mul(held);
+    let per_pixel = if gauss {
+        let surface = if job.guides.surface() { 12 } else { 0 };
+        w.saturating_mul(8 + 8 + 1).saturating_mul(strip + 16)
+            + w.saturating_mul(1 + surface).saturating_mul(held)
+    } else {
+        w.saturating_mul(8 + 8 + 1 + 1)
+            .saturating_mul(2 * p + strip + 2)
+    };
+    let sources = (w.saturating_mul(held) / NOISY_SHARE_INV).saturating_mul(40 + 16 * nch);
+    let rows = w
+        .saturating_mul(nch * 8)
+        .saturating_mul(strip.max(16) + threads);
+    let bands = match gauss {
+        true => 0,
+        false => w
+            .saturating_mul(9 + 4)
+            .saturating_mul((32 + 2 * p) * threads.max(1)),
+    };
     let strips = w
         .saturating_mul(nall * 4)
         .saturating_mul(strip * STRIPS_HELD);
-    windows
+    input
+        .saturating_add(per_pixel)
+        .saturating_add(sources)
+        .saturating_add(rows)
         .saturating_add(bands)
         .saturating_add(strips)
         .saturating_add(scratch(job, cfg, block_bytes))

@@ -9,19 +9,20 @@
 //!    flag;
 //! 2. **treatment** of row `y` once rows `y + passes` are in: the passes over
 //!    the band `y ± passes` decide each noisy pixel's excess (see the module
-//!    above), the pixel keeps the rest, and the excess goes into accumulator
-//!    tiles that own columns, source pixels in row-major order;
+//!    above), the pixel keeps the rest, and it is listed as a source;
 //! 3. **output** of row `y` once every row within the spread radius `R` has
-//!    been treated: kept values plus accumulator.
+//!    been treated: the input row, the kept values of its sources, plus the
+//!    shares of every source whose ring reaches it ([`super::gather`]).
 //!
-//! The treatment of a pixel reads only the input within `passes` of it, and the
-//! accumulator receives spreads in row-major order whatever the tiles, so the
+//! The treatment of a pixel reads only the input within `passes` of it, and
+//! each output pixel adds its shares in row-major source order, so the
 //! output is bit-identical across `--tile`, `--strip-rows` and `--threads`.
 //! Pixels that are neither treated nor reached keep their input bits exactly.
 
 use rayon::prelude::*;
 
 use super::counts::{ExcessCounts, MethodCounts};
+use super::gather::{Made, Placed, Sources};
 use super::guided::GuideReader;
 use super::pixel::SURFACE_SHARE;
 use super::stage::{Output, Stage, WindowUse};
@@ -40,6 +41,10 @@ use crate::geometry::Halo;
 /// around its own, so tasks should be several times taller than that.
 const TREAT_ROWS: usize = 32;
 
+/// Rows handed over at once when every input row is in (as
+/// [`super::pixel`]'s).
+const LAST_ROWS: usize = 16;
+
 /// A pixel whose excess is spread.
 #[derive(Clone, Copy, Debug)]
 struct Source {
@@ -47,14 +52,17 @@ struct Source {
     y: u32,
     /// Offsets of the ring walked.
     m: u32,
-    /// Where what each in-image pixel of the walk receives is, per channel
-    /// (`nch` values in the shares).
-    off: usize,
     /// Its surface guides (with surface guides on: only the pixels of its
     /// surface receive, where it keeps to it).
     surface: Surface,
     /// It keeps to its surface (else only clear of lights).
     on_surface: bool,
+}
+
+impl Placed for Source {
+    fn at(&self) -> (usize, usize) {
+        (self.x as usize, self.y as usize)
+    }
 }
 
 /// The excess rule's settings and factors, set once.
@@ -66,6 +74,9 @@ struct ExcessRule {
     /// Factors of the `stderr` guard's bound.
     tg: TFactor,
     ring: Ring,
+    /// The ring's offsets by row: `rows[dy + reach]` lists the index and
+    /// `dx` of each offset of row `dy`, in the ring's order.
+    ring_rows: Vec<Vec<(u32, i32)>>,
     passes: usize,
     reach: usize,
 }
@@ -79,8 +90,6 @@ struct ExcessWindows {
     raw: RowWindow<u8>,
     /// The decision: 1 noisy, 0 converged (or reliable).
     noisy: RowWindow<u8>,
-    kept: RowWindow<f64>,
-    acc: RowWindow<f64>,
 }
 
 /// The `ep-box` filter state between strips.
@@ -93,9 +102,13 @@ pub struct ExcessStage {
     modes: Vec<ChannelMode>,
     stats: StatsLayout,
     rule: ExcessRule,
-    tile: usize,
     win: ExcessWindows,
+    spreads: Sources<Source>,
+    /// Final output rows not yet written.
+    made: Made,
     treat_done: usize,
+    /// Output rows written.
+    released: usize,
     counters: ExcessCounts,
     guides: GuideReader,
 }
@@ -117,7 +130,6 @@ impl ExcessStage {
         stats: StatsLayout,
         params: &ValidParams,
         ltvis: f64,
-        tile: usize,
         (guides, rule): (GuideLayout, SurfaceRule),
     ) -> Result<Self> {
         let max_radius = params.max_radius;
@@ -153,6 +165,11 @@ impl ExcessStage {
             )));
         }
         let ring = Ring::new(max_radius);
+        let reach = ring.radius();
+        let mut ring_rows = vec![Vec::new(); 2 * reach + 1];
+        for (i, &(dx, dy)) in ring.offsets().iter().enumerate() {
+            ring_rows[(dy + reach as i32) as usize].push((i as u32, dx));
+        }
         let guides = GuideReader::new(guides, rule, &lum, nch, w)?;
         Ok(ExcessStage {
             w,
@@ -168,19 +185,20 @@ impl ExcessStage {
                 t: TFactor::new(params.confidence),
                 tg: TFactor::new(params.guard_confidence),
                 passes: params.passes,
-                reach: ring.radius(),
+                reach,
                 ring,
+                ring_rows,
             },
-            tile,
             win: ExcessWindows {
                 ylum: RowWindow::new(w),
                 cap: RowWindow::new(w),
                 raw: RowWindow::new(w),
                 noisy: RowWindow::new(w),
-                kept: RowWindow::new(nch * w),
-                acc: RowWindow::new(nch * w),
             },
+            spreads: Sources::new(nch, reach),
+            made: Made::new(nch * w),
             treat_done: 0,
+            released: 0,
             counters: ExcessCounts::default(),
             guides,
         })
@@ -213,24 +231,33 @@ impl Stage for ExcessStage {
         self.statistics(input, a, b);
     }
 
-    fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, _all_in: bool) -> usize {
-        self.run(input, rows_in)
+    fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> usize {
+        let end = self.run(input, rows_in);
+        let end = match all_in {
+            true => end.min(self.released + LAST_ROWS),
+            false => end,
+        };
+        self.make_rows(input, end);
+        end
     }
 
     fn input_needed(&self) -> usize {
         // The passes read back to `passes + GUARD_REACH` rows; the spreads'
-        // receivers (their surface guides) `reach` rows.
+        // receivers (their surface guides) `reach` rows; an output row is
+        // made from its input row.
         self.treat_done
             .saturating_sub((self.rule.passes + GUARD_REACH).max(self.rule.reach))
+            .min(self.made.rows.end())
     }
 
     fn output(&self, rows: (usize, usize)) -> Output<'_> {
-        Output::of(&self.win.kept, Some(&self.win.acc), rows)
+        Output::of(&self.made.rows, None, rows)
     }
 
     fn release(&mut self, y: usize) {
-        self.win.kept.evict_below(y);
-        self.win.acc.evict_below(y);
+        self.released = y;
+        self.made.rows.evict_below(y);
+        self.spreads.release(y);
     }
 
     fn counts(&self) -> MethodCounts {
@@ -256,14 +283,14 @@ impl Stage for ExcessStage {
                 row_bytes: w,
             },
             WindowUse {
-                name: "kept",
-                rows: self.win.kept.high_water(),
+                name: "output",
+                rows: self.made.rows.high_water(),
                 row_bytes: nch * w * 8,
             },
             WindowUse {
-                name: "accumulator",
-                rows: self.win.acc.high_water(),
-                row_bytes: nch * w * 8,
+                name: "sources (one a row)",
+                rows: self.spreads.high_water(),
+                row_bytes: std::mem::size_of::<Source>() + self.spreads.value_bytes(),
             },
         ]
     }
@@ -388,17 +415,10 @@ impl ExcessStage {
         }
     }
 
-    /// Decide the excess of every noisy pixel of rows `a..b`, write their kept
-    /// rows, and spread the excess.
+    /// Decide the excess of every noisy pixel of rows `a..b` and list the
+    /// spread ones as sources.
     fn treat(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
         let (w, h, nch) = (self.w, self.h, self.nch);
-        for _ in a..b {
-            self.win.kept.push_stale(0.0);
-        }
-        while self.win.acc.end() < (b + self.rule.reach).min(h) {
-            self.win.acc.push(-0.0);
-        }
-        let kept = self.win.kept.range_mut(a, b);
         let ctx = Band {
             w,
             h,
@@ -415,30 +435,17 @@ impl ExcessStage {
             ring: &self.rule.ring,
             guides: &self.guides,
         };
-        let mut chunks: Vec<(usize, Vec<&mut [f64]>)> = Vec::new();
-        let mut rows = kept.into_iter();
-        let mut y = a;
-        while y < b {
-            let n = TREAT_ROWS.min(b - y);
-            chunks.push((y, rows.by_ref().take(n).collect()));
-            y += n;
-        }
+        let chunks: Vec<usize> = (a..b).step_by(TREAT_ROWS).collect();
         let region = crate::trace::region("ep-box passes");
         let results: Vec<(Vec<Source>, Vec<f64>, ExcessCounts)> = chunks
             .into_par_iter()
-            .map(|(c0, rows)| {
+            .map(|c0| {
                 let _task = region.task("ep-box passes");
-                ctx.treat_rows(c0, rows)
+                ctx.treat_rows(c0, (c0 + TREAT_ROWS).min(b))
             })
             .collect();
-        let (mut sources, mut shares) = (Vec::new(), Vec::new());
-        for (s, sh, c) in results {
-            let base = shares.len();
-            sources.extend(s.into_iter().map(|s| Source {
-                off: s.off + base,
-                ..s
-            }));
-            shares.extend(sh);
+        for (s, values, c) in results {
+            self.spreads.extend(s, values);
             let k = &mut self.counters;
             k.noisy += c.noisy;
             k.spread += c.spread;
@@ -448,19 +455,43 @@ impl ExcessStage {
             k.unresolved += c.unresolved;
             k.passes = k.passes.max(c.passes);
         }
-        let surface = self
-            .guides
-            .chooses_receivers()
-            .then_some((input, &self.guides));
-        scatter_ring(
-            &mut self.win.acc,
-            &self.rule.ring,
-            (&sources, &shares),
-            &self.modes,
-            (w, h),
-            self.tile,
-            surface,
-        );
+    }
+
+    /// Output rows `a..b` (final: every source whose ring reaches them is
+    /// treated): each source's share added to the in-image pixels of its
+    /// ring prefix (those its guides accept, where they choose receivers).
+    fn make_rows(&mut self, input: &RowWindow<f32>, end: usize) {
+        let (w, nch, reach) = (self.w, self.nch, self.rule.reach);
+        let spread: Vec<usize> = (0..nch)
+            .filter(|&c| self.modes[c] == ChannelMode::Spread)
+            .collect();
+        let g = self.guides.chooses_receivers().then_some(&self.guides);
+        let by_row = &self.rule.ring_rows;
+        self.made
+            .make_to(&self.spreads, input, (end, w), |s, shares, ty, acc| {
+                let (sx, sy, m) = (s.x as usize, s.y as usize, s.m);
+                if ty + reach < sy || ty > sy + reach {
+                    return;
+                }
+                let from = s.on_surface.then_some((&s.surface, sx, sy));
+                for &(i, dx) in &by_row[ty + reach - sy] {
+                    if i >= m {
+                        break;
+                    }
+                    let tx = sx as i64 + dx as i64;
+                    if tx < 0 || tx >= w as i64 {
+                        continue;
+                    }
+                    let tx = tx as usize;
+                    if g.is_some_and(|g| !g.accepts_in(input.get(ty), (tx, ty), from)) {
+                        continue;
+                    }
+                    // Channels that are not spread keep their bits.
+                    for &c in &spread {
+                        acc[c * w + tx] += shares[c];
+                    }
+                }
+            })
     }
 }
 
@@ -539,33 +570,23 @@ impl Band<'_> {
         max
     }
 
-    /// Treat rows `c0..c0 + kept.len()`: the passes over the band of rows
+    /// Treat rows `c0..c1`: the passes over the band of rows
     /// `c0 - passes .. c1 + passes`, which holds everything those rows'
-    /// decisions read (see `filter::ep_box`).
-    fn treat_rows(
-        &self,
-        c0: usize,
-        mut kept: Vec<&mut [f64]>,
-    ) -> (Vec<Source>, Vec<f64>, ExcessCounts) {
+    /// decisions read (see `filter::ep_box`). The sources in row-major
+    /// order, their values (per source what its pixel keeps, then what each
+    /// receiver gets, a value a channel each) and what it counted.
+    fn treat_rows(&self, c0: usize, c1: usize) -> (Vec<Source>, Vec<f64>, ExcessCounts) {
         let (w, h, nch) = (self.w, self.h, self.nch);
-        let c1 = c0 + kept.len();
         let margin = self.passes + GUARD_REACH;
         let ba = c0.saturating_sub(margin);
         let bb = (c1 + margin).min(h);
         let bh = bb - ba;
         let mut counters = ExcessCounts::default();
-        // Originals first: kept values start as the input.
-        for (k, row) in kept.iter_mut().enumerate() {
-            let src = self.input.get(c0 + k);
-            for (d, &v) in row.iter_mut().zip(&src[..nch * w]) {
-                *d = v as f64;
-            }
-        }
         let in_target = |r: usize| (c0..c1).contains(&(ba + r));
         counters.noisy = (c0..c1)
             .map(|y| self.noisy.get(y)[..w].iter().filter(|&&f| f != 0).count() as u64)
             .sum();
-        let (mut sources, mut shares) = (Vec::new(), Vec::new());
+        let (mut sources, mut values) = (Vec::new(), Vec::new());
         let settle = |r: usize, x: usize, k: u8, mean: f64| -> f64 {
             let y = self.ylum.get(ba + r)[x];
             let target = in_target(r);
@@ -635,23 +656,22 @@ impl Band<'_> {
             };
             counters.spread += 1;
             counters.capped += u64::from(found < wanted);
-            let off = shares.len();
-            let row = &mut kept[yy - c0];
+            let at = values.len();
+            values.resize(at + 2 * nch, 0.0);
+            let (kept, shares) = values[at..].split_at_mut(nch);
             let f = colour_fraction(excess, y);
             for c in 0..nch {
-                let mut share = 0.0;
+                kept[c] = src[c * w + x] as f64;
                 if self.modes[c] == ChannelMode::Spread {
                     let removed = g.residual(src, c, x) * f;
-                    row[c * w + x] -= removed;
-                    share = removed / found as f64;
+                    kept[c] -= removed;
+                    shares[c] = removed / found as f64;
                 }
-                shares.push(share);
             }
             sources.push(Source {
                 x: x as u32,
                 y: yy as u32,
                 m: m as u32,
-                off,
                 surface,
                 on_surface,
             });
@@ -668,55 +688,13 @@ impl Band<'_> {
             .iter()
             .filter(|&&i| in_target(i as usize / w))
             .count() as u64;
-        sources.sort_by_key(|s| (s.y, s.x));
-        (sources, shares, counters)
+        // The passes settle pixels ring by ring: row-major for the output.
+        let mut order: Vec<usize> = (0..sources.len()).collect();
+        order.sort_by_key(|&i| (sources[i].y, sources[i].x));
+        let values = (order.iter())
+            .flat_map(|&i| values[i * 2 * nch..(i + 1) * 2 * nch].iter().copied())
+            .collect();
+        let sources = order.iter().map(|&i| sources[i]).collect();
+        (sources, values, counters)
     }
-}
-
-/// Add each source's share to the in-image pixels of its ring prefix, one task
-/// per tile of columns; every pixel receives its shares in source order.
-fn scatter_ring(
-    acc: &mut RowWindow<f64>,
-    ring: &Ring,
-    (sources, shares): (&[Source], &[f64]),
-    modes: &[ChannelMode],
-    (w, h): (usize, usize),
-    tile: usize,
-    surface: Option<(&RowWindow<f32>, &GuideReader)>,
-) {
-    let nch = modes.len();
-    if sources.is_empty() {
-        return;
-    }
-    let first = acc.first();
-    let offsets = ring.offsets();
-    crate::pipeline::tiles::for_each_tile(acc, w, nch, tile, |cols, parts| {
-        let (x0, x1) = (cols.start, cols.end);
-        for s in sources {
-            let (sx, sy, m) = (s.x as usize, s.y as usize, s.m as usize);
-            let rx = ring.reach_x(m);
-            if sx + rx < x0 || sx >= x1 + rx {
-                continue;
-            }
-            for &(dx, dy) in &offsets[..m] {
-                let tx = sx as i64 + dx as i64;
-                let ty = sy as i64 + dy as i64;
-                if tx < x0 as i64 || tx >= x1 as i64 || ty < 0 || ty >= h as i64 {
-                    continue;
-                }
-                let (tx, ty) = (tx as usize, ty as usize);
-                if let Some((input, g)) = surface {
-                    let from = s.on_surface.then_some((&s.surface, sx, sy));
-                    if !g.accepts_in(input.get(ty), (tx, ty), from) {
-                        continue;
-                    }
-                }
-                let r = ty - first;
-                // Channels that are not spread keep their bits.
-                for c in (0..nch).filter(|&c| modes[c] == ChannelMode::Spread) {
-                    parts[r * nch + c][tx - x0] += shares[s.off + c];
-                }
-            }
-        }
-    });
 }

@@ -27,6 +27,7 @@ pub mod counts;
 pub mod edge;
 mod estimate;
 pub mod excess;
+mod gather;
 mod guided;
 pub mod ledger;
 mod memory;

@@ -51,7 +51,6 @@ pub fn make(
                 stats,
                 params,
                 ltvis,
-                tile,
                 (job.guides.clone(), job.surface_rule),
             )?)
         }
@@ -63,7 +62,6 @@ pub fn make(
             job.guides.clone(),
             job.surface_rule,
             params,
-            tile,
         )?),
         Method::Median | Method::AlphaTrim => {
             Box::new(OrderStage::new(grid, job.modes.clone(), params))

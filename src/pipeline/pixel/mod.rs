@@ -11,22 +11,24 @@
 //!    whether it is noisy;
 //! 3. **treatment** of row `y` once rows `y + 2` are classified and rows
 //!    `y + R` are in (with guides, the receivers a spread may not reach,
-//!    lights and other surfaces, are read there): the feature rules, the width, the kept row (the pixel less its
-//!    excess), and the spread of each excess into accumulator tiles that own
-//!    columns, sources in row-major order;
+//!    lights and other surfaces, are read there): the feature rules, the
+//!    width, and each spread pixel as a source (what it keeps, what its
+//!    kernel carries);
 //!
 //! and the **output** of row `y` once every row within the widest reach `R`
-//! has been treated: kept values plus accumulator.
+//! has been treated: the input row, the kept values of its sources, plus
+//! every source's shares that reach it ([`super::gather`]).
 //!
 //! Each pixel's decision reads only the input within 4 rows and columns of
 //! it (with surface guides, its receivers' guides within `R`), and each
-//! accumulator pixel receives its spreads in source order whatever the
-//! tiles, so the output is bit-identical across `--tile`, `--strip-rows` and
-//! `--threads`. A pixel neither spread nor reached keeps its input bits.
+//! output pixel adds its shares in source order, so the output is
+//! bit-identical across `--tile`, `--strip-rows` and `--threads`. A pixel
+//! neither spread nor reached keeps its input bits.
 
 use rayon::prelude::*;
 
 use super::counts::{MethodCounts, SpreadCounts};
+use super::gather::{Made, Placed, Sources};
 use super::guided::GuideReader;
 use super::stage::{Output, Stage, WindowUse};
 use super::window::RowWindow;
@@ -52,6 +54,10 @@ pub(super) const SURFACE_SHARE: f64 = 0.5;
 /// Rows treated per task.
 const TREAT_ROWS: usize = 16;
 
+/// Rows handed over at once when every input row is in: the last rows are
+/// made a strip's worth at a time, not all at once.
+const LAST_ROWS: usize = 16;
+
 /// Rows past a row whose classification its treatment reads (the range
 /// rule looks at the flags within [`BACKGROUND_REACH`]).
 const DECIDE_REACH: usize = BACKGROUND_REACH;
@@ -63,12 +69,15 @@ struct Source {
     y: u32,
     /// Its rung on the ladder of widths.
     k: u32,
-    /// Where its per-channel shares (what one unit of weight carries) are.
-    off: usize,
-    /// Where the bits of the receivers the guides allow are, in its
-    /// batch's masks (row-major over its kernel's square), when the guides
-    /// choose them.
-    mask: usize,
+    /// The surface it keeps to, where the guides choose its receivers and
+    /// it does (else, with them, it keeps clear of lights only).
+    on_surface: Option<Surface>,
+}
+
+impl Placed for Source {
+    fn at(&self) -> (usize, usize) {
+        (self.x as usize, self.y as usize)
+    }
 }
 
 /// The widths and the tests, set once.
@@ -95,8 +104,6 @@ struct PixelWindows {
     /// Each pixel's surface guides (with them), for the rows a spread may
     /// reach (as `light`).
     surf: RowWindow<Surface>,
-    kept: RowWindow<f64>,
-    acc: RowWindow<f64>,
 }
 
 /// ep-gauss's state between strips at S = 1.
@@ -107,12 +114,16 @@ pub struct PixelStage {
     modes: Vec<ChannelMode>,
     guides: GuideReader,
     rule: PixelRule,
-    tile: usize,
     win: PixelWindows,
+    spreads: Sources<Source>,
+    /// Final output rows not yet written.
+    made: Made,
     /// Pixels whose emission guide set light aside (counted on arrival).
     emissive: u64,
     class_done: usize,
     treat_done: usize,
+    /// Output rows written.
+    released: usize,
     counts: SpreadCounts,
 }
 
@@ -120,8 +131,7 @@ impl PixelStage {
     /// The stage for a `w x h` image whose strip rows hold `nch` filtered
     /// channels (luminance weights `lum`, modes `modes`) and then the aux
     /// channels; `guides` indexes that whole row. Checked by the skeleton:
-    /// the grid, the channels and the tile.
-    #[allow(clippy::too_many_arguments)]
+    /// the grid and the channels.
     pub fn new(
         w: usize,
         h: usize,
@@ -130,7 +140,6 @@ impl PixelStage {
         guides: GuideLayout,
         rule: SurfaceRule,
         params: &ValidParams,
-        tile: usize,
     ) -> Result<Self> {
         let nch = modes.len();
         let guides = GuideReader::new(guides, rule, &lum, nch, w)?;
@@ -157,19 +166,19 @@ impl PixelStage {
                 taps,
                 reach,
             },
-            tile,
             win: PixelWindows {
                 ylum: RowWindow::new(w),
                 bg: RowWindow::new(w),
                 cand: RowWindow::new(w),
                 light: RowWindow::new(w),
                 surf: RowWindow::new(w),
-                kept: RowWindow::new(nch * w),
-                acc: RowWindow::new(nch * w),
             },
+            spreads: Sources::new(nch, reach),
+            made: Made::new(nch * w),
             emissive: 0,
             class_done: 0,
             treat_done: 0,
+            released: 0,
             counts: SpreadCounts::default(),
         })
     }
@@ -190,7 +199,6 @@ impl Stage for PixelStage {
 
     fn arrive(&mut self, input: &mut RowWindow<f32>, a: usize, b: usize) {
         for _ in a..b {
-            self.win.ylum.push_stale(0.0);
             self.win.light.push_stale(0);
         }
         if self.guides.surface() {
@@ -206,24 +214,26 @@ impl Stage for PixelStage {
                 }
             });
         }
+        if !self.guides.emission() {
+            return;
+        }
+        // The lights, for the rows a spread may reach (their luminance is
+        // made again when their rows are classified: held until then, it
+        // would cost the width times the reach).
         let guides = &self.guides;
-        let region = crate::trace::region("pixel luminance");
-        let rows = self.win.ylum.range_mut(a, b);
+        let region = crate::trace::region("pixel lights");
         let lights = self.win.light.range_mut(a, b);
-        let emissive: u64 = rows
+        let emissive: u64 = lights
             .into_par_iter()
-            .zip(lights)
             .enumerate()
-            .map(|(k, (yrow, lrow))| {
-                let _task = region.task("pixel luminance");
+            .map(|(k, lrow)| {
+                let _task = region.task("pixel lights");
                 let row = input.get(a + k);
                 let mut emissive = 0;
-                for (x, (y, l)) in yrow.iter_mut().zip(lrow.iter_mut()).enumerate() {
-                    *y = guides.residual_luminance(row, x);
-                    let light = guides.is_light(row, x, *y);
+                for (x, l) in lrow.iter_mut().enumerate() {
+                    let light = guides.is_light(row, x, guides.residual_luminance(row, x));
                     *l = u8::from(light);
-                    emissive +=
-                        u64::from(guides.emission() && (light || guides.has_emission(row, x)));
+                    emissive += u64::from(light || guides.has_emission(row, x));
                 }
                 emissive
             })
@@ -231,55 +241,41 @@ impl Stage for PixelStage {
         self.emissive += emissive;
     }
 
-    fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, _all_in: bool) -> usize {
+    fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> usize {
         let h = self.h;
-        let class_target = if rows_in == h {
-            h
+        let end = if rows_in < h || !all_in {
+            self.step(input, rows_in, rows_in.saturating_sub(self.treat_lag()));
+            self.end()
         } else {
-            rows_in.saturating_sub(BACKGROUND_REACH)
+            // The last rows a few at a time: what waits for its treatment
+            // is held across the whole width.
+            loop {
+                self.step(input, rows_in, (self.treat_done + LAST_ROWS).min(h));
+                if self.end() > self.released || self.treat_done == h {
+                    break;
+                }
+            }
+            self.end().min(self.released + LAST_ROWS)
         };
-        if class_target > self.class_done {
-            self.classify(self.class_done, class_target);
-            self.class_done = class_target;
-        }
-        // A treatment reads the flags DECIDE_REACH below its row, and its
-        // spreads' receivers (their surface guides) `reach` below.
-        let treat_target = if rows_in == h && self.class_done == h {
-            h
-        } else {
-            (self.class_done.saturating_sub(DECIDE_REACH))
-                .min(rows_in.saturating_sub(self.rule.reach))
-        };
-        if treat_target > self.treat_done {
-            self.treat(input, self.treat_done, treat_target);
-            self.treat_done = treat_target;
-            let keep = self.treat_done.saturating_sub(2 * BACKGROUND_REACH);
-            self.win.ylum.evict_below(keep);
-            self.win.bg.evict_below(keep);
-            self.win.cand.evict_below(keep);
-            // Receivers are read `reach` rows above a treated row.
-            let receivers = self.treat_done.saturating_sub(self.rule.reach);
-            self.win.light.evict_below(keep.min(receivers));
-            self.win.surf.evict_below(receivers);
-        }
-        if self.treat_done == h {
-            h
-        } else {
-            self.treat_done.saturating_sub(self.rule.reach)
-        }
+        self.make_rows(input, end);
+        end
     }
 
     fn input_needed(&self) -> usize {
-        self.treat_done.saturating_sub(self.rule.reach)
+        // An output row is made from its input row.
+        self.treat_done
+            .saturating_sub(self.rule.reach)
+            .min(self.made.rows.end())
     }
 
     fn output(&self, rows: (usize, usize)) -> Output<'_> {
-        Output::of(&self.win.kept, Some(&self.win.acc), rows)
+        Output::of(&self.made.rows, None, rows)
     }
 
     fn release(&mut self, y: usize) {
-        self.win.kept.evict_below(y);
-        self.win.acc.evict_below(y);
+        self.released = y;
+        self.made.rows.evict_below(y);
+        self.spreads.release(y);
     }
 
     fn counts(&self) -> MethodCounts {
@@ -308,25 +304,94 @@ impl Stage for PixelStage {
                 row_bytes: w,
             },
             WindowUse {
-                name: "kept",
-                rows: self.win.kept.high_water(),
+                name: "output",
+                rows: self.made.rows.high_water(),
                 row_bytes: nch * w * 8,
             },
             WindowUse {
-                name: "accumulator",
-                rows: self.win.acc.high_water(),
-                row_bytes: nch * w * 8,
+                name: "sources (one a row)",
+                rows: self.spreads.high_water(),
+                row_bytes: std::mem::size_of::<Source>() + self.spreads.value_bytes(),
+            },
+            WindowUse {
+                name: "surface guides",
+                rows: self.win.surf.high_water(),
+                row_bytes: w * std::mem::size_of::<Surface>(),
             },
         ]
     }
 }
 
 impl PixelStage {
-    /// Rows past a row that its treatment reads: the same with or without
-    /// surface guides, so that the halo follows from the settings alone
-    /// ([`crate::filter::halo`]).
+    /// Rows past a row that its treatment reads: the flags' and, where the
+    /// guides choose a spread's receivers, theirs within the widest reach
+    /// (the settings' halo, [`crate::filter::halo`], counts them always).
     fn treat_lag(&self) -> usize {
-        (BACKGROUND_REACH + DECIDE_REACH).max(self.rule.reach)
+        treat_lag(self.guides.chooses_receivers(), self.rule.reach)
+    }
+
+    /// Treat the rows up to `treat_target`, with what their treatment
+    /// reads. A treatment reads the flags DECIDE_REACH below its row, and
+    /// its spreads' receivers (their surface guides) `reach` below; a row's
+    /// flags, the luminance BACKGROUND_REACH below. Each is made when a
+    /// treatment needs it, not as rows arrive: what waits is held across the
+    /// whole width.
+    fn step(&mut self, input: &RowWindow<f32>, rows_in: usize, treat_target: usize) {
+        let h = self.h;
+        let class_target = match rows_in == h {
+            true => (treat_target + DECIDE_REACH).min(h),
+            false => (treat_target + DECIDE_REACH).min(rows_in.saturating_sub(BACKGROUND_REACH)),
+        };
+        let lum_target = match class_target == h {
+            true => h,
+            false => (class_target + BACKGROUND_REACH).min(rows_in),
+        };
+        if lum_target > self.win.ylum.end() {
+            self.luminance(input, self.win.ylum.end(), lum_target);
+        }
+        if class_target > self.class_done {
+            self.classify(self.class_done, class_target);
+            self.class_done = class_target;
+        }
+        if treat_target > self.treat_done {
+            self.treat(input, self.treat_done, treat_target);
+            self.treat_done = treat_target;
+            let keep = self.treat_done.saturating_sub(2 * BACKGROUND_REACH);
+            self.win.ylum.evict_below(keep);
+            self.win.bg.evict_below(keep);
+            self.win.cand.evict_below(keep);
+            // Receivers are read `reach` rows above a treated row, and
+            // again when their row is made.
+            let receivers = self.treat_done.saturating_sub(self.rule.reach);
+            let receivers = receivers.min(self.made.rows.end());
+            self.win.light.evict_below(keep.min(receivers));
+            self.win.surf.evict_below(receivers);
+        }
+    }
+
+    /// The end of the final output rows: those no untreated row reaches.
+    fn end(&self) -> usize {
+        match self.treat_done == self.h {
+            true => self.h,
+            false => self.treat_done.saturating_sub(self.rule.reach),
+        }
+    }
+
+    /// The luminance of what the emission guide leaves of rows `a..b`.
+    fn luminance(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
+        for _ in a..b {
+            self.win.ylum.push_stale(0.0);
+        }
+        let guides = &self.guides;
+        let region = crate::trace::region("pixel luminance");
+        let rows = self.win.ylum.range_mut(a, b);
+        rows.into_par_iter().enumerate().for_each(|(k, yrow)| {
+            let _task = region.task("pixel luminance");
+            let row = input.get(a + k);
+            for (x, y) in yrow.iter_mut().enumerate() {
+                *y = guides.residual_luminance(row, x);
+            }
+        });
     }
 
     /// Backgrounds and Rule 1 for rows `a..b` (their luminance rows within
@@ -377,124 +442,94 @@ impl PixelStage {
             });
     }
 
-    /// Treat rows `a..b`: decide each noisy pixel, write the kept rows and
-    /// spread the excess.
+    /// Treat rows `a..b`: decide each noisy pixel and list the spread
+    /// ones as sources.
     fn treat(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
-        let (h, nch) = (self.h, self.nch);
-        for _ in a..b {
-            self.win.kept.push_stale(0.0);
-        }
-        while self.win.acc.end() < (b + self.rule.reach).min(h) {
-            self.win.acc.push(-0.0);
-        }
-        // The kept rows are written while the rest of the stage is read.
-        let mut kept_window = std::mem::replace(&mut self.win.kept, RowWindow::new(0));
-        let kept = kept_window.range_mut(a, b);
-        let mut chunks: Vec<(usize, Vec<&mut [f64]>)> = Vec::new();
-        let mut rows = kept.into_iter();
-        let mut y = a;
-        while y < b {
-            let n = TREAT_ROWS.min(b - y);
-            chunks.push((y, rows.by_ref().take(n).collect()));
-            y += n;
-        }
+        let chunks: Vec<usize> = (a..b).step_by(TREAT_ROWS).collect();
         let ctx = Treat { stage: self, input };
         let region = crate::trace::region("pixel treat");
         let results: Vec<Treated> = chunks
             .into_par_iter()
-            .map(|(y0, rows)| {
+            .map(|y0| {
                 let _task = region.task("pixel treat");
-                ctx.rows(y0, rows)
+                ctx.rows(y0, (y0 + TREAT_ROWS).min(b))
             })
             .collect();
-        let (mut sources, mut shares, mut masks) = (Vec::new(), Vec::new(), Vec::new());
+        let nch = self.nch as u64;
         for t in results {
-            let (base, mbase) = (shares.len(), masks.len());
-            sources.extend(t.sources.into_iter().map(|s| Source {
-                off: s.off + base,
-                mask: s.mask + mbase,
-                ..s
-            }));
-            shares.extend(t.shares);
-            masks.extend(t.masks);
+            let taps: u64 = (t.sources.iter())
+                .map(|s| (2 * self.rule.widths.reach[s.k as usize] as u64 + 1).pow(2))
+                .sum();
             self.counts += t.counts;
+            self.counts.spread_taps += taps * nch;
+            self.spreads.extend(t.sources, t.values);
         }
-        self.win.kept = kept_window;
-        let taps: u64 = sources
-            .iter()
-            .map(|s| (2 * self.rule.widths.reach[s.k as usize] as u64 + 1).pow(2))
-            .sum();
-        self.counts.spread_taps += taps * nch as u64;
-        self.scatter(&sources, &shares, &masks);
     }
 
-    /// Add each source's shares to the pixels its kernel reaches (on its
-    /// surface), one task per tile of columns; every pixel receives its
-    /// shares in source order.
-    fn scatter(&mut self, sources: &[Source], shares: &[f64], masks: &[u64]) {
-        if sources.is_empty() {
-            return;
-        }
-        let (w, h, nch) = (self.w, self.h, self.nch);
-        let first = self.win.acc.first();
-        let (taps, widths, modes) = (&self.rule.taps, &self.rule.widths, &self.modes);
-        let choose = self.guides.chooses_receivers();
+    /// Output rows `a..b` (final: every source that reaches them is
+    /// treated): each source's shares added to the pixels its kernel
+    /// reaches (on its surface, or clear of lights, where the guides choose
+    /// receivers).
+    fn make_rows(&mut self, input: &RowWindow<f32>, end: usize) {
+        let (w, nch) = (self.w, self.nch);
+        let (taps, widths, guides) = (&self.rule.taps, &self.rule.widths, &self.guides);
         let spread: Vec<usize> = (0..nch)
-            .filter(|&c| modes[c] == ChannelMode::Spread)
+            .filter(|&c| self.modes[c] == ChannelMode::Spread)
             .collect();
-        crate::pipeline::tiles::for_each_tile(
-            &mut self.win.acc,
-            w,
-            nch,
-            self.tile,
-            |cols, parts| {
-                let (x0, x1) = (cols.start, cols.end);
-                for s in sources {
-                    let k = s.k as usize;
-                    let r = widths.reach[k];
-                    let (sx, sy) = (s.x as usize, s.y as usize);
-                    if sx + r < x0 || sx >= x1 + r {
-                        continue;
-                    }
-                    let g = &taps[k];
-                    let (xa, xb) = (sx.saturating_sub(r).max(x0), (sx + r + 1).min(x1));
-                    if xa >= xb {
-                        continue;
-                    }
-                    let gx = &g[xa + r - sx..xb + r - sx];
-                    for ty in sy.saturating_sub(r)..(sy + r + 1).min(h) {
-                        let gy = g[ty + r - sy];
-                        if gy == 0.0 {
-                            continue;
-                        }
-                        let ri = ty - first;
-                        if choose {
-                            // The receivers the guides allow: the bits the
-                            // width's normalisation set.
-                            let side = 2 * r + 1;
-                            let row = s.mask * 64 + (ty + r - sy) * side + xa + r - sx;
-                            for (k, (tx, &wx)) in (xa..xb).zip(gx).enumerate() {
-                                let bit = row + k;
-                                if masks[bit / 64] & (1 << (bit % 64)) == 0 {
-                                    continue;
-                                }
-                                for &c in &spread {
-                                    parts[ri * nch + c][tx - x0] += shares[s.off + c] * gy * wx;
-                                }
+        let choose = guides.chooses_receivers();
+        let (light, surf) = (&self.win.light, &self.win.surf);
+        self.made
+            .make_to(&self.spreads, input, (end, w), |s, shares, ty, acc| {
+                let k = s.k as usize;
+                let r = widths.reach[k];
+                let (sx, sy) = (s.x as usize, s.y as usize);
+                if ty + r < sy || ty > sy + r {
+                    return;
+                }
+                let g = &taps[k];
+                let gy = g[ty + r - sy];
+                if gy == 0.0 {
+                    return;
+                }
+                let (xa, xb) = (sx.saturating_sub(r), (sx + r + 1).min(w));
+                let gx = &g[xa + r - sx..xb + r - sx];
+                if choose {
+                    // The receivers the guides allowed when the width was
+                    // chosen ([`Treat::norm`]).
+                    let lights = light.get(ty);
+                    for (tx, &wx) in (xa..xb).zip(gx) {
+                        let ok = match &s.on_surface {
+                            Some(from) => {
+                                let q = (lights[tx] != 0, &surf.get(ty)[tx]);
+                                guides.accepts(q, (tx, ty), Some((from, sx, sy)))
                             }
-                            continue;
-                        }
-                        for &c in &spread {
-                            let a = shares[s.off + c] * gy;
-                            let dst = &mut parts[ri * nch + c][xa - x0..xb - x0];
-                            for (d, &wx) in dst.iter_mut().zip(gx) {
-                                *d += a * wx;
+                            None => lights[tx] == 0,
+                        };
+                        if ok {
+                            for &c in &spread {
+                                acc[c * w + tx] += shares[c] * gy * wx;
                             }
                         }
+                    }
+                    return;
+                }
+                for &c in &spread {
+                    let a = shares[c] * gy;
+                    for (d, &wx) in acc[c * w + xa..c * w + xb].iter_mut().zip(gx) {
+                        *d += a * wx;
                     }
                 }
-            },
-        );
+            })
+    }
+}
+
+/// Rows past a row that its treatment reads, where the guides choose
+/// receivers (`choose`) within `reach` rows or not.
+pub(super) fn treat_lag(choose: bool, reach: usize) -> usize {
+    let flags = BACKGROUND_REACH + DECIDE_REACH;
+    match choose {
+        true => flags.max(reach),
+        false => flags,
     }
 }
 
@@ -592,10 +627,27 @@ mod tests {
                 GuideLayout::default(),
                 SurfaceRule::default(),
                 &v,
-                16,
             )
             .unwrap();
-            assert_eq!(st.halo(), crate::filter::halo(&p), "{mr} {cut}");
+            // Without guides a treatment reads only the flags' rows.
+            let settings = crate::filter::halo(&p);
+            assert_eq!(st.halo().spread_reach, settings.spread_reach);
+            assert_eq!(st.halo().search_reach, 4, "{mr} {cut}");
+            let guides = GuideLayout {
+                emission: Some(vec![0, 1, 2]),
+                ..GuideLayout::default()
+            };
+            let st = PixelStage::new(
+                30,
+                20,
+                RGB.to_vec(),
+                vec![ChannelMode::Spread; 3],
+                guides,
+                SurfaceRule::default(),
+                &v,
+            )
+            .unwrap();
+            assert_eq!(st.halo(), settings, "{mr} {cut}");
         }
     }
 

@@ -1,6 +1,6 @@
 //! The treatment of ep-gauss's pixel stage: each noisy pixel's feature
 //! rules, its width (the search over the ladder, with the guides' receivers)
-//! and the kept rows, one task per band of rows.
+//! and what it keeps, one task per band of rows.
 
 use super::{neighbours8, PixelStage, Source, SURFACE_SHARE};
 use crate::filter::ep_gauss::pixel::{in_range, supported, BACKGROUND_REACH};
@@ -10,12 +10,12 @@ use crate::pipeline::counts::SpreadCounts;
 use crate::pipeline::window::RowWindow;
 use crate::pipeline::ChannelMode;
 
-/// What a treatment task found: the sources, their shares and masks, and
-/// what it counted.
+/// What a treatment task found: the sources, their values (per source,
+/// what its pixel keeps, then what one unit of its kernel carries, a value
+/// a channel each) and what it counted.
 pub(super) struct Treated {
     pub(super) sources: Vec<Source>,
-    pub(super) shares: Vec<f64>,
-    pub(super) masks: Vec<u64>,
+    pub(super) values: Vec<f64>,
     pub(super) counts: SpreadCounts,
 }
 
@@ -26,20 +26,15 @@ pub(super) struct Treat<'a> {
 }
 
 impl Treat<'_> {
-    /// Treat rows `y0..y0 + kept.len()`: copy them into `kept`, then take
-    /// each noisy pixel's excess out and list it as a source.
-    pub(super) fn rows(&self, y0: usize, mut kept: Vec<&mut [f64]>) -> Treated {
+    /// Treat rows `y0..y1`: take each noisy pixel's excess out and list it
+    /// as a source.
+    pub(super) fn rows(&self, y0: usize, y1: usize) -> Treated {
         let st = self.stage;
         let (w, h, nch) = (st.w, st.h, st.nch);
         let mut counts = SpreadCounts::default();
-        let (mut sources, mut shares, mut masks) = (Vec::new(), Vec::new(), Vec::new());
-        let (mut cur, mut best) = (Vec::new(), Vec::new());
-        for (k, out) in kept.iter_mut().enumerate() {
-            let y = y0 + k;
+        let (mut sources, mut values) = (Vec::new(), Vec::new());
+        for y in y0..y1 {
             let src = self.input.get(y);
-            for (d, &v) in out.iter_mut().zip(&src[..nch * w]) {
-                *d = v as f64;
-            }
             let r = BACKGROUND_REACH as i64;
             let lrows: Vec<&[f64]> = (-1..=1)
                 .map(|d| st.win.ylum.get(mirror(y as i64 + d, h)))
@@ -72,8 +67,7 @@ impl Treat<'_> {
                 }
                 let excess = v - bg;
                 let surface = st.guides.surface_of(src, x);
-                let scratch = (&mut cur, &mut best);
-                let Some((k, norm, capped)) = self.width((x, y), excess, bg, &surface, scratch)
+                let Some((k, norm, capped, on_surface)) = self.width((x, y), excess, bg, &surface)
                 else {
                     counts.beyond += 1;
                     continue;
@@ -81,33 +75,28 @@ impl Treat<'_> {
                 counts.spread += 1;
                 counts.capped += u64::from(capped);
                 let f = excess / v;
-                let off = shares.len();
+                let at = values.len();
+                values.resize(at + 2 * nch, 0.0);
+                let (kept, shares) = values[at..].split_at_mut(nch);
                 for c in 0..nch {
-                    let mut share = 0.0;
+                    kept[c] = src[c * w + x] as f64;
                     if st.modes[c] == ChannelMode::Spread {
                         let removed = st.guides.residual(src, c, x) * f;
-                        out[c * w + x] -= removed;
-                        share = removed / norm;
+                        kept[c] -= removed;
+                        shares[c] = removed / norm;
                     }
-                    shares.push(share);
-                }
-                let mask = masks.len();
-                if st.guides.chooses_receivers() {
-                    masks.extend_from_slice(&best);
                 }
                 sources.push(Source {
                     x: x as u32,
                     y: y as u32,
                     k: k as u32,
-                    off,
-                    mask,
+                    on_surface: on_surface.then_some(surface),
                 });
             }
         }
         Treated {
             sources,
-            shares,
-            masks,
+            values,
             counts,
         }
     }
@@ -116,15 +105,16 @@ impl Treat<'_> {
     /// over the in-image pixels it reaches, those the guides allow) gives
     /// its centre at most `tolerance * bg` of `excess`, and that
     /// normalisation; when no rung within the cap does, the cap (flagged)
-    /// where the guides' receivers alone made it so, else `None`.
+    /// where the guides' receivers alone made it so, else `None`. Last,
+    /// whether it keeps to its surface (else, with guides that choose
+    /// receivers, it keeps clear of lights only).
     fn width(
         &self,
         (x, y): (usize, usize),
         excess: f64,
         bg: f64,
         surface: &Surface,
-        (cur, best): (&mut Vec<u64>, &mut Vec<u64>),
-    ) -> Option<(usize, f64, bool)> {
+    ) -> Option<(usize, f64, bool, bool)> {
         let st = self.stage;
         let limit = st.rule.tolerance * bg;
         let cap = st.rule.widths.rho.len() - 1;
@@ -137,39 +127,35 @@ impl Treat<'_> {
         // hold its excess within the tolerance would pile it on the few
         // pixels that match. Both keep clear of lights only.
         let mut on_surface = st.guides.surface().then_some(surface);
-        let at_first = self.norm(first, x, y, on_surface, cur);
+        let at_first = self.norm(first, x, y, on_surface);
         if on_surface.is_some() {
             if at_first >= SURFACE_SHARE * self.plain_norm(first, x, y) {
-                if let Some(found) =
-                    self.search((x, y), first, at_first, on_surface, passes, (cur, best))
-                {
-                    return Some((found.0, found.1, false));
+                if let Some((k, norm)) = self.search((x, y), first, at_first, on_surface, passes) {
+                    return Some((k, norm, false, true));
                 }
             }
             on_surface = None;
         }
         let at_first = if st.guides.surface() {
-            self.norm(first, x, y, None, cur)
+            self.norm(first, x, y, None)
         } else {
             at_first
         };
-        if let Some((k, norm)) =
-            self.search((x, y), first, at_first, on_surface, passes, (cur, best))
-        {
-            return Some((k, norm, false));
+        if let Some((k, norm)) = self.search((x, y), first, at_first, on_surface, passes) {
+            return Some((k, norm, false, false));
         }
         // The lights the guides leave out made the kernel too narrow: a
         // pixel the kernel over every pixel spreads within the cap is spread
         // at the cap clear of them (the guides never leave in place what
-        // ep-gauss spreads without them). `best` holds the cap's bits.
+        // ep-gauss spreads without them).
         let plain = st.guides.chooses_receivers() && excess <= limit * self.plain_norm(cap, x, y);
-        let at_cap = self.norm(cap, x, y, None, best);
-        (plain && at_cap > 0.0).then_some((cap, at_cap, true))
+        let at_cap = self.norm(cap, x, y, None);
+        (plain && at_cap > 0.0).then_some((cap, at_cap, true, false))
     }
 
     /// The first rung from `first` (whose sum is `at_first`) up to the cap
     /// whose kernel over the receivers `on_surface` allows `passes`, and its
-    /// sum; its receivers' bits in `best`. The sum grows with the rung
+    /// sum. The sum grows with the rung
     /// (every weight does): gallop up from the ladder's guess (most kernels
     /// pass there or a rung or two above, and a width costs its area), then
     /// bisect.
@@ -180,7 +166,6 @@ impl Treat<'_> {
         at_first: f64,
         on_surface: Option<&Surface>,
         passes: impl Fn(f64) -> bool,
-        (cur, best): (&mut Vec<u64>, &mut Vec<u64>),
     ) -> Option<(usize, f64)> {
         let cap = self.stage.rule.widths.rho.len() - 1;
         let (mut lo, mut step) = (None, 1);
@@ -189,10 +174,9 @@ impl Treat<'_> {
             let at = if k == first {
                 at_first
             } else {
-                self.norm(k, x, y, on_surface, cur)
+                self.norm(k, x, y, on_surface)
             };
             if passes(at) {
-                std::mem::swap(cur, best);
                 break (k, at);
             }
             if k == cap {
@@ -207,9 +191,8 @@ impl Treat<'_> {
         };
         while hi - lo > 1 {
             let mid = (lo + hi) / 2;
-            let at_mid = self.norm(mid, x, y, on_surface, cur);
+            let at_mid = self.norm(mid, x, y, on_surface);
             if passes(at_mid) {
-                std::mem::swap(cur, best);
                 (hi, at_hi) = (mid, at_mid);
             } else {
                 lo = mid;
@@ -232,15 +215,10 @@ impl Treat<'_> {
     }
 
     /// The sum of rung `k`'s weights over the in-image pixels it reaches
-    /// from `(x, y)` (those on the source's surface, with surface guides).
-    fn norm(
-        &self,
-        k: usize,
-        x: usize,
-        y: usize,
-        surface: Option<&Surface>,
-        mask: &mut Vec<u64>,
-    ) -> f64 {
+    /// from `(x, y)` (those on the source's surface, with surface guides;
+    /// those clear of lights, with the emission guide): the receivers
+    /// [`PixelStage::spread_rows`] gives its shares to.
+    fn norm(&self, k: usize, x: usize, y: usize, surface: Option<&Surface>) -> f64 {
         let st = self.stage;
         let (w, h) = (st.w, st.h);
         let r = st.rule.widths.reach[k];
@@ -251,14 +229,10 @@ impl Treat<'_> {
             return self.plain_norm(k, x, y);
         }
         let gx = &g[xa + r - x..xb + r - x];
-        let side = 2 * r + 1;
-        mask.clear();
-        mask.resize((side * side).div_ceil(64), 0);
         let mut sum = 0.0;
         for ty in ya..yb {
             let gy = g[ty + r - y];
             let lights = &st.win.light.get(ty)[xa..xb];
-            let row = (ty + r - y) * side + xa + r - x;
             let mut part = 0.0;
             match surface {
                 Some(from) => {
@@ -267,7 +241,6 @@ impl Treat<'_> {
                         let q = (lights[k] != 0, &surfs[k]);
                         if st.guides.accepts(q, (tx, ty), Some((from, x, y))) {
                             part += wx;
-                            mask[(row + k) / 64] |= 1 << ((row + k) % 64);
                         }
                     }
                 }
@@ -275,7 +248,6 @@ impl Treat<'_> {
                     for (k, &wx) in gx.iter().enumerate() {
                         if lights[k] == 0 {
                             part += wx;
-                            mask[(row + k) / 64] |= 1 << ((row + k) % 64);
                         }
                     }
                 }
