@@ -892,6 +892,27 @@ fn completions_and_a_man_page_come_from_the_command_line_definition() {
 }
 
 #[test]
+fn man_dir_writes_a_page_for_every_command() {
+    let dir = tmpdir();
+    let pages = dir.path().join("man1");
+    let o = epfilt(&["man", "--dir", pages.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for command in [
+        "", "-filter", "-restore", "-info", "-compare", "-merge", "-preview",
+    ] {
+        let page = std::fs::read_to_string(pages.join(format!("epfilt{command}.1"))).unwrap();
+        assert!(page.contains(".TH"), "epfilt{command}.1: {page:.200}");
+    }
+    let filter = std::fs::read_to_string(pages.join("epfilt-filter.1")).unwrap();
+    assert!(filter.contains("max\\-memory"), "{filter:.400}");
+    // A directory that cannot be made: one line naming it.
+    let blocked = dir.path().join("file");
+    std::fs::write(&blocked, b"x").unwrap();
+    let o = epfilt(&["man", "--dir", blocked.join("sub").to_str().unwrap()]);
+    one_line_error(&o, 1, "sub");
+}
+
+#[test]
 fn filter_help_is_grouped_under_headings_with_examples() {
     let text = epfilt_ok(&["filter", "--help"]);
     for heading in [

@@ -106,8 +106,13 @@ pub enum Command {
         /// bash, zsh, fish, elvish or powershell.
         shell: clap_complete::Shell,
     },
-    /// Print the manual page (roff): `epfilt man > epfilt.1`.
-    Man,
+    /// Print the manual page (roff): `epfilt man > epfilt.1`; with --dir,
+    /// write it and one page per command (epfilt-filter.1 ...) there.
+    Man {
+        /// Write every page into this directory (made if missing).
+        #[arg(long, value_hint = clap::ValueHint::DirPath)]
+        dir: Option<std::path::PathBuf>,
+    },
 }
 
 #[derive(Args)]

@@ -133,7 +133,14 @@ fn dispatch(cli: Cli, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
             clap_complete::generate(shell, &mut Cli::command(), "epfilt", &mut out);
             emit_bytes(&out)
         }
-        Command::Man => {
+        Command::Man { dir: Some(dir) } => {
+            let written = std::fs::create_dir_all(&dir)
+                .and_then(|()| clap_mangen::generate_to(Cli::command(), &dir));
+            written.map_err(|e| fail(epfilt::Error::io(dir.clone(), e)))?;
+            eprintln!("epfilt: manual pages written to {}", dir.display());
+            Ok(())
+        }
+        Command::Man { dir: None } => {
             let mut out = Vec::new();
             clap_mangen::Man::new(Cli::command())
                 .render(&mut out)
