@@ -24,6 +24,7 @@ use crate::error::{Error, Result};
 use crate::filter::restore::{targets, FieldRows, LevelSummary, RestoreParams};
 use crate::geometry::Grid;
 
+pub(super) mod estimate;
 mod kept;
 mod stage;
 mod stats;
