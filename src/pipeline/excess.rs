@@ -570,6 +570,57 @@ impl Band<'_> {
         max
     }
 
+    /// The ring prefix a source at `(x, yy)` on `surface` spreads `wanted`
+    /// receivers' worth over: the offsets walked, the receivers found, and
+    /// whether it keeps to its surface (where the guides choose receivers).
+    fn ring_prefix(
+        &self,
+        (x, yy): (usize, usize),
+        surface: &Surface,
+        wanted: usize,
+    ) -> (usize, usize, bool) {
+        let (w, h, g) = (self.w, self.h, self.guides);
+        if g.chooses_receivers() {
+            let walk = |on: bool| {
+                let from = on.then_some((surface, x, yy));
+                let accepts =
+                    |tx: usize, ty: usize| g.accepts_in(self.input.get(ty), (tx, ty), from);
+                self.ring.prefix_where(x, yy, (w, h), wanted, accepts)
+            };
+            // A source whose nearest receivers are mostly on other
+            // surfaces sits on an edge or a sliver, and one whose
+            // surface has too few within the ring would pile its excess
+            // on them: both keep clear of lights only (pipeline::pixel's
+            // SURFACE_SHARE).
+            let (m0, found0) = walk(false);
+            let kept = g.surface().then(|| walk(true)).filter(|&(_, found)| {
+                let mine = self.ring.offsets()[..m0]
+                    .iter()
+                    .filter(|&&(dx, dy)| {
+                        let (tx, ty) = (x as i64 + dx as i64, yy as i64 + dy as i64);
+                        tx >= 0
+                            && ty >= 0
+                            && (tx as usize) < w
+                            && (ty as usize) < h
+                            && g.accepts_in(
+                                self.input.get(ty as usize),
+                                (tx as usize, ty as usize),
+                                Some((surface, x, yy)),
+                            )
+                    })
+                    .count();
+                found >= found0 && mine as f64 >= SURFACE_SHARE * found0 as f64
+            });
+            match kept {
+                Some((m, found)) => (m, found, true),
+                None => (m0, found0, false),
+            }
+        } else {
+            let (m, found) = self.ring.prefix(x, yy, w, h, wanted);
+            (m, found, false)
+        }
+    }
+
     /// Treat rows `c0..c1`: the passes over the band of rows
     /// `c0 - passes .. c1 + passes`, which holds everything those rows'
     /// decisions read (see `filter::ep_box`). The sources in row-major
@@ -615,45 +666,7 @@ impl Band<'_> {
             let g = self.guides;
             let src = self.input.get(yy);
             let surface = g.surface_of(src, x);
-            let (m, found, on_surface) = if g.chooses_receivers() {
-                let walk = |on: bool| {
-                    let from = on.then_some((&surface, x, yy));
-                    let accepts =
-                        |tx: usize, ty: usize| g.accepts_in(self.input.get(ty), (tx, ty), from);
-                    self.ring.prefix_where(x, yy, (w, h), wanted, accepts)
-                };
-                // A source whose nearest receivers are mostly on other
-                // surfaces sits on an edge or a sliver, and one whose
-                // surface has too few within the ring would pile its excess
-                // on them: both keep clear of lights only (pipeline::pixel's
-                // SURFACE_SHARE).
-                let (m0, found0) = walk(false);
-                let kept = g.surface().then(|| walk(true)).filter(|&(_, found)| {
-                    let mine = self.ring.offsets()[..m0]
-                        .iter()
-                        .filter(|&&(dx, dy)| {
-                            let (tx, ty) = (x as i64 + dx as i64, yy as i64 + dy as i64);
-                            tx >= 0
-                                && ty >= 0
-                                && (tx as usize) < w
-                                && (ty as usize) < h
-                                && g.accepts_in(
-                                    self.input.get(ty as usize),
-                                    (tx as usize, ty as usize),
-                                    Some((&surface, x, yy)),
-                                )
-                        })
-                        .count();
-                    found >= found0 && mine as f64 >= SURFACE_SHARE * found0 as f64
-                });
-                match kept {
-                    Some((m, found)) => (m, found, true),
-                    None => (m0, found0, false),
-                }
-            } else {
-                let (m, found) = self.ring.prefix(x, yy, w, h, wanted);
-                (m, found, false)
-            };
+            let (m, found, on_surface) = self.ring_prefix((x, yy), &surface, wanted);
             counters.spread += 1;
             counters.capped += u64::from(found < wanted);
             let at = values.len();
