@@ -56,6 +56,55 @@ pub fn run(dir: &Path, w: usize, h: usize, log: &dyn Fn(&str)) -> Result<String>
     Ok(text)
 }
 
+/// The scene's noisy samples (`s` x `s` a pixel) and its truth.
+fn render(scene: &Scene, s: usize, noisy: &Path, truth: &Path) -> Result<()> {
+    synth(
+        &SynthJob {
+            scene: scene.clone(),
+            sampling: Sampling::Supersample(s),
+            output: noisy.to_path_buf(),
+            truth: Some(truth.to_path_buf()),
+            variance: false,
+            compression: Compression::ZIP16,
+            threads: 0,
+            format: None,
+        },
+        &|_, _| {},
+    )
+    .map(|_| ())
+}
+
+/// The truth seen through the Gaussian: the expected sample values filtered
+/// with the base Gaussian, i.e. what gauss/ep-gauss would give with no
+/// noise. Its path.
+fn truth_through_gauss(dir: &Path, scene: &Scene, s: usize) -> Result<std::path::PathBuf> {
+    let (name, w, h) = (scene.kind.name(), scene.w, scene.h);
+    let expected = dir.join(format!("{name}_expected_3x.exr"));
+    let truth_gauss = dir.join(format!("{name}_truth_gauss.exr"));
+    let names: Vec<String> = ["R", "G", "B"].iter().map(|c| c.to_string()).collect();
+    let mut out = ExrOutput::create_new(
+        &expected,
+        w * s,
+        h * s,
+        &names,
+        Compression::ZIP16,
+        Precision::F32,
+        &[],
+    )?;
+    let mut y = 0;
+    while y < h * s {
+        let n = 64.min(h * s - y);
+        out.write_rows(y, n, &scene.expected_rows(s, y, n))?;
+        y += n;
+    }
+    out.finish()?;
+    out.commit()?;
+    let job = FilterJob::new(&expected, &truth_gauss, FilterParams::new(Method::Gauss, s));
+    filter_file(&job, &|_, _| {})?;
+    std::fs::remove_file(&expected).map_err(|e| Error::io(&expected, e))?;
+    Ok(truth_gauss)
+}
+
 /// One scene: render, filter with every method, score, montage.
 /// (Long: each method's run and scores are a row of one table, written in
 /// one place so that the columns stay in step.)
@@ -85,49 +134,9 @@ fn scene_table(
         dir.display()
     ));
     let t = Instant::now();
-    synth(
-        &SynthJob {
-            scene: scene.clone(),
-            sampling: Sampling::Supersample(s),
-            output: noisy.clone(),
-            truth: Some(truth.clone()),
-            variance: false,
-            compression: Compression::ZIP16,
-            threads: 0,
-            format: None,
-        },
-        &|_, _| {},
-    )?;
-    // The truth seen through the Gaussian: the expected sample values filtered
-    // with the base Gaussian, i.e. what gauss/ep-gauss would give with no noise.
-    let expected = dir.join(format!("{name}_expected_3x.exr"));
-    let truth_gauss = dir.join(format!("{name}_truth_gauss.exr"));
-    {
-        let names: Vec<String> = ["R", "G", "B"].iter().map(|c| c.to_string()).collect();
-        let mut out = ExrOutput::create_new(
-            &expected,
-            w * s,
-            h * s,
-            &names,
-            Compression::ZIP16,
-            Precision::F32,
-            &[],
-        )?;
-        let mut y = 0;
-        while y < h * s {
-            let n = 64.min(h * s - y);
-            out.write_rows(y, n, &scene.expected_rows(s, y, n))?;
-            y += n;
-        }
-        out.finish()?;
-        out.commit()?;
-    }
+    render(&scene, s, &noisy, &truth)?;
+    let truth_gauss = truth_through_gauss(dir, &scene, s)?;
     let job = |input: &Path, output: &Path, p: FilterParams| FilterJob::new(input, output, p);
-    filter_file(
-        &job(&expected, &truth_gauss, FilterParams::new(Method::Gauss, s)),
-        &|_, _| {},
-    )?;
-    std::fs::remove_file(&expected).map_err(|e| Error::io(&expected, e))?;
     log(&format!(
         "  scene, truth and noise-free Gaussian written in {:.2} s",
         t.elapsed().as_secs_f64()

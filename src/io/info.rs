@@ -586,8 +586,8 @@ fn cstr(bytes: &[u8], at: &mut usize) -> Option<String> {
     Some(s)
 }
 
-/// An attribute's value in words, by its type (OpenEXR's file layout).
-/// (Long: one arm per attribute type of the file layout: a table, not logic.)
+/// An attribute's value in words, by its type (OpenEXR's file layout): one
+/// arm per type, the longer ones in functions of their own.
 fn attribute_text(ty: &str, v: &[u8]) -> String {
     let i32s = |n: usize| -> Option<Vec<i32>> {
         (v.len() >= 4 * n).then(|| {
@@ -652,33 +652,8 @@ fn attribute_text(ty: &str, v: &[u8]) -> String {
             c => format!("unknown ({c})"),
         }),
         "deepImageState" => v.first().map(|c| c.to_string()),
-        "tiledesc" => (v.len() >= 9).then(|| {
-            let x = u32::from_le_bytes([v[0], v[1], v[2], v[3]]);
-            let y = u32::from_le_bytes([v[4], v[5], v[6], v[7]]);
-            let level = ["one level", "mipmap", "ripmap"]
-                .get((v[8] & 0x0f) as usize)
-                .copied()
-                .unwrap_or("unknown levels");
-            let round = if v[8] >> 4 == 1 {
-                "round up"
-            } else {
-                "round down"
-            };
-            format!("{x}x{y}, {level}, {round}")
-        }),
-        "timecode" => i32s(1).map(|x| {
-            let t = x[0] as u32;
-            let bcd = |shift: u32, mask: u32| {
-                ((t >> shift) & mask & 0xf) + 10 * (((t >> shift) & mask) >> 4)
-            };
-            format!(
-                "{:02}:{:02}:{:02}:{:02}",
-                bcd(24, 0x3f),
-                bcd(16, 0x7f),
-                bcd(8, 0x7f),
-                bcd(0, 0x3f)
-            )
-        }),
+        "tiledesc" => tiledesc_text(v),
+        "timecode" => i32s(1).map(|x| timecode_text(x[0] as u32)),
         "keycode" => i32s(7).map(|x| {
             x.iter()
                 .map(|k| k.to_string())
@@ -687,44 +662,81 @@ fn attribute_text(ty: &str, v: &[u8]) -> String {
         }),
         "preview" => i32s(2).map(|x| format!("{}x{} preview image", x[0] as u32, x[1] as u32)),
         "floatvector" => f32s(v.len() / 4).map(|x| format!("[{}]", list(&x))),
-        "stringvector" => {
-            let mut out = Vec::new();
-            let mut at = 0;
-            while at + 4 <= v.len() {
-                let n = i32::from_le_bytes([v[at], v[at + 1], v[at + 2], v[at + 3]]);
-                at += 4;
-                let Some(s) = usize::try_from(n).ok().and_then(|n| v.get(at..at + n)) else {
-                    break;
-                };
-                out.push(format!("{:?}", String::from_utf8_lossy(s)));
-                at += s.len();
-            }
-            Some(out.join(", "))
-        }
-        "chlist" => {
-            let mut out = Vec::new();
-            let mut at = 0;
-            while let Some(name) = cstr(v, &mut at).filter(|n| !n.is_empty()) {
-                let Some(b) = v.get(at..at + 16) else { break };
-                let t = i32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-                let xs = i32::from_le_bytes([b[8], b[9], b[10], b[11]]);
-                let ys = i32::from_le_bytes([b[12], b[13], b[14], b[15]]);
-                let t = ["uint", "half", "float"]
-                    .get(t as usize)
-                    .copied()
-                    .unwrap_or("?");
-                out.push(if (xs, ys) == (1, 1) {
-                    format!("{name} {t}")
-                } else {
-                    format!("{name} {t} ({xs}x{ys})")
-                });
-                at += 16;
-            }
-            Some(out.join(", "))
-        }
+        "stringvector" => Some(stringvector_text(v)),
+        "chlist" => Some(chlist_text(v)),
         _ => None,
     };
     text.unwrap_or_else(|| format!("{} bytes", v.len()))
+}
+
+/// A `tiledesc`: the tile size, the levels and their rounding.
+fn tiledesc_text(v: &[u8]) -> Option<String> {
+    (v.len() >= 9).then(|| {
+        let x = u32::from_le_bytes([v[0], v[1], v[2], v[3]]);
+        let y = u32::from_le_bytes([v[4], v[5], v[6], v[7]]);
+        let level = ["one level", "mipmap", "ripmap"]
+            .get((v[8] & 0x0f) as usize)
+            .copied()
+            .unwrap_or("unknown levels");
+        let round = if v[8] >> 4 == 1 {
+            "round up"
+        } else {
+            "round down"
+        };
+        format!("{x}x{y}, {level}, {round}")
+    })
+}
+
+/// A SMPTE time code's time (BCD hours, minutes, seconds, frames).
+fn timecode_text(t: u32) -> String {
+    let bcd =
+        |shift: u32, mask: u32| ((t >> shift) & mask & 0xf) + 10 * (((t >> shift) & mask) >> 4);
+    format!(
+        "{:02}:{:02}:{:02}:{:02}",
+        bcd(24, 0x3f),
+        bcd(16, 0x7f),
+        bcd(8, 0x7f),
+        bcd(0, 0x3f)
+    )
+}
+
+/// A `stringvector`: each string, quoted.
+fn stringvector_text(v: &[u8]) -> String {
+    let mut out = Vec::new();
+    let mut at = 0;
+    while at + 4 <= v.len() {
+        let n = i32::from_le_bytes([v[at], v[at + 1], v[at + 2], v[at + 3]]);
+        at += 4;
+        let Some(s) = usize::try_from(n).ok().and_then(|n| v.get(at..at + n)) else {
+            break;
+        };
+        out.push(format!("{:?}", String::from_utf8_lossy(s)));
+        at += s.len();
+    }
+    out.join(", ")
+}
+
+/// A `chlist`: each channel's name and type (and sampling, where not 1 x 1).
+fn chlist_text(v: &[u8]) -> String {
+    let mut out = Vec::new();
+    let mut at = 0;
+    while let Some(name) = cstr(v, &mut at).filter(|n| !n.is_empty()) {
+        let Some(b) = v.get(at..at + 16) else { break };
+        let t = i32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+        let xs = i32::from_le_bytes([b[8], b[9], b[10], b[11]]);
+        let ys = i32::from_le_bytes([b[12], b[13], b[14], b[15]]);
+        let t = ["uint", "half", "float"]
+            .get(t as usize)
+            .copied()
+            .unwrap_or("?");
+        out.push(if (xs, ys) == (1, 1) {
+            format!("{name} {t}")
+        } else {
+            format!("{name} {t} ({xs}x{ys})")
+        });
+        at += 16;
+    }
+    out.join(", ")
 }
 
 #[cfg(test)]

@@ -92,54 +92,7 @@ const CHECK_BYTES: u64 = 64 << 20;
 /// (Long: headers, offset tables and chunks go through one call of the `exr`
 /// crate's block writer, whose closure holds the state the steps share.)
 pub fn assemble(dest: &Path, sources: &[PartSource]) -> Result<u64> {
-    let mut opened: Vec<Opened> = Vec::new();
-    let mut which = Vec::with_capacity(sources.len());
-    for src in sources {
-        let k = match opened.iter().position(|o| o.path == src.path) {
-            Some(k) => k,
-            None => {
-                let map = MappedFile::open(&src.path)?;
-                let (meta, tables, _) = parse_meta(&src.path, map.bytes())?;
-                opened.push(Opened {
-                    path: src.path.clone(),
-                    map,
-                    meta,
-                    tables,
-                });
-                opened.len() - 1
-            }
-        };
-        let o = &opened[k];
-        let Some(h) = o.meta.headers.get(src.part) else {
-            return Err(Error::Config(format!(
-                "{}: no part {} (the file has {})",
-                src.path.display(),
-                src.part,
-                o.meta.headers.len()
-            )));
-        };
-        if h.deep {
-            return Err(Error::Unsupported {
-                path: src.path.clone(),
-                reason: format!("part {} holds deep data, which cannot be written", src.part),
-            });
-        }
-        // What a decoder allocates per block comes from the header: bound it
-        // before any is checked (as the reader does for the part it filters).
-        let limit = crate::host::default_max_memory();
-        if block_bytes(h) > limit {
-            return Err(Error::InvalidFile {
-                path: src.path.clone(),
-                reason: format!(
-                    "part {}: one block claims {} MiB decoded, more than the {} MiB a block may take",
-                    src.part,
-                    block_bytes(h) >> 20,
-                    limit >> 20
-                ),
-            });
-        }
-        which.push(k);
-    }
+    let (opened, which) = open_sources(sources)?;
     let headers: SmallVec<[Header; 3]> = sources
         .iter()
         .zip(&which)
@@ -221,6 +174,61 @@ pub fn assemble(dest: &Path, sources: &[PartSource]) -> Result<u64> {
     staged.file().sync_all().ok();
     staged.commit()?;
     Ok(copied)
+}
+
+/// Each distinct file of `sources` opened once, and which of them each
+/// source reads: its part checked to exist, to be flat, and to claim blocks
+/// a decoder may allocate.
+fn open_sources(sources: &[PartSource]) -> Result<(Vec<Opened>, Vec<usize>)> {
+    let mut opened: Vec<Opened> = Vec::new();
+    let mut which = Vec::with_capacity(sources.len());
+    for src in sources {
+        let k = match opened.iter().position(|o| o.path == src.path) {
+            Some(k) => k,
+            None => {
+                let map = MappedFile::open(&src.path)?;
+                let (meta, tables, _) = parse_meta(&src.path, map.bytes())?;
+                opened.push(Opened {
+                    path: src.path.clone(),
+                    map,
+                    meta,
+                    tables,
+                });
+                opened.len() - 1
+            }
+        };
+        let o = &opened[k];
+        let Some(h) = o.meta.headers.get(src.part) else {
+            return Err(Error::Config(format!(
+                "{}: no part {} (the file has {})",
+                src.path.display(),
+                src.part,
+                o.meta.headers.len()
+            )));
+        };
+        if h.deep {
+            return Err(Error::Unsupported {
+                path: src.path.clone(),
+                reason: format!("part {} holds deep data, which cannot be written", src.part),
+            });
+        }
+        // What a decoder allocates per block comes from the header: bound it
+        // before any is checked (as the reader does for the part it filters).
+        let limit = crate::host::default_max_memory();
+        if block_bytes(h) > limit {
+            return Err(Error::InvalidFile {
+                path: src.path.clone(),
+                reason: format!(
+                    "part {}: one block claims {} MiB decoded, more than the {} MiB a block may take",
+                    src.part,
+                    block_bytes(h) >> 20,
+                    limit >> 20
+                ),
+            });
+        }
+        which.push(k);
+    }
+    Ok((opened, which))
 }
 
 fn chunk_bytes(c: &Chunk) -> u64 {

@@ -173,36 +173,6 @@ impl EpGauss {
         let (cx, cy) = ((px + self.pad()) as i64, py as i64);
         fold.reset(self.pad());
         let mut bounded_evals = 0u32;
-        let mut eval = |l: usize| -> (f64, f64) {
-            let lv = &self.levels[l];
-            // A lower bound where it can be trusted (Relation 14 against it
-            // is conservative), else the exact average.
-            let bounded = lv.bound.as_ref().and_then(|b| {
-                fold.cost += b.cost;
-                b.average(rows, cx as usize, cy as usize)
-            });
-            let xbar = match bounded {
-                Some(v) => {
-                    bounded_evals += 1;
-                    v
-                }
-                None => {
-                    fold.grow(rows, cx, cy, lv);
-                    fold.average(lv)
-                }
-            };
-            if !(xbar > 0.0) || !xbar.is_finite() {
-                return (f64::INFINITY, xbar);
-            }
-            // Relation 14 times xbar above and below: one division.
-            let den = xbar * lv.inv_w0 - x0;
-            let d = if den > 0.0 {
-                (x0 - xbar).abs() / den
-            } else {
-                f64::INFINITY
-            };
-            (if d.is_nan() { f64::INFINITY } else { d }, xbar)
-        };
         // Guess from Relations 12-14: with `bg` the average without the
         // sample (Relation 12), Relation 14 is exactly `D = (x0/bg - 1) * w0`,
         // so the width needed is the first whose `w0 <= tol / (x0/bg - 1)`.
@@ -277,7 +247,7 @@ impl EpGauss {
             }
             .clamp(lo + 1, upper);
             guesses += 1;
-            let (d, xbar) = eval(cand);
+            let (d, xbar) = self.relation14_at(rows, (cx, cy), x0, cand, fold, &mut bounded_evals);
             if d <= self.tol {
                 hi = Some(cand);
                 d_hi = LogD::new(d);
@@ -288,6 +258,49 @@ impl EpGauss {
             }
             latest = (cand, xbar);
         }
+    }
+
+    /// Relation 14 at rung `l` for the sample `x0` at padded `(cx, cy)`
+    /// (times the average, above and below: one division; infinite where
+    /// the average is not positive), and the average it read: a lower bound
+    /// where one can be trusted (counted in `bounded`), else the exact one.
+    fn relation14_at(
+        &self,
+        rows: &impl AreaSums,
+        (cx, cy): (i64, i64),
+        x0: f64,
+        l: usize,
+        fold: &mut Folded,
+        bounded: &mut u32,
+    ) -> (f64, f64) {
+        let lv = &self.levels[l];
+        // A lower bound where it can be trusted (Relation 14 against it
+        // is conservative), else the exact average.
+        let lower = lv.bound.as_ref().and_then(|b| {
+            fold.cost += b.cost;
+            b.average(rows, cx as usize, cy as usize)
+        });
+        let xbar = match lower {
+            Some(v) => {
+                *bounded += 1;
+                v
+            }
+            None => {
+                fold.grow(rows, cx, cy, lv);
+                fold.average(lv)
+            }
+        };
+        if !(xbar > 0.0) || !xbar.is_finite() {
+            return (f64::INFINITY, xbar);
+        }
+        // Relation 14 times xbar above and below: one division.
+        let den = xbar * lv.inv_w0 - x0;
+        let d = if den > 0.0 {
+            (x0 - xbar).abs() / den
+        } else {
+            f64::INFINITY
+        };
+        (if d.is_nan() { f64::INFINITY } else { d }, xbar)
     }
 
     /// The narrowest level whose `w0` would meet the tolerance if the average

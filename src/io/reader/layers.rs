@@ -103,6 +103,66 @@ pub(super) fn layer_colour(names: &[String], layer: &str) -> Option<Vec<&'static
     Some(wanted)
 }
 
+/// The layer to filter among those with colour (`coloured`: each layer's
+/// prefix and colour channels): `layer` when given, else the unlayered
+/// channels, a beauty layer or the only one ([`choose_channels`]).
+fn choose_layer<'a>(
+    path: &Path,
+    coloured: &'a [(&'a String, Vec<&'a str>)],
+    layer: Option<&str>,
+) -> Result<&'a (&'a String, Vec<&'a str>)> {
+    let shown = |l: &str| {
+        if l.is_empty() {
+            "(unlayered)".to_string()
+        } else {
+            l.trim_end_matches('.').to_string()
+        }
+    };
+    let list = || {
+        coloured
+            .iter()
+            .map(|(l, _)| shown(l))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    if let Some(want) = layer {
+        let want = want.trim_end_matches('.');
+        let key = if want.is_empty() {
+            String::new()
+        } else {
+            format!("{want}.")
+        };
+        match coloured.iter().find(|(l, _)| **l == key) {
+            Some(c) => Ok(c),
+            None => Err(Error::Config(format!(
+                "{}: --layer {want:?} has no R,G,B or Y channels (layers with colour: {})",
+                path.display(),
+                list()
+            ))),
+        }
+    } else {
+        let beauty = |l: &str| {
+            let last = l.trim_end_matches('.').rsplit('.').next().unwrap_or("");
+            BEAUTY_LAYERS.iter().any(|b| last.eq_ignore_ascii_case(b))
+        };
+        match coloured
+            .iter()
+            .find(|(l, _)| l.is_empty())
+            .or_else(|| coloured.iter().find(|(l, _)| beauty(l)))
+        {
+            Some(c) => Ok(c),
+            None => match coloured {
+                [only] => Ok(only),
+                _ => Err(Error::Config(format!(
+                        "{}: several layers have colour and none is named as the beauty ({}): choose one with --layer NAME",
+                        path.display(),
+                    list()
+                ))),
+            },
+        }
+    }
+}
+
 /// The channels to filter: R, G, B (+ A), or Y (+ A) of one layer, and the
 /// rest (dropped, and listed). The layer is `layer` when given; otherwise the
 /// unlayered channels, else a layer with a beauty name ([`BEAUTY_LAYERS`]),
@@ -136,60 +196,7 @@ pub(crate) fn choose_channels(
             ),
         ));
     }
-    let shown = |l: &str| {
-        if l.is_empty() {
-            "(unlayered)".to_string()
-        } else {
-            l.trim_end_matches('.').to_string()
-        }
-    };
-    let list = || {
-        coloured
-            .iter()
-            .map(|(l, _)| shown(l))
-            .collect::<Vec<_>>()
-            .join(", ")
-    };
-    let chosen = if let Some(want) = layer {
-        let want = want.trim_end_matches('.');
-        let key = if want.is_empty() {
-            String::new()
-        } else {
-            format!("{want}.")
-        };
-        match coloured.iter().find(|(l, _)| **l == key) {
-            Some(c) => c,
-            None => {
-                return Err(Error::Config(format!(
-                    "{}: --layer {want:?} has no R,G,B or Y channels (layers with colour: {})",
-                    path.display(),
-                    list()
-                )))
-            }
-        }
-    } else {
-        let beauty = |l: &str| {
-            let last = l.trim_end_matches('.').rsplit('.').next().unwrap_or("");
-            BEAUTY_LAYERS.iter().any(|b| last.eq_ignore_ascii_case(b))
-        };
-        match coloured
-            .iter()
-            .find(|(l, _)| l.is_empty())
-            .or_else(|| coloured.iter().find(|(l, _)| beauty(l)))
-        {
-            Some(c) => c,
-            None => match coloured.as_slice() {
-                [only] => only,
-                _ => {
-                    return Err(Error::Config(format!(
-                        "{}: several layers have colour and none is named as the beauty ({}): choose one with --layer NAME",
-                        path.display(),
-                        list()
-                    )))
-                }
-            },
-        }
-    };
+    let chosen = choose_layer(path, &coloured, layer)?;
     let (layer, wanted) = chosen;
     if wanted[0] == "Y" {
         let has = |c: &str| names.iter().any(|n| *n == format!("{layer}{c}"));
