@@ -107,35 +107,8 @@ fn same_run(bands: &[BandFile]) -> Result<()> {
     odd_one(&|f| f.settings.as_str(), "settings")
 }
 
-/// Merge `parts` (in any order) into `output` (`format`: `--format`, for
-/// a name that does not end in `.exr`).
-pub fn merge(
-    parts: &[PathBuf],
-    output: &Path,
-    format: Option<crate::io::Format>,
-) -> Result<MergeReport> {
-    let start = Instant::now();
-    if parts.is_empty() {
-        return Err(Error::Config(
-            "merge needs the band files and an output".into(),
-        ));
-    }
-    crate::io::format::output_format(
-        output,
-        format,
-        Some(crate::io::Format::Exr),
-        &[crate::io::Format::Exr],
-        "merge",
-    )?;
-    for p in parts {
-        crate::job::check_not_same_file(p, output)?;
-    }
-    let mut bands = parts
-        .iter()
-        .map(|p| BandFile::read(p))
-        .collect::<Result<Vec<_>>>()?;
-    same_run(&bands)?;
-    bands.sort_by_key(|b| b.k);
+/// Bands sorted by number that are one run's and cover its rows once.
+fn cover_once(bands: &[BandFile]) -> Result<()> {
     let first = &bands[0];
     let n = first.n;
     let mut next = 0;
@@ -178,6 +151,40 @@ pub fn merge(
             first.of
         )));
     }
+    Ok(())
+}
+
+/// Merge `parts` (in any order) into `output` (`format`: `--format`, for
+/// a name that does not end in `.exr`).
+pub fn merge(
+    parts: &[PathBuf],
+    output: &Path,
+    format: Option<crate::io::Format>,
+) -> Result<MergeReport> {
+    let start = Instant::now();
+    if parts.is_empty() {
+        return Err(Error::Config(
+            "merge needs the band files and an output".into(),
+        ));
+    }
+    crate::io::format::output_format(
+        output,
+        format,
+        Some(crate::io::Format::Exr),
+        &[crate::io::Format::Exr],
+        "merge",
+    )?;
+    for p in parts {
+        crate::job::check_not_same_file(p, output)?;
+    }
+    let mut bands = parts
+        .iter()
+        .map(|p| BandFile::read(p))
+        .collect::<Result<Vec<_>>>()?;
+    same_run(&bands)?;
+    bands.sort_by_key(|b| b.k);
+    cover_once(&bands)?;
+    let (first, n) = (&bands[0], bands[0].n);
     let staged = crate::io::Staged::new(output, ".exr.tmp")?;
     let copied = crate::io::bands::write_merged(&bands, output, &staged)?;
     // The ledger: the bands' shares added up.

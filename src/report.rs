@@ -522,8 +522,46 @@ impl Report {
         )
     }
 
-    /// This run's (or part's) summary.
-    /// (Long: a line per fact, in the order they print.)
+    /// ep-box's lines of the summary: its statistics and what it did.
+    fn ep_box_lines(&self, e: &EpBoxReport) -> String {
+        let mut s = String::new();
+        s.push_str(&format!(
+            "  ep-box statistics: variance {} ({}), samples per pixel {}\n",
+            e.variance_channels.join(", "),
+            e.variance_kind,
+            e.spp_from
+        ));
+        s.push_str(&format!(
+            "  ep-box: L_tvis {:.4e}{}, D {}, {}% confidence, guard {}; reliable {}, noisy pixels {}, spread {}, guarded {}, trimmed {}, unresolved {}, passes {}\n",
+            e.l_tvis,
+            e.l_ave.map(|l| format!(" (L_ave {l:.4e})")).unwrap_or_default(),
+            e.d,
+            e.confidence * 100.0,
+            e.guard,
+            e.reliable,
+            self.samples_noisy,
+            self.samples_spread,
+            e.guarded,
+            e.trimmed,
+            e.unresolved,
+            e.passes_used
+        ));
+        if e.unresolved > 0 {
+            let pixels = (self.out_width * self.out_height).max(1) as f64;
+            s.push_str(&format!(
+                "  note: {} noisy pixels ({:.1}% of the image) have no converged pixel within {} passes and are left as they are; \
+                 more samples (see `epfilt plan`), more --passes or a larger --ltvis would reach them\n",
+                e.unresolved,
+                100.0 * e.unresolved as f64 / pixels,
+                e.passes_allowed
+            ));
+        }
+
+        s
+    }
+
+    /// This run's (or part's) summary: a line per fact, in the order they
+    /// print.
     fn own_summary(&self) -> String {
         let mut s = format!(
             "{} -> {}: {} S={} {}x{} -> {}x{}\n  {}{:.2} s, {:.1} Mpx/s; noisy {} spread {} capped {}{}\n",
@@ -572,37 +610,7 @@ impl Report {
             ));
         }
         if let Some(e) = &self.ep_box {
-            s.push_str(&format!(
-                "  ep-box statistics: variance {} ({}), samples per pixel {}\n",
-                e.variance_channels.join(", "),
-                e.variance_kind,
-                e.spp_from
-            ));
-            s.push_str(&format!(
-                "  ep-box: L_tvis {:.4e}{}, D {}, {}% confidence, guard {}; reliable {}, noisy pixels {}, spread {}, guarded {}, trimmed {}, unresolved {}, passes {}\n",
-                e.l_tvis,
-                e.l_ave.map(|l| format!(" (L_ave {l:.4e})")).unwrap_or_default(),
-                e.d,
-                e.confidence * 100.0,
-                e.guard,
-                e.reliable,
-                self.samples_noisy,
-                self.samples_spread,
-                e.guarded,
-                e.trimmed,
-                e.unresolved,
-                e.passes_used
-            ));
-            if e.unresolved > 0 {
-                let pixels = (self.out_width * self.out_height).max(1) as f64;
-                s.push_str(&format!(
-                    "  note: {} noisy pixels ({:.1}% of the image) have no converged pixel within {} passes and are left as they are; \
-                     more samples (see `epfilt plan`), more --passes or a larger --ltvis would reach them\n",
-                    e.unresolved,
-                    100.0 * e.unresolved as f64 / pixels,
-                    e.passes_allowed
-                ));
-            }
+            s.push_str(&self.ep_box_lines(e));
         }
         if let Some(r) = self.peak_rss_bytes {
             s.push_str(&format!(

@@ -552,6 +552,117 @@ fn write_streamed(
     out.commit()
 }
 
+/// The noisy output's format and the truth's.
+type Formats = (Format, Option<Format>);
+
+/// `synth --supersample s`: the noisy samples, S x S a pixel, and the truth.
+fn write_supersampled(
+    job: &SynthJob,
+    s: usize,
+    (out_format, truth_format): Formats,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<(usize, usize)> {
+    let sc = &job.scene;
+    let rgb: Vec<String> = ["R", "G", "B"].iter().map(|s| s.to_string()).collect();
+    if !(1..=8).contains(&s) {
+        return Err(Error::Config(format!(
+            "--supersample must be 1..=8, got {s}"
+        )));
+    }
+    let (iw, ih) = (sc.w.checked_mul(s), sc.h.checked_mul(s));
+    let (Some(iw), Some(ih)) = (iw, ih) else {
+        return Err(Error::Config(
+            "--size times --supersample is too large".into(),
+        ));
+    };
+    let strip = crate::pipeline::auto_strip_rows(iw, 3).max(s);
+    // The render says it is super-sampled: `filter` reduces it
+    // S times without being told (crate::io::verdict).
+    let ints = [(crate::io::SUPERSAMPLE_ATTRIBUTES[0], s as i32)];
+    let spec = OutSpec {
+        path: &job.output,
+        format: out_format,
+        w: iw,
+        h: ih,
+        names: &rgb,
+        compression: job.compression,
+        strip,
+        ints: &ints,
+    };
+    write_streamed(&spec, |j, n| sc.noisy_rows(s, j, n), progress)?;
+    if let Some(t) = &job.truth {
+        let spec = OutSpec {
+            path: t,
+            format: truth_format.unwrap_or(out_format),
+            w: sc.w,
+            h: sc.h,
+            strip: 64,
+            ints: &[],
+            ..spec
+        };
+        write_streamed(&spec, |y, n| sc.truth_rows(s, y, n), &|_, _| {})?;
+    }
+    Ok((iw, ih))
+}
+
+/// `synth --spp n`: the mean of `n` samples a pixel (and their variance),
+/// and the truth.
+fn write_spp(
+    job: &SynthJob,
+    n: usize,
+    (out_format, truth_format): Formats,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<(usize, usize)> {
+    let sc = &job.scene;
+    let rgb: Vec<String> = ["R", "G", "B"].iter().map(|s| s.to_string()).collect();
+    if n == 0 || n > 1 << 20 {
+        return Err(Error::Config(format!("--spp must be 1..=1048576, got {n}")));
+    }
+    let all = ["R", "G", "B", "variance.R", "variance.G", "variance.B"];
+    let nch = if job.variance { 6 } else { 3 };
+    let names: Vec<String> = all[..nch].iter().map(|s| s.to_string()).collect();
+    let strip = crate::pipeline::auto_strip_rows(sc.w, nch);
+    let spp = i32::try_from(n).unwrap_or(i32::MAX);
+    let ints = [("spp", spp)];
+    let spec = OutSpec {
+        path: &job.output,
+        format: out_format,
+        w: sc.w,
+        h: sc.h,
+        names: &names,
+        compression: job.compression,
+        strip,
+        ints: &ints,
+    };
+    let w = sc.w;
+    write_streamed(
+        &spec,
+        |y, k| {
+            let rows = sc.spp_rows(n, y, k);
+            if job.variance {
+                rows
+            } else {
+                rows.chunks(6 * w)
+                    .flat_map(|r| r[..3 * w].iter().copied())
+                    .collect()
+            }
+        },
+        progress,
+    )?;
+    if let Some(t) = &job.truth {
+        let spec = OutSpec {
+            path: t,
+            format: truth_format.unwrap_or(out_format),
+            names: &rgb,
+            strip: 64,
+            ints: &[],
+            ..spec
+        };
+        write_streamed(&spec, |y, k| sc.spp_truth_rows(y, k), &|_, _| {})?;
+    }
+    Ok((sc.w, sc.h))
+}
+
 /// Run a `synth` job; `progress(rows done, rows)`.
 pub fn synth(job: &SynthJob, progress: &(dyn Fn(usize, usize) + Sync)) -> Result<SynthReport> {
     let sc = &job.scene;
@@ -570,100 +681,13 @@ pub fn synth(job: &SynthJob, progress: &(dyn Fn(usize, usize) + Sync)) -> Result
     };
     let out_format = format_of(&job.output)?;
     let truth_format = job.truth.as_deref().map(format_of).transpose()?;
+    let formats = (out_format, truth_format);
     let pool = crate::pipeline::thread_pool(job.threads)?;
     let start = Instant::now();
-    let rgb: Vec<String> = ["R", "G", "B"].iter().map(|s| s.to_string()).collect();
     let (width, height) = pool.install(|| -> Result<(usize, usize)> {
         match job.sampling {
-            Sampling::Supersample(s) => {
-                if !(1..=8).contains(&s) {
-                    return Err(Error::Config(format!(
-                        "--supersample must be 1..=8, got {s}"
-                    )));
-                }
-                let (iw, ih) = (sc.w.checked_mul(s), sc.h.checked_mul(s));
-                let (Some(iw), Some(ih)) = (iw, ih) else {
-                    return Err(Error::Config(
-                        "--size times --supersample is too large".into(),
-                    ));
-                };
-                let strip = crate::pipeline::auto_strip_rows(iw, 3).max(s);
-                // The render says it is super-sampled: `filter` reduces it
-                // S times without being told (crate::io::verdict).
-                let ints = [(crate::io::SUPERSAMPLE_ATTRIBUTES[0], s as i32)];
-                let spec = OutSpec {
-                    path: &job.output,
-                    format: out_format,
-                    w: iw,
-                    h: ih,
-                    names: &rgb,
-                    compression: job.compression,
-                    strip,
-                    ints: &ints,
-                };
-                write_streamed(&spec, |j, n| sc.noisy_rows(s, j, n), progress)?;
-                if let Some(t) = &job.truth {
-                    let spec = OutSpec {
-                        path: t,
-                        format: truth_format.unwrap_or(out_format),
-                        w: sc.w,
-                        h: sc.h,
-                        strip: 64,
-                        ints: &[],
-                        ..spec
-                    };
-                    write_streamed(&spec, |y, n| sc.truth_rows(s, y, n), &|_, _| {})?;
-                }
-                Ok((iw, ih))
-            }
-            Sampling::Spp(n) => {
-                if n == 0 || n > 1 << 20 {
-                    return Err(Error::Config(format!("--spp must be 1..=1048576, got {n}")));
-                }
-                let all = ["R", "G", "B", "variance.R", "variance.G", "variance.B"];
-                let nch = if job.variance { 6 } else { 3 };
-                let names: Vec<String> = all[..nch].iter().map(|s| s.to_string()).collect();
-                let strip = crate::pipeline::auto_strip_rows(sc.w, nch);
-                let spp = i32::try_from(n).unwrap_or(i32::MAX);
-                let ints = [("spp", spp)];
-                let spec = OutSpec {
-                    path: &job.output,
-                    format: out_format,
-                    w: sc.w,
-                    h: sc.h,
-                    names: &names,
-                    compression: job.compression,
-                    strip,
-                    ints: &ints,
-                };
-                let w = sc.w;
-                write_streamed(
-                    &spec,
-                    |y, k| {
-                        let rows = sc.spp_rows(n, y, k);
-                        if job.variance {
-                            rows
-                        } else {
-                            rows.chunks(6 * w)
-                                .flat_map(|r| r[..3 * w].iter().copied())
-                                .collect()
-                        }
-                    },
-                    progress,
-                )?;
-                if let Some(t) = &job.truth {
-                    let spec = OutSpec {
-                        path: t,
-                        format: truth_format.unwrap_or(out_format),
-                        names: &rgb,
-                        strip: 64,
-                        ints: &[],
-                        ..spec
-                    };
-                    write_streamed(&spec, |y, k| sc.spp_truth_rows(y, k), &|_, _| {})?;
-                }
-                Ok((sc.w, sc.h))
-            }
+            Sampling::Supersample(s) => write_supersampled(job, s, formats, progress),
+            Sampling::Spp(n) => write_spp(job, n, formats, progress),
         }
     })?;
     Ok(SynthReport {

@@ -191,8 +191,22 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<RgbeHeader> {
             lines.push(line.to_string());
         }
     }
-    // The resolution line.
-    let rest = &bytes[end + 2..];
+    let (w, h, nl) = resolution(path, &bytes[end + 2..])?;
+    Ok(RgbeHeader {
+        w,
+        h,
+        xyze,
+        scale,
+        primaries,
+        lines,
+        epfilt,
+        data: end + 2 + nl + 1,
+    })
+}
+
+/// The resolution line at the start of `rest` (after the header): width,
+/// height and the line's length.
+fn resolution(path: &Path, rest: &[u8]) -> Result<(usize, usize, usize)> {
     let nl = rest
         .iter()
         .take(256)
@@ -221,16 +235,7 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<RgbeHeader> {
             format!("picture size {w}x{h} is empty or too large"),
         ));
     }
-    Ok(RgbeHeader {
-        w,
-        h,
-        xyze,
-        scale,
-        primaries,
-        lines,
-        epfilt,
-        data: end + 2 + nl + 1,
-    })
+    Ok((w, h, nl))
 }
 
 /// The value of one channel of an RGBE pixel, as Radiance's `colr_color`:

@@ -574,7 +574,6 @@ fn filter_and_assemble(
     chosen: &[usize],
     progress: Progress<'_>,
 ) -> Result<Report> {
-    let all = matches!(job.part, Some(PartSelect::All));
     let name_of = |i: usize| parts[i].name.clone();
     let tmp = temp_dir_beside(&job.output, ".epfilt-parts-")?;
     let mut reports: Vec<Option<Report>> = vec![None; parts.len()];
@@ -582,33 +581,7 @@ fn filter_and_assemble(
     let mut entries = Vec::new();
     let mut warnings = Vec::new();
     for p in parts {
-        // --part all: a part with nothing to filter (no colour channels, or
-        // a layout epfilt does not filter) is copied at S = 1, else left out.
-        let mut unfilterable = None;
-        if all && !p.deep {
-            let sel = PartSelect::Index(p.index);
-            if let Err(Error::Unsupported { reason, .. }) =
-                ExrInput::open_layer(&job.input, Some(&sel), job.layer.as_deref())
-            {
-                unfilterable = Some(reason);
-            }
-        }
-        let filter_it = chosen.contains(&p.index) && unfilterable.is_none();
-        let left_out = if filter_it {
-            None
-        } else if p.deep {
-            Some("deep data cannot be written".to_string())
-        } else {
-            unfilterable
-                .as_ref()
-                .filter(|_| job.params.supersample > 1)
-                .map(|reason| {
-                    format!(
-                        "it cannot be filtered ({reason}), and at S = {} a copy's display window would differ from the filtered parts'",
-                        job.params.supersample
-                    )
-                })
-        };
+        let (filter_it, left_out) = part_action(job, p, chosen);
         if let Some(why) = left_out {
             warnings.push(format!(
                 "{}: part {:?} is left out: {why}",
@@ -671,6 +644,45 @@ fn filter_and_assemble(
     report.warnings = warnings;
     report.parts = part_reports;
     Ok(report)
+}
+
+/// What `--part` does with part `p`: filter it (among `chosen`, and
+/// filterable), or leave it out, and why (deep, or not filterable at
+/// S > 1); neither: copy it.
+fn part_action(
+    job: &FilterJob,
+    p: &crate::io::parts::PartInfo,
+    chosen: &[usize],
+) -> (bool, Option<String>) {
+    let all = matches!(job.part, Some(PartSelect::All));
+    // --part all: a part with nothing to filter (no colour channels, or
+    // a layout epfilt does not filter) is copied at S = 1, else left out.
+    let mut unfilterable = None;
+    if all && !p.deep {
+        let sel = PartSelect::Index(p.index);
+        if let Err(Error::Unsupported { reason, .. }) =
+            ExrInput::open_layer(&job.input, Some(&sel), job.layer.as_deref())
+        {
+            unfilterable = Some(reason);
+        }
+    }
+    let filter_it = chosen.contains(&p.index) && unfilterable.is_none();
+    let left_out = if filter_it {
+        None
+    } else if p.deep {
+        Some("deep data cannot be written".to_string())
+    } else {
+        unfilterable
+            .as_ref()
+            .filter(|_| job.params.supersample > 1)
+            .map(|reason| {
+                format!(
+                    "it cannot be filtered ({reason}), and at S = {} a copy's display window would differ from the filtered parts'",
+                    job.params.supersample
+                )
+            })
+    };
+    (filter_it, left_out)
 }
 
 /// Filter one part of the input (the only one, or `job.part`) into

@@ -101,55 +101,15 @@ pub fn run_streamer<S: Source, K: Sink>(
     let result = std::thread::scope(|scope| -> Result<()> {
         let reader = scope.spawn(move || read_strips(source, io, ahead, strip_tx));
         let writer = scope.spawn(move || write_rows(sink, io, total, row_rx));
-        let mut filter_result = Ok(());
-        let mut writer_failed = false;
-        let mut drained = false;
-        for k in 0.. {
-            let t = Instant::now();
-            let strip = if drained { None } else { strip_rx.recv().ok() };
-            stages.filter_waiting_for_input += t.elapsed().as_secs_f64();
-            if cancelled() {
-                filter_result = Err(Error::Interrupted);
-                break;
-            }
-            let t = Instant::now();
-            let pushed = match strip {
-                Some(strip) => strip.and_then(|s| {
-                    pool.install(|| {
-                        let _segment = crate::trace::segment("filter", k, &[]);
-                        streamer.push(s)
-                    })
-                }),
-                // The input is all in: a stage may hand its last rows over
-                // a few at a time (restore's rows of blocks).
-                None if streamer.rows_out() < total => {
-                    drained = true;
-                    match pool.install(|| streamer.drain()) {
-                        Ok(None) => break,
-                        r => r,
-                    }
-                }
-                None => break,
-            };
-            stages.filter += t.elapsed().as_secs_f64();
-            match pushed {
-                Ok(Some(rows)) => {
-                    progress(rows.y0 + rows.rows, total);
-                    let t = Instant::now();
-                    let sent = row_tx.send((k, rows));
-                    stages.filter_waiting_for_output += t.elapsed().as_secs_f64();
-                    if sent.is_err() {
-                        writer_failed = true; // its error is reported below
-                        break;
-                    }
-                }
-                Ok(None) => {}
-                Err(e) => {
-                    filter_result = Err(e);
-                    break;
-                }
-            }
-        }
+        let channels = (&strip_rx, &row_tx);
+        let (mut filter_result, writer_failed) = filter_strips(
+            &mut streamer,
+            channels,
+            (pool, &cancelled),
+            total,
+            progress,
+            &mut stages,
+        );
         drop(strip_rx);
         if filter_result.is_ok() && !writer_failed && streamer.rows_out() != total {
             filter_result = Err(Error::Internal(format!(
@@ -186,6 +146,72 @@ pub fn run_streamer<S: Source, K: Sink>(
         nonfinite_zeroed: books.nonfinite_zeroed().to_vec(),
         first_nonfinite: books.first_nonfinite(),
     })
+}
+
+/// The filter's loop: each strip from `strip_rx` through the streamer, its
+/// final rows to `row_tx`, then the last rows once the input is all in.
+/// Its result, and whether the writer went away (its error is its own).
+fn filter_strips(
+    streamer: &mut Streamer,
+    (strip_rx, row_tx): (
+        &crossbeam_channel::Receiver<Result<Strip>>,
+        &crossbeam_channel::Sender<(usize, OutRows)>,
+    ),
+    (pool, cancelled): (&rayon::ThreadPool, &dyn Fn() -> bool),
+    total: usize,
+    progress: Progress<'_>,
+    stages: &mut StageSeconds,
+) -> (Result<()>, bool) {
+    let mut filter_result = Ok(());
+    let mut writer_failed = false;
+    let mut drained = false;
+    for k in 0.. {
+        let t = Instant::now();
+        let strip = if drained { None } else { strip_rx.recv().ok() };
+        stages.filter_waiting_for_input += t.elapsed().as_secs_f64();
+        if cancelled() {
+            filter_result = Err(Error::Interrupted);
+            break;
+        }
+        let t = Instant::now();
+        let pushed = match strip {
+            Some(strip) => strip.and_then(|s| {
+                pool.install(|| {
+                    let _segment = crate::trace::segment("filter", k, &[]);
+                    streamer.push(s)
+                })
+            }),
+            // The input is all in: a stage may hand its last rows over
+            // a few at a time (restore's rows of blocks).
+            None if streamer.rows_out() < total => {
+                drained = true;
+                match pool.install(|| streamer.drain()) {
+                    Ok(None) => break,
+                    r => r,
+                }
+            }
+            None => break,
+        };
+        stages.filter += t.elapsed().as_secs_f64();
+        match pushed {
+            Ok(Some(rows)) => {
+                progress(rows.y0 + rows.rows, total);
+                let t = Instant::now();
+                let sent = row_tx.send((k, rows));
+                stages.filter_waiting_for_output += t.elapsed().as_secs_f64();
+                if sent.is_err() {
+                    writer_failed = true; // its error is reported below
+                    break;
+                }
+            }
+            Ok(None) => {}
+            Err(e) => {
+                filter_result = Err(e);
+                break;
+            }
+        }
+    }
+    (filter_result, writer_failed)
 }
 
 /// The reader thread: strips of `ahead.strip_rows` from `source` into `tx` (an

@@ -48,8 +48,6 @@ pub struct Streamer {
 impl Streamer {
     /// The skeleton and stage of `job` with `params` (validated), writing at
     /// `precision`.
-    /// (Long: the checks of the layout and of `--edge pad` before anything is
-    /// allocated, each with its own message.)
     pub fn new(
         job: &StripLayout,
         params: &ValidParams,
@@ -57,40 +55,8 @@ impl Streamer {
         precision: Vec<Precision>,
     ) -> Result<Self> {
         let grid = job.grid;
-        let nch = job.channels.len();
-        if nch == 0 || nch > MAX_CHANNELS || job.luminance.len() != nch || job.modes.len() != nch {
-            return Err(Error::Config(format!(
-                "1..={MAX_CHANNELS} channels with luminance weights and modes needed, got {nch}"
-            )));
-        }
         let s = grid.s;
-        if grid.in_w == 0 || grid.in_h == 0 {
-            return Err(Error::Config("the image is empty".into()));
-        }
-        if s == 0 || grid.in_w < s || grid.in_h < s {
-            return Err(Error::Config(format!(
-                "--supersample {s} is larger than the image ({}x{} samples)",
-                grid.in_w, grid.in_h
-            )));
-        }
-        if grid.in_w % s != 0 || grid.in_h % s != 0 {
-            return Err(Error::Config(format!(
-                "image size {}x{} is not a multiple of --supersample {s}",
-                grid.in_w, grid.in_h
-            )));
-        }
-        if cfg.tile == 0 {
-            return Err(Error::Config("--tile must be at least 1".into()));
-        }
-        let reads_aux = params.method == Method::EpBox
-            || (params.method == Method::EpGauss && s == 1)
-            || !job.guides.is_empty();
-        if !reads_aux && !job.aux.is_empty() {
-            return Err(Error::Config(format!(
-                "{} reads no statistics or guide channels",
-                params.method.name()
-            )));
-        }
+        check_layout(job, params, cfg)?;
         // --edge pad: the grid completes the source's samples with zeros to
         // a multiple of S; outputs are normalised by their coverage.
         let coverage = match job.padded_from {
@@ -273,6 +239,48 @@ impl Streamer {
         v.extend(self.stage.windows());
         v
     }
+}
+
+/// The layout's checks before anything is allocated, each with its own
+/// message: channels, the grid against S, the tile, and aux channels only
+/// for a stage that reads them.
+fn check_layout(job: &StripLayout, params: &ValidParams, cfg: &PipelineConfig) -> Result<()> {
+    let grid = job.grid;
+    let nch = job.channels.len();
+    if nch == 0 || nch > MAX_CHANNELS || job.luminance.len() != nch || job.modes.len() != nch {
+        return Err(Error::Config(format!(
+            "1..={MAX_CHANNELS} channels with luminance weights and modes needed, got {nch}"
+        )));
+    }
+    let s = grid.s;
+    if grid.in_w == 0 || grid.in_h == 0 {
+        return Err(Error::Config("the image is empty".into()));
+    }
+    if s == 0 || grid.in_w < s || grid.in_h < s {
+        return Err(Error::Config(format!(
+            "--supersample {s} is larger than the image ({}x{} samples)",
+            grid.in_w, grid.in_h
+        )));
+    }
+    if grid.in_w % s != 0 || grid.in_h % s != 0 {
+        return Err(Error::Config(format!(
+            "image size {}x{} is not a multiple of --supersample {s}",
+            grid.in_w, grid.in_h
+        )));
+    }
+    if cfg.tile == 0 {
+        return Err(Error::Config("--tile must be at least 1".into()));
+    }
+    let reads_aux = params.method == Method::EpBox
+        || (params.method == Method::EpGauss && s == 1)
+        || !job.guides.is_empty();
+    if !reads_aux && !job.aux.is_empty() {
+        return Err(Error::Config(format!(
+            "{} reads no statistics or guide channels",
+            params.method.name()
+        )));
+    }
+    Ok(())
 }
 
 /// The final rows `a..b` not yet finished, `w` wide (none when there are

@@ -152,6 +152,50 @@ pub struct FrameEvent<'a> {
     pub outcome: Option<&'a FrameOutcome>,
 }
 
+/// Filter one frame (`input` into `output`, unless `--skip-existing` finds
+/// it done) into `outcome`; only an interruption is an error.
+fn run_frame(
+    job: &SequenceJob,
+    outcome: &mut FrameOutcome,
+    input: std::path::PathBuf,
+    output: std::path::PathBuf,
+    progress: Progress<'_>,
+) -> Result<()> {
+    let mut fj = job.template.clone();
+    fj.input = input.clone();
+    fj.output = output;
+    let existing = if job.skip_existing && input.exists() {
+        existing_output(&fj)
+    } else {
+        Ok(Existing::Missing)
+    };
+    if !input.exists() {
+        outcome.status = FrameStatus::Failed;
+        outcome.error = Some(format!("{}: no such file", input.display()));
+    } else if let Err(e) = existing {
+        outcome.status = FrameStatus::Failed;
+        outcome.error = Some(crate::error::one_line(&e));
+    } else if existing.as_ref().is_ok_and(|e| *e == Existing::Done) {
+        outcome.status = FrameStatus::Skipped;
+    } else {
+        if let Ok(Existing::Redo(why)) = existing {
+            outcome.redone = Some(why);
+        }
+        match filter_file(&fj, progress) {
+            Ok(report) => {
+                outcome.status = FrameStatus::Done;
+                outcome.report = Some(Box::new(report));
+            }
+            Err(Error::Interrupted) => return Err(Error::Interrupted),
+            Err(e) => {
+                outcome.status = FrameStatus::Failed;
+                outcome.error = Some(crate::error::one_line(&e));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Filter the task's frames in order. `on_frame` hears of each frame when it
 /// starts (`None`) and ends (`Some`), with its place in the task;
 /// `progress` is each frame's row progress. An interruption (the template's
@@ -196,38 +240,7 @@ pub fn run_sequence(
             outcome: None,
         });
         let t = Instant::now();
-        let mut fj = job.template.clone();
-        fj.input = input.clone();
-        fj.output = output;
-        let existing = if job.skip_existing && input.exists() {
-            existing_output(&fj)
-        } else {
-            Ok(Existing::Missing)
-        };
-        if !input.exists() {
-            outcome.status = FrameStatus::Failed;
-            outcome.error = Some(format!("{}: no such file", input.display()));
-        } else if let Err(e) = existing {
-            outcome.status = FrameStatus::Failed;
-            outcome.error = Some(crate::error::one_line(&e));
-        } else if existing.as_ref().is_ok_and(|e| *e == Existing::Done) {
-            outcome.status = FrameStatus::Skipped;
-        } else {
-            if let Ok(Existing::Redo(why)) = existing {
-                outcome.redone = Some(why);
-            }
-            match filter_file(&fj, progress) {
-                Ok(report) => {
-                    outcome.status = FrameStatus::Done;
-                    outcome.report = Some(Box::new(report));
-                }
-                Err(Error::Interrupted) => return Err(Error::Interrupted),
-                Err(e) => {
-                    outcome.status = FrameStatus::Failed;
-                    outcome.error = Some(crate::error::one_line(&e));
-                }
-            }
-        }
+        run_frame(job, &mut outcome, input, output, progress)?;
         outcome.seconds = t.elapsed().as_secs_f64();
         if outcome.status == FrameStatus::Failed && job.fail_fast {
             stop = true;

@@ -233,19 +233,10 @@ impl EpGauss {
             // the flat-background guess overshoots). Once bracketed, the
             // same line between the bracket's ends, else the guess, else the
             // midpoint.
-            let cand = match hi {
-                None => match below
-                    .as_mut()
-                    .and_then(|(l, d)| rung_where((*l, d), (lo, &mut d_lo), self.ln_tol))
-                {
-                    Some(r) => guess.map_or(r, |g| g.min(r)).min(lo + 2 * self.jump),
-                    None => guess.map_or(lo + self.jump, |g| g.min(lo + self.jump)),
-                },
-                Some(h) => rung_where((lo, &mut d_lo), (h, &mut d_hi), self.ln_tol)
-                    .or(guess)
-                    .unwrap_or((lo + upper).div_ceil(2)),
-            }
-            .clamp(lo + 1, upper);
+            let bracket = ((lo, &mut d_lo), hi.map(|h| (h, &mut d_hi)));
+            let cand = self
+                .next_rung(bracket, below.as_mut(), guess)
+                .clamp(lo + 1, upper);
             guesses += 1;
             let (d, xbar) = self.relation14_at(rows, (cx, cy), x0, cand, fold, &mut bounded_evals);
             if d <= self.tol {
@@ -257,6 +248,26 @@ impl EpGauss {
                 d_lo = LogD::new(d);
             }
             latest = (cand, xbar);
+        }
+    }
+
+    /// The rung to try next, from the bracket's ends `lo` (failed) and `hi`
+    /// (passed, where one has), the failing rung below `lo` and the
+    /// flat-background guess ([`EpGauss::search_in`] says why each).
+    fn next_rung(
+        &self,
+        ((lo, d_lo), hi): ((usize, &mut LogD), Option<(usize, &mut LogD)>),
+        below: Option<&mut (usize, LogD)>,
+        guess: Option<usize>,
+    ) -> usize {
+        match hi {
+            None => match below.and_then(|(l, d)| rung_where((*l, d), (lo, d_lo), self.ln_tol)) {
+                Some(r) => guess.map_or(r, |g| g.min(r)).min(lo + 2 * self.jump),
+                None => guess.map_or(lo + self.jump, |g| g.min(lo + self.jump)),
+            },
+            Some((h, d_hi)) => rung_where((lo, d_lo), (h, d_hi), self.ln_tol)
+                .or(guess)
+                .unwrap_or((lo + h - 1).div_ceil(2)),
         }
     }
 

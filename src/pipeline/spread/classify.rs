@@ -83,7 +83,7 @@ impl FindCtx<'_> {
         let FindCtx {
             shape,
             rules,
-            view: yview,
+            view,
             input,
         } = *self;
         let (s, in_w, in_h, nch) = (shape.grid.s, shape.grid.in_w, shape.grid.in_h, shape.nch);
@@ -105,7 +105,6 @@ impl FindCtx<'_> {
                 ends,
             };
         };
-        let view = yview;
         ep.xbar0_cols_into(view, y as i64, cols.clone(), xbars, xbar_h);
         // This part's samples, `i0..i1` of each row (`n` of them).
         let (i0, i1) = (cols.start * s, cols.end * s);
@@ -128,41 +127,7 @@ impl FindCtx<'_> {
                 }
             }
         }
-        // Which pixels hold a noisy sample: one branch-free test of
-        // all their samples first (most hold none).
-        flagged.clear();
-        if ep.low_outliers() {
-            for (k, &xbar) in xbars.iter().enumerate() {
-                let Some((hi, lo)) = ep.bounds(xbar) else {
-                    continue;
-                };
-                let mut any = false;
-                for bb in 0..s {
-                    for &x0 in &lrows[bb * n + k * s..bb * n + (k + 1) * s] {
-                        any |= EpGauss::outside(x0, (hi, lo));
-                    }
-                }
-                if any {
-                    flagged.push((cols.start + k, xbar, hi, lo));
-                }
-            }
-        } else {
-            // Only bright samples can fail (`lo <= 0`): a pixel
-            // holds one iff its brightest sample is above `hi`.
-            pmax.clear();
-            pmax.resize(cols.len(), f64::NEG_INFINITY);
-            for lrow in lrows.chunks_exact(n) {
-                row_max(pmax, lrow, s);
-            }
-            for (k, (&xbar, &m)) in xbars.iter().zip(pmax.iter()).enumerate() {
-                let Some((hi, lo)) = ep.bounds(xbar) else {
-                    continue;
-                };
-                if m > hi {
-                    flagged.push((cols.start + k, xbar, hi, lo));
-                }
-            }
-        }
+        flag_pixels(ep, (lrows, n, s), (xbars, cols.start), pmax, flagged);
         // Row-major order: by input row, then column.
         for bb in 0..s {
             let j = y * s + bb;
@@ -439,6 +404,53 @@ fn row_max(out: &mut [f64], ch: &[f64], s: usize) {
                 for &v in v {
                     *o = if v > *o { v } else { *o };
                 }
+            }
+        }
+    }
+}
+
+/// Which pixels of a part (columns from `start`, their averages `xbars`)
+/// hold a noisy sample, by the luminance of their samples (`lrows`: `s`
+/// rows of `n`): each with its average and bounds, into `flagged`.
+fn flag_pixels(
+    ep: &EpGauss,
+    (lrows, n, s): (&[f64], usize, usize),
+    (xbars, start): (&[f64], usize),
+    pmax: &mut Vec<f64>,
+    flagged: &mut Vec<(usize, f64, f64, f64)>,
+) {
+    // Which pixels hold a noisy sample: one branch-free test of
+    // all their samples first (most hold none).
+    flagged.clear();
+    if ep.low_outliers() {
+        for (k, &xbar) in xbars.iter().enumerate() {
+            let Some((hi, lo)) = ep.bounds(xbar) else {
+                continue;
+            };
+            let mut any = false;
+            for bb in 0..s {
+                for &x0 in &lrows[bb * n + k * s..bb * n + (k + 1) * s] {
+                    any |= EpGauss::outside(x0, (hi, lo));
+                }
+            }
+            if any {
+                flagged.push((start + k, xbar, hi, lo));
+            }
+        }
+    } else {
+        // Only bright samples can fail (`lo <= 0`): a pixel
+        // holds one iff its brightest sample is above `hi`.
+        pmax.clear();
+        pmax.resize(xbars.len(), f64::NEG_INFINITY);
+        for lrow in lrows.chunks_exact(n) {
+            row_max(pmax, lrow, s);
+        }
+        for (k, (&xbar, &m)) in xbars.iter().zip(pmax.iter()).enumerate() {
+            let Some((hi, lo)) = ep.bounds(xbar) else {
+                continue;
+            };
+            if m > hi {
+                flagged.push((start + k, xbar, hi, lo));
             }
         }
     }
