@@ -165,7 +165,7 @@ pub fn write_merged(bands: &[BandFile], output: &Path, staged: &Staged) -> Resul
         },
     );
     written.map_err(|e| Error::from_exr(output, e, "merging"))?;
-    crate::io::writer::sort_header_attributes(staged.file(), None).map_err(|e| Error::Output {
+    crate::io::headers::sort_header_attributes(staged.file(), None).map_err(|e| Error::Output {
         path: output.into(),
         reason: format!("putting the header in order: {e}"),
     })?;

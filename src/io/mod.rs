@@ -24,6 +24,7 @@ pub mod chunk_sizes;
 pub mod destination;
 pub mod format;
 pub mod guides;
+mod headers;
 pub mod info;
 pub mod mapped;
 pub mod output;

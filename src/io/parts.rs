@@ -167,7 +167,7 @@ pub fn assemble(dest: &Path, sources: &[PartSource]) -> Result<u64> {
         return Err(e);
     }
     written.map_err(|e| Error::from_exr(dest, e, "writing the parts"))?;
-    super::writer::sort_header_attributes(staged.file(), None).map_err(|e| Error::Output {
+    super::headers::sort_header_attributes(staged.file(), None).map_err(|e| Error::Output {
         path: dest.into(),
         reason: format!("putting the headers in order: {e}"),
     })?;

@@ -83,14 +83,8 @@ pub fn make(
                     "ep-gauss at S = 1 reads one or three variance channels and a sample count of at least 2".into(),
                 ));
             }
-            let mut stage = GaussianStage::new(
-                grid,
-                job.luminance.clone(),
-                job.modes.clone(),
-                params,
-                tile,
-                job.stats.clone(),
-            );
+            let mut stage =
+                GaussianStage::new(grid, job.luminance.clone(), job.modes.clone(), params, tile);
             if let Some(real) = job.padded_from {
                 stage.set_real_size(real);
             }

@@ -155,10 +155,6 @@ impl FindCtx<'_> {
                         kept += 1;
                         continue;
                     }
-                    if x0 > hi && self.carried(ep, x0, (i, j), px) {
-                        kept += 1;
-                        continue;
-                    }
                     let row = input.get(j);
                     vals.extend((0..nch).map(|c| {
                         let v = row[c * in_w + i] as f64;
@@ -196,37 +192,6 @@ impl FindCtx<'_> {
             }
         }
         ring_median(&mut ring)
-    }
-
-    /// S = 1 with per-pixel statistics: whether the carriers rule keeps the
-    /// bright sample `x0` at input `(i, j)`, pixel column `px` (the sample is
-    /// the pixel).
-    fn carried(&self, ep: &EpGauss, x0: f64, (i, j): (usize, usize), px: usize) -> bool {
-        let Some((st, carriers)) = &self.rules.pixel_stats else {
-            return false;
-        };
-        let Shape {
-            grid, w, h, pad, ..
-        } = *self.shape;
-        let (view, in_w, y) = (self.view, grid.in_w, j);
-        let row = self.input.get(j);
-        let (n, se2) = st.pixel(self.rules.lum.weights(), x0, |c| row[c * in_w + i] as f64);
-        let hot = || {
-            cluster_count(
-                (px, y),
-                (w, h),
-                x0,
-                |xx, yy| view.row(yy as i64)[pad + xx] as f64,
-                |xx, yy| {
-                    let (v, xb) = (
-                        view.row(yy as i64)[pad + xx] as f64,
-                        ep.xbar0(view, xx, yy as i64),
-                    );
-                    ep.bounds(xb).is_some_and(|(hi, _)| v > hi)
-                },
-            )
-        };
-        carriers.keeps(x0, se2, n, hot)
     }
 
     /// Phase 2: the horizontal pass of the base kernel over the `S` sample

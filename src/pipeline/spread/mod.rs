@@ -46,10 +46,7 @@ use super::counts::{MethodCounts, SpreadCounts};
 use super::stage::{Output, Stage, WindowUse};
 use super::window::{RowWindow, Rows};
 use super::ChannelMode;
-use crate::filter::ep_box::{cluster_count, StatsLayout};
-use crate::filter::ep_gauss::{
-    csum_add, csum_prefix, AreaSums, Carriers, EpGauss, Folded, LumRows, Support,
-};
+use crate::filter::ep_gauss::{csum_add, csum_prefix, AreaSums, EpGauss, Folded, LumRows, Support};
 use crate::filter::guides::EmissionParts;
 use crate::filter::kernel::{ColumnTaps, Kernel1d, TentTaps};
 use crate::filter::luminance::Luminance;
@@ -68,71 +65,7 @@ use crate::geometry::{mirror, Grid, Halo};
 const SPREAD_CHUNK: usize = 8192;
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::filter::FilterParams;
-
-    /// A one-channel stage of `p` on `grid`, tiles of 16.
-    pub(super) fn stage(p: &FilterParams, grid: Grid) -> GaussianStage {
-        GaussianStage::new(
-            grid,
-            vec![1.0],
-            vec![ChannelMode::Spread],
-            &p.validated().unwrap(),
-            16,
-            None,
-        )
-    }
-
-    #[test]
-    fn grid_reaches_from_params_equal_the_stages() {
-        for (s, r, mr, from) in [(3, 0.6, 16.0, 2.0), (4, 0.9, 5.5, 1.0), (2, 0.6, 32.0, 0.0)] {
-            let mut p = FilterParams::new(Method::EpGauss, s);
-            (p.radius, p.max_radius, p.coarse_from) = (r, mr, from);
-            let grid = Grid {
-                in_w: 90 * s,
-                in_h: 60 * s,
-                s,
-            };
-            let e = stage(&p, grid);
-            let ep = e.rules.ep.as_ref().unwrap();
-            assert_eq!(
-                crate::filter::grid_reaches(&p),
-                [1, 2, 4].map(|f| ep.grid_reach(f)),
-                "{s} {r} {mr} {from}"
-            );
-        }
-    }
-
-    #[test]
-    fn halo_from_params_equals_the_stages() {
-        for m in [Method::EpGauss, Method::Gauss, Method::Box] {
-            for (s, r, mr, cut) in [
-                (3, 0.6, 16.0, 3.0),
-                (4, 0.9, 5.5, 2.5),
-                (2, 0.3, 0.3, 1.0),
-                (1, 2.0, 40.0, 6.0),
-            ] {
-                if m == Method::EpGauss && s == 1 {
-                    continue; // the pixel stage's (pixel.rs)
-                }
-                let mut p = FilterParams::new(m, s);
-                (p.radius, p.max_radius, p.cutoff) = (r, mr, cut);
-                let grid = Grid {
-                    in_w: 30 * s,
-                    in_h: 20 * s,
-                    s,
-                };
-                let e = stage(&p, grid);
-                assert_eq!(
-                    e.halo(),
-                    crate::filter::halo(&p),
-                    "{m:?} {s} {r} {mr} {cut}"
-                );
-            }
-        }
-    }
-}
+mod tests;
 
 /// A noisy sample waiting for its spread: its input position, its
 /// luminance and its pixel's average (what the width search reads). The
@@ -221,9 +154,6 @@ struct Rules {
     /// The clamp foil's limit.
     clamp: Option<f32>,
     support: Support,
-    /// ep-gauss at S = 1 on a file with per-pixel statistics: where they
-    /// are in the input rows, and the carriers rule that reads them.
-    pixel_stats: Option<(StatsLayout, Carriers)>,
     /// `--edge pad`: real samples per output column and row (S where the
     /// pixel is whole), so that `Ybox` is the mean of what exists.
     real_counts: Option<(Vec<usize>, Vec<usize>)>,
@@ -345,15 +275,12 @@ pub struct GaussianStage {
 impl GaussianStage {
     /// Build the stage: kernels, taps and halo are settled here, once. The
     /// skeleton has checked the grid, the channels and the tile.
-    /// `stats` (ep-gauss at S = 1 only; indices into the input rows'
-    /// channels) turns on the carriers rule.
     pub fn new(
         grid: Grid,
         lum: Vec<f64>,
         modes: Vec<ChannelMode>,
         params: &ValidParams,
         tile: usize,
-        stats: Option<StatsLayout>,
     ) -> Self {
         let nch = lum.len();
         assert_eq!(modes.len(), nch, "a mode per channel");
@@ -421,9 +348,6 @@ impl GaussianStage {
                     .with_over(params.support_over)
                     .with_region(params.support_region, params.support_level)
                     .with_group(params.support_group),
-                pixel_stats: stats
-                    .filter(|_| params.method == Method::EpGauss && s == 1 && params.support > 0)
-                    .map(|st| (st, Carriers::new(&params.ep_box))),
                 ep,
                 real_counts: None,
                 emission: None,
