@@ -315,7 +315,7 @@ macro_rules! knobs {
     (@parse $ty:ty, $parse:expr) => { $parse };
 }
 
-use Method::*;
+use Method::{AlphaTrim, Clamp, EpBox, EpGauss, Gauss, Median};
 
 knobs! {
     /// ep-box: the allowed interval ±D, in units of L_tvis.

@@ -2,7 +2,7 @@
 //! memory estimate checked against `--max-memory` before anything is
 //! allocated.
 
-use super::*;
+use super::{FilterParams, Halo, Method, PipelineConfig, StripLayout};
 
 /// Bytes of input one strip should hold by default: four strips are in
 /// flight at most (two queued, one being read, one being filtered), so this
@@ -447,6 +447,8 @@ fn estimate_pixel_bytes(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::Grid;
+    use crate::pipeline::strips_in_flight;
 
     #[test]
     fn a_batch_counts_bytes_two_blocks_at_the_least() {

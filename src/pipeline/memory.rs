@@ -1,7 +1,11 @@
 //! Whole images in memory as a source and a sink: for tests, benches and
 //! small jobs.
 
-use super::*;
+use super::{
+    mean_luminance, run, FilterParams, Method, PipelineConfig, Precision, RunStats, Sink, Source,
+    Strip, StripLayout,
+};
+use crate::error::Result;
 
 /// An in-memory source: a whole planar image (`[row][channel][x]`).
 #[derive(Clone, Debug)]

@@ -47,8 +47,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
-use rayon::prelude::*;
-
 use crate::error::{Error, Result};
 use crate::filter::channels::ChannelRule;
 use crate::filter::ep_box::StatsLayout;

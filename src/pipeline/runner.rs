@@ -1,7 +1,14 @@
 //! The run: the thread pool, the reader and writer threads around the
 //! skeleton, and ep-box's first pass (the mean luminance).
 
-use super::*;
+use super::{edge, ledger};
+use super::{
+    window_blocks, Error, FilterParams, Instant, Ordering, OutRows, PipelineConfig, ReadAhead,
+    RunStats, Sink, Source, StageSeconds, Streamer, Strip, StripLayout, STRIPS_RECYCLED,
+};
+use crate::error::Result;
+use rayon::iter::ParallelIterator;
+use rayon::slice::ParallelSlice;
 
 /// Progress callback: (output rows done, output rows in all).
 pub type Progress<'a> = &'a (dyn Fn(usize, usize) + Sync);

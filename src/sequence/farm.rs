@@ -2,7 +2,9 @@
 //! process filters, from Slurm, Kubernetes Indexed Jobs, AWS Batch or
 //! `--task-index`/`--task-count`.
 
-use super::*;
+use super::{Error, Path, PathBuf};
+use crate::error::Result;
+use serde::Serialize;
 
 /// One task of an array job: the `index`-th of `count` contiguous chunks of
 /// the frame list.

@@ -11,13 +11,11 @@
 mod farm;
 mod run;
 
-pub use farm::*;
-pub use run::*;
+pub use farm::{band_and_task, band_path, task_from, Share, Task};
+pub use run::{run_sequence, FrameEvent, FrameOutcome, FrameStatus, SequenceJob, SequenceReport};
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-
-use serde::Serialize;
 
 use crate::error::{Error, Result};
 use crate::job::{existing_output, filter_file, Existing, FilterJob};

@@ -2,7 +2,12 @@
 //! going on past a failed frame unless asked to stop, with a report of every
 //! frame.
 
-use super::*;
+use super::{
+    band_path, existing_output, filter_file, Error, Existing, FilterJob, FramePattern, Instant,
+    Progress, Report, Task,
+};
+use crate::error::Result;
+use serde::Serialize;
 
 /// A sequence to filter: one job template, whose input and output paths are
 /// replaced by each frame's.

@@ -8,7 +8,8 @@ use std::collections::{BTreeMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::decode::{decode_rows_into, release_span};
-use super::*;
+use super::ExrInput;
+use crate::error::Result;
 
 /// A decoded block row's values and the file's byte range they came from
 /// (or the error).

@@ -3,7 +3,12 @@
 //! be, decompressed (ZIP by our own decoder, the rest by the `exr` crate) and
 //! converted to f32.
 
-use super::*;
+use super::magic_number;
+use super::{
+    Chunk, CompressedBlock, Error, Header, MetaData, Path, PeekRead, Requirements, SampleType,
+    TileCoordinates, Tracking, UncompressedBlock, IN_DECODER,
+};
+use crate::error::Result;
 
 pub(super) fn invalid(path: &Path, reason: impl Into<String>) -> Error {
     Error::InvalidFile {

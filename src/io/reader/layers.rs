@@ -1,7 +1,8 @@
 //! Which channels of an EXR are read: views, layers, the beauty's colour
 //! channels and their luminance weights, and what is left out.
 
-use super::*;
+use super::{channel_names, unsupported, Error, Header, Path, Selected};
+use crate::error::Result;
 
 /// The views of a multi-view file (`multiView`), the default first; empty
 /// for a file without views.

@@ -25,9 +25,17 @@ mod layers;
 mod pictures;
 mod source;
 
-pub use blocks::*;
-pub use layers::*;
-pub use source::*;
+pub use blocks::MAX_EXACT_ID;
+pub(crate) use blocks::{
+    block_bytes, channel_names, check_chunks, decode_checked, decode_zip_into, parse_headers,
+    parse_layout, parse_meta, read_chunk, text_attribute,
+};
+use blocks::{
+    bytes_of, invalid, parse_headers_from, part_name, read_tables, reorder_planes, unsupported,
+};
+pub(crate) use layers::{base_name, choose_channels, views};
+pub use layers::{view_scope, ViewSelect};
+pub use source::{ExrSource, InputSource, READ_AHEAD_BYTES};
 
 use super::mapped::MappedFile;
 use crate::error::{Error, Result};

@@ -1,7 +1,11 @@
 //! The strip source of an open EXR: block rows decoded in parallel, a
 //! bounded read-ahead, rows handed to the pipeline in order.
 
-use super::*;
+use super::{invalid, BlockRow, Decoder, ExrInput, Source, Strip};
+use crate::error::Result;
+use rayon::iter::{
+    IndexedParallelIterator, IntoParallelIterator, IntoParallelRefIterator, ParallelIterator,
+};
 
 use super::decode::{decode_rows_into, release_span};
 pub use crate::pipeline::READ_AHEAD_BYTES;

@@ -1,5 +1,6 @@
 //! The reader's unit tests.
 
+use super::layers::layer_colour;
 use super::*;
 
 fn names(v: &[&str]) -> Vec<String> {

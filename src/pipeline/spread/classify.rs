@@ -4,7 +4,7 @@
 
 use rayon::prelude::*;
 
-use super::*;
+use super::{ChannelMode, EpGauss, LumRows, Noisy, RowWindow, Rules, Shape, YView};
 
 /// The 5th smallest of eight values (their upper median): what three
 /// outliers on either side cannot move past the others. NaN sorts last.

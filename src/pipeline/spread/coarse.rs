@@ -3,7 +3,7 @@
 //! brought back up with a tent (the 4x grid's into the 2x grid's, the 2x
 //! grid's into the accumulator's), each row once, in tap order.
 
-use super::*;
+use super::{Back, RowWindow, TentTaps};
 
 /// A coarse grid of the spread (`--coarse-from`): its accumulator (`[c][X]`
 /// rows of cells `factor` times coarser than the grid it feeds), the tent's

@@ -5,7 +5,11 @@
 
 use rayon::prelude::*;
 
-use super::*;
+use super::coarse;
+use super::{
+    csum_add, csum_prefix, mirror, Back, ChannelMode, CoarseGrid, RowWindow, Rows, Rules, Shape,
+    TableRows,
+};
 
 /// The box luminance of pixel rows `a..` of `input` into `rows` (`pad`
 /// mirrored pixels each side) and, with `csum` (the table's rows before `a`,

@@ -6,7 +6,10 @@
 use crate::filter::ep_gauss::Choice;
 use rayon::prelude::*;
 
-use super::*;
+use super::{
+    Back, ChannelMode, CoarseGrid, EpGauss, Folded, Kernel1d, Noisy, RowWindow, Rules, Shape,
+    SpreadCounts, YView, SPREAD_CHUNK,
+};
 
 /// Where the weights of one axis of a spread are.
 #[derive(Clone, Copy, Debug)]
@@ -631,6 +634,9 @@ fn scatter_tile(job: &mut TileJob<'_, '_>, nch: usize) {
 mod tests {
     use super::*;
     use crate::filter::FilterParams;
+    use crate::filter::Method;
+    use crate::geometry::Grid;
+    use crate::pipeline::spread::GaussianStage;
 
     /// An ep-gauss stage of 400x400 pixels at S = 1, with `n` pending
     /// samples at pixel `(x, y)`.
