@@ -15,7 +15,8 @@
 
 use std::path::Path;
 
-use rayon::prelude::*;
+use rayon::iter::{IndexedParallelIterator, ParallelIterator};
+use rayon::slice::ParallelSlice;
 use serde::Serialize;
 
 use crate::error::{Error, Result};

@@ -15,7 +15,7 @@ use exr::block::writer::ChunksWriter;
 use exr::meta::header::Header;
 use exr::meta::MetaData;
 use exr::prelude::{SmallVec, Text};
-use rayon::prelude::*;
+use rayon::iter::{IntoParallelRefIterator, ParallelIterator};
 
 use super::mapped::MappedFile;
 use super::reader::{block_bytes, decode_checked, parse_headers, parse_meta, read_chunk};

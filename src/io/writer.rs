@@ -16,7 +16,7 @@ use exr::meta::attribute::{ChannelDescription, ChannelList, IntegerBounds, LineO
 use exr::meta::header::Header;
 use exr::meta::BlockDescription;
 use exr::prelude::{Compression, SmallVec, Text};
-use rayon::prelude::*;
+use rayon::iter::{IntoParallelIterator, ParallelIterator};
 
 use crate::error::{Error, Result};
 use crate::pipeline::{Precision, Sink};

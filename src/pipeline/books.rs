@@ -4,7 +4,7 @@
 //! counted) and output rows go out through [`Books::finish`] (rounded,
 //! counted), so every method accounts the same way.
 
-use rayon::prelude::*;
+use rayon::iter::{IntoParallelIterator, ParallelIterator};
 
 use super::edge::Coverage;
 use super::ledger::{Ledger, Sums};

@@ -19,7 +19,7 @@
 //! output is bit-identical across `--tile`, `--strip-rows` and `--threads`.
 //! Pixels that are neither treated nor reached keep their input bits exactly.
 
-use rayon::prelude::*;
+use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
 
 use super::counts::{ExcessCounts, MethodCounts};
 use super::gather::{Made, Placed, Sources};

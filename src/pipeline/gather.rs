@@ -17,7 +17,7 @@
 
 use std::sync::Mutex;
 
-use rayon::prelude::*;
+use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
 
 use super::window::RowWindow;
 

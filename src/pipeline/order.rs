@@ -6,7 +6,7 @@
 //! Carried ids and masks (`nearest`) take the centre sample instead: a
 //! median of ids is an id only by luck.
 
-use rayon::prelude::*;
+use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
 
 use super::counts::MethodCounts;
 use super::stage::{Output, Stage, WindowUse};

@@ -2,7 +2,7 @@
 //! of every channel of every row, so tiles can be written in parallel, each
 //! pixel by one task, in an order that does not depend on the tile size.
 
-use rayon::prelude::*;
+use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
 
 use super::window::RowWindow;
 

@@ -16,7 +16,7 @@ use exr::meta::attribute::SampleType;
 use exr::meta::header::Header;
 use exr::meta::{magic_number, MetaData, Requirements};
 use exr::prelude::Compression;
-use rayon::prelude::*;
+use rayon::iter::{IntoParallelRefIterator, ParallelIterator};
 
 mod ahead;
 mod blocks;

@@ -25,7 +25,7 @@
 //! bit-identical across `--tile`, `--strip-rows` and `--threads`. A pixel
 //! neither spread nor reached keeps its input bits.
 
-use rayon::prelude::*;
+use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
 
 use super::counts::{MethodCounts, SpreadCounts};
 use super::gather::{Made, Placed, Sources};

@@ -4,7 +4,7 @@
 
 use std::collections::VecDeque;
 
-use rayon::prelude::*;
+use rayon::iter::{IntoParallelIterator, ParallelIterator};
 
 use super::RenderStats;
 use crate::filter::restore::{

@@ -17,7 +17,9 @@
 //! added row by row in order, never by how rows came: the output is the
 //! same for any strip height and thread count.
 
-use rayon::prelude::*;
+use rayon::iter::{
+    IndexedParallelIterator, IntoParallelIterator, IntoParallelRefMutIterator, ParallelIterator,
+};
 
 use super::kept::{Kept, KeptLayout};
 use crate::filter::restore::{shape, FieldRows, LOOKAHEAD};

@@ -6,7 +6,7 @@
 
 use std::time::Instant;
 
-use rayon::prelude::*;
+use rayon::iter::{IntoParallelIterator, ParallelIterator};
 
 use super::kept::{Kept, KeptLayout};
 use crate::error::{Error, Result, Side};

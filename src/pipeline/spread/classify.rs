@@ -2,7 +2,8 @@
 //! noise (the base test, the feature rules), set aside with their values,
 //! and the horizontal gather pass of the base kernel with them taken out.
 
-use rayon::prelude::*;
+use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
+use rayon::slice::{ParallelSlice, ParallelSliceMut};
 
 use super::{ChannelMode, EpGauss, LumRows, Noisy, RowWindow, Rules, Shape, YView};
 

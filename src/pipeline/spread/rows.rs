@@ -3,7 +3,9 @@
 //! horizontal pass), and the coarse grids' share of final rows. Each is a
 //! parallel loop, a task a row.
 
-use rayon::prelude::*;
+use rayon::iter::{
+    IndexedParallelIterator, IntoParallelIterator, IntoParallelRefMutIterator, ParallelIterator,
+};
 
 use super::coarse;
 use super::{

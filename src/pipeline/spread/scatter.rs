@@ -4,7 +4,8 @@
 //! at full resolution or on the 2x and 4x coarse grids.
 
 use crate::filter::ep_gauss::Choice;
-use rayon::prelude::*;
+use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
+use rayon::slice::ParallelSlice;
 
 use super::{
     Back, ChannelMode, CoarseGrid, EpGauss, Folded, Kernel1d, Noisy, RowWindow, Rules, Shape,
