@@ -365,7 +365,8 @@ mod tests {
                 }
             }
         }
-        assert!(out.report.energy_rel_error.iter().all(|e| e.abs() < 1e-12));
+        assert!((out.report.energy_rel_error.iter())
+            .all(|e| e.abs() < crate::pipeline::ledger::LEDGER_TOL));
     }
 
     #[test]

@@ -7,6 +7,13 @@
 
 use serde::Serialize;
 
+/// The unit tests' bound on a run's relative ledger error before rounding:
+/// each sample's weights sum to one within ~1e-16 and every sum is
+/// compensated, so 1e-12 leaves a wide margin and still catches one lost
+/// sample in 1e12 (the behaviour tests' `ENERGY_TOL`).
+#[cfg(test)]
+pub(crate) const LEDGER_TOL: f64 = 1e-12;
+
 /// A compensated (Neumaier) sum.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct CompensatedSum {

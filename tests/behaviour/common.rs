@@ -154,46 +154,86 @@ pub fn cfg(tile: usize, strip_rows: usize, threads: usize) -> PipelineConfig {
     }
 }
 
+/// One way of cutting the work, every dimension the invariance tests vary
+/// named: accumulator tile width, input rows a strip (0: automatic),
+/// worker threads, strips in flight, and `small_chunks`: each row's
+/// classification cut into column ranges of `3 tile + 1` samples and the
+/// spread into chunks of the memory of `tile + 1` samples at an edge
+/// (wide images get such cuts; small ones only when asked).
+#[derive(Clone, Copy, Debug)]
+pub struct Cut {
+    pub tile: usize,
+    pub strip_rows: usize,
+    pub threads: usize,
+    pub strips_in_flight: usize,
+    pub small_chunks: bool,
+}
+
+impl From<(usize, usize, usize)> for Cut {
+    /// A cut from (tile, strip rows, threads) as the property tests draw
+    /// them: one strip in flight or two by the strip height's parity (so
+    /// every list of cuts has both), small chunks under 32-column tiles.
+    fn from((tile, strip_rows, threads): (usize, usize, usize)) -> Self {
+        Cut {
+            tile,
+            strip_rows,
+            threads,
+            strips_in_flight: 1 + strip_rows % 2,
+            small_chunks: tile < 32,
+        }
+    }
+}
+
+const fn cut(
+    tile: usize,
+    strip_rows: usize,
+    threads: usize,
+    strips_in_flight: usize,
+    small_chunks: bool,
+) -> Cut {
+    Cut {
+        tile,
+        strip_rows,
+        threads,
+        strips_in_flight,
+        small_chunks,
+    }
+}
+
 /// The cuts of the work every method must give the same bits for: tiles
 /// that divide the width and that do not (1 and 7 columns, a whole row),
-/// strips of 1, 5 and 1000 rows and the automatic height, 1 to 4 threads.
-pub const CUTS: [(usize, usize, usize); 9] = [
-    (256, 0, 1),
-    (1, 1, 2),
-    (7, 5, 3),
-    (16, 13, 1),
-    (70, 96, 1),
-    (256, 1, 1),
-    (256, 1000, 1),
-    (16, 7, 2),
-    (64, 200, 4),
+/// strips of 1, 5 and 1000 rows and the automatic height, 1 to 4 threads,
+/// one strip in flight and two, whole and small chunks.
+pub const CUTS: [Cut; 9] = [
+    cut(256, 0, 1, 1, false),
+    cut(1, 1, 2, 2, true),
+    cut(7, 5, 3, 2, true),
+    cut(16, 13, 1, 2, true),
+    cut(70, 96, 1, 1, false),
+    cut(256, 1, 1, 2, false),
+    cut(256, 1000, 1, 1, false),
+    cut(16, 7, 2, 2, true),
+    cut(64, 200, 4, 1, false),
 ];
 
 /// The one invariance tester: runs `data` (planar, as `job` says) with
-/// `params` through every cut of `cuts` (tile, strip rows, threads) and
-/// demands one answer: the same output bits, the same digest of the
-/// unrounded output, the same ledger bits and the same counts (with one
-/// strip in flight or two, [`epfilt::pipeline::PipelineConfig::strips_in_flight`]). Returns the
-/// first run's output and statistics, or what differed where (a `Result`, so
-/// a property test can report it as its failure).
+/// `params` through every cut of `cuts` ([`Cut`]) and demands one answer:
+/// the same output bits, the same digest of the unrounded output, the same
+/// ledger bits and the same counts. Returns the first run's output and
+/// statistics, or what differed where (a `Result`, so a property test can
+/// report it as its failure).
 pub fn invariant(
     data: &[f32],
     job: &StripLayout,
     params: &FilterParams,
-    cuts: &[(usize, usize, usize)],
+    cuts: &[Cut],
 ) -> Result<(Vec<f32>, RunStats), String> {
     let mut first: Option<(Vec<f32>, RunStats)> = None;
-    for &(tile, strip, threads) in cuts {
-        // Narrow tiles also cut each row's classification into column
-        // ranges of 3 tile + 1 samples (4, 22, 49: ranges that divide no
-        // row evenly), which wide images get, and the spread into chunks
-        // of the memory of tile + 1 samples at an edge (small images have
-        // little interior: a few samples a chunk).
+    for c in cuts {
+        let (tile, strip, threads) = (c.tile, c.strip_rows, c.threads);
         let mut cut = cfg(tile, strip, threads);
-        // One strip in flight or two, on one thread or several: by the
-        // strip height's parity, so that every list of cuts has both.
-        cut.strips_in_flight = 1 + strip % 2;
-        if tile < 32 {
+        cut.strips_in_flight = c.strips_in_flight;
+        if c.small_chunks {
             cut.classify_samples = 3 * tile + 1;
             cut.spread_chunk = tile + 1;
         }

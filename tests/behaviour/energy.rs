@@ -265,7 +265,7 @@ fn wide_fireflies_on_the_coarse_grid_keep_energy_influence_and_bits() {
         }
         let p = params(Method::EpGauss, s);
         // The default cut first (tile 256, automatic strips, every thread).
-        let cuts = [(256, 0, 0), (1, 1, 1), (5, 7, 2), (13, 3, 3)];
+        let cuts = [(256, 0, 0), (1, 1, 1), (5, 7, 2), (13, 3, 3)].map(Cut::from);
         let (a, stats) = invariant(&img.data, &job_for(&img, s), &p, &cuts)
             .unwrap_or_else(|e| panic!("S={s}: {e}"));
         assert!(stats.eg().coarse >= 3, "S={s}: {:?}", stats.eg());

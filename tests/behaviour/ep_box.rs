@@ -596,8 +596,13 @@ fn energy_and_invariance(
     p: &FilterParams,
     cut: (usize, usize, usize),
 ) -> Result<(), TestCaseError> {
-    let (a, sa) = invariant(&img.data, &job(img.w, img.h, 16.0), p, &[(256, 0, 1), cut])
-        .map_err(TestCaseError::fail)?;
+    let (a, sa) = invariant(
+        &img.data,
+        &job(img.w, img.h, 16.0),
+        p,
+        &[Cut::from((256, 0, 1)), Cut::from(cut)],
+    )
+    .map_err(TestCaseError::fail)?;
     for l in &sa.ledger {
         prop_assert!(
             l.rel_error <= ENERGY_TOL,

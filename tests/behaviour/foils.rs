@@ -84,7 +84,7 @@ proptest! {
         let img = fireflies(w * s, h * s, 3, 0.05, seed);
         for m in [Method::Clamp, Method::Median, Method::AlphaTrim] {
             let p = params(m, s);
-            let cuts = [(256, 0, 1), (tile, strip, threads)];
+            let cuts = [(256, 0, 1), (tile, strip, threads)].map(Cut::from);
             let (a, _) = invariant(&img.data, &job_for(&img, s), &p, &cuts)
                 .map_err(TestCaseError::fail)?;
             prop_assert!(a.iter().all(|v| v.is_finite()));

@@ -88,7 +88,7 @@ proptest! {
         }
         for m in GAUSSIAN_FAMILY {
             let p = params(m, s);
-            let cuts = [(256, 96, 1), (tile, strip, threads)];
+            let cuts = [(256, 96, 1), (tile, strip, threads)].map(Cut::from);
             let (a, stats) = invariant(&img.data, &job_for(&img, s), &p, &cuts)
                 .map_err(TestCaseError::fail)?;
             for l in &stats.ledger {
@@ -117,7 +117,7 @@ proptest! {
         job.padded_from = Some((w, h));
         for m in GAUSSIAN_FAMILY {
             let p = params(m, s);
-            let cuts = [(256, 96, 1), (tile, strip, threads)];
+            let cuts = [(256, 96, 1), (tile, strip, threads)].map(Cut::from);
             let (a, stats) = invariant(&img.data, &job, &p, &cuts).map_err(TestCaseError::fail)?;
             prop_assert_eq!(a.len(), 3 * w.div_ceil(s) * h.div_ceil(s));
             for l in &stats.ledger {

@@ -5,12 +5,8 @@
 
 use exr::image::FlatSamples;
 
-use crate::common::{epfilt_ok, epfilt_run, read_json};
+use crate::common::{epfilt_ok, epfilt_run, read_json, ENERGY_TOL};
 use crate::exr_io::{read_channels, read_samples, tmpdir, write_flat};
-
-/// `restore`'s own bound on the ledger before rounding (the job refuses
-/// to write above it).
-const LEDGER_TOL: f64 = 1e-12;
 
 /// An R, G, B image `w x h` from `f(x, y, c)`.
 fn write(path: &std::path::Path, (w, h): (usize, usize), f: impl Fn(usize, usize, usize) -> f32) {
@@ -70,7 +66,7 @@ fn restore_report(
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let r = read_json(&rep);
     for l in r["ledger"].as_array().unwrap() {
-        assert!(l["rel_error"].as_f64().unwrap() <= LEDGER_TOL, "{l}");
+        assert!(l["rel_error"].as_f64().unwrap() <= ENERGY_TOL, "{l}");
     }
     r
 }
@@ -93,7 +89,7 @@ fn restore_keeps_the_energy_and_the_bytes_at_any_thread_count() {
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         let r = read_json(&rep);
         for l in r["ledger"].as_array().unwrap() {
-            assert!(l["rel_error"].as_f64().unwrap() <= LEDGER_TOL, "{l}");
+            assert!(l["rel_error"].as_f64().unwrap() <= ENERGY_TOL, "{l}");
         }
         digests.push(r["digest"].as_str().unwrap().to_string());
     }
@@ -201,7 +197,7 @@ fn restore_refuses_nan_energy_unless_told_and_keeps_what_the_denoiser_lacks() {
     assert_eq!(r["counts"]["denoised_nonfinite"], 3);
     assert!(r["counts"]["unshaped"].as_u64().unwrap() > 0, "{r}");
     for l in r["ledger"].as_array().unwrap() {
-        assert!(l["rel_error"].as_f64().unwrap() <= LEDGER_TOL, "{l}");
+        assert!(l["rel_error"].as_f64().unwrap() <= ENERGY_TOL, "{l}");
     }
     assert_eq!(std::fs::read(&e).unwrap(), before, "the input was touched");
 }
@@ -468,7 +464,7 @@ fn restore_matches_a_layered_render_to_a_plain_denoiser_output() {
         "{r}"
     );
     for l in r["ledger"].as_array().unwrap() {
-        assert!(l["rel_error"].as_f64().unwrap() <= LEDGER_TOL, "{l}");
+        assert!(l["rel_error"].as_f64().unwrap() <= ENERGY_TOL, "{l}");
     }
     let got = read_channels(&out);
     let names: Vec<&str> = got.iter().map(|(n, _)| n.as_str()).collect();
@@ -654,7 +650,7 @@ fn restore_takes_a_part_and_a_layer_of_the_energy_image() {
     let o = restore(&d, multi, &out, &["--part", "0", "--report", &s(&rep)]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     for l in read_json(&rep)["ledger"].as_array().unwrap() {
-        assert!(l["rel_error"].as_f64().unwrap() <= LEDGER_TOL, "{l}");
+        assert!(l["rel_error"].as_f64().unwrap() <= ENERGY_TOL, "{l}");
     }
     // A layer other than the beauty.
     let layered = std::path::Path::new("tests/data/exr/small/aovs_multilayer.exr");

@@ -550,6 +550,7 @@ mod tests {
     use crate::filter::guides::GuideLayout;
     use crate::filter::{FilterParams, Method};
     use crate::geometry::Grid;
+    use crate::pipeline::ledger::LEDGER_TOL;
     use crate::pipeline::{filter_in_memory, PipelineConfig, StripLayout};
 
     /// Rec. 709 luminance weights of R, G, B.
@@ -677,7 +678,7 @@ mod tests {
             }
         }
         for e in stats.ledger.iter().map(|l| l.rel_error) {
-            assert!(e.abs() < 1e-12, "{e}");
+            assert!(e.abs() < LEDGER_TOL, "{e}");
         }
     }
 
@@ -727,7 +728,7 @@ mod tests {
         assert!(at(24, 20) < 5.0, "{}", at(24, 20));
         assert_eq!(stats.ep_gauss().unwrap().spread, 1);
         for e in stats.ledger.iter().map(|l| l.rel_error) {
-            assert!(e.abs() < 1e-12, "{e}");
+            assert!(e.abs() < LEDGER_TOL, "{e}");
         }
     }
 
@@ -762,7 +763,7 @@ mod tests {
         // there).
         assert!(off > on, "on the sliver {on}, off it {off}");
         for e in stats.ledger.iter().map(|l| l.rel_error) {
-            assert!(e.abs() < 1e-12, "{e}");
+            assert!(e.abs() < LEDGER_TOL, "{e}");
         }
     }
 
@@ -792,7 +793,7 @@ mod tests {
             .sum();
         assert!(left.abs() < 1e-3, "{left}");
         for e in stats.ledger.iter().map(|l| l.rel_error) {
-            assert!(e.abs() < 1e-12, "{e}");
+            assert!(e.abs() < LEDGER_TOL, "{e}");
         }
     }
 }

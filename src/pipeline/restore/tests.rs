@@ -4,8 +4,7 @@ use crate::filter::ep_box::{Spp, StatsLayout, VarianceKind};
 use crate::filter::restore::{taps, KEEP_SIGMA, LOOKAHEAD};
 use crate::pipeline::counts::{MethodCounts, RestoreCounts};
 
-/// What a restore's ledger balances to (see the job's limit).
-const LEDGER_TOL: f64 = 1e-12;
+use crate::pipeline::ledger::LEDGER_TOL;
 /// A block's sum of f32 outputs against its f64 energy: a few f32
 /// roundings (2^-24 each) over up to a thousand values.
 const BLOCK_TOL: f64 = 1e-5;
