@@ -13,7 +13,11 @@
 //! * **`-`**: standard output. EXR writing needs a seekable file, so the
 //!   temporary file is made in the system's temporary folder and copied to
 //!   standard output once complete;
-//! * a **directory, character or block device, FIFO or socket**: refused
+//! * **`/dev/null`** (or a link to it): the run goes through the whole
+//!   pipeline into a temporary file in the system's temporary folder, which
+//!   is removed once complete: the run is measured, nothing is written (as
+//!   other tools take it);
+//! * a **directory, another character or block device, FIFO or socket**: refused
 //!   with one line, before anything is written (renaming over `/dev/stdout`
 //!   would replace the link with a regular file and write nothing to it).
 
@@ -39,6 +43,26 @@ pub enum Destination {
     },
     /// Standard output (`-`).
     Stdout,
+    /// `/dev/null`: written, then discarded.
+    Null,
+}
+
+/// Whether `path` is the null device (through any links).
+fn is_null_device(path: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::{FileTypeExt, MetadataExt};
+        let null = Path::new("/dev/null");
+        match (std::fs::metadata(path), std::fs::metadata(null)) {
+            (Ok(a), Ok(b)) => a.file_type().is_char_device() && a.rdev() == b.rdev(),
+            _ => false,
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = path;
+        false
+    }
 }
 
 fn refuse(path: &Path, reason: impl Into<String>) -> Error {
@@ -86,6 +110,7 @@ impl Destination {
                 let target = std::fs::canonicalize(path).map_err(|e| Error::io(path, e))?;
                 Ok(Destination::File { named, target })
             }
+            Ok(_) if is_null_device(path) => Ok(Destination::Null),
             Ok(m) => Err(refuse(
                 path,
                 format!(
@@ -113,6 +138,7 @@ impl Destination {
         match self {
             Destination::File { named, .. } => named,
             Destination::Stdout => Path::new("-"),
+            Destination::Null => Path::new("/dev/null"),
         }
     }
 
@@ -180,7 +206,7 @@ impl Staged {
     pub fn new(dest: &Path, suffix: &str) -> Result<Self> {
         let dest = Destination::resolve(dest)?;
         let dir = match &dest {
-            Destination::Stdout => std::env::temp_dir(),
+            Destination::Stdout | Destination::Null => std::env::temp_dir(),
             Destination::File { target, .. } => match target.parent() {
                 Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
                 _ => PathBuf::from("."),
@@ -239,6 +265,8 @@ impl Staged {
         // Registered until it is in place: a signal before then removes it.
         let path = temp.path().to_path_buf();
         let done = match &self.dest {
+            // Dropped: the temporary file goes with it.
+            Destination::Null => Ok(()),
             Destination::Stdout => {
                 let mut f = File::open(temp.path()).map_err(|e| Error::io(temp.path(), e))?;
                 let stdout = std::io::stdout();
@@ -296,12 +324,16 @@ mod tests {
         );
         let err = Destination::resolve(dir.path()).unwrap_err().to_string();
         assert!(err.contains("is a directory"), "{err}");
-        let err = Destination::resolve(Path::new("/dev/null"))
+        let err = Destination::resolve(Path::new("/dev/zero"))
             .unwrap_err()
             .to_string();
         assert!(
-            err.contains("character device") && err.contains("/dev/null"),
+            err.contains("character device") && err.contains("/dev/zero"),
             "{err}"
+        );
+        assert_eq!(
+            Destination::resolve(Path::new("/dev/null")).unwrap(),
+            Destination::Null
         );
         // A dangling link: its target is created, through a relative link.
         let link = dir.path().join("link.exr");

@@ -131,7 +131,7 @@ pub fn output_format(
     accepted: &[Format],
     command: &str,
 ) -> Result<Format> {
-    super::Destination::resolve(path)?;
+    let dest = super::Destination::resolve(path)?;
     let refuse = |why: String| Error::Output {
         path: path.into(),
         reason: why,
@@ -148,6 +148,12 @@ pub fn output_format(
             )))
         }
     };
+    // Nothing is written to /dev/null: any format the command writes.
+    if dest == super::Destination::Null {
+        if let Some(f) = explicit.or(follow).or(accepted.first().copied()) {
+            return check(f, "--format");
+        }
+    }
     if path.as_os_str() == "-" {
         return match explicit.or(follow) {
             Some(f) => check(

@@ -370,7 +370,7 @@ fn outputs_that_are_not_regular_files_are_refused_and_left_as_they_are() {
     let made = Command::new("mkfifo").arg(&fifo).status();
     let mut targets = vec![
         (dir.path().to_path_buf(), "is a directory"),
-        ("/dev/null".into(), "is a character device"),
+        ("/dev/zero".into(), "is a character device"),
     ];
     if made.is_ok_and(|s| s.success()) {
         targets.push((fifo.clone(), "is a FIFO"));
@@ -388,7 +388,7 @@ fn outputs_that_are_not_regular_files_are_refused_and_left_as_they_are() {
     if fifo.exists() {
         assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo());
     }
-    assert!(std::fs::metadata("/dev/null")
+    assert!(std::fs::metadata("/dev/zero")
         .unwrap()
         .file_type()
         .is_char_device());
@@ -1051,4 +1051,78 @@ fn info_lists_every_attribute_and_speaks_json() {
         json["parts"][0]["attributes"]["lineOrder"][1],
         "increasing y"
     );
+}
+
+/// `--json` puts the report on standard output for the commands that write
+/// one with `--report` (as `--report -`), and the two cannot both be given.
+#[test]
+fn json_puts_the_report_on_standard_output_for_filter_restore_and_merge() {
+    let dir = tmpdir();
+    let inp = input(dir.path());
+    let p = |name: &str| dir.path().join(name).to_string_lossy().into_owned();
+    let json = |args: &[&str]| -> serde_json::Value {
+        let text = epfilt_ok(args);
+        serde_json::from_str(&text).unwrap_or_else(|e| panic!("{args:?}: {e}: {text:.200}"))
+    };
+    let r = json(&["filter", &inp, &p("f.exr"), "-s", "3", "-q", "--json"]);
+    assert_eq!(r["method"], "ep-gauss");
+    let r = json(&[
+        "restore",
+        &p("f.exr"),
+        &p("f.exr"),
+        &p("r.exr"),
+        "-q",
+        "--json",
+    ]);
+    assert!(r["ledger"].is_array(), "{r}");
+    // Bands of one scan line each: the output's blocks are that high.
+    for k in ["1/2", "2/2"] {
+        let band = p(&format!("band{}.exr", &k[..1]));
+        let args = ["-s", "3", "-q", "--compression", "none", "--band", k];
+        epfilt_ok(&[&["filter", inp.as_str(), band.as_str()][..], &args].concat());
+    }
+    let r = json(&[
+        "merge",
+        &p("band1.exr"),
+        &p("band2.exr"),
+        &p("m.exr"),
+        "-q",
+        "--json",
+    ]);
+    assert_eq!(r["bands"], 2);
+    let o = epfilt(&[
+        "filter",
+        &inp,
+        &p("g.exr"),
+        "--json",
+        "--report",
+        &p("g.json"),
+    ]);
+    assert_eq!(o.status.code(), Some(USAGE));
+}
+
+/// `/dev/null` as an output runs the whole command and writes nothing (as
+/// other tools take it); another device is still refused.
+#[cfg(unix)]
+#[test]
+fn dev_null_runs_the_command_and_writes_nothing() {
+    let dir = tmpdir();
+    let inp = input(dir.path());
+    let temp_files = || {
+        std::fs::read_dir(std::env::temp_dir())
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .filter(|e| e.file_name().to_string_lossy().starts_with(".epfilt-"))
+            .count()
+    };
+    let before = temp_files();
+    let text = epfilt_ok(&["filter", &inp, "/dev/null", "-s", "3", "-q", "--json"]);
+    let r: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(r["output"], "/dev/null");
+    assert!(r["energy_rel_error"][0].as_f64().unwrap() < ENERGY_TOL);
+    epfilt_ok(&["preview", &inp, "/dev/null"]);
+    epfilt_ok(&["restore", &inp, &inp, "/dev/null", "-q"]);
+    assert!(temp_files() <= before, "a temporary file was left behind");
+    let o = epfilt(&["filter", &inp, "/dev/zero", "-s", "3"]);
+    one_line_error(&o, 2, "character device");
 }

@@ -81,9 +81,12 @@ pub enum Command {
         /// The output's format where its name does not end in .exr: exr.
         #[arg(long)]
         format: Option<String>,
-        /// Write the summary as JSON to this file.
+        /// Write the summary as JSON to this file (- for standard output).
         #[arg(long)]
         report: Option<PathBuf>,
+        /// The summary as JSON on standard output (as --report -).
+        #[arg(long, conflicts_with = "report")]
+        json: bool,
         /// No summary.
         #[arg(long, short = 'q')]
         quiet: bool,
@@ -253,6 +256,9 @@ pub struct RestoreArgs {
     /// Write the summary as JSON to this file (- for standard output).
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// The summary as JSON on standard output (as --report -).
+    #[arg(long, conflicts_with = "report")]
+    pub json: bool,
     /// No progress bar and no summary.
     #[arg(long, short = 'q')]
     pub quiet: bool,
@@ -355,6 +361,9 @@ pub struct FilterArgs {
     /// Write the summary as JSON to this file (- for standard output).
     #[arg(long, help_heading = "Output")]
     pub report: Option<PathBuf>,
+    /// The summary as JSON on standard output (as --report -).
+    #[arg(long, help_heading = "Output", conflicts_with = "report")]
+    pub json: bool,
     /// Record every unit of work of the run (reads, filter tasks, writes)
     /// as Chrome trace-event JSON in this file (Perfetto, chrome://tracing);
     /// the lab's `scripts/scaling-model FILE` predicts the run on more cores.

@@ -13,7 +13,10 @@ use crate::args::FilterArgs;
 use crate::{check_binary_stdout, fail, progress_bar, usage, warn, write_report, Exit};
 
 /// Run `filter`: one file, or a frame sequence.
-pub fn run(a: FilterArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
+pub fn run(mut a: FilterArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
+    if a.json {
+        a.report = Some("-".into());
+    }
     let (opts, given) = FilterOptions::from_settings(a.opts.settings.clone()).map_err(usage)?;
     let env = |k: &str| std::env::var(k).ok();
     if a.trace.is_some() && FramePattern::parse(&a.input).map_err(usage)?.is_some() {

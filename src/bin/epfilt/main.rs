@@ -102,8 +102,10 @@ fn dispatch(cli: Cli, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
             mut paths,
             format,
             report,
+            json,
             quiet,
         } => {
+            let report = report.or(json.then(|| "-".into()));
             let out = paths
                 .pop()
                 .context("merge needs an output")
@@ -210,7 +212,10 @@ fn compare(a: CompareArgs) -> Result<(), Exit> {
     Ok(())
 }
 
-fn restore(a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
+fn restore(mut a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
+    if a.json {
+        a.report = Some("-".into());
+    }
     let nonfinite = epfilt::pipeline::NonFinite::parse(&a.nonfinite).map_err(usage)?;
     let mut job = epfilt::RestoreJob::new(&a.denoised, &a.energy, &a.output);
     job.scale = a.scale;
