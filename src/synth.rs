@@ -527,7 +527,7 @@ fn write_streamed(
             spec.w,
             spec.h,
             false,
-            &[],
+            (&[], &software),
             &[],
             &software,
         )?))

@@ -166,13 +166,14 @@ impl Output {
             ));
         }
         let software = settings.software();
+        let history = settings.history_line();
         let (w, h) = (input_header.layer_size.0 / s, input_header.layer_size.1 / s);
         Ok(Output::Rgbe(Box::new(RgbeOutput::create(
             dest,
             w,
             h,
             xyze,
-            rgbe_lines,
+            (rgbe_lines, &history),
             &settings.extra,
             &software,
         )?)))

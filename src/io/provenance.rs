@@ -173,11 +173,22 @@ fn one_line(e: &Error) -> String {
 }
 
 /// The method of epfilt's `filter` that made `input`, read from the
-/// software attribute it writes: `None` for any other file, and for a
-/// Radiance picture (whose `SOFTWARE=` line is not read).
+/// settings attribute it writes (the `software` attribute of files
+/// written before it had one): `None` for any other file, and for a
+/// Radiance picture (whose header lines are not read).
 pub fn filtered_by(input: &super::ExrInput) -> Option<String> {
-    let software = input.header().own_attributes.software_name.as_ref()?;
-    method_of(&software.to_string())
+    method_of(&settings_text(input.header())?)
+}
+
+/// epfilt's settings text in `header` (`epfilt VERSION (settings)`), where
+/// it wrote one.
+pub fn settings_text(header: &exr::meta::header::Header) -> Option<String> {
+    let own = &header.own_attributes;
+    let key = exr::meta::attribute::Text::from(super::writer::SETTINGS_ATTRIBUTE);
+    match own.other.get(&key) {
+        Some(exr::meta::attribute::AttributeValue::Text(t)) => Some(t.to_string()),
+        _ => own.software_name.as_ref().map(|s| s.to_string()),
+    }
 }
 
 /// The `method=` of epfilt's software text, `epfilt VERSION (settings)`.

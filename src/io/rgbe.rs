@@ -174,11 +174,9 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<RgbeHeader> {
             for k in 0..3 {
                 scale[k] *= v[k];
             }
-        } else if line.starts_with("SOFTWARE=") {
-            // Replaced by ours on output.
         } else if let Some((name, value)) = line
             .split_once('=')
-            .filter(|(n, _)| n.starts_with("epfilt"))
+            .filter(|(n, _)| n.starts_with("epfilt") && !n.contains(' '))
         {
             epfilt.push((name.to_string(), value.to_string()));
         } else {
@@ -482,13 +480,15 @@ pub fn write_scanline(pixels: &[[u8; 4]], out: &mut Vec<u8>, comp: &mut Vec<u8>)
     }
 }
 
-/// The header text of a written picture: the kept `lines`, epfilt's own
-/// variables `extra` (`name=value`), then `SOFTWARE=` and `FORMAT=`.
+/// The header text of a written picture: the kept `lines` (the input's
+/// `SOFTWARE=` among them), this run's `history` line (as every Radiance
+/// program appends its command), epfilt's own variables `extra`
+/// (`name=value`), `SOFTWARE=` where the input had none, then `FORMAT=`.
 pub fn header_text(
     w: usize,
     h: usize,
     xyze: bool,
-    lines: &[String],
+    (lines, history): (&[String], &str),
     extra: &[(String, String)],
     software: &str,
 ) -> String {
@@ -497,10 +497,14 @@ pub fn header_text(
         s.push_str(l);
         s.push('\n');
     }
+    s.push_str(history);
+    s.push('\n');
     for (name, value) in extra {
         s.push_str(&format!("{name}={value}\n"));
     }
-    s.push_str(&format!("SOFTWARE={software}\n"));
+    if !lines.iter().any(|l| l.starts_with("SOFTWARE=")) {
+        s.push_str(&format!("SOFTWARE={software}\n"));
+    }
     s.push_str(if xyze {
         "FORMAT=32-bit_rle_xyze\n"
     } else {
@@ -530,13 +534,14 @@ pub struct RgbeOutput {
 
 impl RgbeOutput {
     /// Start a `w` x `h` picture at `dest` (checked as every output is) with
-    /// these header lines and epfilt's own variables.
+    /// these header lines, this run's history line and epfilt's own
+    /// variables ([`header_text`]).
     pub fn create(
         dest: &Path,
         w: usize,
         h: usize,
         xyze: bool,
-        lines: &[String],
+        lines: (&[String], &str),
         extra: &[(String, String)],
         software: &str,
     ) -> Result<Self> {
@@ -664,8 +669,15 @@ mod tests {
         h: usize,
         px: impl Fn(usize, usize) -> [f32; 3],
     ) -> (Vec<u8>, Vec<[u8; 4]>) {
-        let mut bytes =
-            header_text(w, h, false, &["VIEW= -vtv -vh 45".into()], &[], "test").into_bytes();
+        let mut bytes = header_text(
+            w,
+            h,
+            false,
+            (&["VIEW= -vtv -vh 45".into()], "test"),
+            &[],
+            "test",
+        )
+        .into_bytes();
         let mut all = Vec::new();
         let (mut line, mut comp) = (Vec::new(), Vec::new());
         for y in 0..h {
@@ -709,7 +721,9 @@ mod tests {
             });
             let (hd, data) = decode_all(&bytes);
             assert_eq!((hd.w, hd.h), (w, h));
-            assert_eq!(hd.lines, vec!["VIEW= -vtv -vh 45".to_string()]);
+            // Every line is kept: the history's and SOFTWARE= too.
+            let kept = ["VIEW= -vtv -vh 45", "test", "SOFTWARE=test"].map(String::from);
+            assert_eq!(hd.lines, kept);
             for y in 0..h {
                 for c in 0..3 {
                     for x in 0..w {

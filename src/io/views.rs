@@ -72,12 +72,9 @@ pub fn assemble(
     header.own_attributes.multi_view_names =
         Some(views.iter().map(|v| Text::from(v.as_str())).collect());
     // The settings the first view's run recorded, and that it was every view.
-    let software = header
-        .own_attributes
-        .software_name
-        .as_ref()
-        .map(|s| s.to_string())
-        .unwrap_or_default();
+    let software = super::provenance::settings_text(&header).unwrap_or_default();
+    // The views' runs were one run: its line of the history once.
+    drop_last_run(&mut header);
     let prefix = format!("epfilt {} (", env!("CARGO_PKG_VERSION"));
     let provenance = software
         .strip_prefix(&prefix)
@@ -124,4 +121,18 @@ pub fn assemble(
     }
     out.finish()?;
     out.commit()
+}
+
+/// Take the last line off `header`'s history: the view's run, which the
+/// writer records again as the whole file's.
+fn drop_last_run(header: &mut exr::meta::header::Header) {
+    use exr::meta::attribute::AttributeValue;
+    let key = Text::from(super::writer::HISTORY_ATTRIBUTE);
+    let Some(AttributeValue::Text(t)) = header.own_attributes.other.remove(&key) else {
+        return;
+    };
+    if let Some((before, _)) = t.to_string().rsplit_once('\n') {
+        let value = AttributeValue::Text(Text::from(before));
+        header.own_attributes.other.insert(key, value);
+    }
 }

@@ -34,7 +34,7 @@ pub struct OutputSettings {
     /// ([`ExrOutput::decoded_sums`]). Without it a lossy `compression` is
     /// refused.
     pub allow_lossy: bool,
-    /// How the file was made: its `software` attribute reads
+    /// How the file was made: its `epfiltSettings` attribute reads
     /// `epfilt VERSION (key=value ...)`.
     pub provenance: Option<String>,
     /// More text attributes (name, value) for the header.
@@ -70,6 +70,16 @@ pub struct ExrOutput {
     thread: Option<JoinHandle<Result<()>>>,
 }
 
+/// The attribute that records epfilt's settings of the run that made a file.
+pub const SETTINGS_ATTRIBUTE: &str = "epfiltSettings";
+
+/// The attribute that holds the runs that made a file, one a line, oldest
+/// first (as Radiance programs append theirs to a picture's header). A line
+/// is the run's version and settings, not its literal command line: paths,
+/// threads, tiles, strips and bands would make the bytes of one result
+/// differ from cut to cut, band to band and rerun to rerun.
+pub const HISTORY_ATTRIBUTE: &str = "epfiltHistory";
+
 impl OutputSettings {
     /// What the file says made it: `epfilt VERSION (settings)`.
     pub fn software(&self) -> String {
@@ -77,6 +87,11 @@ impl OutputSettings {
             Some(p) => format!("epfilt {} ({p})", env!("CARGO_PKG_VERSION")),
             None => format!("epfilt {}", env!("CARGO_PKG_VERSION")),
         }
+    }
+
+    /// This run's line of the history ([`HISTORY_ATTRIBUTE`]).
+    pub fn history_line(&self) -> String {
+        self.software()
     }
 }
 
@@ -230,15 +245,31 @@ impl ExrOutput {
             let kept = views_with_channels(&names, channels);
             (!kept.is_empty()).then(|| kept.iter().map(|v| Text::from(v.as_str())).collect())
         });
-        // The settings go into the standard `software` attribute: the
-        // input's comments stay the user's, and exr writes custom attributes
-        // in hash-map order, so one more of them would make the file's bytes
-        // differ from run to run.
-        own.software_name = Some(Text::from(settings.software().as_str()));
+        // The input's `software` stays the renderer's; epfilt's settings
+        // and the command go into attributes of their own (sorted with the
+        // rest once written: the bytes do not change from run to run).
+        if own.software_name.is_none() {
+            own.software_name = Some(Text::from(settings.software().as_str()));
+        }
+        let history = match own.other.get(&Text::from(HISTORY_ATTRIBUTE)) {
+            Some(exr::meta::attribute::AttributeValue::Text(t)) => {
+                format!("{t}\n{}", settings.history_line())
+            }
+            _ => settings.history_line(),
+        };
         // What an input that epfilt wrote records of its own making is not
-        // this output's ([`super::provenance`]).
+        // this output's ([`super::provenance`]); its history is kept above.
         own.other
             .retain(|k, _| !k.to_string().starts_with("epfilt"));
+        for (k, v) in [
+            (SETTINGS_ATTRIBUTE, settings.software()),
+            (HISTORY_ATTRIBUTE, history),
+        ] {
+            own.other.insert(
+                Text::from(k),
+                exr::meta::attribute::AttributeValue::Text(Text::from(v.as_str())),
+            );
+        }
         for (k, v) in &settings.extra {
             own.other.insert(
                 Text::from(k.as_str()),
@@ -397,6 +428,8 @@ impl ExrOutput {
     ) -> Result<Self> {
         let types = vec![precision; channels.len()];
         let mut header = Self::fresh_header(w, h, channels, compression, &types);
+        let software = format!("epfilt {}", env!("CARGO_PKG_VERSION"));
+        header.own_attributes.software_name = Some(Text::from(software.as_str()));
         for (name, v) in ints {
             header.own_attributes.other.insert(
                 Text::from(*name),

@@ -648,11 +648,11 @@ fn the_output_and_the_report_say_how_they_were_made() {
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         let meta = exr::meta::MetaData::read_from_file(&out, false).expect("header");
         let own = &meta.headers[0].own_attributes;
-        let software = own.software_name.as_ref().expect("software").to_string();
+        let software = text_attribute(own, "epfiltSettings").expect("epfiltSettings");
         let text = software
             .strip_prefix(&format!("epfilt {} (", env!("CARGO_PKG_VERSION")))
             .and_then(|t| t.strip_suffix(')'))
-            .unwrap_or_else(|| panic!("software: {software}"));
+            .unwrap_or_else(|| panic!("settings: {software}"));
         assert!(
             text.starts_with(&format!("method={method} supersample=3 ")),
             "{text}"
@@ -1125,4 +1125,73 @@ fn dev_null_runs_the_command_and_writes_nothing() {
     assert!(temp_files() <= before, "a temporary file was left behind");
     let o = epfilt(&["filter", &inp, "/dev/zero", "-s", "3"]);
     one_line_error(&o, 2, "character device");
+}
+
+/// A text attribute of a header, by name.
+fn text_attribute(own: &exr::meta::header::LayerAttributes, name: &str) -> Option<String> {
+    match own.other.get(&Text::from(name)) {
+        Some(AttributeValue::Text(t)) => Some(t.to_string()),
+        _ => None,
+    }
+}
+
+/// The input's `software` stays the renderer's; each run appends its
+/// version and settings to the history (an EXR attribute; a Radiance header
+/// line, as Radiance's own programs do), and the bytes stay those of any
+/// cut of the same run.
+#[test]
+fn software_is_kept_and_each_run_appends_itself_to_the_history() {
+    let dir = tmpdir();
+    let p = |name: &str| dir.path().join(name).to_string_lossy().into_owned();
+    let version = env!("CARGO_PKG_VERSION");
+    epfilt_ok(&["synth", "-q", "--size", "24x16", "-o", &p("in.exr")]);
+    epfilt_ok(&["filter", &p("in.exr"), &p("a.exr"), "-q"]);
+    epfilt_ok(&[
+        "filter",
+        &p("a.exr"),
+        &p("b.exr"),
+        "-q",
+        "--method",
+        "gauss",
+    ]);
+    let meta = exr::meta::MetaData::read_from_file(p("b.exr"), false).expect("header");
+    let own = &meta.headers[0].own_attributes;
+    let software = own.software_name.as_ref().map(|s| s.to_string());
+    assert_eq!(
+        software.as_deref(),
+        Some(format!("epfilt {version}").as_str())
+    );
+    let history = text_attribute(own, "epfiltHistory").expect("history");
+    let lines: Vec<&str> = history.lines().collect();
+    assert_eq!(lines.len(), 2, "{history}");
+    assert!(
+        lines[0].starts_with(&format!("epfilt {version} (method=ep-gauss ")),
+        "{history}"
+    );
+    assert!(
+        lines[1].starts_with(&format!("epfilt {version} (method=gauss ")),
+        "{history}"
+    );
+    let settings = text_attribute(own, "epfiltSettings").expect("settings");
+    assert_eq!(settings, lines[1]);
+    // A Radiance picture: its SOFTWARE= stays, the run is a line of its own.
+    epfilt_ok(&["synth", "-q", "--size", "24x16", "-o", &p("in.hdr")]);
+    epfilt_ok(&["filter", &p("in.hdr"), &p("out.hdr"), "-q"]);
+    let bytes = std::fs::read(p("out.hdr")).unwrap();
+    let end = bytes.windows(2).position(|w| w == b"\n\n").unwrap();
+    let head = String::from_utf8_lossy(&bytes[..end]);
+    let software: Vec<&str> = head
+        .lines()
+        .filter(|l| l.starts_with("SOFTWARE="))
+        .collect();
+    assert_eq!(
+        software,
+        [format!("SOFTWARE=epfilt {version} synth").as_str()],
+        "{head}"
+    );
+    let ran = head
+        .lines()
+        .filter(|l| l.starts_with(&format!("epfilt {version} (method=ep-gauss ")))
+        .count();
+    assert_eq!(ran, 1, "{head}");
 }
