@@ -84,6 +84,17 @@ impl Method {
         Method::AlphaTrim,
     ];
 
+    /// The command line's names, in [`Method::ALL`]'s order.
+    pub const NAMES: [&'static str; 7] = [
+        "ep-gauss",
+        "ep-box",
+        "gauss",
+        "box",
+        "clamp",
+        "median",
+        "alpha-trim",
+    ];
+
     /// Parse a command-line name.
     pub fn parse(s: &str) -> Result<Self> {
         match s {
@@ -141,6 +152,9 @@ pub enum Quality {
 impl Quality {
     /// Every preset, fastest first.
     pub const ALL: [Quality; 3] = [Quality::Fast, Quality::Default, Quality::Best];
+
+    /// The names `--quality` takes, in [`Quality::ALL`]'s order.
+    pub const NAMES: [&'static str; 3] = ["fast", "default", "best"];
 
     /// The name `--quality` takes.
     pub fn name(self) -> &'static str {

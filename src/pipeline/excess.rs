@@ -12,7 +12,7 @@
 //!    above), the pixel keeps the rest, and it is listed as a source;
 //! 3. **output** of row `y` once every row within the spread radius `R` has
 //!    been treated: the input row, the kept values of its sources, plus the
-//!    shares of every source whose ring reaches it ([`super::gather`]).
+//!    shares of every source whose ring reaches it (`pipeline/gather.rs`).
 //!
 //! The treatment of a pixel reads only the input within `passes` of it, and
 //! each output pixel adds its shares in row-major source order, so the

@@ -881,6 +881,16 @@ fn completions_and_a_man_page_come_from_the_command_line_definition() {
             text.len()
         );
     }
+    // Options with a fixed set of values complete to them, not to files.
+    let bash = epfilt_ok(&["completions", "bash"]);
+    for values in [
+        "ep-gauss ep-box gauss box",
+        "fast default best",
+        "crop pad",
+        "error zero",
+    ] {
+        assert!(bash.contains(values), "bash completions lack {values:?}");
+    }
     let man = epfilt_ok(&["man"]);
     assert!(man.starts_with(".ie") || man.contains(".TH"), "{man:.200}");
     assert!(

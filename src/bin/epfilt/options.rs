@@ -6,7 +6,9 @@
 
 use clap::parser::ValueSource;
 use clap::{Arg, ArgAction, ArgMatches, Args, Command, FromArgMatches};
+use epfilt::filter::ep_box::Guard;
 use epfilt::filter::settings::{self, KNOBS};
+use epfilt::filter::Quality;
 use epfilt::job::options::{quality_help, Kind, OPTIONS};
 use epfilt::job::Setting;
 
@@ -21,6 +23,35 @@ struct Spec {
     kind: Kind,
     default: Option<String>,
     env: Option<&'static str>,
+    /// The fixed set of values it takes, for completions (else empty).
+    values: &'static [&'static str],
+}
+
+/// A value parser that takes any text (the library parses and checks it,
+/// with its own messages) but names the values it knows, so that the shell
+/// completions offer them.
+#[derive(Clone)]
+struct Suggest(&'static [&'static str]);
+
+impl clap::builder::TypedValueParser for Suggest {
+    type Value = String;
+
+    fn parse_ref(
+        &self,
+        cmd: &Command,
+        arg: Option<&Arg>,
+        value: &std::ffi::OsStr,
+    ) -> Result<String, clap::Error> {
+        clap::builder::StringValueParser::new().parse_ref(cmd, arg, value)
+    }
+
+    fn possible_values(
+        &self,
+    ) -> Option<Box<dyn Iterator<Item = clap::builder::PossibleValue> + '_>> {
+        Some(Box::new(
+            self.0.iter().map(|v| clap::builder::PossibleValue::new(*v)),
+        ))
+    }
 }
 
 impl Spec {
@@ -61,6 +92,11 @@ impl Spec {
         if let Some(e) = self.env {
             a = a.env(e);
         }
+        if !self.values.is_empty() {
+            a = a
+                .value_parser(Suggest(self.values))
+                .hide_possible_values(true);
+        }
         a.allow_hyphen_values(self.kind != Kind::Flag)
     }
 
@@ -94,6 +130,7 @@ fn specs() -> Vec<Spec> {
         kind: d.kind,
         default: d.default.map(str::to_string),
         env: d.env,
+        values: d.values,
     };
     let knob = |k: &'static settings::Knob| Spec {
         name: k.name,
@@ -105,6 +142,11 @@ fn specs() -> Vec<Spec> {
         kind: Kind::Value,
         default: k.fixed_default(),
         env: None,
+        values: match k.name {
+            "quality" => &Quality::NAMES,
+            "guard" => &Guard::NAMES,
+            _ => &[],
+        },
     };
     let first = |h: &str| h == "Input" || h == settings::METHOD;
     let mut v: Vec<Spec> = (OPTIONS.iter().filter(|d| first(d.heading)))

@@ -64,6 +64,9 @@ pub enum Guard {
 }
 
 impl Guard {
+    /// Every name `--guard` takes.
+    pub const NAMES: [&'static str; 6] = ["none", "range", "stderr", "both", "carriers", "all"];
+
     /// Name as on the command line.
     pub fn name(self) -> &'static str {
         match self {

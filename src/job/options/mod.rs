@@ -71,6 +71,9 @@ pub struct OptionDef {
     pub files_only: bool,
     /// Read only by ep-box (warned about when given to another method).
     pub ep_box_only: bool,
+    /// The values it takes where they are a fixed set (for completions;
+    /// each parses, `every_listed_value_parses`), else empty.
+    pub values: &'static [&'static str],
 }
 
 impl OptionDef {
@@ -181,6 +184,7 @@ macro_rules! options {
             $(, value_name: $value_name:literal)?
             $(, files_only: $files_only:literal)?
             $(, ep_box_only: $ep_box_only:literal)?
+            $(, values: $values:expr)?
         }
     )*) => {
         /// Every setting of `epfilt filter` but its files and what it prints
@@ -212,6 +216,7 @@ macro_rules! options {
                 env: options!(@opt $($env)?),
                 files_only: options!(@or false $(, $files_only)?),
                 ep_box_only: options!(@or false $(, $ep_box_only)?),
+                values: options!(@or &[] $(, $values)?),
             },
         )*];
 
@@ -278,17 +283,21 @@ options! {
     /// A size that is not a multiple of S: crop drops the last partial output
     /// column and row; pad keeps them as pixels of fewer samples, each kernel
     /// normalised over what exists, energy exact [default: refuse, naming the options].
-    edge: Option<Edge> { Value, INPUT, parse: |_, s| Edge::parse(s), files_only: true }
+    edge: Option<Edge> {
+        Value, INPUT, parse: |_, s| Edge::parse(s), files_only: true, values: &["crop", "pad"]
+    }
     /// NaN and infinite input samples: error (refuse, naming the first) or zero (count them).
     nonfinite: NonFinite {
         Value, INPUT, parse: |_, s| NonFinite::parse(s),
-        default: "error"
+        default: "error", values: &["error", "zero"]
     }
     /// ep-gauss (§5.2), ep-box (§5.1, pixels with variance), gauss (linear
     /// foil), box (S x S average), or the energy-losing foils clamp, median
     /// and alpha-trim [default: from the file: ep-box where it holds
     /// per-pixel variance at S = 1, else ep-gauss; `epfilt info` says which].
-    method: Option<Method> { Value, settings::METHOD, parse: |_, s| Method::parse(s) }
+    method: Option<Method> {
+        Value, settings::METHOD, parse: |_, s| Method::parse(s), values: &Method::NAMES
+    }
     /// ep-box: the variance channel (luminance) or layer with .R/.G/.B
     /// [default: found by name].
     variance_channel: Option<String> {
@@ -297,7 +306,8 @@ options! {
     /// ep-box: what the variance holds: sample (of single samples), mean (of
     /// the pixel mean) or moment (E[Y^2]) [default: guessed from the name].
     variance_kind: Option<VarianceKind> {
-        Value, settings::EP_BOX, parse: |_, s| VarianceKind::parse(s), ep_box_only: true
+        Value, settings::EP_BOX, parse: |_, s| VarianceKind::parse(s), ep_box_only: true,
+        values: &["sample", "mean", "moment"]
     }
     /// ep-box: samples per pixel [default: the header's spp/samples attribute].
     spp: Option<u32> { Value, settings::EP_BOX, parse: number, ep_box_only: true }
@@ -311,7 +321,10 @@ options! {
     /// visible light) is set aside before any test and added back after, so
     /// a lamp is never spread; albedo, normal and depth keep a spread on its
     /// source's surface (see --guide-normal).
-    guides: String { Value, GUIDES, parse: text, default: "auto" }
+    guides: String {
+        Value, GUIDES, parse: text, default: "auto",
+        values: &["auto", "none", "emission", "albedo", "normal", "depth"]
+    }
     /// KIND=NAME: the layer (depth: the channel) of a guide, e.g.
     /// emission=ViewLayer.Emit, normal=N, depth=Z (repeatable).
     guide: Vec<String> { List, GUIDES, parse: text, value_name: "KIND=NAME" }
@@ -347,13 +360,16 @@ options! {
     }
     /// The output's format where its name does not say (- or a name without
     /// an image extension): exr or hdr [default for -: the input's].
-    format: Option<Format> { Value, OUTPUT, parse: |_, s| Format::parse(s), files_only: true }
+    format: Option<Format> {
+        Value, OUTPUT, parse: |_, s| Format::parse(s), files_only: true, values: &["exr", "hdr"]
+    }
     /// Output compression (none rle zips zip piz pxr24 b44 b44a dwaa dwab)
     /// [default: as input, but zip where the input's is lossy].
     compression: Option<Compression> {
         Value, OUTPUT, parse: |_, c| parse_compression(c)
             .ok_or_else(|| Error::Config(format!("unknown --compression {c:?}"))),
-        files_only: true
+        files_only: true,
+        values: &["none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a", "dwaa", "dwab"]
     }
     /// Accept a lossy output compression (dwaa, dwab; b44, b44a for f16;
     /// pxr24 for f32): the energy on disk is then measured by decoding the
@@ -361,7 +377,10 @@ options! {
     allow_lossy: bool { Flag, OUTPUT, files_only: true }
     /// Output sample type: same (each channel its input type: f16 stays f16,
     /// the others f32), f32 or f16 for all (f16 refuses values it cannot hold).
-    pixel_type: PixelType { Value, OUTPUT, parse: |_, s| PixelType::parse(s), default: "same" }
+    pixel_type: PixelType {
+        Value, OUTPUT, parse: |_, s| PixelType::parse(s), default: "same",
+        values: &["same", "f32", "f16"]
+    }
     /// Sequence: the frames to filter, e.g. 1-240, 1-100x2, 3,4,10-20x5
     /// [default: the input frames on disk].
     frames: Option<Vec<i64>> { Value, FARM, parse: |_, s| parse_frames(s), files_only: true }

@@ -69,3 +69,26 @@ fn options_the_method_ignores_are_warned_about() {
     let (_, warnings) = o.params(&given).unwrap();
     assert_eq!(warnings, ["--tolerance has no effect with --method gauss"]);
 }
+
+/// The values an option lists for completions are values it takes, and
+/// the knobs' lists (the binary's) are their parsers' names.
+#[test]
+fn every_listed_value_parses() {
+    let listed: Vec<_> = OPTIONS.iter().filter(|d| !d.values.is_empty()).collect();
+    assert!(listed.len() >= 7, "{}", listed.len());
+    for d in listed {
+        for v in d.values {
+            settings(&[(d.name, Setting::Value(v.to_string()))])
+                .unwrap_or_else(|e| panic!("--{} {v}: {e}", d.option()));
+        }
+    }
+    for q in crate::filter::Quality::NAMES {
+        assert!(crate::filter::Quality::parse(q).is_ok(), "{q}");
+    }
+    for g in crate::filter::ep_box::Guard::NAMES {
+        assert!(crate::filter::ep_box::Guard::parse(g).is_ok(), "{g}");
+    }
+    for (m, name) in Method::ALL.iter().zip(Method::NAMES) {
+        assert_eq!(m.name(), name);
+    }
+}

@@ -17,7 +17,7 @@
 //!
 //! and the **output** of row `y` once every row within the widest reach `R`
 //! has been treated: the input row, the kept values of its sources, plus
-//! every source's shares that reach it ([`super::gather`]).
+//! every source's shares that reach it (`pipeline/gather.rs`).
 //!
 //! Each pixel's decision reads only the input within 4 rows and columns of
 //! it (with surface guides, its receivers' guides within `R`), and each
