@@ -462,6 +462,8 @@ fn progress_bar(quiet: bool) -> Option<ProgressBar> {
         )
         .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
+    // It moves between strips too: a wide strip takes seconds.
+    b.enable_steady_tick(std::time::Duration::from_millis(250));
     Some(b)
 }
 
