@@ -474,6 +474,7 @@ impl ExcessStage {
                     return;
                 }
                 let from = s.on_surface.then_some((&s.surface, sx, sy));
+                let row = input.get(ty);
                 for &(i, dx) in &by_row[ty + reach - sy] {
                     if i >= m {
                         break;
@@ -483,7 +484,7 @@ impl ExcessStage {
                         continue;
                     }
                     let tx = tx as usize;
-                    if g.is_some_and(|g| !g.accepts_in(input.get(ty), (tx, ty), from)) {
+                    if g.is_some_and(|g| !g.accepts_in(row, (tx, ty), from)) {
                         continue;
                     }
                     // Channels that are not spread keep their bits.

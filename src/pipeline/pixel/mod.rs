@@ -497,10 +497,11 @@ impl PixelStage {
                     // The receivers the guides allowed when the width was
                     // chosen ([`Treat::norm`]).
                     let lights = light.get(ty);
+                    let on = s.on_surface.as_ref().map(|from| (from, surf.get(ty)));
                     for (tx, &wx) in (xa..xb).zip(gx) {
-                        let ok = match &s.on_surface {
-                            Some(from) => {
-                                let q = (lights[tx] != 0, &surf.get(ty)[tx]);
+                        let ok = match on {
+                            Some((from, surfs)) => {
+                                let q = (lights[tx] != 0, &surfs[tx]);
                                 guides.accepts(q, (tx, ty), Some((from, sx, sy)))
                             }
                             None => lights[tx] == 0,
