@@ -1,5 +1,6 @@
-//! Headers rewritten in place once a file is written: attributes in a
-//! stable order (for the writer, `merge` and `--part`).
+//! What a written header says beyond the pixels: the views it may list,
+//! and its attributes in a stable order, rewritten in place once the file
+//! is written (for the writer, `merge` and `--part`).
 
 /// Rewrite a finished file's headers (every part's) with their attributes
 /// sorted by name. exr writes custom attributes in hash-map order, which
@@ -92,4 +93,66 @@ pub(crate) fn sort_header_attributes(
         f.write_all(&bytes)?;
     }
     f.flush()
+}
+
+/// The views of a `multiView` list that still have channels among `channels`
+/// (OpenEXR's convention: a channel's view is its name's second-to-last
+/// component when that is a listed view, else the first, default view).
+/// The file must not name views whose channels were not written.
+pub fn views_with_channels(views: &[String], channels: &[String]) -> Vec<String> {
+    let view_of = |name: &str| -> usize {
+        let parts: Vec<&str> = name.split('.').collect();
+        if parts.len() >= 2 {
+            if let Some(i) = views.iter().position(|v| v == parts[parts.len() - 2]) {
+                return i;
+            }
+        }
+        0
+    };
+    let mut used = vec![false; views.len()];
+    for c in channels {
+        if !views.is_empty() {
+            used[view_of(c)] = true;
+        }
+    }
+    views
+        .iter()
+        .zip(used)
+        .filter(|(_, u)| *u)
+        .map(|(v, _)| v.clone())
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn names(v: &[&str]) -> Vec<String> {
+        v.iter().map(|s| s.to_string()).collect()
+    }
+
+    #[test]
+    fn views_without_channels_leave_the_multiview_list() {
+        let views = names(&["left", "right"]);
+        // The default (first) view's channels carry no view name.
+        assert_eq!(
+            views_with_channels(&views, &names(&["R", "G", "B"])),
+            names(&["left"])
+        );
+        assert_eq!(
+            views_with_channels(&views, &names(&["right.R", "right.G"])),
+            names(&["right"])
+        );
+        assert_eq!(
+            views_with_channels(&views, &names(&["R", "right.R", "diffuse.right.G"])),
+            views
+        );
+        // A layer named like no view belongs to the default view.
+        assert_eq!(
+            views_with_channels(&views, &names(&["diffuse.R"])),
+            names(&["left"])
+        );
+        assert!(views_with_channels(&views, &[]).is_empty());
+        assert!(views_with_channels(&[], &names(&["R"])).is_empty());
+    }
 }

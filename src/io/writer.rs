@@ -95,34 +95,6 @@ impl OutputSettings {
     }
 }
 
-/// The views of a `multiView` list that still have channels among `channels`
-/// (OpenEXR's convention: a channel's view is its name's second-to-last
-/// component when that is a listed view, else the first, default view).
-/// The file must not name views whose channels were not written.
-pub fn views_with_channels(views: &[String], channels: &[String]) -> Vec<String> {
-    let view_of = |name: &str| -> usize {
-        let parts: Vec<&str> = name.split('.').collect();
-        if parts.len() >= 2 {
-            if let Some(i) = views.iter().position(|v| v == parts[parts.len() - 2]) {
-                return i;
-            }
-        }
-        0
-    };
-    let mut used = vec![false; views.len()];
-    for c in channels {
-        if !views.is_empty() {
-            used[view_of(c)] = true;
-        }
-    }
-    views
-        .iter()
-        .zip(used)
-        .filter(|(_, u)| *u)
-        .map(|(v, _)| v.clone())
-        .collect()
-}
-
 /// The output sample type that keeps each channel's input type
 /// (`--pixel-type same`): f16, f32, or u32 for ids carried by their nearest
 /// sample. The first `beauty` channels are the filtered colour: a u32 one
@@ -242,7 +214,7 @@ impl ExrOutput {
         own.original_data_window = None;
         own.multi_view_names = own.multi_view_names.as_ref().and_then(|views| {
             let names: Vec<String> = views.iter().map(|v| v.to_string()).collect();
-            let kept = views_with_channels(&names, channels);
+            let kept = super::headers::views_with_channels(&names, channels);
             (!kept.is_empty()).then(|| kept.iter().map(|v| Text::from(v.as_str())).collect())
         });
         // The input's `software` stays the renderer's; epfilt's settings
@@ -791,39 +763,5 @@ impl Drop for ExrOutput {
             let _ = t.join();
         }
         // An uncommitted staged file is removed when dropped.
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn names(v: &[&str]) -> Vec<String> {
-        v.iter().map(|s| s.to_string()).collect()
-    }
-
-    #[test]
-    fn views_without_channels_leave_the_multiview_list() {
-        let views = names(&["left", "right"]);
-        // The default (first) view's channels carry no view name.
-        assert_eq!(
-            views_with_channels(&views, &names(&["R", "G", "B"])),
-            names(&["left"])
-        );
-        assert_eq!(
-            views_with_channels(&views, &names(&["right.R", "right.G"])),
-            names(&["right"])
-        );
-        assert_eq!(
-            views_with_channels(&views, &names(&["R", "right.R", "diffuse.right.G"])),
-            views
-        );
-        // A layer named like no view belongs to the default view.
-        assert_eq!(
-            views_with_channels(&views, &names(&["diffuse.R"])),
-            names(&["left"])
-        );
-        assert!(views_with_channels(&views, &[]).is_empty());
-        assert!(views_with_channels(&[], &names(&["R"])).is_empty());
     }
 }
