@@ -458,6 +458,28 @@ fn info<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyAny>> {
     to_dict(py, &described)
 }
 
+/// Every setting `filter_file` takes by name, with how it takes its value
+/// (`flag`, `value` or `list`) and whether it names files or their layout
+/// (`filter` on arrays takes the others): the library's tables, which the
+/// stubs' `FilterSettings` and `ArraySettings` are checked against.
+#[pyfunction]
+fn settings() -> Vec<(&'static str, &'static str, bool)> {
+    use epfilt::job::options::{Kind, OPTIONS};
+    let kind = |k: Kind| match k {
+        Kind::Flag => "flag",
+        Kind::Value => "value",
+        Kind::List => "list",
+    };
+    (OPTIONS.iter())
+        .map(|d| (d.name, kind(d.kind), d.files_only))
+        .chain(
+            epfilt::filter::settings::KNOBS
+                .iter()
+                .map(|k| (k.name, "value", false)),
+        )
+        .collect()
+}
+
 /// Image `a` against reference `b` (`epfilt compare --json`); see the stub.
 #[pyfunction]
 fn compare<'py>(py: Python<'py>, a: PathBuf, b: PathBuf) -> PyResult<Bound<'py, PyAny>> {
@@ -648,6 +670,7 @@ fn _epfilt(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(filter, m)?)?;
     m.add_function(wrap_pyfunction!(filter_file, m)?)?;
     m.add_function(wrap_pyfunction!(info, m)?)?;
+    m.add_function(wrap_pyfunction!(settings, m)?)?;
     m.add_function(wrap_pyfunction!(compare, m)?)?;
     m.add_function(wrap_pyfunction!(read, m)?)?;
     m.add_function(wrap_pyfunction!(restore, m)?)?;

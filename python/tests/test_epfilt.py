@@ -476,3 +476,26 @@ def test_restore_file_is_the_cli_streamed(variance_scene, tmp_path):
     with pytest.raises(epfilt.Error, match="at least about"):
         epfilt.restore_file(denoised, variance_scene, tmp_path / "none.exr", max_memory=1)
     assert not (tmp_path / "none.exr").exists()
+
+
+def test_the_stubs_settings_are_the_librarys():
+    """`FilterSettings` and `ArraySettings` in the stubs name every setting the
+    library's tables hold, typed by how each takes its value: a stub that
+    drifts from the tables fails here."""
+    import ast
+    import pathlib
+
+    stub = pathlib.Path(epfilt.__file__).with_name("__init__.pyi")
+    tree = ast.parse(stub.read_text())
+    typed = {
+        node.name: {a.target.id: ast.unparse(a.annotation) for a in node.body if isinstance(a, ast.AnnAssign)}
+        for node in tree.body
+        if isinstance(node, ast.ClassDef)
+    }
+    kinds = {"flag": "bool", "value": "_Value", "list": "Sequence[str]"}
+    table = epfilt._epfilt.settings()
+    assert len(table) > 50
+    assert typed["FilterSettings"] == {name: kinds[kind] for name, kind, _ in table}
+    explicit = {"supersample", "method", "spp"}  # filter's own parameters
+    arrays = {name: kinds[kind] for name, kind, files in table if not files and name not in explicit}
+    assert typed["ArraySettings"] == arrays
