@@ -23,14 +23,16 @@ pub enum Format {
     Rgbe,
     /// PNG (sRGB, 8 bits: pictures for people).
     Png,
+    /// Portable float map (R, G, B floats: what `oidnDenoise` reads).
+    Pfm,
 }
 
 /// Extensions of image formats epfilt does not write: a name ending in one
 /// of them is never given another format's bytes, even with `--format`.
 const FOREIGN: &[&str] = &[
     "tif", "tiff", "jpg", "jpeg", "jpe", "jp2", "jxl", "bmp", "gif", "webp", "tga", "dpx", "cin",
-    "psd", "ppm", "pgm", "pbm", "pfm", "pnm", "avif", "heic", "heif", "sgi", "rgb", "iff", "dds",
-    "ktx", "svg", "pdf",
+    "psd", "ppm", "pgm", "pbm", "pnm", "avif", "heic", "heif", "sgi", "rgb", "iff", "dds", "ktx",
+    "svg", "pdf",
 ];
 
 impl Format {
@@ -40,8 +42,9 @@ impl Format {
             "exr" | "openexr" => Ok(Format::Exr),
             "hdr" | "pic" | "rgbe" | "radiance" => Ok(Format::Rgbe),
             "png" => Ok(Format::Png),
+            "pfm" => Ok(Format::Pfm),
             other => Err(Error::Config(format!(
-                "--format {other:?}: exr, hdr or png"
+                "--format {other:?}: exr, hdr, pfm or png"
             ))),
         }
     }
@@ -52,6 +55,7 @@ impl Format {
             Format::Exr => "exr",
             Format::Rgbe => "hdr",
             Format::Png => "png",
+            Format::Pfm => "pfm",
         }
     }
 
@@ -61,6 +65,7 @@ impl Format {
             Format::Exr => &["exr"],
             Format::Rgbe => &["hdr", "pic", "rgbe"],
             Format::Png => &["png"],
+            Format::Pfm => &["pfm"],
         }
     }
 
@@ -70,6 +75,7 @@ impl Format {
             Format::Exr => "OpenEXR (.exr)",
             Format::Rgbe => "Radiance (.hdr, .pic)",
             Format::Png => "PNG (.png)",
+            Format::Pfm => "PFM (.pfm)",
         }
     }
 
@@ -82,6 +88,8 @@ impl Format {
             Some(Format::Rgbe)
         } else if bytes.starts_with(b"\x89PNG") {
             Some(Format::Png)
+        } else if super::pfm::is_pfm(bytes) {
+            Some(Format::Pfm)
         } else {
             None
         }
@@ -93,7 +101,7 @@ impl Format {
 /// (no extension, or one that is not an image format's).
 fn by_extension(path: &Path) -> Option<std::result::Result<Format, String>> {
     let ext = path.extension()?.to_str()?.to_ascii_lowercase();
-    for f in [Format::Exr, Format::Rgbe, Format::Png] {
+    for f in [Format::Exr, Format::Rgbe, Format::Png, Format::Pfm] {
         if f.extensions().contains(&ext.as_str()) {
             return Some(Ok(f));
         }
@@ -235,6 +243,8 @@ mod tests {
         assert_eq!(Format::sniff(b"\x89PNG\r\n"), Some(Format::Png));
         assert_eq!(Format::sniff(b"hello"), None);
         assert_eq!(Format::parse("HDR").unwrap(), Format::Rgbe);
+        assert_eq!(Format::parse("pfm").unwrap(), Format::Pfm);
+        assert_eq!(Format::sniff(b"PF\n2 2\n-1.0\n"), Some(Format::Pfm));
         assert!(Format::parse("tiff").is_err());
     }
 }

@@ -90,14 +90,14 @@ impl OutputLayout {
     pub fn create(
         &self,
         dest: &Path,
-        rgbe: bool,
+        format: super::Format,
         s: usize,
         channels: &[String],
         settings: &OutputSettings,
     ) -> Result<Output> {
         Output::create(
             dest,
-            rgbe,
+            format,
             &self.header,
             s,
             channels,
@@ -114,18 +114,20 @@ pub enum Output {
     Exr(Box<ExrOutput>),
     /// Radiance RGBE / XYZE.
     Rgbe(Box<RgbeOutput>),
+    /// Portable float map.
+    Pfm(Box<super::pfm::PfmOutput>),
 }
 
 impl Output {
-    /// Start the output of a run at `dest`, a Radiance picture when `rgbe`
-    /// (else OpenEXR): S x S input samples per pixel of
+    /// Start the output of a run at `dest` in `format` (OpenEXR, a Radiance
+    /// picture or a PFM): S x S input samples per pixel of
     /// an input described by `input_header` (and `rgbe_lines`, the header
     /// lines of a Radiance input, kept in a Radiance output); the first
     /// `beauty` of `channels` are the filtered colour.
     #[allow(clippy::too_many_arguments)]
     pub fn create(
         dest: &Path,
-        rgbe: bool,
+        format: super::Format,
         input_header: &Header,
         s: usize,
         channels: &[String],
@@ -133,7 +135,10 @@ impl Output {
         settings: &OutputSettings,
         rgbe_lines: &[String],
     ) -> Result<Self> {
-        if !rgbe {
+        if format == super::Format::Pfm {
+            return Self::create_pfm(dest, input_header, s, channels, settings);
+        }
+        if format != super::Format::Rgbe {
             return Ok(Output::Exr(Box::new(ExrOutput::create(
                 dest,
                 input_header,
@@ -186,11 +191,42 @@ impl Output {
         }
     }
 
+    /// A PFM of the filtered R, G, B ([`Output::create`]).
+    fn create_pfm(
+        dest: &Path,
+        input_header: &Header,
+        s: usize,
+        channels: &[String],
+        settings: &OutputSettings,
+    ) -> Result<Self> {
+        let refuse = |why: String| Error::Config(format!("{}: {why}", dest.display()));
+        let names: Vec<&str> = channels
+            .iter()
+            .map(|c| super::reader::base_name(c))
+            .collect();
+        if names != ["R", "G", "B"] {
+            return Err(refuse(format!(
+                "a PFM holds R, G, B; the filtered channels are {}",
+                channels.join(", ")
+            )));
+        }
+        if settings.compression.is_some() || settings.precision == Some(Precision::F16) {
+            return Err(refuse(
+                "--compression and --pixel-type f16 apply to EXR outputs; a PFM stores f32".into(),
+            ));
+        }
+        let (w, h) = (input_header.layer_size.0 / s, input_header.layer_size.1 / s);
+        Ok(Output::Pfm(Box::new(super::pfm::PfmOutput::create(
+            dest, w, h,
+        )?)))
+    }
+
     /// The compression's name (`rgbe` for a Radiance picture).
     pub fn compression_name(&self) -> String {
         match self {
             Output::Exr(o) => super::compression_name(o.compression()).to_string(),
             Output::Rgbe(_) => "rgbe".into(),
+            Output::Pfm(_) => "pfm".into(),
         }
     }
 
@@ -198,7 +234,7 @@ impl Output {
     pub fn note(&self) -> Option<&str> {
         match self {
             Output::Exr(o) => o.note(),
-            Output::Rgbe(_) => None,
+            Output::Rgbe(_) | Output::Pfm(_) => None,
         }
     }
 
@@ -208,6 +244,7 @@ impl Output {
         match self {
             Output::Exr(o) => o.is_lossy(),
             Output::Rgbe(_) => true,
+            Output::Pfm(_) => false,
         }
     }
 
@@ -217,6 +254,7 @@ impl Output {
         match self {
             Output::Exr(o) => o.set_coverage(coverage),
             Output::Rgbe(o) => o.set_coverage(coverage),
+            Output::Pfm(o) => o.set_coverage(coverage),
         }
     }
 
@@ -225,6 +263,7 @@ impl Output {
         match self {
             Output::Exr(o) => o.decoded_sums(),
             Output::Rgbe(o) => Ok(o.decoded_sums()),
+            Output::Pfm(o) => Ok(o.decoded_sums()),
         }
     }
 
@@ -233,6 +272,7 @@ impl Output {
         match self {
             Output::Exr(o) => o.commit(),
             Output::Rgbe(o) => o.commit(),
+            Output::Pfm(o) => o.commit(),
         }
     }
 }
@@ -242,6 +282,7 @@ impl Sink for Output {
         match self {
             Output::Exr(o) => o.precision(),
             Output::Rgbe(o) => o.precision(),
+            Output::Pfm(o) => o.precision(),
         }
     }
 
@@ -249,6 +290,7 @@ impl Sink for Output {
         match self {
             Output::Exr(o) => o.precisions(nch),
             Output::Rgbe(o) => o.precisions(nch),
+            Output::Pfm(o) => o.precisions(nch),
         }
     }
 
@@ -256,6 +298,7 @@ impl Sink for Output {
         match self {
             Output::Exr(o) => o.write_rows(y0, rows, data),
             Output::Rgbe(o) => o.write_rows(y0, rows, data),
+            Output::Pfm(o) => o.write_rows(y0, rows, data),
         }
     }
 
@@ -263,6 +306,7 @@ impl Sink for Output {
         match self {
             Output::Exr(o) => o.finish(),
             Output::Rgbe(o) => o.finish(),
+            Output::Pfm(o) => o.finish(),
         }
     }
 }

@@ -1,9 +1,10 @@
 //! Portable float maps (PFM), the format Intel OIDN's `oidnDenoise` reads and
 //! writes: a text header (`PF` colour or `Pf` grey, width and height, a
 //! scale whose sign gives the byte order), then 32-bit floats, rows from the
-//! bottom of the picture up, a pixel's channels together. Read only: a
-//! denoiser's output goes straight into `restore` (or any command that
-//! reads), with no conversion in between.
+//! bottom of the picture up, a pixel's channels together. A denoiser's
+//! output goes straight into `restore` (or any command that reads), and
+//! `--format pfm` (or a `.pfm` name) writes one for `oidnDenoise`
+//! ([`PfmOutput`]: R, G, B, little-endian).
 
 use std::path::{Path, PathBuf};
 
@@ -214,6 +215,122 @@ impl Source for PfmSource<'_> {
         };
         self.y += rows;
         Ok(Some(strip))
+    }
+}
+
+/// A PFM being written (`PF`, little-endian): rows arrive top first and
+/// are written where the file keeps them, bottom first, into the staged
+/// file (a pixel's three floats together), so nothing is held.
+pub struct PfmOutput {
+    dest: PathBuf,
+    staged: Option<super::Staged>,
+    w: usize,
+    h: usize,
+    header_len: u64,
+    rows_done: usize,
+    line: Vec<u8>,
+    /// Sum per channel of the stored values (the ledger's "on disk").
+    sums: [crate::pipeline::ledger::CompensatedSum; 3],
+    /// `--edge pad`: the sums weigh pixels by this.
+    coverage: Option<crate::pipeline::edge::Coverage>,
+}
+
+impl PfmOutput {
+    /// Start a `w` x `h` map at `dest` (checked as every output is).
+    pub fn create(dest: &Path, w: usize, h: usize) -> Result<Self> {
+        let staged = super::Staged::new(dest, ".pfm.tmp")?;
+        let header = format!("PF\n{w} {h}\n-1.0\n");
+        let len = header.len() as u64 + (w as u64 * h as u64 * 12);
+        let file = staged.file();
+        std::io::Write::write_all(&mut &*file, header.as_bytes())
+            .and_then(|()| file.set_len(len))
+            .map_err(|e| Error::io(dest, e))?;
+        Ok(PfmOutput {
+            dest: dest.into(),
+            staged: Some(staged),
+            w,
+            h,
+            header_len: header.len() as u64,
+            rows_done: 0,
+            line: Vec::with_capacity(12 * w),
+            sums: Default::default(),
+            coverage: None,
+        })
+    }
+
+    /// `--edge pad`: weigh each pixel of the sums by its coverage.
+    pub fn set_coverage(&mut self, coverage: crate::pipeline::edge::Coverage) {
+        self.coverage = Some(coverage);
+    }
+
+    /// Per channel, the sum of the values the file holds.
+    pub fn decoded_sums(&self) -> Vec<f64> {
+        self.sums.iter().map(|s| s.value()).collect()
+    }
+
+    /// Put the finished map in place.
+    pub fn commit(mut self) -> Result<()> {
+        let staged = self.staged.take().ok_or(Error::Interrupted)?;
+        staged.file().sync_all().ok();
+        staged.commit()
+    }
+}
+
+impl crate::pipeline::Sink for PfmOutput {
+    fn write_rows(&mut self, _y0: usize, rows: usize, data: &[f32]) -> Result<()> {
+        let w = self.w;
+        if data.len() != rows * 3 * w {
+            return Err(Error::Config(format!(
+                "{}: a PFM holds three channels, not {}",
+                self.dest.display(),
+                data.len() / (rows * w).max(1)
+            )));
+        }
+        let file = self.staged.as_ref().ok_or(Error::Interrupted)?.file();
+        for r in 0..rows {
+            let y = self.rows_done + r;
+            let row = &data[r * 3 * w..][..3 * w];
+            let weight = |x: usize| self.coverage.as_ref().map_or(1.0, |cov| cov.at(x, y));
+            self.line.clear();
+            for x in 0..w {
+                for c in 0..3 {
+                    let v = row[c * w + x];
+                    self.sums[c].add(v as f64 * weight(x));
+                    self.line.extend_from_slice(&v.to_le_bytes());
+                }
+            }
+            let at = self.header_len + (self.h - 1 - y) as u64 * 12 * w as u64;
+            write_at(file, &self.line, at).map_err(|e| Error::io(&self.dest, e))?;
+        }
+        self.rows_done += rows;
+        Ok(())
+    }
+
+    fn finish(&mut self) -> Result<()> {
+        if self.rows_done != self.h {
+            return Err(Error::Internal(format!(
+                "{}: output incomplete ({} of {} rows)",
+                self.dest.display(),
+                self.rows_done,
+                self.h
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Write `bytes` at byte `at` of `file`.
+fn write_at(file: &std::fs::File, bytes: &[u8], at: u64) -> std::io::Result<()> {
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::FileExt::write_all_at(file, bytes, at)
+    }
+    #[cfg(not(unix))]
+    {
+        use std::io::{Seek, SeekFrom, Write};
+        let mut f = file;
+        f.seek(SeekFrom::Start(at))?;
+        f.write_all(bytes)
     }
 }
 

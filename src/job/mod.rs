@@ -248,7 +248,7 @@ impl FilterJob {
 }
 
 /// What `filter` writes.
-pub const WRITES: &[Format] = &[Format::Exr, Format::Rgbe];
+pub const WRITES: &[Format] = &[Format::Exr, Format::Rgbe, Format::Pfm];
 
 impl FilterJob {
     /// Every setting that decides the output's bytes, as text: the
@@ -397,7 +397,8 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
         ..job.clone()
     };
     let fingerprint = &job.fingerprint()?;
-    let to_rgbe = job.format == Some(Format::Rgbe);
+    // A picture (Radiance, PFM) holds the colour alone.
+    let to_rgbe = job.format.is_some_and(|f| f != Format::Exr);
     let parts = crate::io::parts::list(&job.input)?;
     if parts.len() < 2 {
         return filter_views(job, fingerprint, progress);
@@ -466,8 +467,8 @@ fn filter_views(
             job.output.display()
         )))
     };
-    if job.format == Some(Format::Rgbe) {
-        return refuse("a Radiance picture holds one view");
+    if job.format.is_some_and(|f| f != Format::Exr) {
+        return refuse("a Radiance picture or a PFM holds one view");
     }
     if job.band.is_some() {
         return refuse("not with --band; filter one view at a time with --view NAME");

@@ -25,7 +25,6 @@ pub struct FilterPlan<'a> {
     pub(crate) input: ExrInput,
     /// The job's settings (ep-box's `L_tvis` is settled by the first pass).
     pub(crate) params: FilterParams,
-    pub(crate) to_rgbe: bool,
     /// The statistics channels found (ep-box).
     pub(crate) found: Option<StatsChannels>,
     /// The guide passes found and used.
@@ -100,7 +99,8 @@ impl<'a> FilterPlan<'a> {
         };
         let mut input =
             ExrInput::open_view(&job.input, job.part.as_ref(), job.layer.as_deref(), view)?;
-        let to_rgbe = job.output_format()? == Format::Rgbe;
+        // A picture (Radiance, PFM) holds the colour alone.
+        let to_rgbe = job.output_format()? != Format::Exr;
         let scope = crate::io::reader::view_scope(&job.input, input.header(), view, exclusive)?;
         let mut warnings = job.notes.clone();
         let found_guides = guides(job, &input, &mut warnings)?;
@@ -134,7 +134,6 @@ impl<'a> FilterPlan<'a> {
             fingerprint,
             input,
             params: job.params.clone(),
-            to_rgbe,
             found: found.map(|f| f.0),
             guides: found_guides,
             geometry,
@@ -416,7 +415,7 @@ fn plan_band(
             "--band {k}/{n}: the band must be 1 to N of N"
         )));
     }
-    if job.output_format()? == Format::Rgbe {
+    if job.output_format()? != Format::Exr {
         return Err(Error::Config(format!(
             "{}: --band writes EXR bands; `epfilt merge` puts them together",
             job.output.display()

@@ -46,7 +46,7 @@ impl FilterPlan<'_> {
         let out_settings = self.output_settings(&settings);
         let mut output = self.layout.create(
             &self.job.output,
-            self.to_rgbe,
+            self.job.output_format()?,
             self.job.params.supersample,
             &self.channels,
             &out_settings,

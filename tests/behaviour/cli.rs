@@ -1205,3 +1205,46 @@ fn software_is_kept_and_each_run_appends_itself_to_the_history() {
         .count();
     assert_eq!(ran, 1, "{head}");
 }
+
+/// `.pfm` (or `--format pfm` for standard output) writes a portable float
+/// map, what `oidnDenoise` reads: the same values as the EXR of the same
+/// run, bottom row first, and read back by every command.
+#[test]
+fn pfm_outputs_hold_the_exrs_values_and_read_back() {
+    let dir = tmpdir();
+    let inp = input(dir.path());
+    let p = |name: &str| dir.path().join(name).to_string_lossy().into_owned();
+    epfilt_ok(&["filter", &inp, &p("o.exr"), "-s", "3", "-q"]);
+    let r: serde_json::Value = serde_json::from_str(&epfilt_ok(&[
+        "filter",
+        &inp,
+        &p("o.pfm"),
+        "-s",
+        "3",
+        "-q",
+        "--json",
+    ]))
+    .unwrap();
+    assert!(r["energy_rel_error"][0].as_f64().unwrap() < ENERGY_TOL);
+    let bytes = std::fs::read(p("o.pfm")).unwrap();
+    assert!(bytes.starts_with(b"PF\n10 7\n-1.0\n"), "{:?}", &bytes[..16]);
+    assert_eq!(bytes.len(), 13 + 10 * 7 * 12);
+    let cmp: serde_json::Value =
+        serde_json::from_str(&epfilt_ok(&["compare", &p("o.pfm"), &p("o.exr"), "--json"])).unwrap();
+    assert_eq!(cmp["identical"], true, "{cmp}");
+    let o = epfilt(&["filter", &inp, "-", "-s", "3", "-q", "--format", "pfm"]);
+    assert!(
+        o.status.success() && o.stdout == bytes,
+        "standard output differs"
+    );
+    let o = epfilt(&[
+        "filter",
+        &inp,
+        &p("z.pfm"),
+        "-s",
+        "3",
+        "--compression",
+        "zip",
+    ]);
+    one_line_error(&o, USAGE, "a PFM stores f32");
+}

@@ -352,7 +352,7 @@ pub struct FilterArgs {
     /// input), or a frame sequence: render.####.exr (one padded digit per #)
     /// or render.%04d.exr.
     pub input: PathBuf,
-    /// Output (.exr, .hdr or .pic; - for standard output, in the input's
+    /// Output (.exr, .hdr or .pic, .pfm; - for standard output, in the input's
     /// format unless --format); for a sequence, a pattern with a frame field.
     pub output: PathBuf,
     /// Every setting (the library's, shared with the Python bindings).

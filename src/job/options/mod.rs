@@ -359,9 +359,10 @@ options! {
         files_only: true
     }
     /// The output's format where its name does not say (- or a name without
-    /// an image extension): exr or hdr [default for -: the input's].
+    /// an image extension): exr, hdr or pfm [default for -: the input's].
     format: Option<Format> {
-        Value, OUTPUT, parse: |_, s| Format::parse(s), files_only: true, values: &["exr", "hdr"]
+        Value, OUTPUT, parse: |_, s| Format::parse(s), files_only: true,
+        values: &["exr", "hdr", "pfm"]
     }
     /// Output compression (none rle zips zip piz pxr24 b44 b44a dwaa dwab)
     /// [default: as input, but zip where the input's is lossy].

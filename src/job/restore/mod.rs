@@ -361,7 +361,7 @@ impl RestorePlan {
             energy, denoised, ..
         } = &self;
         let mut output =
-            (self.output).create(&job.output, false, 1, &self.channels, &self.settings)?;
+            (self.output).create(&job.output, Format::Exr, 1, &self.channels, &self.settings)?;
         let cpu_start = cpu_seconds();
         let guide = self.layout.guide.clone();
         let restored = restore_stream(
