@@ -230,9 +230,7 @@ pub struct PfmOutput {
     rows_done: usize,
     line: Vec<u8>,
     /// Sum per channel of the stored values (the ledger's "on disk").
-    sums: [crate::pipeline::ledger::CompensatedSum; 3],
-    /// `--edge pad`: the sums weigh pixels by this.
-    coverage: Option<crate::pipeline::edge::Coverage>,
+    sums: crate::pipeline::ledger::StoredSums,
 }
 
 impl PfmOutput {
@@ -254,18 +252,17 @@ impl PfmOutput {
             rows_done: 0,
             line: Vec::with_capacity(12 * w),
             sums: Default::default(),
-            coverage: None,
         })
     }
 
     /// `--edge pad`: weigh each pixel of the sums by its coverage.
     pub fn set_coverage(&mut self, coverage: crate::pipeline::edge::Coverage) {
-        self.coverage = Some(coverage);
+        self.sums.set_coverage(coverage);
     }
 
     /// Per channel, the sum of the values the file holds.
     pub fn decoded_sums(&self) -> Vec<f64> {
-        self.sums.iter().map(|s| s.value()).collect()
+        self.sums.values()
     }
 
     /// Put the finished map in place.
@@ -290,12 +287,11 @@ impl crate::pipeline::Sink for PfmOutput {
         for r in 0..rows {
             let y = self.rows_done + r;
             let row = &data[r * 3 * w..][..3 * w];
-            let weight = |x: usize| self.coverage.as_ref().map_or(1.0, |cov| cov.at(x, y));
             self.line.clear();
             for x in 0..w {
-                for c in 0..3 {
-                    let v = row[c * w + x];
-                    self.sums[c].add(v as f64 * weight(x));
+                let rgb = [0, 1, 2].map(|c| row[c * w + x]);
+                self.sums.add((x, y), rgb.map(f64::from));
+                for v in rgb {
                     self.line.extend_from_slice(&v.to_le_bytes());
                 }
             }

@@ -527,9 +527,7 @@ pub struct RgbeOutput {
     line: Vec<u8>,
     comp: Vec<u8>,
     /// Sum per channel of the decoded stored values.
-    sums: [crate::pipeline::ledger::CompensatedSum; 3],
-    /// `--edge pad`: the sums weigh pixels by this.
-    coverage: Option<crate::pipeline::edge::Coverage>,
+    sums: crate::pipeline::ledger::StoredSums,
 }
 
 impl RgbeOutput {
@@ -564,18 +562,17 @@ impl RgbeOutput {
             line: Vec::with_capacity(4 * w + 64),
             comp: Vec::with_capacity(w),
             sums: Default::default(),
-            coverage: None,
         })
     }
 
     /// `--edge pad`: weigh each pixel of the sums by its coverage.
     pub fn set_coverage(&mut self, coverage: crate::pipeline::edge::Coverage) {
-        self.coverage = Some(coverage);
+        self.sums.set_coverage(coverage);
     }
 
     /// Per channel, the sum of the values the file holds (decoded).
     pub fn decoded_sums(&self) -> Vec<f64> {
-        self.sums.iter().map(|s| s.value()).collect()
+        self.sums.values()
     }
 
     /// Put the finished picture in place.
@@ -612,13 +609,8 @@ impl Sink for RgbeOutput {
                         self.rows_done + r
                     ),
                 })?;
-                let weight = self
-                    .coverage
-                    .as_ref()
-                    .map_or(1.0, |cov| cov.at(x, self.rows_done + r));
-                for c in 0..3 {
-                    self.sums[c].add(channel(p[c], p[3]) as f64 * weight);
-                }
+                let stored = [0, 1, 2].map(|c| channel(p[c], p[3]) as f64);
+                self.sums.add((x, self.rows_done + r), stored);
                 self.pixels[x] = p;
             }
             self.line.clear();

@@ -14,6 +14,36 @@ use serde::Serialize;
 #[cfg(test)]
 pub(crate) const LEDGER_TOL: f64 = 1e-12;
 
+/// What a picture output (Radiance, PFM) holds per colour channel, summed
+/// as it is stored: the ledger's "on disk" column, each pixel weighed by its
+/// coverage under `--edge pad`.
+#[derive(Clone, Debug, Default)]
+pub struct StoredSums {
+    sums: [CompensatedSum; 3],
+    coverage: Option<super::edge::Coverage>,
+}
+
+impl StoredSums {
+    /// `--edge pad`: weigh each pixel by its coverage.
+    pub fn set_coverage(&mut self, coverage: super::edge::Coverage) {
+        self.coverage = Some(coverage);
+    }
+
+    /// Add pixel `(x, y)`'s stored values.
+    #[inline]
+    pub fn add(&mut self, (x, y): (usize, usize), rgb: [f64; 3]) {
+        let weight = self.coverage.as_ref().map_or(1.0, |cov| cov.at(x, y));
+        for (s, v) in self.sums.iter_mut().zip(rgb) {
+            s.add(v * weight);
+        }
+    }
+
+    /// Per channel, the sum.
+    pub fn values(&self) -> Vec<f64> {
+        self.sums.iter().map(|s| s.value()).collect()
+    }
+}
+
 /// A compensated (Neumaier) sum.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct CompensatedSum {
