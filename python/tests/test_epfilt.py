@@ -487,11 +487,18 @@ def test_the_stubs_settings_are_the_librarys():
 
     stub = pathlib.Path(epfilt.__file__).with_name("__init__.pyi")
     tree = ast.parse(stub.read_text())
-    typed = {
-        node.name: {a.target.id: ast.unparse(a.annotation) for a in node.body if isinstance(a, ast.AnnAssign)}
-        for node in tree.body
-        if isinstance(node, ast.ClassDef)
-    }
+    classes = {node.name: node for node in tree.body if isinstance(node, ast.ClassDef)}
+
+    def keys(name):
+        """A TypedDict's keys, its bases' included."""
+        node = classes[name]
+        own = {a.target.id: ast.unparse(a.annotation) for a in node.body if isinstance(a, ast.AnnAssign)}
+        for base in node.bases:
+            if isinstance(base, ast.Name) and base.id in classes:
+                own = {**keys(base.id), **own}
+        return own
+
+    typed = {name: keys(name) for name in ("FilterSettings", "ArraySettings")}
     kinds = {"flag": "bool", "value": "_Value", "list": "Sequence[str]"}
     table = epfilt._epfilt.settings()
     assert len(table) > 50

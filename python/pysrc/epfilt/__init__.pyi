@@ -17,73 +17,6 @@ _Samples = Union[npt.NDArray[np.float32], npt.NDArray[np.float16], npt.NDArray[n
 # tables by a test (`epfilt._epfilt.settings()`).
 _Value = Union[str, int, float]
 
-class FilterSettings(TypedDict, total=False):
-    supersample: _Value
-    part: _Value
-    edge: _Value
-    nonfinite: _Value
-    method: _Value
-    variance_channel: _Value
-    variance_kind: _Value
-    spp: _Value
-    spp_channel: _Value
-    guides: _Value
-    guide: Sequence[str]
-    guide_normal: _Value
-    guide_albedo: _Value
-    guide_depth: _Value
-    layer: _Value
-    view: _Value
-    channel_rule: Sequence[str]
-    format: _Value
-    compression: _Value
-    allow_lossy: bool
-    pixel_type: _Value
-    frames: _Value
-    task_index: _Value
-    task_count: _Value
-    skip_existing: bool
-    fail_fast: bool
-    keep_going: bool
-    band: _Value
-    band_index: _Value
-    band_count: _Value
-    threads: _Value
-    oversubscribe: bool
-    max_memory: _Value
-    tile: _Value
-    strip_rows: _Value
-    window_blocks: _Value
-    geometry_threads: _Value
-    strips_in_flight: _Value
-    d: _Value
-    nmid: _Value
-    ltvis: _Value
-    confidence: _Value
-    passes: _Value
-    quality: _Value
-    clamp: _Value
-    tolerance: _Value
-    radius: _Value
-    max_radius: _Value
-    cutoff: _Value
-    width_step: _Value
-    support: _Value
-    support_ratio: _Value
-    support_group: _Value
-    support_compact: _Value
-    support_over: _Value
-    support_region: _Value
-    support_level: _Value
-    coarse_from: _Value
-    bound_from: _Value
-    guard: _Value
-    guard_confidence: _Value
-    carriers: _Value
-    carriers_fraction: _Value
-    carriers_rse: _Value
-    alpha: _Value
-
 class ArraySettings(TypedDict, total=False):
     nonfinite: _Value
     variance_kind: _Value
@@ -127,6 +60,33 @@ class ArraySettings(TypedDict, total=False):
     carriers_fraction: _Value
     carriers_rse: _Value
     alpha: _Value
+
+# `filter_file` takes every setting `filter` does, and those naming files,
+# their layout, and what `filter` takes as its own parameters.
+class FilterSettings(ArraySettings, total=False):
+    supersample: _Value
+    part: _Value
+    edge: _Value
+    method: _Value
+    variance_channel: _Value
+    spp: _Value
+    spp_channel: _Value
+    layer: _Value
+    view: _Value
+    channel_rule: Sequence[str]
+    format: _Value
+    compression: _Value
+    allow_lossy: bool
+    frames: _Value
+    task_index: _Value
+    task_count: _Value
+    skip_existing: bool
+    fail_fast: bool
+    keep_going: bool
+    band: _Value
+    band_index: _Value
+    band_count: _Value
+    max_memory: _Value
 
 class Error(Exception): ...
 class InputError(Error): ...
