@@ -56,5 +56,5 @@ pub use error::{Error, Result};
 pub use filter::{FilterParams, Method};
 pub use geometry::Grid;
 pub use job::restore::{restore_file, RestoreJob};
-pub use job::{filter_file, FilterJob};
+pub use job::{filter_file, filter_opened, FilterJob};
 pub use pipeline::{filter_in_memory, PipelineConfig, Precision, RunStats, StripLayout};

@@ -432,7 +432,10 @@ fn filter_file<'py>(
     }
     job.output_format().map_err(to_py)?;
     epfilt::io::Destination::resolve(&job.output).map_err(to_py)?;
-    if opts.skip_existing && epfilt::job::existing_output(&job).map_err(to_py)? == Existing::Done {
+    let file = epfilt::io::InputFile::open(&job.input).map_err(to_py)?;
+    if opts.skip_existing
+        && epfilt::job::existing_output(&job, &file).map_err(to_py)? == Existing::Done
+    {
         let skipped = PyDict::new(py);
         skipped.set_item("skipped", true)?;
         skipped.set_item("output", job.output.display().to_string())?;
@@ -443,7 +446,7 @@ fn filter_file<'py>(
         move |cancel| {
             let mut job = job;
             job.pipeline.cancel = Some(cancel);
-            epfilt::filter_file(&job, &report_rows)
+            epfilt::filter_opened(&job, &file, &report_rows)
         },
         tick,
     )?;

@@ -46,7 +46,7 @@ pub use exr::prelude::Compression;
 pub use format::Format;
 pub use guides::{find_guides, FoundGuides, GuideKind, GuideRequest};
 pub use info::info;
-pub use reader::{ExrInput, PartSelect, Selection, ViewSelect};
+pub use reader::{ExrInput, InputFile, PartSelect, Selection, ViewSelect};
 pub use variance::{find_stats, SppFrom, StatsChannels, StatsRequest};
 pub use verdict::{verdict, Verdict, SUPERSAMPLE_ATTRIBUTES};
 pub use writer::{ExrOutput, OutputSettings};

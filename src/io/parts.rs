@@ -18,7 +18,7 @@ use exr::prelude::{SmallVec, Text};
 use rayon::iter::{IntoParallelRefIterator, ParallelIterator};
 
 use super::mapped::MappedFile;
-use super::reader::{block_bytes, decode_checked, parse_headers, parse_meta, read_chunk};
+use super::reader::{block_bytes, decode_checked, parse_meta, read_chunk};
 use crate::error::{Error, Result};
 
 /// One part of a file.
@@ -30,34 +30,6 @@ pub struct PartInfo {
     pub name: String,
     /// Deep data (deep scan lines or deep tiles).
     pub deep: bool,
-}
-
-/// The parts of the EXR file `path` (one for a Radiance picture).
-pub fn list(path: &Path) -> Result<Vec<PartInfo>> {
-    let map = MappedFile::open(path)?;
-    if super::rgbe::is_rgbe(map.bytes()) || super::pfm::is_pfm(map.bytes()) {
-        return Ok(vec![PartInfo {
-            index: 0,
-            name: String::new(),
-            deep: false,
-        }]);
-    }
-    let meta = parse_headers(path, map.bytes())?;
-    Ok(meta
-        .headers
-        .iter()
-        .enumerate()
-        .map(|(index, h)| PartInfo {
-            index,
-            name: h
-                .own_attributes
-                .layer_name
-                .as_ref()
-                .map(|t| t.to_string())
-                .unwrap_or_default(),
-            deep: h.deep,
-        })
-        .collect())
 }
 
 /// Part `part` of the file `path`, to be part of an assembled output under

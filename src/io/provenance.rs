@@ -24,7 +24,8 @@ use std::path::Path;
 use serde::Serialize;
 
 use super::mapped::MappedFile;
-use crate::error::{Error, Result};
+use super::reader::InputFile;
+use crate::error::Error;
 
 /// The attribute (or Radiance header variable) holding the fingerprint:
 /// `input=<32 hex> settings=<16 hex>`.
@@ -75,11 +76,11 @@ impl Fingerprint {
 
     /// `input`'s fingerprint with these settings (the text that decides the
     /// output, see [`settings_fingerprint`]).
-    pub fn of(input: &Path, settings: &str) -> Result<Self> {
-        Ok(Fingerprint {
-            input: input_fingerprint(input)?,
+    pub fn of(input: &InputFile, settings: &str) -> Self {
+        Fingerprint {
+            input: input_fingerprint(input),
             settings: settings_fingerprint(settings),
-        })
+        }
     }
 }
 
@@ -88,21 +89,12 @@ pub fn settings_fingerprint(settings: &str) -> String {
     format!("{:016x}", xxhash_rust::xxh3::xxh3_64(settings.as_bytes()))
 }
 
-/// The fingerprint of an input file (`-`: standard input).
-pub fn input_fingerprint(path: &Path) -> Result<String> {
-    let map = MappedFile::open(path)?;
-    let bytes = map.bytes();
-    // Where the pixel data starts: after the headers and offset tables, or
-    // after a Radiance picture's header. A file too damaged to say is hashed
-    // from its first MiB (reading it fails later, with the reason).
-    let data = if super::rgbe::is_rgbe(bytes) {
-        super::rgbe::parse_header(path, bytes).map(|h| h.data)
-    } else if super::pfm::is_pfm(bytes) {
-        super::pfm::parse_header(path, bytes).map(|h| h.data)
-    } else {
-        super::reader::parse_layout(path, bytes).map(|l| l.1)
-    };
-    let data = data.unwrap_or(1 << 20).min(bytes.len());
+/// The fingerprint of an input file: its length, its headers and offset
+/// tables (a picture's header), and spans sampled through its pixel data. A
+/// picture whose header does not parse is hashed from its first MiB.
+pub fn input_fingerprint(input: &InputFile) -> String {
+    let bytes = input.bytes();
+    let data = input.data_start().unwrap_or(1 << 20).min(bytes.len());
     let mut h = xxhash_rust::xxh3::Xxh3::new();
     h.update(&(bytes.len() as u64).to_le_bytes());
     h.update(&bytes[..data]);
@@ -111,7 +103,7 @@ pub fn input_fingerprint(path: &Path) -> Result<String> {
         let at = data + rest / SAMPLED_SPANS * k;
         h.update(&bytes[at..(at + SPAN_BYTES).min(bytes.len())]);
     }
-    Ok(format!("{:032x}", h.digest128()))
+    format!("{:032x}", h.digest128())
 }
 
 /// What an existing output says of itself.
@@ -267,14 +259,9 @@ mod tests {
         std::fs::write(&a, &bytes).unwrap();
         *bytes.last_mut().unwrap() = 130;
         std::fs::write(&b, &bytes).unwrap();
-        assert_ne!(
-            input_fingerprint(&a).unwrap(),
-            input_fingerprint(&b).unwrap()
-        );
-        assert_eq!(
-            input_fingerprint(&a).unwrap(),
-            input_fingerprint(&a).unwrap()
-        );
+        let print = |p: &Path| input_fingerprint(&InputFile::open(p).unwrap());
+        assert_ne!(print(&a), print(&b));
+        assert_eq!(print(&a), print(&a));
     }
 
     #[test]

@@ -13,20 +13,13 @@ use std::path::{Path, PathBuf};
 use exr::meta::attribute::{ChannelDescription, ChannelList, Text};
 use exr::prelude::SmallVec;
 
-use super::{ExrInput, OutputSettings, PartSelect};
+use super::{ExrInput, OutputSettings};
 use crate::error::{Error, Result};
 use crate::filter::channels::ChannelRule;
 use crate::pipeline::{Sink, Source, Strip};
 
 /// Rows copied at once.
 const STRIP_ROWS: usize = 64;
-
-/// The views of `path`'s part (`multiView`, the default first); empty when
-/// it has none.
-pub fn of(path: &Path, part: Option<&PartSelect>) -> Result<Vec<String>> {
-    let input = ExrInput::open(path, part)?;
-    Ok(super::reader::views(input.header()))
-}
 
 /// Write `dest` with every channel of `sources` (each a file and the layer
 /// of its colour: its view's, `None` for the default view), in that order,

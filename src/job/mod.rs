@@ -20,7 +20,8 @@ use crate::filter::guides::SurfaceRule;
 use crate::filter::{FilterParams, Method};
 use crate::io::provenance::{self, Fingerprint};
 use crate::io::{
-    ExrInput, Format, GuideRequest, OutputSettings, PartSelect, StatsRequest, Verdict, ViewSelect,
+    ExrInput, Format, GuideRequest, InputFile, OutputSettings, PartSelect, StatsRequest, Verdict,
+    ViewSelect,
 };
 use crate::pipeline::{PipelineConfig, Progress};
 use crate::report::{PartReport, Report};
@@ -116,8 +117,9 @@ impl FilterJob {
     /// The job with S and the method decided: by the user where given, else
     /// by the input's header ([`crate::io::verdict()`]: the super-sampling
     /// attribute, else 1; ep-box where the file holds variance at S = 1,
-    /// else ep-gauss), its settings rebuilt for them. Reads the header only.
-    pub fn settle(&self) -> Result<FilterJob> {
+    /// else ep-gauss), its settings rebuilt for them, from `file` (this
+    /// job's input, opened): its header only.
+    pub fn settle(&self, file: &InputFile) -> Result<FilterJob> {
         if self.verdict.is_some() {
             return Ok(self.clone());
         }
@@ -132,21 +134,15 @@ impl FilterJob {
                 method_from: "--method".into(),
                 stats: None,
             },
+            // Every part with the same settings: the parts may say different
+            // things, so what is not given keeps its default.
+            _ if self.part == Some(PartSelect::All) => return Ok(self.clone()),
             _ => {
                 let view = match &self.view {
                     Some(ViewSelect::Name(v)) => Some(v.as_str()),
                     _ => None,
                 };
-                let input = crate::io::ExrInput::open_view(
-                    &self.input,
-                    self.part.as_ref(),
-                    self.layer.as_deref(),
-                    view,
-                );
-                // A part or view that cannot be opened: the plan says why.
-                let Ok(input) = input else {
-                    return Ok(self.clone());
-                };
+                let input = file.input(self.part.as_ref(), self.layer.as_deref(), view)?;
                 crate::io::verdict(&self.input, input.header(), &self.stats, given_m, given_s)?
             }
         };
@@ -289,9 +285,10 @@ impl FilterJob {
         ))
     }
 
-    /// What this job's output records of its input and settings.
-    pub fn fingerprint(&self) -> Result<Fingerprint> {
-        Fingerprint::of(&self.input, &self.settings_text()?)
+    /// What this job's output records of its input (`file`, opened) and
+    /// settings.
+    pub fn fingerprint(&self, file: &InputFile) -> Result<Fingerprint> {
+        Ok(Fingerprint::of(file, &self.settings_text()?))
     }
 
     /// The band label an output of this job carries (`None` without a band;
@@ -315,9 +312,9 @@ pub enum Existing {
 /// Whether `job`'s output already exists as a complete output of its input
 /// and settings: readable, whole (every block present), made by epfilt from
 /// the same input with the same settings ([`provenance`]), and the same band
-/// or none.
-pub fn existing_output(job: &FilterJob) -> Result<Existing> {
-    let job = &job.settle()?;
+/// or none. `file` is the job's input, opened.
+pub fn existing_output(job: &FilterJob, file: &InputFile) -> Result<Existing> {
+    let job = &job.settle(file)?;
     let out = &job.output;
     if out.as_os_str() == "-" {
         return Ok(Existing::Missing);
@@ -335,7 +332,7 @@ pub fn existing_output(job: &FilterJob) -> Result<Existing> {
     let Some(found) = recorded.fingerprint else {
         return Ok(Existing::Redo("it was not written by epfilt".into()));
     };
-    let want = job.fingerprint()?;
+    let want = job.fingerprint(file)?;
     let recorded_band = recorded
         .band
         .as_deref()
@@ -389,19 +386,25 @@ pub fn check_not_same_file(input: &Path, output: &Path) -> Result<()> {
 /// out with a warning. `--part all` filters every part with the same
 /// settings into one multi-part output.
 pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
-    let job = &job.settle()?;
+    filter_opened(job, &InputFile::open(&job.input)?, progress)
+}
+
+/// [`filter_file`] of `job`'s input opened as `file`: every question asked
+/// of the input before the first pixel is read is answered from it.
+pub fn filter_opened(job: &FilterJob, file: &InputFile, progress: Progress<'_>) -> Result<Report> {
+    let job = &job.settle(file)?;
     job.params.validate()?;
     check_not_same_file(&job.input, &job.output)?;
     let job = &FilterJob {
         format: Some(job.output_format()?),
         ..job.clone()
     };
-    let fingerprint = &job.fingerprint()?;
+    let fingerprint = &job.fingerprint(file)?;
     // A picture (Radiance, PFM) holds the colour alone.
     let to_rgbe = job.format.is_some_and(|f| f != Format::Exr);
-    let parts = crate::io::parts::list(&job.input)?;
+    let parts = file.parts();
     if parts.len() < 2 {
-        return filter_views(job, fingerprint, progress);
+        return filter_views(job, file, fingerprint, progress);
     }
     if job.view == Some(ViewSelect::All) {
         return Err(Error::Config(format!(
@@ -409,8 +412,9 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
             job.input.display()
         )));
     }
-    let filter_part =
-        |job: &FilterJob, progress: Progress<'_>| filter_part(job, fingerprint, false, progress);
+    let filter_part = |job: &FilterJob, progress: Progress<'_>| {
+        filter_part(job, file, fingerprint, false, progress)
+    };
     let chosen: Vec<usize> = match &job.part {
         None => return filter_part(job, progress), // its error lists the parts
         Some(PartSelect::All) => {
@@ -433,9 +437,9 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
     }
     let all = matches!(job.part, Some(PartSelect::All));
     if all || (job.params.supersample == 1 && job.band.is_none() && !to_rgbe) {
-        filter_and_assemble(job, fingerprint, &parts, &chosen, progress)
+        filter_and_assemble(job, file, fingerprint, &parts, &chosen, progress)
     } else {
-        filter_one_part_of_many(job, fingerprint, &parts, chosen[0], to_rgbe, progress)
+        filter_one_part_of_many(job, file, fingerprint, &parts, chosen[0], to_rgbe, progress)
     }
 }
 
@@ -444,17 +448,18 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
 /// results put together into one output.
 fn filter_views(
     job: &FilterJob,
+    file: &InputFile,
     fingerprint: &Fingerprint,
     progress: Progress<'_>,
 ) -> Result<Report> {
     if job.view != Some(ViewSelect::All) {
-        return filter_part(job, fingerprint, false, progress);
+        return filter_part(job, file, fingerprint, false, progress);
     }
-    let views = crate::io::views::of(&job.input, job.part.as_ref())?;
+    let views = crate::io::reader::views(file.input(job.part.as_ref(), None, None)?.header());
     if views.len() < 2 {
         let mut one = job.clone();
         one.view = None;
-        let mut report = filter_part(&one, fingerprint, false, progress)?;
+        let mut report = filter_part(&one, file, fingerprint, false, progress)?;
         report.warnings.push(format!(
             "{}: --view all: the file has no other view to filter",
             job.input.display()
@@ -484,7 +489,7 @@ fn filter_views(
         sub.view = Some(ViewSelect::Name(v.clone()));
         sub.output = tmp.path().join(format!("view{i}.exr"));
         sub.format = Some(Format::Exr);
-        let mut r = filter_part(&sub, fingerprint, true, progress)?;
+        let mut r = filter_part(&sub, file, fingerprint, true, progress)?;
         let own = sub.output.display().to_string();
         let named = format!("{} (view {v:?})", job.output.display());
         for w in r.warnings.iter_mut() {
@@ -520,13 +525,14 @@ fn temp_dir_beside(output: &Path, prefix: &str) -> Result<tempfile::TempDir> {
 /// warning and the report as left out, with why.
 fn filter_one_part_of_many(
     job: &FilterJob,
+    file: &InputFile,
     fingerprint: &Fingerprint,
     parts: &[crate::io::parts::PartInfo],
     chosen: usize,
     to_rgbe: bool,
     progress: Progress<'_>,
 ) -> Result<Report> {
-    let mut report = filter_part(job, fingerprint, false, progress)?;
+    let mut report = filter_part(job, file, fingerprint, false, progress)?;
     let why = if to_rgbe {
         "a Radiance picture has one part".to_string()
     } else if job.band.is_some() {
@@ -570,6 +576,7 @@ fn filter_one_part_of_many(
 /// other parts (copied), in the input's order.
 fn filter_and_assemble(
     job: &FilterJob,
+    file: &InputFile,
     fingerprint: &Fingerprint,
     parts: &[crate::io::parts::PartInfo],
     chosen: &[usize],
@@ -582,7 +589,7 @@ fn filter_and_assemble(
     let mut entries = Vec::new();
     let mut warnings = Vec::new();
     for p in parts {
-        let (filter_it, left_out) = part_action(job, p, chosen);
+        let (filter_it, left_out) = part_action(job, file, p, chosen);
         if let Some(why) = left_out {
             warnings.push(format!(
                 "{}: part {:?} is left out: {why}",
@@ -596,7 +603,7 @@ fn filter_and_assemble(
             let mut sub = job.clone();
             sub.part = Some(PartSelect::Index(p.index));
             sub.output = tmp.path().join(format!("part{}.exr", p.index));
-            let mut r = filter_part(&sub, fingerprint, false, progress)?;
+            let mut r = filter_part(&sub, file, fingerprint, false, progress)?;
             // What it says of its file, it says of its part of the output.
             let own = sub.output.display().to_string();
             let named = format!("{} (part {:?})", job.output.display(), p.name);
@@ -652,6 +659,7 @@ fn filter_and_assemble(
 /// S > 1); neither: copy it.
 fn part_action(
     job: &FilterJob,
+    file: &InputFile,
     p: &crate::io::parts::PartInfo,
     chosen: &[usize],
 ) -> (bool, Option<String>) {
@@ -662,7 +670,7 @@ fn part_action(
     if all && !p.deep {
         let sel = PartSelect::Index(p.index);
         if let Err(Error::Unsupported { reason, .. }) =
-            ExrInput::open_layer(&job.input, Some(&sel), job.layer.as_deref())
+            file.input(Some(&sel), job.layer.as_deref(), None)
         {
             unfilterable = Some(reason);
         }
@@ -691,11 +699,12 @@ fn part_action(
 /// `--view all`, which carries nothing of the others.
 fn filter_part(
     job: &FilterJob,
+    file: &InputFile,
     fingerprint: &Fingerprint,
     exclusive: bool,
     progress: Progress<'_>,
 ) -> Result<Report> {
-    FilterPlan::build(job, fingerprint, exclusive)?.run(progress)
+    FilterPlan::build(job, file, fingerprint, exclusive)?.run(progress)
 }
 
 /// What the output leaves out of the input's channels, said as a warning

@@ -11,7 +11,7 @@ use crate::host::{cpu_seconds, default_max_memory};
 use crate::io::output::OutputLayout;
 use crate::io::provenance::Fingerprint;
 use crate::io::{
-    find_guides, find_stats, ExrInput, Format, FoundGuides, StatsChannels, ViewSelect,
+    find_guides, find_stats, ExrInput, Format, FoundGuides, InputFile, StatsChannels, ViewSelect,
 };
 use crate::pipeline::stream::MAX_CHANNELS;
 use crate::pipeline::{ChannelMode, StripLayout};
@@ -84,11 +84,12 @@ impl BandPlan {
 }
 
 impl<'a> FilterPlan<'a> {
-    /// Open `job`'s input (the part, layer and view it names) and settle the
-    /// run. `exclusive`: one view of `--view all`, which carries nothing of
+    /// Open the part, layer and view `job` names of its input `file`, and
+    /// settle the run. `exclusive`: one view of `--view all`, which carries nothing of
     /// the others; `fingerprint` goes into the output.
     pub fn build(
         job: &'a FilterJob,
+        file: &InputFile,
         fingerprint: &'a Fingerprint,
         exclusive: bool,
     ) -> Result<Self> {
@@ -97,8 +98,7 @@ impl<'a> FilterPlan<'a> {
             Some(ViewSelect::Name(v)) => Some(v.as_str()),
             _ => None,
         };
-        let mut input =
-            ExrInput::open_view(&job.input, job.part.as_ref(), job.layer.as_deref(), view)?;
+        let mut input = file.input(job.part.as_ref(), job.layer.as_deref(), view)?;
         // A picture (Radiance, PFM) holds the colour alone.
         let to_rgbe = job.output_format()? != Format::Exr;
         let scope = crate::io::reader::view_scope(&job.input, input.header(), view, exclusive)?;

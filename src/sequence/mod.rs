@@ -18,7 +18,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::error::{Error, Result};
-use crate::job::{existing_output, filter_file, Existing, FilterJob};
+use crate::io::InputFile;
+use crate::job::{existing_output, filter_opened, Existing, FilterJob};
 use crate::pipeline::Progress;
 use crate::report::Report;
 

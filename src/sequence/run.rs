@@ -3,8 +3,8 @@
 //! frame.
 
 use super::{
-    band_path, existing_output, filter_file, Error, Existing, FilterJob, FramePattern, Instant,
-    Progress, Report, Task,
+    band_path, existing_output, filter_opened, Error, Existing, FilterJob, FramePattern, InputFile,
+    Instant, Progress, Report, Task,
 };
 use crate::error::Result;
 use serde::Serialize;
@@ -169,15 +169,25 @@ fn run_frame(
     let mut fj = job.template.clone();
     fj.input = input.clone();
     fj.output = output;
-    let existing = if job.skip_existing && input.exists() {
-        existing_output(&fj)
-    } else {
-        Ok(Existing::Missing)
-    };
     if !input.exists() {
         outcome.status = FrameStatus::Failed;
         outcome.error = Some(format!("{}: no such file", input.display()));
-    } else if let Err(e) = existing {
+        return Ok(());
+    }
+    let file = match InputFile::open(&input) {
+        Ok(file) => file,
+        Err(e) => {
+            outcome.status = FrameStatus::Failed;
+            outcome.error = Some(crate::error::one_line(&e));
+            return Ok(());
+        }
+    };
+    let existing = if job.skip_existing {
+        existing_output(&fj, &file)
+    } else {
+        Ok(Existing::Missing)
+    };
+    if let Err(e) = existing {
         outcome.status = FrameStatus::Failed;
         outcome.error = Some(crate::error::one_line(&e));
     } else if existing.as_ref().is_ok_and(|e| *e == Existing::Done) {
@@ -186,7 +196,7 @@ fn run_frame(
         if let Ok(Existing::Redo(why)) = existing {
             outcome.redone = Some(why);
         }
-        match filter_file(&fj, progress) {
+        match filter_opened(&fj, &file, progress) {
             Ok(report) => {
                 outcome.status = FrameStatus::Done;
                 outcome.report = Some(Box::new(report));

@@ -40,8 +40,9 @@ fn one_file(a: &FilterArgs, skip_existing: bool, job: FilterJob) -> Result<(), E
     for path in a.report.iter().chain(&a.trace) {
         epfilt::io::Destination::resolve(path).map_err(fail)?;
     }
+    let file = epfilt::io::InputFile::open(&job.input).map_err(fail)?;
     if skip_existing {
-        match epfilt::job::existing_output(&job).map_err(fail)? {
+        match epfilt::job::existing_output(&job, &file).map_err(fail)? {
             Existing::Done => {
                 if !a.quiet {
                     eprintln!(
@@ -65,7 +66,7 @@ fn one_file(a: &FilterArgs, skip_existing: bool, job: FilterJob) -> Result<(), E
         }
     };
     let session = a.trace.as_ref().map(|_| epfilt::trace::start());
-    let report = epfilt::filter_file(&job, &progress);
+    let report = epfilt::filter_opened(&job, &file, &progress);
     if let Some(b) = &bar {
         b.finish_and_clear();
     }

@@ -74,7 +74,7 @@ pub(super) fn read_tables(
 
 /// The headers of the EXR file `bytes`, where its pixel data starts (past
 /// the offset tables) and the tables.
-pub(crate) fn parse_layout(path: &Path, bytes: &[u8]) -> Result<(MetaData, usize, Vec<Vec<u64>>)> {
+fn parse_layout(path: &Path, bytes: &[u8]) -> Result<(MetaData, usize, Vec<Vec<u64>>)> {
     let mut read = PeekRead::new(Tracking::new(bytes));
     let meta = parse_headers_from(path, &mut read)?;
     let (tables, start) = read_tables(path, bytes, &mut read, &meta)?;

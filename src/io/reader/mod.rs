@@ -8,6 +8,7 @@
 //! order. Consumed byte ranges are released from the page cache.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use exr::block::chunk::{Chunk, CompressedBlock, TileCoordinates};
 use exr::block::UncompressedBlock;
@@ -21,6 +22,7 @@ use rayon::iter::{IntoParallelRefIterator, ParallelIterator};
 mod ahead;
 mod blocks;
 mod decode;
+mod file;
 mod layers;
 mod pictures;
 mod source;
@@ -28,11 +30,11 @@ mod source;
 pub use blocks::MAX_EXACT_ID;
 pub(crate) use blocks::{
     block_bytes, channel_names, check_chunks, decode_checked, decode_zip_into, parse_headers,
-    parse_layout, parse_meta, read_chunk, text_attribute,
+    parse_meta, read_chunk, text_attribute,
 };
-use blocks::{
-    bytes_of, invalid, parse_headers_from, part_name, read_tables, reorder_planes, unsupported,
-};
+use blocks::{bytes_of, invalid, part_name, reorder_planes, unsupported};
+pub use file::InputFile;
+use file::Layout;
 pub(crate) use layers::{base_name, choose_channels, views};
 pub use layers::{view_scope, ViewSelect};
 pub use source::{ExrSource, InputSource, READ_AHEAD_BYTES};
@@ -120,7 +122,7 @@ pub(crate) struct Selected {
 #[derive(Debug)]
 pub struct ExrInput {
     path: PathBuf,
-    map: MappedFile,
+    map: Arc<MappedFile>,
     meta: MetaData,
     part: usize,
     selected: Vec<Selected>,
@@ -298,27 +300,35 @@ impl ExrInput {
         layer: Option<&str>,
         view: Option<&str>,
     ) -> Result<Self> {
-        let map = MappedFile::open(path)?;
-        if super::rgbe::is_rgbe(map.bytes()) {
-            if let Some(v) = view {
-                return Err(Error::Config(format!(
-                    "{}: a Radiance picture has no views (--view {v:?})",
-                    path.display()
-                )));
-            }
-            return Self::open_rgbe(path, map, part, layer);
-        }
-        if super::pfm::is_pfm(map.bytes()) {
-            return Self::open_pfm(path, map, part, layer, view);
-        }
-        let bytes = map.bytes();
-        let mut read = PeekRead::new(Tracking::new(bytes));
-        let meta = parse_headers_from(path, &mut read)?;
+        InputFile::open(path)?.input(part, layer, view)
+    }
 
-        // Choose the part before reading offset tables (their size is checked).
-        let part = choose_part(path, &meta, part)?;
-        // Offset tables: their total size must fit in the file.
-        let (tables, chunks_start) = read_tables(path, bytes, &mut read, &meta)?;
+    /// [`ExrInput::open_view`] of an opened file.
+    fn of_file(
+        file: &InputFile,
+        part: Option<&PartSelect>,
+        layer: Option<&str>,
+        view: Option<&str>,
+    ) -> Result<Self> {
+        let path = file.path();
+        let (meta, tables, chunks_start) = match file.layout() {
+            Layout::Rgbe => {
+                if let Some(v) = view {
+                    return Err(Error::Config(format!(
+                        "{}: a Radiance picture has no views (--view {v:?})",
+                        path.display()
+                    )));
+                }
+                return Self::open_rgbe(path, file.map(), part, layer);
+            }
+            Layout::Pfm => return Self::open_pfm(path, file.map(), part, layer, view),
+            Layout::Exr {
+                meta,
+                tables,
+                chunks_start,
+            } => (meta, tables, *chunks_start),
+        };
+        let part = choose_part(path, meta, part)?;
         let header = &meta.headers[part];
         check_filterable(path, header)?;
         let scope = view_scope(path, header, view, false)?;
@@ -331,11 +341,17 @@ impl ExrInput {
         };
         let (selected, dropped) = choose_channels(path, header, view_layer.as_deref())?;
 
-        let rows = block_rows(path, header, &tables[part], chunks_start, bytes.len())?;
+        let rows = block_rows(
+            path,
+            header,
+            &tables[part],
+            chunks_start,
+            file.bytes().len(),
+        )?;
         let input = ExrInput {
             path: path.into(),
-            map,
-            meta,
+            map: file.map(),
+            meta: MetaData::clone(meta),
             part,
             selected,
             rows,

@@ -3,6 +3,7 @@
 //! channels, so that every command reads them as it reads an EXR.
 
 use std::path::Path;
+use std::sync::Arc;
 
 use exr::meta::header::Header;
 use exr::meta::{MetaData, Requirements};
@@ -18,7 +19,7 @@ impl ExrInput {
     /// channels (R, G, B, or X, Y, Z for XYZE) with the picture's primaries.
     pub(super) fn open_rgbe(
         path: &Path,
-        map: MappedFile,
+        map: Arc<MappedFile>,
         part: Option<&PartSelect>,
         layer: Option<&str>,
     ) -> Result<Self> {
@@ -45,7 +46,7 @@ impl ExrInput {
     /// f32 channels (R, G, B, or Y for a grey map).
     pub(super) fn open_pfm(
         path: &Path,
-        map: MappedFile,
+        map: Arc<MappedFile>,
         part: Option<&PartSelect>,
         layer: Option<&str>,
         view: Option<&str>,
@@ -82,7 +83,7 @@ impl ExrInput {
     /// channels `names` in the picture's order.
     fn picture(
         path: &Path,
-        map: MappedFile,
+        map: Arc<MappedFile>,
         header: Header,
         names: &[&str],
         (rgbe, pfm): (Option<RgbeHeader>, Option<PfmHeader>),

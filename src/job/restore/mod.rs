@@ -20,8 +20,8 @@ use crate::filter::Method;
 use crate::host::{cpu_seconds, default_max_memory};
 use crate::io::output::OutputLayout;
 use crate::io::{
-    find_guides, find_stats, ExrInput, Format, GuideKind, GuideRequest, OutputSettings, Selection,
-    StatsRequest,
+    find_guides, find_stats, ExrInput, Format, GuideKind, GuideRequest, InputFile, OutputSettings,
+    Selection, StatsRequest,
 };
 use crate::pipeline::restore::{restore_stream, EnergyLayout, RenderStats, RestoreRun};
 use crate::pipeline::stream::MAX_CHANNELS;
@@ -286,11 +286,9 @@ impl RestorePlan {
         let mut energy = job.select.open(&job.energy)?;
         // A denoiser writes one image: the energy's part where it has parts
         // too, else its only one.
+        let denoised = InputFile::open(&job.denoised)?;
         let part = job.select.part.as_ref();
-        let denoised = match part.map(|p| ExrInput::open(&job.denoised, Some(p))) {
-            Some(Ok(d)) => d,
-            _ => ExrInput::open(&job.denoised, None)?,
-        };
+        let denoised = denoised.input(part.filter(|_| denoised.parts().len() > 1), None, None)?;
         let (keep_gain, keep_gain_from) = keep_gain(job, &energy);
         let params = RestoreParams { scale, keep_gain };
         let carried = carry(job, &mut energy)?;
