@@ -199,9 +199,7 @@ fn scene_table(
     crate::preview::write_png(
         &panels,
         &dir.join(format!("{name}.png")),
-        0.0,
         &Default::default(),
-        None,
     )?;
     Ok(table)
 }

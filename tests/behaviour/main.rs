@@ -18,6 +18,7 @@ mod foils;
 mod guides;
 mod invariance;
 mod parts;
+mod pictures;
 mod reference;
 mod restore;
 mod rgbe;

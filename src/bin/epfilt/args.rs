@@ -307,6 +307,12 @@ pub struct CompareArgs {
     /// from 1.
     #[arg(long)]
     pub warn_energy_error: Option<f64>,
+    /// Write where and how much the images differ as a PNG: each pixel's
+    /// luminance-weighted absolute difference, in false colour with a legend.
+    #[arg(long, value_name = "PNG")]
+    pub diff: Option<PathBuf>,
+    #[command(flatten)]
+    pub look: LookArgs,
 }
 
 #[derive(Args)]
@@ -328,6 +334,32 @@ pub struct PreviewArgs {
     /// Comma-separated labels for the montage.
     #[arg(long)]
     pub labels: Option<String>,
+    #[command(flatten)]
+    pub look: LookArgs,
+}
+
+/// How a PNG shows an image: its size, its crop, false colour.
+#[derive(Args)]
+pub struct LookArgs {
+    /// Shrink each image to at most this many pixels wide (the mean of the
+    /// area each pixel covers; never enlarged).
+    #[arg(long, value_name = "PIXELS")]
+    pub width: Option<usize>,
+    /// Show this rectangle of each image: WxH+X+Y, in pixels from the top
+    /// left (as oiiotool writes it).
+    #[arg(long, value_name = "WxH+X+Y")]
+    pub crop: Option<String>,
+    /// Luminance on a log scale in false colour, with a legend in the
+    /// image's units (as Radiance's falsecolor).
+    #[arg(long)]
+    pub false_color: bool,
+    /// The value at the top of the false-colour scale [default: a round
+    /// number above all but the brightest 0.1% of the first image].
+    #[arg(long, value_name = "VALUE")]
+    pub fc_top: Option<f64>,
+    /// How many factors of ten the false-colour scale spans below its top.
+    #[arg(long, value_name = "N", default_value_t = 4)]
+    pub fc_decades: u32,
 }
 
 #[derive(Args)]

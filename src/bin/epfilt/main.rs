@@ -19,7 +19,7 @@ use epfilt::io::{parse_compression, Format, PartSelect, Selection};
 use epfilt::synth::{Sampling, Scene, SceneKind, SynthJob};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use args::{Cli, Command, CompareArgs, PreviewArgs, RestoreArgs, SelectArgs, SynthArgs};
+use args::{Cli, Command, CompareArgs, LookArgs, PreviewArgs, RestoreArgs, SelectArgs, SynthArgs};
 
 fn main() {
     tune_allocator();
@@ -180,6 +180,13 @@ fn compare(a: CompareArgs) -> Result<(), Exit> {
         };
         Exit::Status(code, e.into())
     })?;
+    if let Some(png) = &a.diff {
+        check_binary_stdout(png)?;
+        let mut settings = look(&a.look, true)?;
+        settings.select = select.clone();
+        epfilt::preview::write_diff_png(&a.a, &a.b, png, &settings)
+            .map_err(|e| Exit::Status(compare_status::FILE, e.into()))?;
+    }
     if a.json {
         emit(&(serde_json::to_string_pretty(&cmp).map_err(fail)? + "\n"))?;
     } else {
@@ -353,8 +360,29 @@ fn preview(a: PreviewArgs) -> Result<(), Exit> {
         )));
     }
     let inputs: Vec<_> = paths.into_iter().zip(labels).collect();
-    epfilt::preview::write_png(&inputs, &out, a.exposure, &selection(&a.select), format)
-        .map_err(fail)
+    let mut settings = look(&a.look, a.look.false_color)?;
+    settings.exposure = a.exposure;
+    settings.select = selection(&a.select);
+    settings.format = format;
+    epfilt::preview::write_png(&inputs, &out, &settings).map_err(fail)
+}
+
+/// The preview settings `--width`, `--crop` and the false-colour flags
+/// give (`false_color`: whether false colour is on).
+fn look(a: &LookArgs, false_color: bool) -> Result<epfilt::preview::PreviewSettings, Exit> {
+    let crop = (a.crop.as_deref())
+        .map(epfilt::preview::Crop::parse)
+        .transpose()
+        .map_err(usage)?;
+    Ok(epfilt::preview::PreviewSettings {
+        width: a.width,
+        crop,
+        false_color: false_color.then_some(epfilt::preview::FalseColor {
+            top: a.fc_top,
+            decades: a.fc_decades,
+        }),
+        ..Default::default()
+    })
 }
 
 fn parse_size(s: &str) -> Result<(usize, usize)> {
