@@ -8,7 +8,7 @@ use serde::Serialize;
 use crate::error::{Error, Result};
 use crate::io::Selection;
 use crate::pipeline::ledger::CompensatedSum;
-use crate::pipeline::Source;
+use crate::pipeline::{Progress, Source};
 
 /// Differences of image A against reference B, over all channels and pixels.
 #[derive(Clone, Debug, Serialize)]
@@ -88,8 +88,14 @@ impl Comparison {
 }
 
 /// Compare `a` against the reference `b` (same size and channels), each
-/// read as `select` says (`--part`, `--layer`).
-pub fn compare_files(a: &Path, b: &Path, select: &Selection) -> Result<Comparison> {
+/// read as `select` says (`--part`, `--layer`); `progress(rows, total)`
+/// over its two reads.
+pub fn compare_files(
+    a: &Path,
+    b: &Path,
+    select: &Selection,
+    progress: Progress<'_>,
+) -> Result<Comparison> {
     let ia = select.open(a)?;
     let ib = select.open(b)?;
     if ia.size() != ib.size() || ia.channels() != ib.channels() {
@@ -112,7 +118,7 @@ pub fn compare_files(a: &Path, b: &Path, select: &Selection) -> Result<Compariso
             reason: format!("{}; {}: they differ in {what}", say(a, &ia), say(b, &ib)),
         });
     }
-    let (w, _) = ia.size();
+    let (w, h) = ia.size();
     let nch = ia.channels().len();
     // Pass 1: mean |b| for the relative error's eps (a second read of B keeps
     // memory flat instead of holding per-pixel terms).
@@ -127,6 +133,7 @@ pub fn compare_files(a: &Path, b: &Path, select: &Selection) -> Result<Compariso
             lum_b.add(lum[(k / w) % nch] * *v as f64);
             n += 1;
         }
+        progress(rb.y0 + rb.rows, 2 * h);
     }
     let mean_b = sum_b.value() / n.max(1) as f64;
     let display = crate::preview::Display::for_average(
@@ -162,6 +169,7 @@ pub fn compare_files(a: &Path, b: &Path, select: &Selection) -> Result<Compariso
                 differing += diff as u64;
             }
         }
+        progress(h + ra.y0 + ra.rows, 2 * h);
     }
     let n = n.max(1) as f64;
     Ok(Comparison {

@@ -166,13 +166,13 @@ fn scene_table(
         let out = dir.join(format!("{name}_{file}.exr"));
         let method = params.method;
         let report = filter_file(&job(&noisy, &out, params), &|_, _| {})?;
-        let cmp = compare_files(&out, &truth, &Default::default())?;
+        let cmp = compare_files(&out, &truth, &Default::default(), &|_, _| {})?;
         let through = if method == Method::Box {
             &truth
         } else {
             &truth_gauss
         };
-        let noise = compare_files(&out, through, &Default::default())?;
+        let noise = compare_files(&out, through, &Default::default(), &|_, _| {})?;
         let ratio: f64 =
             report.energy_out.iter().sum::<f64>() / report.energy_in.iter().sum::<f64>();
         log(&format!("  {label:<22} done in {:.2} s", report.seconds));
@@ -196,10 +196,7 @@ fn scene_table(
         panels.push((out, label));
     }
     panels.push((truth.clone(), "truth".to_string()));
-    crate::preview::write_png(
-        &panels,
-        &dir.join(format!("{name}.png")),
-        &Default::default(),
-    )?;
+    let png = dir.join(format!("{name}.png"));
+    crate::preview::write_png(&panels, &png, &Default::default(), &|_, _| {})?;
     Ok(table)
 }

@@ -156,7 +156,7 @@ pub fn plan_file(
         lum.clone(),
     );
     job.aux = aux.clone();
-    let l_ave = crate::pipeline::mean_luminance(input.source(), &job, 0)?;
+    let l_ave = crate::pipeline::mean_luminance(input.source(), &job, 0, &|_, _| {})?;
     let l_tvis = params
         .ltvis
         .unwrap_or_else(|| ep_box::ltvis(l_ave, params.nmid));

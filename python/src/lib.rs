@@ -487,7 +487,7 @@ fn settings() -> Vec<(&'static str, &'static str, bool)> {
 #[pyfunction]
 fn compare<'py>(py: Python<'py>, a: PathBuf, b: PathBuf) -> PyResult<Bound<'py, PyAny>> {
     let cmp = detached(py, move |_| {
-        epfilt::compare::compare_files(&a, &b, &epfilt::io::Selection::default())
+        epfilt::compare::compare_files(&a, &b, &epfilt::io::Selection::default(), &|_, _| {})
     })?;
     to_dict(py, &cmp)
 }

@@ -41,7 +41,11 @@ impl FilterPlan<'_> {
     /// Filter the input into the output, check the ledger and put the
     /// output in place; the report of the run.
     pub fn run(mut self, progress: Progress<'_>) -> Result<Report> {
-        let l_ave = self.first_pass()?;
+        // ep-box's first pass reads the input once before the stream: each
+        // is half of the progress.
+        let l_ave = self.first_pass(&|done, rows| progress(done, 2 * rows))?;
+        let second = |done, rows| progress(rows + done, 2 * rows);
+        let progress: Progress<'_> = if l_ave.is_some() { &second } else { progress };
         let settings = self.settings();
         let out_settings = self.output_settings(&settings);
         let mut output = self.layout.create(
@@ -91,7 +95,7 @@ impl FilterPlan<'_> {
 
     /// ep-box without `--ltvis`: `L_tvis = L_ave / N_MID` from a first pass
     /// over the input (Eq. 9).
-    fn first_pass(&mut self) -> Result<Option<f64>> {
+    fn first_pass(&mut self, progress: Progress<'_>) -> Result<Option<f64>> {
         let ep = &self.params.ep_box;
         if self.params.method != Method::EpBox || ep.ltvis.is_some() {
             return Ok(None);
@@ -100,6 +104,7 @@ impl FilterPlan<'_> {
             self.source(),
             &self.pipe_job,
             self.pipeline.strip_rows,
+            progress,
         )?;
         let l = crate::filter::ep_box::ltvis(mean, ep.nmid);
         if !(l.is_finite() && l > 0.0) {

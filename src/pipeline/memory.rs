@@ -122,7 +122,7 @@ pub fn filter_planar(
     let mut l_ave = None;
     if params.method == Method::EpBox && params.ep_box.ltvis.is_none() {
         let source = MemorySource::new(data.clone(), row_len);
-        let mean = mean_luminance(source, job, cfg.strip_rows)?;
+        let mean = mean_luminance(source, job, cfg.strip_rows, &|_, _| {})?;
         params.ep_box.ltvis = Some(crate::filter::ep_box::ltvis(mean, params.ep_box.nmid));
         l_ave = Some(mean);
     }

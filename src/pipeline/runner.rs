@@ -302,11 +302,13 @@ fn write_rows<K: Sink>(
 }
 
 /// The mean luminance of a source's filtered channels (the first pass of
-/// `ep-box`, for `L_ave` of Eq. 9), summed exactly (compensated) in row order.
+/// `ep-box`, for `L_ave` of Eq. 9), summed exactly (compensated) in row order;
+/// `progress(rows read, rows)`.
 pub fn mean_luminance<S: Source>(
     mut source: S,
     job: &StripLayout,
     strip_rows: usize,
+    progress: Progress<'_>,
 ) -> Result<f64> {
     let w = job.grid.in_w;
     let nall = job.strip_channels();
@@ -334,6 +336,7 @@ pub fn mean_luminance<S: Source>(
             total.merge(s);
         }
         count += strip.rows * w;
+        progress(strip.y0 + strip.rows, job.grid.in_h);
     }
     Ok(if count == 0 {
         0.0

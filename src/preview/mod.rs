@@ -25,7 +25,7 @@ use crate::error::{Error, Result};
 use crate::io::reader::InputSource;
 use crate::io::{ExrInput, Format, Selection};
 use crate::pipeline::ledger::CompensatedSum;
-use crate::pipeline::{Source, Strip};
+use crate::pipeline::{Progress, Source, Strip};
 
 /// Height of a line of the label band above each panel, in pixels.
 const LABEL_BAND: usize = 12;
@@ -35,6 +35,8 @@ const GAP: usize = 4;
 const STRIP_ROWS: usize = 64;
 /// The largest preview side, in pixels.
 const MAX_SIDE: usize = 1 << 20;
+/// Each of a preview's two reads' share of its progress, in steps.
+const PROGRESS_STEPS: usize = 1000;
 /// Values per pixel a panel makes: R, G, B, and what false colour shows.
 const K: usize = 4;
 /// The share of pixels a false-colour scale's top leaves above it.
@@ -147,16 +149,18 @@ impl Default for FalseColor {
 pub fn average_luminance(path: &Path) -> Result<f64> {
     let input = ExrInput::open(path, None)?;
     let crop = Crop::of(None, &input)?;
-    Ok(survey(&mut Rows::image(&input, crop), false)?.0)
+    Ok(survey(&mut Rows::image(&input, crop), false, &|_| {})?.0)
 }
 
 /// Write `inputs` (path, label) side by side as one sRGB PNG at `output`,
 /// under one mapping (from the first image), as `settings` say. With one
-/// input and no label, a plain preview.
+/// input and no label, a plain preview. `progress(done, total)`: the first
+/// image's rows read for the mapping, then the preview's rows.
 pub fn write_png(
     inputs: &[(PathBuf, String)],
     output: &Path,
     settings: &PreviewSettings,
+    progress: Progress<'_>,
 ) -> Result<()> {
     check_output(output, settings)?;
     if inputs.is_empty() {
@@ -175,13 +179,20 @@ pub fn write_png(
         })
         .collect();
     let first = Rows::image(&opened[0], crops[0]);
-    render(panels, first, output, settings, "lum")
+    render(panels, first, output, settings, ("lum", progress))
 }
 
 /// Write where and how much `a` differs from `b` (same size and channels)
 /// as a false-colour PNG at `output`: each pixel's luminance-weighted sum of
-/// the absolute differences of its channels, on a log scale with a legend.
-pub fn write_diff_png(a: &Path, b: &Path, output: &Path, settings: &PreviewSettings) -> Result<()> {
+/// the absolute differences of its channels, on a log scale with a legend;
+/// `progress` as for [`write_png`].
+pub fn write_diff_png(
+    a: &Path,
+    b: &Path,
+    output: &Path,
+    settings: &PreviewSettings,
+    progress: Progress<'_>,
+) -> Result<()> {
     check_output(output, settings)?;
     let (ia, ib) = (settings.select.open(a)?, settings.select.open(b)?);
     if ia.size() != ib.size() || ia.channels() != ib.channels() {
@@ -200,7 +211,8 @@ pub fn write_diff_png(a: &Path, b: &Path, output: &Path, settings: &PreviewSetti
         rows: Rows::diff(&ia, &ib, crop),
         label,
     }];
-    render(panels, Rows::diff(&ia, &ib, crop), output, settings, "diff")
+    let first = Rows::diff(&ia, &ib, crop);
+    render(panels, first, output, settings, ("diff", progress))
 }
 
 fn name(p: &Path) -> String {
@@ -240,14 +252,15 @@ struct Panel<'a> {
 
 /// The average of the first panel's luminance, and the value above all
 /// but `ABOVE_TOP` of its pixels' measures (when `top` is asked for).
-fn survey(rows: &mut Rows<'_>, top: bool) -> Result<(f64, f64)> {
+fn survey(rows: &mut Rows<'_>, top: bool, progress: &dyn Fn(usize)) -> Result<(f64, f64)> {
     let w = rows.crop.w;
     let mut px = vec![0.0; w * K];
     let mut sum = CompensatedSum::default();
     let bins = (DECADES_KEPT * BINS_PER_DECADE) as usize;
     let mut hist = vec![0u64; if top { bins } else { 0 }];
     let mut positive = 0u64;
-    for _ in 0..rows.crop.h {
+    for y in 0..rows.crop.h {
+        progress(y);
         rows.next(&mut px)?;
         for p in px.chunks_exact(K) {
             // The luminance is the measure of an image; a difference has
@@ -278,16 +291,19 @@ fn survey(rows: &mut Rows<'_>, top: bool) -> Result<(f64, f64)> {
 
 /// The PNG of `panels` side by side, mapped by what `first` (the first
 /// panel's rows, read once more) says, as `settings` ask; `legend` names the
-/// false-colour legend's quantity.
+/// false-colour legend's quantity. Progress is half the survey's rows, half
+/// the preview's.
 fn render(
     panels: Vec<Panel<'_>>,
     mut first: Rows<'_>,
     output: &Path,
     settings: &PreviewSettings,
-    legend: &str,
+    (legend, progress): (&str, Progress<'_>),
 ) -> Result<()> {
     let fc = settings.false_color;
-    let (mean, top) = survey(&mut first, fc.is_some_and(|f| f.top.is_none()))?;
+    let rows = first.crop.h;
+    let surveyed = |y: usize| progress(y * PROGRESS_STEPS / rows, 2 * PROGRESS_STEPS);
+    let (mean, top) = survey(&mut first, fc.is_some_and(|f| f.top.is_none()), &surveyed)?;
     drop(first);
     let display = Display::for_average(mean, settings.exposure);
     let scale = fc.map(|f| LogScale {
@@ -353,6 +369,10 @@ fn render(
             put(&row)?;
         }
         for y in 0..panels_h {
+            progress(
+                PROGRESS_STEPS + y * PROGRESS_STEPS / panels_h,
+                2 * PROGRESS_STEPS,
+            );
             row.iter_mut().for_each(|b| *b = BACKGROUND);
             let mut x0 = 0;
             for (s, &w) in states.iter_mut().zip(&widths) {

@@ -899,3 +899,37 @@ fn the_carriers_rule_at_its_edges() {
     assert!(out.data.iter().all(|v| v.is_finite()), "{:?}", s.eb());
     assert!(exact(&s));
 }
+
+#[test]
+fn progress_covers_the_first_pass_then_the_stream() {
+    let dir = crate::exr_io::tmpdir();
+    let input = dir.path().join("pt.exr");
+    let out = dir.path().join("out.exr");
+    let i = input.to_str().expect("UTF-8 path");
+    crate::common::epfilt_ok(&[
+        "synth",
+        "-q",
+        "-o",
+        i,
+        "--spp",
+        "16",
+        "--variance",
+        "--size",
+        "48x40",
+    ]);
+    let job = epfilt::FilterJob::new(&input, &out, FilterParams::new(Method::EpBox, 1));
+    let calls = std::sync::Mutex::new(Vec::new());
+    epfilt::filter_file(&job, &|done, total| {
+        calls.lock().unwrap().push((done, total))
+    })
+    .expect("filter");
+    let calls = calls.into_inner().unwrap();
+    let share: Vec<f64> = calls.iter().map(|&(d, t)| d as f64 / t as f64).collect();
+    // The first pass reports the first half, the stream the second (of
+    // twice the 40 rows); never backwards, and done at the end.
+    assert!(calls.iter().all(|&(_, t)| t == 2 * 40), "{calls:?}");
+    assert!(share.first().is_some_and(|&s| s <= 0.5), "{calls:?}");
+    assert!(share.contains(&0.5), "{calls:?}");
+    assert!(share.windows(2).all(|w| w[0] <= w[1]), "{calls:?}");
+    assert_eq!(share.last(), Some(&1.0), "{calls:?}");
+}

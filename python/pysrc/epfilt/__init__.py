@@ -105,7 +105,8 @@ def filter_file(input, output, *, progress=None, **settings):
         ``frames=``, ``task_index=``/``task_count=``; one band with ``band="3/8"``.
     settings: the command line's options with underscores (``method="ep-box"``,
         ``compression="zip"``, ``skip_existing=True``, ``threads=8``).
-    progress: a callable ``progress(done, total)`` (output rows; frames of a sequence),
+    progress: a callable ``progress(done, total)`` (output rows, twice over when ep-box reads
+        the input once before filtering it; frames of a sequence),
         called from the calling thread as the run advances; an exception it raises stops
         the run, leaving no output.
 

@@ -307,6 +307,9 @@ pub struct CompareArgs {
     /// from 1.
     #[arg(long)]
     pub warn_energy_error: Option<f64>,
+    /// No progress bar.
+    #[arg(long, short = 'q')]
+    pub quiet: bool,
     /// Write where and how much the images differ as a PNG: each pixel's
     /// luminance-weighted absolute difference, in false colour with a legend.
     #[arg(long, value_name = "PNG")]
@@ -331,11 +334,14 @@ pub struct PreviewArgs {
     /// Place the inputs side by side with labels (file names, or --labels).
     #[arg(long)]
     pub montage: bool,
-    /// Comma-separated labels for the montage.
+    /// Comma-separated labels for the montage (a newline starts another line).
     #[arg(long)]
     pub labels: Option<String>,
     #[command(flatten)]
     pub look: LookArgs,
+    /// No progress bar.
+    #[arg(long, short = 'q')]
+    pub quiet: bool,
 }
 
 /// How a PNG shows an image: its size, its crop, false colour.

@@ -10,7 +10,13 @@ use epfilt::sequence::{FramePattern, FrameStatus, SequenceJob};
 use epfilt::FilterJob;
 
 use crate::args::FilterArgs;
-use crate::{check_binary_stdout, fail, progress_bar, usage, warn, write_report, Exit};
+use crate::{
+    check_binary_stdout, fail, image_pixels, progress_bar, read_stdin, usage, warn, write_report,
+    Exit,
+};
+
+/// A frame's share of a sequence's progress bar, in steps.
+const FRAME_STEPS: u64 = 1000;
 
 /// Run `filter`: one file, or a frame sequence.
 pub fn run(mut a: FilterArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
@@ -40,6 +46,7 @@ fn one_file(a: &FilterArgs, skip_existing: bool, job: FilterJob) -> Result<(), E
     for path in a.report.iter().chain(&a.trace) {
         epfilt::io::Destination::resolve(path).map_err(fail)?;
     }
+    read_stdin(a.quiet, [job.input.as_path()]);
     let file = epfilt::io::InputFile::open(&job.input).map_err(fail)?;
     if skip_existing {
         match epfilt::job::existing_output(&job, &file).map_err(fail)? {
@@ -58,7 +65,11 @@ fn one_file(a: &FilterArgs, skip_existing: bool, job: FilterJob) -> Result<(), E
             _ => {}
         }
     }
-    let bar = progress_bar(a.quiet);
+    let pixels = (file
+        .input(job.part.as_ref(), job.layer.as_deref(), None)
+        .ok())
+    .map(|i| i.size().0 as f64 * i.size().1 as f64);
+    let bar = progress_bar(a.quiet, pixels);
     let progress = |done: usize, total: usize| {
         if let Some(b) = &bar {
             b.set_length(total as u64);
@@ -123,11 +134,26 @@ fn sequence(a: &FilterArgs, job: SequenceJob) -> Result<(), Exit> {
     if let Some(path) = &a.report {
         epfilt::io::Destination::resolve(path).map_err(fail)?;
     }
-    let bar = progress_bar(a.quiet);
+    // One bar for the whole sequence: each frame a thousandth part at a
+    // time, the rate from the first frame's size, the ETA the sequence's.
+    let n = job.frames.len();
+    let first = job.frames.first().map(|&f| job.input.path(f));
+    let select = epfilt::io::Selection {
+        part: job.template.part.clone(),
+        layer: job.template.layer.clone(),
+    };
+    let pixels = first
+        .and_then(|p| image_pixels(&p, &select))
+        .map(|px| px * n as f64);
+    let bar = progress_bar(a.quiet, pixels);
+    let position = std::sync::atomic::AtomicUsize::new(0);
     let progress = |done: usize, total: usize| {
         if let Some(b) = &bar {
-            b.set_length(total as u64);
-            b.set_position(done as u64);
+            let k = position.load(std::sync::atomic::Ordering::Relaxed);
+            b.set_length(n as u64 * FRAME_STEPS);
+            b.set_position(
+                k as u64 * FRAME_STEPS + (done * FRAME_STEPS as usize / total.max(1)) as u64,
+            );
         }
     };
     let quiet = a.quiet;
@@ -138,6 +164,7 @@ fn sequence(a: &FilterArgs, job: SequenceJob) -> Result<(), Exit> {
     let on_frame = |e: epfilt::sequence::FrameEvent<'_>| {
         let (k, n, frame) = (e.position, e.of, e.frame);
         let Some(o) = e.outcome else {
+            position.store(k, std::sync::atomic::Ordering::Relaxed);
             if let Some(b) = &bar {
                 b.set_message(format!("frame {frame} [{}/{n}]", k + 1));
             }

@@ -172,8 +172,13 @@ mod compare_status {
 }
 
 fn compare(a: CompareArgs) -> Result<(), Exit> {
+    read_stdin(a.quiet, [a.a.as_path(), a.b.as_path()]);
     let select = selection(&a.select);
-    let cmp = epfilt::compare::compare_files(&a.a, &a.b, &select).map_err(|e| {
+    let pixels = image_pixels(&a.a, &select).map(|px| 2.0 * px);
+    let compared = with_progress(a.quiet, pixels, |p| {
+        epfilt::compare::compare_files(&a.a, &a.b, &select, p)
+    });
+    let cmp = compared.map_err(|e| {
         let code = match e {
             epfilt::Error::Mismatch { .. } => compare_status::MISMATCH,
             _ => compare_status::FILE,
@@ -184,8 +189,11 @@ fn compare(a: CompareArgs) -> Result<(), Exit> {
         check_binary_stdout(png)?;
         let mut settings = look(&a.look, true)?;
         settings.select = select.clone();
-        epfilt::preview::write_diff_png(&a.a, &a.b, png, &settings)
-            .map_err(|e| Exit::Status(compare_status::FILE, e.into()))?;
+        let pixels = image_pixels(&a.a, &select).map(|px| 2.0 * px);
+        with_progress(a.quiet, pixels, |p| {
+            epfilt::preview::write_diff_png(&a.a, &a.b, png, &settings, p)
+        })
+        .map_err(|e| Exit::Status(compare_status::FILE, e.into()))?;
     }
     if a.json {
         emit(&(serde_json::to_string_pretty(&cmp).map_err(fail)? + "\n"))?;
@@ -220,6 +228,7 @@ fn compare(a: CompareArgs) -> Result<(), Exit> {
 }
 
 fn restore(mut a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
+    read_stdin(a.quiet, [a.energy.as_path(), a.denoised.as_path()]);
     if a.json {
         a.report = Some("-".into());
     }
@@ -243,7 +252,8 @@ fn restore(mut a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
                 .ok_or_else(|| usage(anyhow::anyhow!("unknown compression {c:?}")))?,
         );
     }
-    let r = with_progress(a.quiet, |p| epfilt::restore_file(&job, p)).map_err(fail)?;
+    let pixels = image_pixels(&job.energy, &job.select);
+    let r = with_progress(a.quiet, pixels, |p| epfilt::restore_file(&job, p)).map_err(fail)?;
     if let Some(path) = &a.report {
         write_report(path, &r)?;
     }
@@ -325,6 +335,7 @@ fn exact_scales(r: &epfilt::job::restore::RestoreReport) -> String {
 }
 
 fn preview(a: PreviewArgs) -> Result<(), Exit> {
+    read_stdin(a.quiet, a.paths.iter().rev().skip(1).map(|p| p.as_path()));
     let mut paths = a.paths;
     let out = paths
         .pop()
@@ -364,7 +375,11 @@ fn preview(a: PreviewArgs) -> Result<(), Exit> {
     settings.exposure = a.exposure;
     settings.select = selection(&a.select);
     settings.format = format;
-    epfilt::preview::write_png(&inputs, &out, &settings).map_err(fail)
+    let pixels = image_pixels(&inputs[0].0, &settings.select).map(|px| 2.0 * px);
+    with_progress(a.quiet, pixels, |p| {
+        epfilt::preview::write_png(&inputs, &out, &settings, p)
+    })
+    .map_err(fail)
 }
 
 /// The preview settings `--width`, `--crop` and the false-colour flags
@@ -428,7 +443,12 @@ fn synth(a: SynthArgs) -> Result<(), Exit> {
             .transpose()
             .map_err(usage)?,
     };
-    let r = with_progress(a.quiet, |p| epfilt::synth::synth(&job, p)).map_err(fail)?;
+    let samples = match job.sampling {
+        Sampling::Supersample(s) => s * s,
+        Sampling::Spp(_) => 1,
+    };
+    let pixels = Some((w * h * samples) as f64);
+    let r = with_progress(a.quiet, pixels, |p| epfilt::synth::synth(&job, p)).map_err(fail)?;
     if !a.quiet {
         eprintln!(
             "{}: {}x{}{} in {:.2} s{}",
@@ -463,10 +483,14 @@ fn warn(text: &str) {
     eprintln!("epfilt: warning: {text}");
 }
 
-/// Run `work` with a progress bar of rows (none under `-q` or off a
-/// terminal), cleared when it ends.
-fn with_progress<T>(quiet: bool, work: impl FnOnce(epfilt::pipeline::Progress<'_>) -> T) -> T {
-    let bar = progress_bar(quiet);
+/// Run `work` with a progress bar (none under `-q` or off a terminal),
+/// cleared when it ends; `pixels`: the image's, for the rate.
+fn with_progress<T>(
+    quiet: bool,
+    pixels: Option<f64>,
+    work: impl FnOnce(epfilt::pipeline::Progress<'_>) -> T,
+) -> T {
+    let bar = progress_bar(quiet, pixels);
     let result = work(&|done, total| {
         if let Some(b) = &bar {
             b.set_length(total as u64);
@@ -479,20 +503,60 @@ fn with_progress<T>(quiet: bool, work: impl FnOnce(epfilt::pipeline::Progress<'_
     result
 }
 
-fn progress_bar(quiet: bool) -> Option<ProgressBar> {
+/// A progress bar on standard error when it is a terminal: the share done,
+/// the rate in megapixels a second of `pixels` (the whole work's, when
+/// known), the time spent and the time left. It ticks between updates: a
+/// wide strip takes seconds.
+fn progress_bar(quiet: bool, pixels: Option<f64>) -> Option<ProgressBar> {
     if quiet || !std::io::stderr().is_terminal() {
         return None;
     }
     let b = ProgressBar::new(0);
+    let rate = move |s: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
+        let secs = s.elapsed().as_secs_f64();
+        if let (Some(px), true) = (pixels, secs > 0.5) {
+            let _ = write!(w, "{:6.1} Mpx/s", s.fraction() as f64 * px / secs / 1e6);
+        }
+    };
     b.set_style(
         ProgressStyle::with_template(
-            "{spinner} {msg} {wide_bar} {pos}/{len} rows  {elapsed_precise} eta {eta}",
+            "{spinner} {msg} {wide_bar} {percent:>3}% {rate}  {elapsed_precise} eta {eta}",
         )
+        .map(|s| s.with_key("rate", rate))
         .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    // It moves between strips too: a wide strip takes seconds.
     b.enable_steady_tick(std::time::Duration::from_millis(250));
     Some(b)
+}
+
+/// Where one of `inputs` is standard input, read it now with a spinner
+/// that counts what came (none under `-q` or off a terminal): a pipe gives
+/// no sign of its size, and the reading can take minutes.
+fn read_stdin<'a>(quiet: bool, inputs: impl IntoIterator<Item = &'a Path>) {
+    if !inputs.into_iter().any(epfilt::io::stdin::is_stdin) {
+        return;
+    }
+    let bar = (!quiet && std::io::stderr().is_terminal()).then(|| {
+        let b = ProgressBar::new_spinner();
+        b.enable_steady_tick(std::time::Duration::from_millis(250));
+        b
+    });
+    epfilt::io::stdin::read_now(&|bytes| {
+        if let Some(b) = &bar {
+            b.set_message(format!("reading standard input: {} MiB", bytes >> 20));
+        }
+    });
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+}
+
+/// The pixels of the image `select` names in `path` (`None` where it
+/// cannot be opened: the command says why).
+fn image_pixels(path: &Path, select: &epfilt::io::Selection) -> Option<f64> {
+    let input = select.open(path).ok()?;
+    let (w, h) = input.size();
+    Some(w as f64 * h as f64)
 }
 
 /// Write `--report`'s JSON (`-`: standard output).
