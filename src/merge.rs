@@ -155,11 +155,13 @@ fn cover_once(bands: &[BandFile]) -> Result<()> {
 }
 
 /// Merge `parts` (in any order) into `output` (`format`: `--format`, for
-/// a name that does not end in `.exr`).
+/// a name that does not end in `.exr`); `progress(rows, of)` as blocks are
+/// copied.
 pub fn merge(
     parts: &[PathBuf],
     output: &Path,
     format: Option<crate::io::Format>,
+    progress: crate::pipeline::Progress<'_>,
 ) -> Result<MergeReport> {
     let start = Instant::now();
     if parts.is_empty() {
@@ -186,7 +188,7 @@ pub fn merge(
     cover_once(&bands)?;
     let (first, n) = (&bands[0], bands[0].n);
     let staged = crate::io::Staged::new(output, ".exr.tmp")?;
-    let copied = crate::io::bands::write_merged(&bands, output, &staged)?;
+    let copied = crate::io::bands::write_merged(&bands, output, &staged, progress)?;
     // The ledger: the bands' shares added up.
     let names: Vec<String> = first.ledger.iter().map(|l| l.0.clone()).collect();
     let mut sum_in = vec![CompensatedSum::default(); names.len()];

@@ -120,7 +120,12 @@ impl BandFile {
 /// Write `bands` (one run's, in order, covering the image once) into
 /// `staged` as one file (`output` names it in messages); returns the bytes
 /// of compressed blocks copied.
-pub fn write_merged(bands: &[BandFile], output: &Path, staged: &Staged) -> Result<u64> {
+pub fn write_merged(
+    bands: &[BandFile],
+    output: &Path,
+    staged: &Staged,
+    progress: crate::pipeline::Progress<'_>,
+) -> Result<u64> {
     let reference = bands[0].whole_header();
     let lines = reference.compression.scan_lines_per_block();
     let y0 = reference.own_attributes.layer_position.1;
@@ -159,6 +164,8 @@ pub fn write_merged(bands: &[BandFile], output: &Path, staged: &Staged) -> Resul
                     let index = (y - y0) as usize / lines;
                     copied += block.compressed_pixels_le.len() as u64;
                     writer.write_chunk(index, chunk)?;
+                    let done = ((y - y0) as usize + lines).min(b.of);
+                    progress(done, b.of);
                 }
             }
             Ok(())

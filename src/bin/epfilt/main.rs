@@ -116,7 +116,10 @@ fn dispatch(cli: Cli, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
                 .transpose()
                 .map_err(usage)?;
             check_binary_stdout(&out)?;
-            let r = epfilt::merge::merge(&paths, &out, format).map_err(fail)?;
+            let r = with_progress(quiet, None, |p| {
+                epfilt::merge::merge(&paths, &out, format, p)
+            })
+            .map_err(fail)?;
             if let Some(path) = &report {
                 write_report(path, &r)?;
             }
