@@ -461,24 +461,30 @@ fn info<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyAny>> {
     to_dict(py, &described)
 }
 
-/// Every setting `filter_file` takes by name, with how it takes its value
-/// (`flag`, `value` or `list`) and whether it names files or their layout
-/// (`filter` on arrays takes the others): the library's tables, which the
-/// stubs' `FilterSettings` and `ArraySettings` are checked against.
+/// Every setting `filter_file` and `restore_file` take by name, with how it
+/// takes its value (`flag`, `value` or `list`), whether it names files or
+/// their layout (the array functions take the others) and which of them
+/// takes it (`filter`, `restore` or `both`): the library's tables, which the
+/// stubs' settings are checked against.
 #[pyfunction]
-fn settings() -> Vec<(&'static str, &'static str, bool)> {
-    use epfilt::job::options::{Kind, OPTIONS};
+fn settings() -> Vec<(&'static str, &'static str, bool, &'static str)> {
+    use epfilt::job::options::{Command, Kind, OptionDef, OPTIONS};
     let kind = |k: Kind| match k {
         Kind::Flag => "flag",
         Kind::Value => "value",
         Kind::List => "list",
     };
+    let commands = |d: &OptionDef| match (d.takes(Command::Filter), d.takes(Command::Restore)) {
+        (true, true) => "both",
+        (false, true) => "restore",
+        _ => "filter",
+    };
     (OPTIONS.iter())
-        .map(|d| (d.name, kind(d.kind), d.files_only))
+        .map(|d| (d.name, kind(d.kind), d.files_only, commands(d)))
         .chain(
             epfilt::filter::settings::KNOBS
                 .iter()
-                .map(|k| (k.name, "value", false)),
+                .map(|k| (k.name, "value", false, "filter")),
         )
         .collect()
 }
@@ -543,23 +549,35 @@ fn read<'py>(
 }
 
 /// A denoiser's output with the energy of `energy` put back; see the stub.
-/// (Python's keyword arguments, one each.)
+/// Its settings are `restore_file`'s but those naming files. (Python's
+/// keyword arguments, one each.)
 #[allow(clippy::too_many_arguments)]
 #[pyfunction]
-#[pyo3(signature = (denoised, energy, scale=None, *, keep_gain=None, emission=None, variance=None, spp=None, channels=None, threads=0, nonfinite="error"))]
+#[pyo3(signature = (denoised, energy, scale=None, *, emission=None, variance=None, spp=None, channels=None, **settings))]
 fn restore<'py>(
     py: Python<'py>,
     denoised: &Bound<'py, PyAny>,
     energy: &Bound<'py, PyAny>,
     scale: Option<usize>,
-    keep_gain: Option<f64>,
     emission: Option<&Bound<'py, PyAny>>,
     variance: Option<&Bound<'py, PyAny>>,
     spp: Option<&Bound<'py, PyAny>>,
     channels: Option<Vec<String>>,
-    threads: usize,
-    nonfinite: &str,
+    settings: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    let mut named = settings_of(settings)?;
+    if let Some(s) = scale {
+        named.push(("scale".into(), Setting::Value(s.to_string())));
+    }
+    let opts = epfilt::job::FilterOptions::for_restore(named).map_err(to_py)?;
+    let files = opts.files_only_given();
+    if !files.is_empty() {
+        return Err(config_error(format!(
+            "{} appl{} to files: use restore_file",
+            files.join(", "),
+            if files.len() == 1 { "ies" } else { "y" }
+        )));
+    }
     let (d, dshape, _) = samples_of(denoised, "denoised")?;
     let (e, eshape, _) = samples_of(energy, "energy")?;
     let em = match emission {
@@ -582,8 +600,9 @@ fn restore<'py>(
     let ([h, w, c], flat) = image_shape(&eshape, "energy")?;
     let (variance, spp_counts, spp_fixed) = statistics_of(variance, spp, (h, w))?;
     let channels = channel_names(channels, c)?;
-    let nonfinite = epfilt::pipeline::NonFinite::parse(nonfinite).map_err(to_py)?;
-    let scale = scale.unwrap_or(epfilt::filter::restore::DEFAULT_SCALE);
+    let (threads, capped) = epfilt::job::options::cap_threads(opts.threads);
+    warn_all(py, capped.as_slice())?;
+    let (scale, keep_gain, nonfinite) = (opts.scale, opts.keep_gain, opts.nonfinite);
     let (out, report) = detached(py, |cancel| {
         let input = epfilt::job::restore::RestoreArrays {
             denoised: &d,
@@ -610,51 +629,23 @@ fn restore<'py>(
     Ok((image, to_dict(py, &report)?))
 }
 
-/// `restore` from file to file, streamed; see the stub. (Python's keyword
-/// arguments, one each.)
-#[allow(clippy::too_many_arguments)]
+/// `restore` from file to file, streamed; see the stub. Its settings are
+/// the command line's, by the library's table.
 #[pyfunction]
-#[pyo3(signature = (denoised, energy, output, *, scale=None, keep_gain=None, guides="auto", guide=None, part=None, layer=None, channel_rule=None, compression=None, threads=0, max_memory=None, nonfinite="error", progress=None))]
+#[pyo3(signature = (denoised, energy, output, *, progress=None, **settings))]
 fn restore_file<'py>(
     py: Python<'py>,
     denoised: PathBuf,
     energy: PathBuf,
     output: PathBuf,
-    scale: Option<usize>,
-    keep_gain: Option<f64>,
-    guides: &str,
-    guide: Option<Vec<String>>,
-    part: Option<String>,
-    layer: Option<String>,
-    channel_rule: Option<Vec<String>>,
-    compression: Option<String>,
-    threads: usize,
-    max_memory: Option<u64>,
-    nonfinite: &str,
     progress: Option<PyObject>,
+    settings: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let mut job = epfilt::RestoreJob::new(denoised, energy, output);
-    job.channel_rules = (channel_rule.unwrap_or_default().iter())
-        .map(|r| epfilt::filter::channels::RuleOverride::parse(r))
-        .collect::<epfilt::Result<_>>()
+    let opts = epfilt::job::FilterOptions::for_restore(settings_of(settings)?).map_err(to_py)?;
+    let (mut job, capped) = opts
+        .restore_job((denoised, energy, output), None)
         .map_err(to_py)?;
-    job.max_memory = max_memory.map(|m| m.saturating_mul(1 << 20));
-    job.scale = scale.unwrap_or(epfilt::filter::restore::DEFAULT_SCALE);
-    job.keep_gain = keep_gain;
-    job.threads = threads;
-    job.nonfinite = epfilt::pipeline::NonFinite::parse(nonfinite).map_err(to_py)?;
-    job.guides =
-        epfilt::io::GuideRequest::parse(guides, &guide.unwrap_or_default()).map_err(to_py)?;
-    job.select = epfilt::io::Selection {
-        part: part.as_deref().map(epfilt::io::PartSelect::parse),
-        layer,
-    };
-    if let Some(c) = compression {
-        job.output_settings.compression = Some(
-            epfilt::io::parse_compression(&c)
-                .ok_or_else(|| config_error(format!("unknown compression {c:?}")))?,
-        );
-    }
+    warn_all(py, capped.as_slice())?;
     let (tick, report_rows) = ticker(progress);
     let report = detached_with(
         py,

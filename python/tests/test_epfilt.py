@@ -479,9 +479,9 @@ def test_restore_file_is_the_cli_streamed(variance_scene, tmp_path):
 
 
 def test_the_stubs_settings_are_the_librarys():
-    """`FilterSettings` and `ArraySettings` in the stubs name every setting the
-    library's tables hold, typed by how each takes its value: a stub that
-    drifts from the tables fails here."""
+    """The stubs' settings (`FilterSettings`, `ArraySettings`, `RestoreSettings`,
+    `RestoreArraySettings`) name every setting the library's table gives each
+    command, typed by how each takes its value: a stub that drifts fails here."""
     import ast
     import pathlib
 
@@ -498,11 +498,36 @@ def test_the_stubs_settings_are_the_librarys():
                 own = {**keys(base.id), **own}
         return own
 
-    typed = {name: keys(name) for name in ("FilterSettings", "ArraySettings")}
+    names = ("FilterSettings", "ArraySettings", "RestoreSettings", "RestoreArraySettings")
+    typed = {name: keys(name) for name in names}
     kinds = {"flag": "bool", "value": "_Value", "list": "Sequence[str]"}
     table = epfilt._epfilt.settings()
     assert len(table) > 50
-    assert typed["FilterSettings"] == {name: kinds[kind] for name, kind, _ in table}
-    explicit = {"supersample", "method", "spp"}  # filter's own parameters
-    arrays = {name: kinds[kind] for name, kind, files in table if not files and name not in explicit}
-    assert typed["ArraySettings"] == arrays
+
+    def of(command, arrays=False, explicit=()):
+        """The settings `command` takes, those naming files left out for arrays."""
+        return {name: kinds[kind] for name, kind, files, takes in table
+                if takes in (command, "both") and not (arrays and files) and name not in explicit}
+
+    assert typed["FilterSettings"] == of("filter")
+    # filter's and restore's own parameters are not among the keywords.
+    assert typed["ArraySettings"] == of("filter", True, {"supersample", "method", "spp"})
+    assert typed["RestoreSettings"] == of("restore")
+    assert typed["RestoreArraySettings"] == of("restore", True, {"scale"})
+
+
+def test_restore_takes_the_command_lines_settings_and_names_the_others(tmp_path):
+    """restore and restore_file read their settings from the library's table:
+    a setting of filter's alone, or one naming files given to arrays, is a
+    ConfigError that says what restore takes."""
+    rng = np.random.default_rng(5)
+    energy = rng.random((24, 32, 3)).astype(np.float32)
+    denoised = np.full_like(energy, energy.mean())
+    with pytest.raises(epfilt.ConfigError, match="restore's settings are: .*keep_gain"):
+        epfilt.restore(denoised, energy, tolerance=0.1)
+    with pytest.raises(epfilt.ConfigError, match="restore_file"):
+        epfilt.restore(denoised, energy, part="0")
+    out, rep = epfilt.restore(denoised, energy, 8, threads="1", nonfinite="zero")
+    assert max(abs(line["rel_error"]) for line in rep["ledger"]) < LEDGER_TOL
+    with pytest.raises(epfilt.ConfigError, match="restore's settings"):
+        epfilt.restore_file(tmp_path / "d.exr", tmp_path / "e.exr", tmp_path / "o.exr", radius=2)

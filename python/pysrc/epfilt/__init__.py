@@ -117,8 +117,8 @@ def filter_file(input, output, *, progress=None, **settings):
     return _epfilt.filter_file(str(input), str(output), progress=progress, **settings)
 
 
-def restore(denoised, energy, scale=None, *, keep_gain=None, emission=None, variance=None,
-            spp=None, channels=None, threads=0, nonfinite="error"):
+def restore(denoised, energy, scale=None, *, emission=None, variance=None, spp=None,
+            channels=None, **settings):
     """A denoiser's output with ``energy``'s energy put back, closer to the truth than
     either, and the report.
 
@@ -141,7 +141,8 @@ def restore(denoised, energy, scale=None, *, keep_gain=None, emission=None, vari
     ``keep_gain=1`` where ``energy`` is ``filter``'s ep-gauss or ep-box output (its
     fireflies already spread: what still exceeds the denoiser is a feature).
     ``nonfinite``: "error" refuses NaN or infinite values (of either image, naming the
-    pixel), "zero" counts them as zero. The result is float32.
+    pixel), "zero" counts them as zero. ``settings``: ``restore_file``'s but those naming
+    files (``keep_gain``, ``nonfinite``, ``threads``, ``guides``). The result is float32.
 
     With Intel OIDN as its users run it, with the render's albedo and normal
     (``pip install epfilt[oidn]``; ``denoise_file`` does all of this for a file)::
@@ -153,9 +154,8 @@ def restore(denoised, energy, scale=None, *, keep_gain=None, emission=None, vari
         denoised = pyoidn.denoise(render, albedo, normal, hdr=True, quality="high")
         restored, report = epfilt.restore(np.asarray(denoised, np.float32), render)
     """
-    return _epfilt.restore(denoised, energy, scale, keep_gain=keep_gain, emission=emission,
-                           variance=variance, spp=spp, channels=channels, threads=threads,
-                           nonfinite=nonfinite)
+    return _epfilt.restore(denoised, energy, scale, emission=emission, variance=variance,
+                           spp=spp, channels=channels, **settings)
 
 
 def denoise_file(render, output, *, denoised=None, quality="high", **restore_settings):
@@ -212,10 +212,13 @@ def _write_pfm(path, rgb):
         f.write(np.ascontiguousarray(rgb[::-1], dtype="<f4").tobytes())
 
 
-def restore_file(denoised, energy, output, *, scale=None, keep_gain=None, guides="auto",
-                 guide=None, part=None, layer=None, channel_rule=None, compression=None,
-                 threads=0, max_memory=None, nonfinite="error", progress=None):
+def restore_file(denoised, energy, output, *, progress=None, **settings):
     """``restore`` from file to file, streamed: ``epfilt restore DENOISED ENERGY OUTPUT``.
+
+    ``settings``: the command line's options with underscores (``epfilt restore --help``:
+    ``scale``, ``keep_gain``, ``guides``, ``guide``, ``part``, ``layer``, ``channel_rule``,
+    ``compression``, ``threads``, ``max_memory``, ``nonfinite``), with its defaults and
+    checks.
 
     Both files are read twice (first every block's energy, then the result): memory grows
     with the width and ``scale`` (and, a few words per block, with the height), so a render
@@ -235,12 +238,8 @@ def restore_file(denoised, energy, output, *, scale=None, keep_gain=None, guides
     the machine's memory, or of its cgroup limit where less); below its floor it raises, naming the floor. The output is
     written whole or not at all. Returns the ``--report`` fields as a dict.
     """
-    return _epfilt.restore_file(str(denoised), str(energy), str(output), scale=scale,
-                                keep_gain=keep_gain, guides=guides, guide=guide, part=part,
-                                layer=layer, channel_rule=channel_rule,
-                                compression=compression, threads=threads,
-                                max_memory=max_memory, nonfinite=nonfinite,
-                                progress=progress)
+    return _epfilt.restore_file(str(denoised), str(energy), str(output), progress=progress,
+                                **settings)
 
 
 def info(path):

@@ -88,6 +88,23 @@ class FilterSettings(ArraySettings, total=False):
     band_count: _Value
     max_memory: _Value
 
+# The settings `restore_file` takes by keyword (`epfilt restore --help`), and
+# those of them `restore` takes (not naming files; `scale` is its own parameter).
+class RestoreArraySettings(TypedDict, total=False):
+    nonfinite: _Value
+    guides: _Value
+    guide: Sequence[str]
+    threads: _Value
+    keep_gain: _Value
+
+class RestoreSettings(RestoreArraySettings, total=False):
+    part: _Value
+    layer: _Value
+    channel_rule: Sequence[str]
+    compression: _Value
+    max_memory: _Value
+    scale: _Value
+
 class Error(Exception): ...
 class InputError(Error): ...
 class ConfigError(Error, ValueError): ...
@@ -115,31 +132,19 @@ def restore(
     energy: _Samples,
     scale: Optional[int] = None,
     *,
-    keep_gain: Optional[float] = None,
     emission: Optional[_Samples] = None,
     variance: Optional[npt.NDArray[Any]] = None,
     spp: Union[int, float, npt.NDArray[Any], None] = None,
     channels: Optional[Sequence[str]] = None,
-    threads: int = 0,
-    nonfinite: str = "error",
+    **settings: Unpack[RestoreArraySettings],
 ) -> Tuple[npt.NDArray[np.float32], Dict[str, Any]]: ...
 def restore_file(
     denoised: _Path,
     energy: _Path,
     output: _Path,
     *,
-    scale: Optional[int] = None,
-    keep_gain: Optional[float] = None,
-    guides: str = "auto",
-    guide: Optional[Sequence[str]] = None,
-    part: Optional[str] = None,
-    layer: Optional[str] = None,
-    channel_rule: Optional[Sequence[str]] = None,
-    compression: Optional[str] = None,
-    threads: int = 0,
-    max_memory: Optional[int] = None,
-    nonfinite: str = "error",
     progress: Optional[Callable[[int, int], Any]] = None,
+    **settings: Unpack[RestoreSettings],
 ) -> Dict[str, Any]: ...
 def denoise_file(
     render: _Path,
@@ -147,18 +152,8 @@ def denoise_file(
     *,
     denoised: Optional[_Path] = None,
     quality: str = "high",
-    scale: Optional[int] = None,
-    keep_gain: Optional[float] = None,
-    guides: str = "auto",
-    guide: Optional[Sequence[str]] = None,
-    part: Optional[str] = None,
-    layer: Optional[str] = None,
-    channel_rule: Optional[Sequence[str]] = None,
-    compression: Optional[str] = None,
-    threads: int = 0,
-    max_memory: Optional[int] = None,
-    nonfinite: str = "error",
     progress: Optional[Callable[[int, int], Any]] = None,
+    **restore_settings: Unpack[RestoreSettings],
 ) -> Dict[str, Any]: ...
 def info(path: _Path) -> Dict[str, Any]: ...
 def compare(a: _Path, b: _Path) -> Dict[str, Any]: ...

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use crate::options::{FilterOptionArgs, StatsArgs};
+use crate::options::{FilterOptionArgs, RestoreOptionArgs, StatsArgs};
 use clap::{Args, Parser, Subcommand};
 
 /// The exit statuses, in every `--help`.
@@ -206,53 +206,10 @@ pub struct RestoreArgs {
     pub energy: PathBuf,
     /// The result (.exr; never one of the inputs).
     pub output: PathBuf,
-    /// The energy image's part and beauty layer (the denoiser's output's
-    /// part too, where it has that part).
+    /// Every setting (the library's table, shared with filter and the
+    /// Python bindings).
     #[command(flatten)]
-    pub select: SelectArgs,
-    /// The side (pixels) of the smallest blocks with an energy target.
-    #[arg(long, default_value_t = epfilt::filter::restore::DEFAULT_SCALE)]
-    pub scale: usize,
-    /// Also keep a pixel's energy in place where it is over this many times
-    /// what the denoiser put around it, evidence or not (1 to 1e6; keeps a
-    /// render's fireflies) [default: 1 where the energy image is epfilt's
-    /// ep-gauss or ep-box output, else none: evidence alone].
-    #[arg(long)]
-    pub keep_gain: Option<f64>,
-    /// NaN and infinite values of either image: error (refuse, naming the
-    /// file and pixel) or zero (count them in the report).
-    #[arg(long, default_value = "error")]
-    pub nonfinite: String,
-    /// The energy image's emission guide pass (its directly visible light):
-    /// auto (found by the names renderers give it; a variance pass's
-    /// agreeing samples keep pixels too), none (neither keeps; a variance
-    /// pass still measures the render's uncertainty), or emission (it must
-    /// be found).
-    #[arg(long, default_value = "auto")]
-    pub guides: String,
-    /// emission=LAYER: the layer of the emission guide, e.g.
-    /// emission=ViewLayer.Emit.
-    #[arg(long, value_name = "KIND=NAME")]
-    pub guide: Vec<String>,
-    /// The energy image's channels beside the beauty (depth, normals, ids,
-    /// light AOVs) are carried into the result as it has them, bit for
-    /// bit: PATTERN=drop leaves those it matches out (glob on the full name;
-    /// repeatable, the last match wins; any other rule carries).
-    #[arg(long, value_name = "PATTERN=RULE")]
-    pub channel_rule: Vec<String>,
-    /// Output compression [default: the energy image's].
-    #[arg(long)]
-    pub compression: Option<String>,
-    /// Worker threads, 0 = one per core (does not change the bytes).
-    #[arg(long, default_value_t = 0, env = "EPFILT_THREADS")]
-    pub threads: usize,
-    /// Memory the process may use, in MiB, by its estimate (the input rows
-    /// of the rows of blocks held, which grow with --scale and the width):
-    /// where the default strips need more, it runs with shorter ones (the
-    /// same bytes); refused only below the floor it names [default: half
-    /// the machine's memory, or of its cgroup limit where less].
-    #[arg(long, env = "EPFILT_MAX_MEMORY", value_name = "MIB")]
-    pub max_memory: Option<u64>,
+    pub opts: RestoreOptionArgs,
     /// Write the summary as JSON to this file (- for standard output).
     #[arg(long)]
     pub report: Option<PathBuf>,

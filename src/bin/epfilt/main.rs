@@ -235,25 +235,11 @@ fn restore(mut a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
     if a.json {
         a.report = Some("-".into());
     }
-    let nonfinite = epfilt::pipeline::NonFinite::parse(&a.nonfinite).map_err(usage)?;
-    let mut job = epfilt::RestoreJob::new(&a.denoised, &a.energy, &a.output);
-    job.scale = a.scale;
-    job.keep_gain = a.keep_gain;
-    job.threads = capped_threads(a.threads);
-    job.max_memory = a.max_memory.map(|m| m.saturating_mul(1 << 20));
-    job.nonfinite = nonfinite;
-    job.guides = epfilt::io::GuideRequest::parse(&a.guides, &a.guide).map_err(usage)?;
-    job.select = selection(&a.select);
-    job.channel_rules = (a.channel_rule.iter())
-        .map(|r| epfilt::filter::channels::RuleOverride::parse(r))
-        .collect::<Result<_, _>>()
-        .map_err(usage)?;
-    job.cancel = Some(cancel);
-    if let Some(c) = &a.compression {
-        job.output_settings.compression = Some(
-            parse_compression(c)
-                .ok_or_else(|| usage(anyhow::anyhow!("unknown compression {c:?}")))?,
-        );
+    let opts = epfilt::job::FilterOptions::for_restore(a.opts.settings.clone()).map_err(usage)?;
+    let files = (a.denoised.clone(), a.energy.clone(), a.output.clone());
+    let (job, capped) = opts.restore_job(files, Some(cancel)).map_err(usage)?;
+    if let Some(w) = capped {
+        warn(&w);
     }
     let pixels = image_pixels(&job.energy, &job.select);
     let r = with_progress(a.quiet, pixels, |p| epfilt::restore_file(&job, p)).map_err(fail)?;

@@ -9,7 +9,7 @@ use clap::{Arg, ArgAction, ArgMatches, Args, Command, FromArgMatches};
 use epfilt::filter::ep_box::Guard;
 use epfilt::filter::settings::{self, KNOBS};
 use epfilt::filter::Quality;
-use epfilt::job::options::{quality_help, Kind, OPTIONS};
+use epfilt::job::options::{quality_help, Command as Cmd, Kind, OptionDef, OPTIONS};
 use epfilt::job::Setting;
 
 /// One argument: its id (the setting's name), and how clap should read it.
@@ -117,21 +117,27 @@ impl Spec {
     }
 }
 
-/// Every option and setting, in `--help`'s order: the input and the method
-/// first, then each method's settings, then the rest.
-fn specs() -> Vec<Spec> {
-    let option = |d: &'static epfilt::job::options::OptionDef| Spec {
+/// `d` as `command`'s argument.
+fn option(d: &'static OptionDef, command: Cmd) -> Spec {
+    Spec {
         name: d.name,
         short: d.short,
         heading: d.heading,
-        help: d.help(),
+        help: d.help_for(command),
         long_help: None,
         value_name: d.value_name,
         kind: d.kind,
         default: d.default.map(str::to_string),
         env: d.env,
         values: d.values,
-    };
+    }
+}
+
+/// Every option and setting of `filter`, in `--help`'s order: the input
+/// and the method first, then each method's settings, then the rest.
+fn specs() -> Vec<Spec> {
+    let filter = OPTIONS.iter().filter(|d| d.takes(Cmd::Filter));
+    let option = |d| option(d, Cmd::Filter);
     let knob = |k: &'static settings::Knob| Spec {
         name: k.name,
         short: None,
@@ -149,14 +155,49 @@ fn specs() -> Vec<Spec> {
         },
     };
     let first = |h: &str| h == "Input" || h == settings::METHOD;
-    let mut v: Vec<Spec> = (OPTIONS.iter().filter(|d| first(d.heading)))
+    let mut v: Vec<Spec> = (filter.clone().filter(|d| first(d.heading)))
         .map(option)
         .collect();
     for heading in [settings::METHOD, settings::EP_GAUSS, settings::EP_BOX] {
         v.extend(KNOBS.iter().filter(|k| k.heading == heading).map(knob));
     }
-    v.extend(OPTIONS.iter().filter(|d| !first(d.heading)).map(option));
+    v.extend(filter.filter(|d| !first(d.heading)).map(option));
     v
+}
+
+/// `restore`'s options, in the table's order.
+fn restore_specs() -> Vec<Spec> {
+    (OPTIONS.iter().filter(|d| d.takes(Cmd::Restore)))
+        .map(|d| option(d, Cmd::Restore))
+        .collect()
+}
+
+/// `epfilt restore`'s settings, as named settings for the library.
+#[derive(Clone, Debug, Default)]
+pub struct RestoreOptionArgs {
+    /// See [`FilterOptionArgs::settings`].
+    pub settings: Vec<(String, Setting)>,
+}
+
+impl FromArgMatches for RestoreOptionArgs {
+    fn from_arg_matches(m: &ArgMatches) -> Result<Self, clap::Error> {
+        Ok(RestoreOptionArgs {
+            settings: restore_specs().iter().filter_map(|s| s.given(m)).collect(),
+        })
+    }
+    fn update_from_arg_matches(&mut self, m: &ArgMatches) -> Result<(), clap::Error> {
+        *self = Self::from_arg_matches(m)?;
+        Ok(())
+    }
+}
+
+impl Args for RestoreOptionArgs {
+    fn augment_args(cmd: Command) -> Command {
+        cmd.args(restore_specs().iter().map(|s| s.arg(true)))
+    }
+    fn augment_args_for_update(cmd: Command) -> Command {
+        Self::augment_args(cmd)
+    }
 }
 
 /// `epfilt filter`'s settings, as named settings for the library.

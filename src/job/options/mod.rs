@@ -25,6 +25,7 @@ use crate::sequence::{parse_frames, FramePattern, SequenceJob, Share, Task};
 
 use super::{Edge, FilterJob, Undecided};
 use crate::filter::guides::SurfaceRule;
+pub use named::{Command, BOTH, FILTER, RESTORE_ONLY};
 
 /// One named setting, as the command line or a keyword argument gives it.
 #[derive(Clone, Debug, PartialEq)]
@@ -74,6 +75,10 @@ pub struct OptionDef {
     /// The values it takes where they are a fixed set (for completions;
     /// each parses, `every_listed_value_parses`), else empty.
     pub values: &'static [&'static str],
+    /// The commands that take it.
+    pub commands: &'static [Command],
+    /// Its help for `restore`, where restore reads less of it.
+    restore_help: Option<&'static str>,
 }
 
 impl OptionDef {
@@ -85,6 +90,19 @@ impl OptionDef {
     /// The help text as one paragraph.
     pub fn help(&self) -> String {
         one_paragraph(self.help)
+    }
+
+    /// Whether `command` takes it.
+    pub fn takes(&self, command: Command) -> bool {
+        self.commands.contains(&command)
+    }
+
+    /// The help text for `command`, as one paragraph.
+    pub fn help_for(&self, command: Command) -> String {
+        match (command, self.restore_help) {
+            (Command::Restore, Some(h)) => one_paragraph(h),
+            _ => self.help(),
+        }
     }
 }
 
@@ -166,6 +184,7 @@ const CHANNELS: &str = "Channels";
 const OUTPUT: &str = "Output";
 const FARM: &str = "Farm";
 const PERFORMANCE: &str = "Performance";
+const RESTORE: &str = "Restore";
 
 /// Defines [`FilterOptions`]'s fields and [`OPTIONS`]: per option, its doc
 /// (the help), name and type, and `{ kind, heading, parse, ... }`: `parse`
@@ -185,6 +204,8 @@ macro_rules! options {
             $(, files_only: $files_only:literal)?
             $(, ep_box_only: $ep_box_only:literal)?
             $(, values: $values:expr)?
+            $(, commands: $commands:expr)?
+            $(, restore_help: $restore_help:literal)?
         }
     )*) => {
         /// Every setting of `epfilt filter` but its files and what it prints
@@ -217,6 +238,8 @@ macro_rules! options {
                 files_only: options!(@or false $(, $files_only)?),
                 ep_box_only: options!(@or false $(, $ep_box_only)?),
                 values: options!(@or &[] $(, $values)?),
+                commands: options!(@or FILTER $(, $commands)?),
+                restore_help: options!(@opt $($restore_help)?),
             },
         )*];
 
@@ -278,7 +301,10 @@ options! {
     /// filtered into one multi-part output). With one part, at S = 1 the
     /// others are copied bit for bit; at S > 1 they are left out, with a warning.
     part: Option<PartSelect> {
-        Value, INPUT, parse: |_, s| Ok::<_, Error>(PartSelect::parse(s)), files_only: true
+        Value, INPUT, parse: |_, s| Ok::<_, Error>(PartSelect::parse(s)), files_only: true,
+        commands: BOTH,
+        restore_help: "The energy image's part of a multi-part file, by name or index (the
+        denoiser's output's too, where it has parts)."
     }
     /// A size that is not a multiple of S: crop drops the last partial output
     /// column and row; pad keeps them as pixels of fewer samples, each kernel
@@ -289,7 +315,7 @@ options! {
     /// NaN and infinite input samples: error (refuse, naming the first) or zero (count them).
     nonfinite: NonFinite {
         Value, INPUT, parse: |_, s| NonFinite::parse(s),
-        default: "error", values: &["error", "zero"]
+        default: "error", values: &["error", "zero"], commands: BOTH
     }
     /// ep-gauss (§5.2), ep-box (§5.1, pixels with variance), gauss (linear
     /// foil), box (S x S average), or the energy-losing foils clamp, median
@@ -323,11 +349,19 @@ options! {
     /// source's surface (see --guide-normal).
     guides: String {
         Value, GUIDES, parse: text, default: "auto",
-        values: &["auto", "none", "emission", "albedo", "normal", "depth"]
+        values: &["auto", "none", "emission", "albedo", "normal", "depth"], commands: BOTH,
+        restore_help: "The energy image's emission guide pass (its directly visible light):
+        auto (found by the names renderers give it; a variance pass's agreeing samples keep
+        pixels too), none (neither keeps; a variance pass still measures the render's
+        uncertainty), or emission (it must be found)."
     }
     /// KIND=NAME: the layer (depth: the channel) of a guide, e.g.
     /// emission=ViewLayer.Emit, normal=N, depth=Z (repeatable).
-    guide: Vec<String> { List, GUIDES, parse: text, value_name: "KIND=NAME" }
+    guide: Vec<String> {
+        List, GUIDES, parse: text, value_name: "KIND=NAME", commands: BOTH,
+        restore_help: "emission=LAYER: the layer of the emission guide, e.g.
+        emission=ViewLayer.Emit."
+    }
     /// Surface guides: a spread reaches a pixel only where the normals'
     /// angle is at most this many degrees, ...
     guide_normal: f64 { Value, GUIDES, parse: number, default: "30" }
@@ -341,7 +375,12 @@ options! {
     guide_depth: f64 { Value, GUIDES, parse: number, default: "0.05" }
     /// Layer whose R,G,B (or Y) channels are filtered, e.g. ViewLayer.Combined
     /// [default: the unlayered channels, else a beauty-named layer, else the only one].
-    layer: Option<String> { Value, CHANNELS, parse: text, files_only: true }
+    layer: Option<String> {
+        Value, CHANNELS, parse: text, files_only: true, commands: BOTH,
+        restore_help: "The energy image's layer whose R,G,B (or Y) channels are the beauty,
+        e.g. ViewLayer.Combined [default: the unlayered channels, else a beauty-named layer,
+        else the only one]."
+    }
     /// A multi-view (stereo) file: the view to filter, or all (each view
     /// filtered as an image of its own, into one output) [default: the first
     /// view; the others are left out, with a warning].
@@ -356,7 +395,11 @@ options! {
     /// channel's rule].
     channel_rule: Vec<RuleOverride> {
         List, CHANNELS, parse: |_, s| RuleOverride::parse(s), value_name: "PATTERN=RULE",
-        files_only: true
+        files_only: true, commands: BOTH,
+        restore_help: "The energy image's channels beside the beauty (depth, normals, ids,
+        light AOVs) are carried into the result as it has them, bit for bit: PATTERN=drop
+        leaves those it matches out (glob on the full name; repeatable, the last match wins;
+        any other rule carries)."
     }
     /// The output's format where its name does not say (- or a name without
     /// an image extension): exr, hdr or pfm [default for -: the input's].
@@ -370,7 +413,8 @@ options! {
         Value, OUTPUT, parse: |_, c| parse_compression(c)
             .ok_or_else(|| Error::Config(format!("unknown --compression {c:?}"))),
         files_only: true,
-        values: &["none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a", "dwaa", "dwab"]
+        values: &["none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a", "dwaa", "dwab"],
+        commands: BOTH, restore_help: "Output compression [default: the energy image's]."
     }
     /// Accept a lossy output compression (dwaa, dwab; b44, b44a for f16;
     /// pxr24 for f32): the energy on disk is then measured by decoding the
@@ -416,7 +460,9 @@ options! {
     /// again decode and compress blocks, beside the filter's: under a CPU
     /// quota (Slurm, cgroups, taskset) they share its N cores; on idle cores
     /// the run may use up to about 1.5 N.
-    threads: usize { Value, PERFORMANCE, parse: number, default: "0", env: "EPFILT_THREADS" }
+    threads: usize {
+        Value, PERFORMANCE, parse: number, default: "0", env: "EPFILT_THREADS", commands: BOTH
+    }
     /// Run `--threads` even where they are more than this machine's cores
     /// (slower: to measure memory at a core count the machine lacks).
     oversubscribe: bool { Flag, PERFORMANCE }
@@ -429,7 +475,13 @@ options! {
     /// (docs/bench/memory.md) [default: half the machine's memory, or of the
     /// container's or job's cgroup limit where less].
     max_memory: Option<u64> {
-        Value, PERFORMANCE, parse: number, env: "EPFILT_MAX_MEMORY", files_only: true
+        Value, PERFORMANCE, parse: number, env: "EPFILT_MAX_MEMORY", files_only: true,
+        commands: BOTH,
+        restore_help: "Memory the process may use, in MiB, by its estimate (the input rows of
+        the rows of blocks held, which grow with --scale and the width): where the default
+        strips need more, it runs with shorter ones (the same bytes); refused only below the
+        floor it names [default: half the machine's memory, or of its cgroup limit where
+        less]."
     }
     /// Accumulator tile width in output pixels (does not change the result).
     tile: usize { Value, PERFORMANCE, parse: number, default: "256" }
@@ -445,6 +497,13 @@ options! {
     /// takes the geometry of the runs it predicts; does not change the
     /// result).
     geometry_threads: usize { Value, PERFORMANCE, parse: number, default: "0" }
+    /// The side (pixels) of the smallest blocks with an energy target.
+    scale: usize { Value, RESTORE, parse: number, default: "32", commands: RESTORE_ONLY }
+    /// Also keep a pixel's energy in place where it is over this many times
+    /// what the denoiser put around it, evidence or not (1 to 1e6; keeps a
+    /// render's fireflies) [default: 1 where the energy image is epfilt's
+    /// ep-gauss or ep-box output, else none: evidence alone].
+    keep_gain: Option<f64> { Value, RESTORE, parse: number, commands: RESTORE_ONLY }
     /// Strips the Gaussian family works on at once, 0 = automatic (two
     /// where there are two threads or more: a strip's first passes run
     /// beside the previous strip's last ones; one holds a strip less;
@@ -477,80 +536,6 @@ pub fn cap_threads(n: usize) -> (usize, Option<String>) {
 }
 
 impl FilterOptions {
-    /// The options from named settings (names as the fields spell them,
-    /// `support_region`; `support-region` is taken too), over the defaults
-    /// and the environment variables of [`OPTIONS`]. Also returns the method
-    /// settings given, for the warnings of [`FilterOptions::params`]. An
-    /// unknown name is a configuration error that lists the known ones; a
-    /// value its option cannot take is one that names the option.
-    pub fn from_settings(
-        settings: impl IntoIterator<Item = (String, Setting)>,
-    ) -> Result<(FilterOptions, Vec<String>)> {
-        let mut o = FilterOptions::default();
-        for def in OPTIONS {
-            if let Some(d) = def.default {
-                o.set_option(def.name, Setting::Value(d.to_string()))?;
-            }
-        }
-        let settings: Vec<(String, Setting)> = settings
-            .into_iter()
-            .map(|(name, v)| (name.replace('-', "_"), v))
-            .collect();
-        for def in OPTIONS {
-            let given = settings.iter().any(|(n, _)| n == def.name);
-            if let (false, Some(var)) = (given, def.env) {
-                if let Ok(v) = std::env::var(var) {
-                    o.set_option(def.name, Setting::Value(v))?;
-                    o.given.push(def.name);
-                }
-            }
-        }
-        // A scratch copy of the settings checks each knob's value as it is
-        // given: the error names the option before any file is read.
-        let mut scratch = FilterParams::new(Method::EpGauss, 1);
-        for (name, value) in settings {
-            if let Some(def) = OPTIONS.iter().find(|d| d.name == name) {
-                o.set_option(def.name, value)?;
-                o.given.push(def.name);
-            } else if let Some(k) = settings::knob(&name) {
-                let Setting::Value(raw) = value else {
-                    return Err(Error::Config(format!(
-                        "setting {name} takes a value, not a true/false switch or a list"
-                    )));
-                };
-                k.set(&mut scratch, &raw)?;
-                o.knobs.push((k, raw));
-                o.given.push(k.name);
-            } else {
-                let mut known: Vec<&str> = (OPTIONS.iter().map(|d| d.name))
-                    .chain(settings::KNOBS.iter().map(|k| k.name))
-                    .collect();
-                known.sort_unstable();
-                return Err(Error::Config(format!(
-                    "unknown setting {name:?}; the settings are: {}",
-                    known.join(", ")
-                )));
-            }
-        }
-        if o.fail_fast && o.keep_going {
-            return Err(Error::Config(
-                "--fail-fast and --keep-going cannot be given together".into(),
-            ));
-        }
-        let mut given: Vec<String> = Vec::new();
-        for (k, _) in &o.knobs {
-            if !given.iter().any(|g| g == k.name) {
-                given.push(k.name.to_string());
-            }
-        }
-        for def in OPTIONS.iter().filter(|d| d.ep_box_only) {
-            if o.given.contains(&def.name) {
-                given.push(def.name.to_string());
-            }
-        }
-        Ok((o, given))
-    }
-
     /// The value given for the method's setting `name`, the last if given
     /// more than once.
     pub fn knob(&self, name: &str) -> Option<&str> {
@@ -791,3 +776,5 @@ impl FilterOptions {
 
 #[cfg(test)]
 mod tests;
+
+mod named;

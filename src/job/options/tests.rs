@@ -92,3 +92,27 @@ fn every_listed_value_parses() {
         assert_eq!(m.name(), name);
     }
 }
+
+#[test]
+fn one_table_serves_filter_and_restore() {
+    // Restore's own settings are not filter's, and filter's not restore's.
+    let named = |n: &str, v: &str| vec![(n.to_string(), Setting::Value(v.to_string()))];
+    let e = FilterOptions::from_settings(named("scale", "16")).unwrap_err();
+    assert!(e.to_string().contains("unknown setting \"scale\""), "{e}");
+    let e = FilterOptions::for_restore(named("tolerance", "0.1")).unwrap_err();
+    assert!(e.to_string().contains("restore's settings are"), "{e}");
+    // The table's default scale is the library's.
+    let o = FilterOptions::for_restore(Vec::new()).unwrap();
+    assert_eq!(o.scale, crate::filter::restore::DEFAULT_SCALE);
+    let o = FilterOptions::for_restore(named("keep-gain", "2")).unwrap();
+    let files = (
+        PathBuf::from("d.exr"),
+        PathBuf::from("e.exr"),
+        PathBuf::from("o.exr"),
+    );
+    let (job, _) = o.restore_job(files, None).unwrap();
+    assert_eq!(
+        (job.keep_gain, job.scale),
+        (Some(2.0), crate::filter::restore::DEFAULT_SCALE)
+    );
+}
