@@ -6,4 +6,5 @@
 //! what they share.
 
 pub mod canvas;
+pub mod chart;
 pub mod model;

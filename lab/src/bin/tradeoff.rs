@@ -21,9 +21,8 @@ use std::process::Command;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use plotters::prelude::*;
 
-use epfilt_lab::canvas;
+use epfilt_lab::chart::{save, Chart, Rgb, Series, Style};
 use serde_json::Value;
 
 const METHODS: [&str; 7] = [
@@ -254,6 +253,7 @@ fn main() -> Result<()> {
             "--repeat" => repeat = args.next().context("--repeat N")?.parse()?,
             "--size" => size = Some(args.next().context("--size WxH")?),
             "--guards-only" => guards_only = true,
+            "--replot" => return replot(&out_dir),
             other => bail!("unknown argument {other:?}"),
         }
     }
@@ -396,7 +396,8 @@ fn main() -> Result<()> {
         );
     }
     write_csv(&out_dir.join("tradeoff.csv"), &rows)?;
-    plot(&out_dir.join("tradeoff.png"), &rows, &scenes)?;
+    let points: Vec<Point> = rows.iter().map(Point::of).collect();
+    plot(&out_dir.join("tradeoff"), &points, &scenes)?;
     let mut md = markdown(&rows, &scenes, &size, quick);
     md.push_str(&guard_study(&bin, work.path(), &out_dir, &size, quick)?);
     std::fs::write(out_dir.join("tradeoff.md"), &md)?;
@@ -585,140 +586,138 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
 }
 
 /// Rows not beaten on both time and RMSE by another row of the same scene.
-fn pareto(rows: &[&Row]) -> Vec<usize> {
-    let mut front: Vec<usize> = (0..rows.len())
+/// The indices of `(seconds, error)` points no other beats in both, by
+/// time.
+fn pareto(pts: &[(f64, f64)]) -> Vec<usize> {
+    let mut front: Vec<usize> = (0..pts.len())
         .filter(|&i| {
-            !rows.iter().any(|o| {
-                (o.seconds <= rows[i].seconds && o.rmse < rows[i].rmse)
-                    || (o.seconds < rows[i].seconds && o.rmse <= rows[i].rmse)
-            })
+            !pts.iter()
+                .any(|o| (o.0 <= pts[i].0 && o.1 < pts[i].1) || (o.0 < pts[i].0 && o.1 <= pts[i].1))
         })
         .collect();
-    front.sort_by(|&a, &b| rows[a].seconds.total_cmp(&rows[b].seconds));
+    front.sort_by(|&a, &b| pts[a].0.total_cmp(&pts[b].0));
     front
 }
 
-fn colour(m: &str) -> RGBColor {
+fn colour(m: &str) -> Rgb {
     match m {
-        "ep-gauss" => RGBColor(214, 39, 40),
-        "ep-box" => RGBColor(255, 127, 14),
-        "gauss" => RGBColor(31, 119, 180),
-        "box" => RGBColor(127, 127, 127),
-        "clamp" => RGBColor(44, 160, 44),
-        "median" => RGBColor(148, 103, 189),
-        _ => RGBColor(140, 86, 75),
+        "ep-gauss" => (214, 39, 40),
+        "ep-box" => (255, 127, 14),
+        "gauss" => (31, 119, 180),
+        "box" => (127, 127, 127),
+        "clamp" => (44, 160, 44),
+        "median" => (148, 103, 189),
+        _ => (140, 86, 75),
     }
 }
 
-/// 8x8 text into an RGB buffer (plotters is built without a font engine).
-fn plot(path: &Path, rows: &[Row], scenes: &[&str]) -> Result<()> {
-    let (pw, ph) = (560usize, 440usize);
-    let (w, h) = (pw * scenes.len(), ph + 40);
-    let mut buf = vec![255u8; w * h * 3];
-    let mut labels: Vec<(usize, usize, String, RGBColor)> = Vec::new();
-    {
-        let root = BitMapBackend::with_buffer(&mut buf, (w as u32, h as u32)).into_drawing_area();
-        let panels = root.split_evenly((1, scenes.len()));
-        for (p, (area, scene)) in panels.iter().zip(scenes).enumerate() {
-            let pts: Vec<&Row> = rows.iter().filter(|r| r.run.scene == *scene).collect();
-            let (t0, t1) = pts.iter().fold((f64::INFINITY, 0.0f64), |(a, b), r| {
-                (a.min(r.seconds), b.max(r.seconds))
-            });
-            let (e0, e1) = pts.iter().fold((f64::INFINITY, 0.0f64), |(a, b), r| {
-                (a.min(r.rmse), b.max(r.rmse))
-            });
-            let (ml, mt, mb) = (60u32, 40u32, 50u32);
-            let mut chart = ChartBuilder::on(area)
-                .margin_left(ml)
-                .margin_top(mt)
-                .margin_bottom(mb)
-                .margin_right(20)
-                .build_cartesian_2d(
-                    (t0 * 0.8..t1 * 1.25).log_scale(),
-                    (e0 * 0.8..e1 * 1.25).log_scale(),
-                )?;
-            // Grid lines where the figures are written (below): 5 per axis,
-            // evenly spaced in log.
-            let (xa, xb, ya, yb) = (t0 * 0.8, t1 * 1.25, e0 * 0.8, e1 * 1.25);
-            let grey = RGBColor(225, 225, 225);
-            for k in 0..=4 {
-                let f = k as f64 / 4.0;
-                let t = xa * (xb / xa).powf(f);
-                let e = ya * (yb / ya).powf(f);
-                chart.draw_series(LineSeries::new(vec![(t, ya), (t, yb)], grey))?;
-                chart.draw_series(LineSeries::new(vec![(xa, e), (xb, e)], grey))?;
-            }
-            for m in METHODS {
-                let c = colour(m);
-                let series: Vec<(f64, f64)> = pts
-                    .iter()
-                    .filter(|r| r.run.method == m)
-                    .map(|r| (r.seconds, r.rmse))
-                    .collect();
-                chart.draw_series(series.iter().map(|&xy| Circle::new(xy, 4, c.filled())))?;
-                for r in pts.iter().filter(|r| r.run.method == m && r.run.default) {
-                    chart.draw_series(std::iter::once(Cross::new(
-                        (r.seconds, r.rmse),
-                        7,
-                        BLACK.stroke_width(2),
-                    )))?;
-                }
-            }
-            let front = pareto(&pts);
-            let line: Vec<(f64, f64)> = front
-                .iter()
-                .map(|&i| (pts[i].seconds, pts[i].rmse))
-                .collect();
-            chart.draw_series(LineSeries::new(line.clone(), BLACK.stroke_width(1)))?;
-            chart.draw_series(
-                line.iter()
-                    .map(|&xy| Circle::new(xy, 7, BLACK.stroke_width(1))),
-            )?;
-            // Axis figures and labels, drawn as text afterwards.
-            let x0 = p * pw;
-            let plot_w = pw as f64 - ml as f64 - 20.0;
-            let plot_h = (ph + 40) as f64 - mt as f64 - mb as f64;
-            let lx = |t: f64| (t / xa).ln() / (xb / xa).ln();
-            let ly = |e: f64| (e / ya).ln() / (yb / ya).ln();
-            for k in 0..=4 {
-                let t = xa * (xb / xa).powf(k as f64 / 4.0);
-                let x = x0 + ml as usize + (lx(t) * plot_w) as usize;
-                labels.push((
-                    x.saturating_sub(16),
-                    h - mb as usize + 6,
-                    format!("{t:.2}"),
-                    BLACK,
-                ));
-                let e = ya * (yb / ya).powf(k as f64 / 4.0);
-                let y = mt as usize + ((1.0 - ly(e)) * plot_h) as usize;
-                labels.push((x0 + 2, y.saturating_sub(4), format!("{e:.3}"), BLACK));
-            }
-            labels.push((
-                x0 + ml as usize,
-                8,
-                format!("scene {scene}: RMSE vs truth (log) against seconds (log)"),
-                BLACK,
-            ));
-            labels.push((
-                x0 + ml as usize + 120,
-                h - 22,
-                "wall seconds per run".into(),
-                BLACK,
-            ));
-            let mut ly0 = mt as usize + 6;
-            for m in METHODS {
-                labels.push((x0 + pw - 130, ly0, format!("o {m}"), colour(m)));
-                ly0 += 11;
-            }
-            labels.push((x0 + pw - 130, ly0, "x default".into(), BLACK));
-            labels.push((x0 + pw - 130, ly0 + 11, "O Pareto front".into(), BLACK));
+/// One run as the plot shows it.
+struct Point {
+    scene: String,
+    method: String,
+    default: bool,
+    seconds: f64,
+    rmse: f64,
+}
+
+impl Point {
+    fn of(r: &Row) -> Self {
+        Point {
+            scene: r.run.scene.clone(),
+            method: r.run.method.clone(),
+            default: r.run.default,
+            seconds: r.seconds,
+            rmse: r.rmse,
         }
-        root.present()?;
     }
-    for (x, y, s, c) in labels {
-        canvas::text(&mut buf, w, x, y, &s, (c.0, c.1, c.2));
+}
+
+/// `STEM.png` and `.svg`: per scene, each run's RMSE against its time (both
+/// logarithmic), a colour a method, its defaults crossed, the Pareto front
+/// joined and ringed.
+fn plot(stem: &Path, points: &[Point], scenes: &[&str]) -> Result<()> {
+    let series = |name: &str, colour, style, points| Series {
+        name: name.into(),
+        colour,
+        style,
+        points,
+        labels: Vec::new(),
+    };
+    let charts: Vec<Chart> = (scenes.iter())
+        .map(|scene| {
+            let pts: Vec<&Point> = points.iter().filter(|p| p.scene == *scene).collect();
+            let xy = |p: &&Point| (p.seconds, p.rmse);
+            let mut all: Vec<Series> = (METHODS.iter())
+                .map(|m| {
+                    let of: Vec<(f64, f64)> =
+                        pts.iter().filter(|p| p.method == *m).map(xy).collect();
+                    series(m, colour(m), Style::Dots, of)
+                })
+                .collect();
+            let defaults = pts.iter().filter(|p| p.default).map(xy).collect();
+            all.push(series(
+                "a method's defaults",
+                (0, 0, 0),
+                Style::Crosses,
+                defaults,
+            ));
+            let xys: Vec<(f64, f64)> = pts.iter().map(xy).collect();
+            let front: Vec<(f64, f64)> = pareto(&xys).into_iter().map(|i| xys[i]).collect();
+            all.push(series("", (0, 0, 0), Style::Line, front.clone()));
+            all.push(series("the Pareto front", (0, 0, 0), Style::Rings, front));
+            Chart {
+                title: format!("scene {scene}: error against time, one point a run"),
+                x_label: "wall seconds per run (log)".into(),
+                y_label: "RMSE against the truth (log)".into(),
+                log: (true, true),
+                series: all,
+            }
+        })
+        .collect();
+    save(&charts, stem)
+}
+
+/// Draw `DIR/tradeoff.png` and `.svg` again from `DIR/tradeoff.csv`,
+/// without running anything.
+fn replot(dir: &Path) -> Result<()> {
+    let text = std::fs::read_to_string(dir.join("tradeoff.csv"))?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines
+        .next()
+        .context("an empty tradeoff.csv")?
+        .split(',')
+        .collect();
+    let col = |name: &str| {
+        header
+            .iter()
+            .position(|h| *h == name)
+            .context(name.to_string())
+    };
+    let (sc, m, d, t, e) = (
+        col("scene")?,
+        col("method")?,
+        col("default")?,
+        col("seconds")?,
+        col("rmse")?,
+    );
+    let mut points = Vec::new();
+    for line in lines {
+        let f: Vec<&str> = line.split(',').collect();
+        points.push(Point {
+            scene: f[sc].into(),
+            method: f[m].into(),
+            default: f[d] == "true",
+            seconds: f[t].parse()?,
+            rmse: f[e].parse()?,
+        });
     }
-    canvas::save_png(path, &buf, w, h)
+    let mut scenes: Vec<&str> = Vec::new();
+    for p in &points {
+        if !scenes.contains(&p.scene.as_str()) {
+            scenes.push(&p.scene);
+        }
+    }
+    plot(&dir.join("tradeoff"), &points, &scenes)
 }
 
 fn settings_text(r: &Row) -> String {
@@ -739,12 +738,13 @@ fn markdown(rows: &[Row], scenes: &[&str], size: &str, quick: bool) -> String {
     );
     let _ = writeln!(
         s,
-        "Written by `scripts/tradeoff`; data in `tradeoff.csv`, plot in `tradeoff.png`. Time is the wall \
+        "Written by `scripts/tradeoff`; data in `tradeoff.csv`, plot in `tradeoff.png` and `.svg`. Time is the wall \
          time of the whole `epfilt filter` process on 2 cores; errors are against each input's exact truth.\n"
     );
     for scene in scenes {
         let pts: Vec<&Row> = rows.iter().filter(|r| r.run.scene == *scene).collect();
-        let front = pareto(&pts);
+        let xys: Vec<(f64, f64)> = pts.iter().map(|r| (r.seconds, r.rmse)).collect();
+        let front = pareto(&xys);
         let _ = writeln!(s, "## Scene `{scene}`: each method at its defaults\n");
         let _ = writeln!(s, "| method | RMSE | rel. MSE | PSNR | energy out/in | seconds | Mpx/s | peak RSS | spread | capped |");
         let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");

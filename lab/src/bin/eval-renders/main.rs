@@ -37,7 +37,8 @@
 //! `--as-written` measures renders as renderers write them: at final
 //! resolution with and without variance and guides, and super-sampled with
 //! the emission guide (`as_written.rs`, `docs/bench/renders-as-written.md`);
-//! `--sweep` runs ep-gauss over a grid of its knobs (`sweep.rs`);
+//! `--sweep` runs ep-gauss over a grid of its knobs (`sweep.rs`; `--replot
+//! DIR` draws its plot again from `DIR/pareto.csv`);
 //! `--sweep-ep-box` runs ep-box over given settings of its knobs
 //! (`box_sweep.rs`, `scripts/joint-search --method ep-box`).
 
@@ -430,6 +431,12 @@ impl Ctx {
 
 fn main() -> Result<()> {
     let argv: Vec<String> = std::env::args().skip(1).collect();
+    if let Some(k) = argv.iter().position(|a| a == "--replot") {
+        let dir = argv
+            .get(k + 1)
+            .context("--replot DIR (where pareto.csv is)")?;
+        return sweep::replot(std::path::Path::new(dir));
+    }
     if argv.iter().any(|a| a == "--sweep") {
         return sweep::run(&argv);
     }
@@ -618,7 +625,7 @@ fn main() -> Result<()> {
                 shown.push((r.clone(), "reference".into()));
             }
             let png = out_dir.join("renders").join(format!("{scene}.png"));
-            epfilt::preview::write_png(&shown, &png, 0.0, &Default::default(), None)?;
+            epfilt::preview::write_png(&shown, &png, &Default::default(), &|_, _| {})?;
         }
         eprintln!("wrote {}", out_dir.join("renders.md").display());
     }

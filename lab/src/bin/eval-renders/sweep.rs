@@ -47,8 +47,6 @@ use epfilt::{filter_file, FilterJob, FilterParams, Method};
 
 use super::{inputs, lights, rel_mse, set, Image, Input, ORACLE_OVER};
 
-use epfilt_lab::canvas;
-
 /// The grid when none is given: the knobs the issue names, jointly.
 const DEFAULT_GRID: &[(&str, &[&str])] = &[
     (
@@ -244,9 +242,6 @@ struct Baseline {
     /// linear filter's).
     lin_peaks: Vec<f64>,
 }
-
-/// A label drawn on the plot: position, text, colour.
-type Label = (usize, usize, String, (u8, u8, u8));
 
 struct Outcome {
     setting: Setting,
@@ -529,7 +524,7 @@ pub fn run(args: &[String]) -> Result<()> {
         std::fs::write(a.out.join("pareto.md"), &md)?;
         std::fs::write(a.out.join("pareto.csv"), csv(&prepared, &outcomes))?;
         if a.bench.is_some() {
-            plot(&a.out.join("pareto.png"), &outcomes)?;
+            plot(&a.out.join("pareto"), &outcomes)?;
         }
         eprintln!("wrote {}", a.out.join("pareto.md").display());
     }
@@ -808,129 +803,104 @@ fn csv(prepared: &[Prepared], outcomes: &[Outcome]) -> String {
     s
 }
 
-fn plot(path: &Path, outcomes: &[Outcome]) -> Result<()> {
-    use plotters::prelude::*;
-    // The settings that lose no more lights than the old defaults (the
-    // others are not eligible, and the paper's rule, far off in both, would
-    // squash the rest into a corner).
+/// `STEM.png` and `STEM.svg`: each setting's error against its time, the
+/// Pareto front, the old defaults and the presets. Only the settings that
+/// lose no more lights than the old defaults are drawn (the others are not
+/// eligible, and the paper's rule, far off in both, would squash the rest
+/// into a corner).
+fn plot(stem: &Path, outcomes: &[Outcome]) -> Result<()> {
+    use epfilt_lab::chart::{save, Chart, Series, Style};
     let allowed = find(outcomes, &old_defaults()).map_or(usize::MAX, |j| outcomes[j].lost);
-    let pts: Vec<(f64, f64)> = outcomes
-        .iter()
-        .filter(|o| o.lost <= allowed)
-        .filter_map(|o| o.seconds_per_mpx.map(|t| (t, o.error)))
+    let point = |o: &Outcome| o.seconds_per_mpx.map(|t| (t, o.error));
+    let eligible: Vec<(f64, f64)> = (outcomes.iter().filter(|o| o.lost <= allowed))
+        .filter_map(point)
         .collect();
-    if pts.is_empty() {
+    if eligible.is_empty() {
         return Ok(());
     }
-    let fold = |f: fn(&(f64, f64)) -> f64| {
-        pts.iter()
-            .map(f)
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-                (a.min(v), b.max(v))
-            })
+    let series = |name: &str, colour, style, points| Series {
+        name: name.into(),
+        colour,
+        style,
+        points,
+        labels: Vec::new(),
     };
-    let (t0, t1) = fold(|p| p.0);
-    let (e0, e1) = fold(|p| p.1);
-    let (xa, xb) = (t0 - 0.05 * (t1 - t0), t1 + 0.05 * (t1 - t0));
-    let (ya, yb) = (e0 - 0.05 * (e1 - e0), e1 + 0.05 * (e1 - e0));
-    let (w, h) = (900usize, 620usize);
-    let (ml, mt, mb, mr) = (70u32, 40u32, 50u32, 30u32);
-    let mut buf = vec![255u8; w * h * 3];
-    let mut labels: Vec<Label> = Vec::new();
-    let (pw, ph) = ((w as u32 - ml - mr) as f64, (h as u32 - mt - mb) as f64);
-    let at = |t: f64, e: f64| {
-        (
-            ml as usize + ((t - xa) / (xb - xa) * pw) as usize,
-            mt as usize + ((1.0 - (e - ya) / (yb - ya)) * ph) as usize,
-        )
-    };
-    {
-        let root = BitMapBackend::with_buffer(&mut buf, (w as u32, h as u32)).into_drawing_area();
-        let mut chart = ChartBuilder::on(&root)
-            .margin_left(ml)
-            .margin_top(mt)
-            .margin_bottom(mb)
-            .margin_right(mr)
-            .build_cartesian_2d(xa..xb, ya..yb)?;
-        let grey = RGBColor(225, 225, 225);
-        for k in 0..=4 {
-            let f = k as f64 / 4.0;
-            let (t, e) = (xa + f * (xb - xa), ya + f * (yb - ya));
-            chart.draw_series(LineSeries::new(vec![(t, ya), (t, yb)], grey))?;
-            chart.draw_series(LineSeries::new(vec![(xa, e), (xb, e)], grey))?;
-            let (x, _) = at(t, ya);
-            labels.push((
-                x.saturating_sub(20),
-                h - mb as usize + 8,
-                format!("{t:.4}"),
-                (0, 0, 0),
-            ));
-            let (_, y) = at(xa, e);
-            labels.push((4, y.saturating_sub(4), format!("{e:.3}"), (0, 0, 0)));
+    let front: Vec<(f64, f64)> = (front(outcomes).into_iter())
+        .filter_map(|i| point(&outcomes[i]))
+        .collect();
+    let marked = |s: &Setting| find(outcomes, s).and_then(|i| point(&outcomes[i]));
+    let mut old = series("the old defaults", (200, 0, 0), Style::Crosses, Vec::new());
+    old.points.extend(marked(&old_defaults()));
+    old.labels.push("old defaults".into());
+    let mut presets = series(
+        "the --quality presets",
+        (0, 130, 0),
+        Style::Crosses,
+        Vec::new(),
+    );
+    for q in Quality::ALL {
+        if let Some(p) = marked(&preset_setting(q)) {
+            presets.points.push(p);
+            presets.labels.push(format!("--quality {}", q.name()));
         }
-        chart.draw_series(
-            pts.iter()
-                .map(|&p| Circle::new(p, 3, RGBColor(160, 160, 160).filled())),
-        )?;
-        let fr: Vec<(f64, f64)> = front(outcomes)
-            .into_iter()
-            .filter_map(|i| outcomes[i].seconds_per_mpx.map(|t| (t, outcomes[i].error)))
+    }
+    let chart = Chart {
+        title: "ep-gauss on real renders: error against time, one point a setting".into(),
+        x_label: "seconds per input megapixel (6144x6144 bench, S = 3)".into(),
+        y_label: "error: geometric mean of the renders' factors (lower is better)".into(),
+        log: (false, false),
+        series: vec![
+            series(
+                "a setting losing no more lights than the old defaults",
+                (150, 150, 150),
+                Style::Dots,
+                eligible,
+            ),
+            series("the Pareto front", (0, 0, 200), Style::Line, front),
+            old,
+            presets,
+        ],
+    };
+    save(&[chart], stem)
+}
+
+/// Draw `DIR/pareto.png` and `.svg` again from `DIR/pareto.csv`, without
+/// measuring anything.
+pub fn replot(dir: &Path) -> Result<()> {
+    let text = std::fs::read_to_string(dir.join("pareto.csv"))?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines
+        .next()
+        .context("an empty pareto.csv")?
+        .split(',')
+        .collect();
+    let col = |name: &str| {
+        header
+            .iter()
+            .position(|h| *h == name)
+            .context(name.to_string())
+    };
+    let (t, e, l) = (col("seconds_per_mpx")?, col("error")?, col("lights_lost")?);
+    let mut outcomes = Vec::new();
+    for line in lines {
+        let f: Vec<&str> = line.split(',').collect();
+        let setting = (f[0].split_whitespace())
+            .filter_map(|kv| kv.split_once('='))
+            .map(|(k, v)| (k.to_string(), v.to_string()))
             .collect();
-        chart.draw_series(LineSeries::new(fr.clone(), BLUE.stroke_width(2)))?;
-        chart.draw_series(fr.iter().map(|&p| Circle::new(p, 4, BLUE.filled())))?;
-        let mut marked = 0usize;
-        let mut mark = |s: &Setting, name: String, c: RGBColor| -> Result<()> {
-            if let Some(o) = find(outcomes, s).map(|i| &outcomes[i]) {
-                if let Some(t) = o.seconds_per_mpx {
-                    chart.draw_series(std::iter::once(Cross::new(
-                        (t, o.error),
-                        8,
-                        c.stroke_width(3),
-                    )))?;
-                    // Labels of points close together go one under another.
-                    let (x, y) = at(t, o.error);
-                    labels.push((
-                        x + 10,
-                        y.saturating_sub(12) + 14 * (marked % 4),
-                        name,
-                        (c.0, c.1, c.2),
-                    ));
-                    marked += 1;
-                }
-            }
-            Ok(())
-        };
-        mark(&old_defaults(), "old defaults".into(), RED)?;
-        for q in Quality::ALL {
-            mark(
-                &preset_setting(q),
-                format!("--quality {}", q.name()),
-                RGBColor(0, 130, 0),
-            )?;
-        }
-        root.present()?;
+        outcomes.push(Outcome {
+            setting,
+            factors: Vec::new(),
+            peaks: Vec::new(),
+            lost: f[l].parse()?,
+            lights: 0,
+            lost_held: 0,
+            lights_held: 0,
+            error: f[e].parse()?,
+            error_held: None,
+            seconds_per_mpx: f[t].parse().ok(),
+            x_gauss: None,
+        });
     }
-    labels.push((
-        ml as usize,
-        12,
-        "ep-gauss on real renders: error (geometric mean of factors) against time".into(),
-        (0, 0, 0),
-    ));
-    labels.push((
-        ml as usize + 150,
-        h - 20,
-        "seconds per input megapixel, 6144x6144 S=3 bench".into(),
-        (0, 0, 0),
-    ));
-    let legend = "o setting (losing no more lights than the old defaults)   - Pareto front";
-    labels.push((
-        w.saturating_sub(8 * legend.len() + 16),
-        mt as usize + 8,
-        legend.into(),
-        (0, 0, 200),
-    ));
-    for (x, y, s, c) in labels {
-        canvas::text(&mut buf, w, x, y, &s, c);
-    }
-    canvas::save_png(path, &buf, w, h)
+    plot(&dir.join("pareto"), &outcomes)
 }
