@@ -111,13 +111,26 @@ pub const WINDOW_MIN_BLOCKS: u64 = 8;
 /// Blocks (chunks) of `block_bytes` decoded bytes the reader's window holds
 /// for `cfg`: [`READ_AHEAD_BATCHES`] batches of [`read_ahead_blocks`], or
 /// `WINDOW_MIN_BLOCKS` where that is more; at most
-/// `WINDOW_BLOCKS_PER_THREAD` a worker thread. [`fit_memory`] takes fewer
-/// under a small budget.
+/// `WINDOW_BLOCKS_PER_THREAD` a worker thread, and a worker's second block
+/// only where the batches' bytes hold it ([`queued_blocks`]).
+/// [`fit_memory`] takes fewer under a small budget.
 pub fn window_blocks(cfg: &PipelineConfig, block_bytes: u64) -> u64 {
     let threads = cfg.geometry_workers() as u64;
     let by_threads = (WINDOW_BLOCKS_PER_THREAD * threads).max(FEWEST_WINDOW_BLOCKS as u64);
     let by_bytes = READ_AHEAD_BATCHES * read_ahead_blocks(block_bytes);
-    by_bytes.max(WINDOW_MIN_BLOCKS).min(by_threads)
+    let queued = queued_blocks(threads, block_bytes);
+    by_bytes.max(WINDOW_MIN_BLOCKS).min(by_threads).min(queued)
+}
+
+/// The most blocks a window of `threads` workers holds where a worker's
+/// second block is queued only within [`READ_AHEAD_BATCHES`] x
+/// [`READ_AHEAD_BYTES`]: one block a worker at the least. On the widest
+/// inputs (a 32769-wide block of 9 channels is 19 MB) one block a worker
+/// decodes as fast at 2 threads, and the second is paid in memory
+/// (docs/bench/s1-memory.md); on many threads the window is bounded before.
+pub fn queued_blocks(threads: u64, block_bytes: u64) -> u64 {
+    let by_bytes = READ_AHEAD_BATCHES * READ_AHEAD_BYTES / block_bytes.max(1);
+    threads.max(by_bytes).max(FEWEST_WINDOW_BLOCKS as u64)
 }
 
 /// Blocks the reader's window holds per worker thread at most: a block
@@ -525,6 +538,11 @@ mod tests {
         assert_eq!(READ_AHEAD_BATCHES * read_ahead_blocks(block), 6);
         assert_eq!(window_blocks(&on(16), block), WINDOW_MIN_BLOCKS);
         assert_eq!(window_blocks(&on(2), block), 4);
+        // Nine channels (19 MB a block): a worker's second block no longer
+        // fits the batches' bytes at 2 threads; 16 threads keep their 8.
+        let nine = 32769 * 9 * 4 * 16;
+        assert_eq!(window_blocks(&on(2), nine), 2);
+        assert_eq!(window_blocks(&on(16), nine), WINDOW_MIN_BLOCKS);
         // The estimate counts the whole window, for every method.
         let wide = rgb(32769, 3600);
         for m in [Method::Box, Method::Gauss, Method::EpGauss] {
