@@ -87,6 +87,33 @@ impl Comparison {
     }
 }
 
+/// Refuse two images that differ in size or channels, saying how.
+fn check_alike(
+    (a, ia): (&Path, &crate::io::ExrInput),
+    (b, ib): (&Path, &crate::io::ExrInput),
+) -> Result<()> {
+    if ia.size() == ib.size() && ia.channels() == ib.channels() {
+        return Ok(());
+    }
+    let say = |p: &Path, i: &crate::io::ExrInput| {
+        let (w, h) = i.size();
+        format!(
+            "{} is {w}x{h} with channels {}",
+            p.display(),
+            i.channels().join(", ")
+        )
+    };
+    let what = match (ia.size() != ib.size(), ia.channels() != ib.channels()) {
+        (true, true) => "size and channels",
+        (true, false) => "size",
+        _ => "channels",
+    };
+    Err(Error::Mismatch {
+        path: a.to_path_buf(),
+        reason: format!("{}; {}: they differ in {what}", say(a, ia), say(b, ib)),
+    })
+}
+
 /// Compare `a` against the reference `b` (same size and channels), each
 /// read as `select` says (`--part`, `--layer`); `progress(rows, total)`
 /// over its two reads.
@@ -96,28 +123,8 @@ pub fn compare_files(
     select: &Selection,
     progress: Progress<'_>,
 ) -> Result<Comparison> {
-    let ia = select.open(a)?;
-    let ib = select.open(b)?;
-    if ia.size() != ib.size() || ia.channels() != ib.channels() {
-        let say = |p: &Path, i: &crate::io::ExrInput| {
-            format!(
-                "{} is {}x{} with channels {}",
-                p.display(),
-                i.size().0,
-                i.size().1,
-                i.channels().join(", ")
-            )
-        };
-        let what = match (ia.size() != ib.size(), ia.channels() != ib.channels()) {
-            (true, true) => "size and channels",
-            (true, false) => "size",
-            _ => "channels",
-        };
-        return Err(Error::Mismatch {
-            path: a.to_path_buf(),
-            reason: format!("{}; {}: they differ in {what}", say(a, &ia), say(b, &ib)),
-        });
-    }
+    let (ia, ib) = (select.open(a)?, select.open(b)?);
+    check_alike((a, &ia), (b, &ib))?;
     let (w, h) = ia.size();
     let nch = ia.channels().len();
     // Pass 1: mean |b| for the relative error's eps (a second read of B keeps

@@ -117,14 +117,9 @@ fn filter_job(
     Ok(job)
 }
 
-/// A frame sequence, or this task's share of it: each frame as `filter`
-/// would do it, a line per frame, a summary, and exit 1 when any failed.
-/// (Long: it reads as the command runs: frames, task, each frame, summary,
-/// exit status; each step is a few lines.)
-fn sequence(a: &FilterArgs, job: SequenceJob) -> Result<(), Exit> {
-    use epfilt::sequence::run_sequence;
-    // The first frame's output says whether the folder and the format are
-    // right, as for one file.
+/// The first frame's output says whether the folder and the format are
+/// right, as for one file; and the report's path.
+fn check_outputs(a: &FilterArgs, job: &SequenceJob) -> Result<(), Exit> {
     if let Some(&first) = job.frames.first() {
         let mut one = job.template.clone();
         one.output = job.output.path(first);
@@ -134,18 +129,31 @@ fn sequence(a: &FilterArgs, job: SequenceJob) -> Result<(), Exit> {
     if let Some(path) = &a.report {
         epfilt::io::Destination::resolve(path).map_err(fail)?;
     }
-    // One bar for the whole sequence: each frame a thousandth part at a
-    // time, the rate from the first frame's size, the ETA the sequence's.
-    let n = job.frames.len();
+    Ok(())
+}
+
+/// One bar for the whole sequence: each frame [`FRAME_STEPS`] steps of
+/// it, the rate from the first frame's size, the ETA the sequence's.
+fn sequence_bar(quiet: bool, job: &SequenceJob) -> Option<indicatif::ProgressBar> {
     let first = job.frames.first().map(|&f| job.input.path(f));
     let select = epfilt::io::Selection {
         part: job.template.part.clone(),
         layer: job.template.layer.clone(),
     };
-    let pixels = first
-        .and_then(|p| image_pixels(&p, &select))
-        .map(|px| px * n as f64);
-    let bar = progress_bar(a.quiet, pixels);
+    let pixels =
+        (first.and_then(|p| image_pixels(&p, &select))).map(|px| px * job.frames.len() as f64);
+    progress_bar(quiet, pixels)
+}
+
+/// A frame sequence, or this task's share of it: each frame as `filter`
+/// would do it, a line per frame, a summary, and exit 1 when any failed.
+/// (Long: it reads as the command runs: frames, task, each frame, summary,
+/// exit status; each step is a few lines.)
+fn sequence(a: &FilterArgs, job: SequenceJob) -> Result<(), Exit> {
+    use epfilt::sequence::run_sequence;
+    check_outputs(a, &job)?;
+    let n = job.frames.len();
+    let bar = sequence_bar(a.quiet, &job);
     let position = std::sync::atomic::AtomicUsize::new(0);
     let progress = |done: usize, total: usize| {
         if let Some(b) = &bar {
