@@ -443,6 +443,32 @@ impl Png {
     }
 }
 
+/// The columns `names` of the CSV file `path` (a header line, then values
+/// without quotes, as the lab writes them), row by row: what a replot reads.
+pub fn csv_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<String>>> {
+    use anyhow::Context;
+    let text = std::fs::read_to_string(path).with_context(|| path.display().to_string())?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = (lines.next())
+        .with_context(|| format!("{}: empty", path.display()))?
+        .split(',')
+        .collect();
+    let at: Vec<usize> = (names.iter())
+        .map(|n| {
+            (header.iter().position(|h| h == n))
+                .with_context(|| format!("{}: no column {n}", path.display()))
+        })
+        .collect::<Result<_>>()?;
+    Ok(lines
+        .map(|line| {
+            let f: Vec<&str> = line.split(',').collect();
+            at.iter()
+                .map(|&i| f.get(i).unwrap_or(&"").to_string())
+                .collect()
+        })
+        .collect())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

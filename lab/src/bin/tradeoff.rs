@@ -680,35 +680,15 @@ fn plot(stem: &Path, points: &[Point], scenes: &[&str]) -> Result<()> {
 /// Draw `DIR/tradeoff.png` and `.svg` again from `DIR/tradeoff.csv`,
 /// without running anything.
 fn replot(dir: &Path) -> Result<()> {
-    let text = std::fs::read_to_string(dir.join("tradeoff.csv"))?;
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines
-        .next()
-        .context("an empty tradeoff.csv")?
-        .split(',')
-        .collect();
-    let col = |name: &str| {
-        header
-            .iter()
-            .position(|h| *h == name)
-            .context(name.to_string())
-    };
-    let (sc, m, d, t, e) = (
-        col("scene")?,
-        col("method")?,
-        col("default")?,
-        col("seconds")?,
-        col("rmse")?,
-    );
+    let names = ["scene", "method", "default", "seconds", "rmse"];
     let mut points = Vec::new();
-    for line in lines {
-        let f: Vec<&str> = line.split(',').collect();
+    for f in epfilt_lab::chart::csv_columns(&dir.join("tradeoff.csv"), &names)? {
         points.push(Point {
-            scene: f[sc].into(),
-            method: f[m].into(),
-            default: f[d] == "true",
-            seconds: f[t].parse()?,
-            rmse: f[e].parse()?,
+            scene: f[0].clone(),
+            method: f[1].clone(),
+            default: f[2] == "true",
+            seconds: f[3].parse()?,
+            rmse: f[4].parse()?,
         });
     }
     let mut scenes: Vec<&str> = Vec::new();

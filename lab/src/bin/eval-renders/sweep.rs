@@ -867,23 +867,10 @@ fn plot(stem: &Path, outcomes: &[Outcome]) -> Result<()> {
 /// Draw `DIR/pareto.png` and `.svg` again from `DIR/pareto.csv`, without
 /// measuring anything.
 pub fn replot(dir: &Path) -> Result<()> {
-    let text = std::fs::read_to_string(dir.join("pareto.csv"))?;
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines
-        .next()
-        .context("an empty pareto.csv")?
-        .split(',')
-        .collect();
-    let col = |name: &str| {
-        header
-            .iter()
-            .position(|h| *h == name)
-            .context(name.to_string())
-    };
-    let (t, e, l) = (col("seconds_per_mpx")?, col("error")?, col("lights_lost")?);
+    let names = ["setting", "seconds_per_mpx", "error", "lights_lost"];
+    let rows = epfilt_lab::chart::csv_columns(&dir.join("pareto.csv"), &names)?;
     let mut outcomes = Vec::new();
-    for line in lines {
-        let f: Vec<&str> = line.split(',').collect();
+    for f in rows {
         let setting = (f[0].split_whitespace())
             .filter_map(|kv| kv.split_once('='))
             .map(|(k, v)| (k.to_string(), v.to_string()))
@@ -892,13 +879,13 @@ pub fn replot(dir: &Path) -> Result<()> {
             setting,
             factors: Vec::new(),
             peaks: Vec::new(),
-            lost: f[l].parse()?,
+            lost: f[3].parse()?,
             lights: 0,
             lost_held: 0,
             lights_held: 0,
-            error: f[e].parse()?,
+            error: f[2].parse()?,
             error_held: None,
-            seconds_per_mpx: f[t].parse().ok(),
+            seconds_per_mpx: f[1].parse().ok(),
             x_gauss: None,
         });
     }
