@@ -179,28 +179,6 @@ pub struct RestoreOptionArgs {
     pub settings: Vec<(String, Setting)>,
 }
 
-impl FromArgMatches for RestoreOptionArgs {
-    fn from_arg_matches(m: &ArgMatches) -> Result<Self, clap::Error> {
-        Ok(RestoreOptionArgs {
-            settings: restore_specs().iter().filter_map(|s| s.given(m)).collect(),
-        })
-    }
-    fn update_from_arg_matches(&mut self, m: &ArgMatches) -> Result<(), clap::Error> {
-        *self = Self::from_arg_matches(m)?;
-        Ok(())
-    }
-}
-
-impl Args for RestoreOptionArgs {
-    fn augment_args(cmd: Command) -> Command {
-        cmd.args(restore_specs().iter().map(|s| s.arg(true)))
-    }
-    fn augment_args_for_update(cmd: Command) -> Command {
-        Self::augment_args(cmd)
-    }
-}
-
-/// `epfilt filter`'s settings, as named settings for the library.
 #[derive(Clone, Debug, Default)]
 pub struct FilterOptionArgs {
     /// The settings given, in the tables' order.
@@ -225,55 +203,39 @@ const STATS: &[&str] = &[
     "confidence",
 ];
 
-fn given(m: &ArgMatches, keep: impl Fn(&str) -> bool) -> Vec<(String, Setting)> {
-    (specs().iter())
-        .filter(|s| keep(s.name))
-        .filter_map(|s| s.given(m))
+/// `filter`'s specs that `plan` takes.
+fn stats_specs() -> Vec<Spec> {
+    (specs().into_iter())
+        .filter(|s| STATS.contains(&s.name))
         .collect()
 }
 
-impl FromArgMatches for FilterOptionArgs {
-    fn from_arg_matches(m: &ArgMatches) -> Result<Self, clap::Error> {
-        Ok(FilterOptionArgs {
-            settings: given(m, |_| true),
-        })
-    }
-    fn update_from_arg_matches(&mut self, m: &ArgMatches) -> Result<(), clap::Error> {
-        *self = Self::from_arg_matches(m)?;
-        Ok(())
-    }
+/// clap's traits for `$t`, a struct of the named settings `$specs` gives
+/// (under their help headings where `$headings`).
+macro_rules! settings_args {
+    ($t:ident, $specs:expr, $headings:expr) => {
+        impl FromArgMatches for $t {
+            fn from_arg_matches(m: &ArgMatches) -> Result<Self, clap::Error> {
+                let settings = ($specs).iter().filter_map(|s| s.given(m)).collect();
+                Ok($t { settings })
+            }
+            fn update_from_arg_matches(&mut self, m: &ArgMatches) -> Result<(), clap::Error> {
+                *self = Self::from_arg_matches(m)?;
+                Ok(())
+            }
+        }
+
+        impl Args for $t {
+            fn augment_args(cmd: Command) -> Command {
+                cmd.args(($specs).iter().map(|s| s.arg($headings)))
+            }
+            fn augment_args_for_update(cmd: Command) -> Command {
+                Self::augment_args(cmd)
+            }
+        }
+    };
 }
 
-impl Args for FilterOptionArgs {
-    fn augment_args(cmd: Command) -> Command {
-        cmd.args(specs().iter().map(|s| s.arg(true)))
-    }
-    fn augment_args_for_update(cmd: Command) -> Command {
-        Self::augment_args(cmd)
-    }
-}
-
-impl FromArgMatches for StatsArgs {
-    fn from_arg_matches(m: &ArgMatches) -> Result<Self, clap::Error> {
-        Ok(StatsArgs {
-            settings: given(m, |n| STATS.contains(&n)),
-        })
-    }
-    fn update_from_arg_matches(&mut self, m: &ArgMatches) -> Result<(), clap::Error> {
-        *self = Self::from_arg_matches(m)?;
-        Ok(())
-    }
-}
-
-impl Args for StatsArgs {
-    fn augment_args(cmd: Command) -> Command {
-        cmd.args(
-            (specs().iter())
-                .filter(|s| STATS.contains(&s.name))
-                .map(|s| s.arg(false)),
-        )
-    }
-    fn augment_args_for_update(cmd: Command) -> Command {
-        Self::augment_args(cmd)
-    }
-}
+settings_args!(FilterOptionArgs, specs(), true);
+settings_args!(StatsArgs, stats_specs(), false);
+settings_args!(RestoreOptionArgs, restore_specs(), true);
