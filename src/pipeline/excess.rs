@@ -22,7 +22,7 @@
 use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
 
 use super::counts::{ExcessCounts, MethodCounts};
-use super::gather::{Made, Placed, Sources};
+use super::gather::{Gathered, Placed};
 use super::guided::GuideReader;
 use super::pixel::SURFACE_SHARE;
 use super::stage::{Output, Stage, WindowUse};
@@ -103,12 +103,9 @@ pub struct ExcessStage {
     stats: StatsLayout,
     rule: ExcessRule,
     win: ExcessWindows,
-    spreads: Sources<Source>,
-    /// Final output rows not yet written.
-    made: Made,
+    /// The spreads, and the final output rows not yet written.
+    gathered: Gathered<Source>,
     treat_done: usize,
-    /// Output rows written.
-    released: usize,
     counters: ExcessCounts,
     guides: GuideReader,
 }
@@ -195,10 +192,8 @@ impl ExcessStage {
                 raw: RowWindow::new(w),
                 noisy: RowWindow::new(w),
             },
-            spreads: Sources::new(nch, reach),
-            made: Made::new(nch * w),
+            gathered: Gathered::new(nch, w, reach),
             treat_done: 0,
-            released: 0,
             counters: ExcessCounts::default(),
             guides,
         })
@@ -234,7 +229,7 @@ impl Stage for ExcessStage {
     fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> usize {
         let end = self.run(input, rows_in);
         let end = match all_in {
-            true => end.min(self.released + LAST_ROWS),
+            true => end.min(self.gathered.released() + LAST_ROWS),
             false => end,
         };
         self.make_rows(input, end);
@@ -247,17 +242,15 @@ impl Stage for ExcessStage {
         // made from its input row.
         self.treat_done
             .saturating_sub((self.rule.passes + GUARD_REACH).max(self.rule.reach))
-            .min(self.made.rows.end())
+            .min(self.gathered.rows.end())
     }
 
     fn output(&self, rows: (usize, usize)) -> Output<'_> {
-        Output::of(&self.made.rows, None, rows)
+        self.gathered.output(rows)
     }
 
     fn release(&mut self, y: usize) {
-        self.released = y;
-        self.made.rows.evict_below(y);
-        self.spreads.release(y);
+        self.gathered.release(y);
     }
 
     fn counts(&self) -> MethodCounts {
@@ -265,8 +258,8 @@ impl Stage for ExcessStage {
     }
 
     fn windows(&self) -> Vec<WindowUse> {
-        let (w, nch) = (self.w, self.nch);
-        vec![
+        let w = self.w;
+        let mut v = vec![
             WindowUse {
                 name: "luminance",
                 rows: self.win.ylum.high_water(),
@@ -282,17 +275,9 @@ impl Stage for ExcessStage {
                 rows: self.win.raw.high_water() + self.win.noisy.high_water(),
                 row_bytes: w,
             },
-            WindowUse {
-                name: "output",
-                rows: self.made.rows.high_water(),
-                row_bytes: nch * w * 8,
-            },
-            WindowUse {
-                name: "sources (one a row)",
-                rows: self.spreads.high_water(),
-                row_bytes: std::mem::size_of::<Source>() + self.spreads.value_bytes(),
-            },
-        ]
+        ];
+        v.extend(self.gathered.windows());
+        v
     }
 }
 
@@ -445,7 +430,7 @@ impl ExcessStage {
             })
             .collect();
         for (s, values, c) in results {
-            self.spreads.extend(s, values);
+            self.gathered.sources.extend(s, values);
             let k = &mut self.counters;
             k.noisy += c.noisy;
             k.spread += c.spread;
@@ -467,8 +452,8 @@ impl ExcessStage {
             .collect();
         let g = self.guides.chooses_receivers().then_some(&self.guides);
         let by_row = &self.rule.ring_rows;
-        self.made
-            .make_to(&self.spreads, input, (end, w), |s, shares, ty, acc| {
+        self.gathered
+            .make_to(input, (end, w), |s, shares, ty, acc| {
                 let (sx, sy, m) = (s.x as usize, s.y as usize, s.m);
                 if ty + reach < sy || ty > sy + reach {
                     return;

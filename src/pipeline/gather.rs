@@ -6,7 +6,7 @@
 //! the widest kernel's reach past the rows treated: twice the reach, for a
 //! few fireflies a row. Instead each source is kept (its pixel, what its
 //! pixel keeps, what one unit of its kernel carries) and an output row is
-//! made when it is final ([`Made`]): the input row, the kept values of the
+//! made when it is final ([`Gathered`]): the input row, the kept values of the
 //! sources on it, plus every source's share that reaches it. Memory then
 //! follows what is spread, not the width times the reach.
 //!
@@ -19,6 +19,7 @@ use std::sync::Mutex;
 
 use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
 
+use super::stage::{Output, WindowUse};
 use super::window::RowWindow;
 
 /// Where a source sits.
@@ -150,31 +151,34 @@ impl Drop for Scratch<'_> {
     }
 }
 
-/// Output rows made from the input and the sources, from the last row
-/// written to the last final row.
-pub(super) struct Made {
+/// A pixel-resolution stage's spreads and what it makes of them: the
+/// sources held until the rows they reach are made, and the output rows
+/// made from the input and the sources, from the last row written to the
+/// last final row.
+pub(super) struct Gathered<S> {
+    pub(super) sources: Sources<S>,
     pub(super) rows: RowWindow<f64>,
     /// Accumulator rows the tasks making rows reuse.
     spare: Mutex<Vec<Vec<f64>>>,
+    /// Output rows written.
+    released: usize,
 }
 
-impl Made {
-    /// No rows, each of `row_len` values.
-    pub(super) fn new(row_len: usize) -> Self {
-        Made {
-            rows: RowWindow::new(row_len),
+impl<S: Placed + Sync> Gathered<S> {
+    /// Nothing yet, for rows of `nch` channels `w` wide and sources that
+    /// reach `reach` rows.
+    pub(super) fn new(nch: usize, w: usize, reach: usize) -> Self {
+        Gathered {
+            sources: Sources::new(nch, reach),
+            rows: RowWindow::new(nch * w),
             spare: Mutex::new(Vec::new()),
+            released: 0,
         }
     }
 
     /// Make the rows up to `end` ([`Sources::make`]).
-    pub(super) fn make_to<S: Placed + Sync, F>(
-        &mut self,
-        sources: &Sources<S>,
-        input: &RowWindow<f32>,
-        (end, w): (usize, usize),
-        add: F,
-    ) where
+    pub(super) fn make_to<F>(&mut self, input: &RowWindow<f32>, (end, w): (usize, usize), add: F)
+    where
         F: Fn(&S, &[f64], usize, &mut [f64]) + Sync,
     {
         let a = self.rows.end();
@@ -185,7 +189,41 @@ impl Made {
             self.rows.push_stale(0.0);
         }
         let out = self.rows.range_mut(a, end);
-        sources.make(input, (a, out), w, &self.spare, add);
+        self.sources.make(input, (a, out), w, &self.spare, add);
+    }
+
+    /// Output rows written.
+    pub(super) fn released(&self) -> usize {
+        self.released
+    }
+
+    /// Rows `rows` of the output.
+    pub(super) fn output(&self, rows: (usize, usize)) -> Output<'_> {
+        Output::of(&self.rows, None, rows)
+    }
+
+    /// The rows below `y` are written: they and the sources that reach no
+    /// lower go.
+    pub(super) fn release(&mut self, y: usize) {
+        self.released = y;
+        self.rows.evict_below(y);
+        self.sources.release(y);
+    }
+
+    /// What the output rows and the sources hold, for the estimate's check.
+    pub(super) fn windows(&self) -> [WindowUse; 2] {
+        [
+            WindowUse {
+                name: "output",
+                rows: self.rows.high_water(),
+                row_bytes: self.rows.row_len() * 8,
+            },
+            WindowUse {
+                name: "sources (one a row)",
+                rows: self.sources.high_water(),
+                row_bytes: std::mem::size_of::<S>() + self.sources.value_bytes(),
+            },
+        ]
     }
 }
 
@@ -227,11 +265,11 @@ mod tests {
     fn rows_hold_the_kept_values_and_the_shares_and_untouched_rows_the_input() {
         let (w, h) = (6, 5);
         let win = input(w, h);
-        let mut s = Sources::new(1, 1);
-        s.extend(vec![Dot(1, 1), Dot(3, 1)], vec![0.5, 2.0, 7.0, 4.0]);
-        let mut made = Made::new(w);
-        made.make_to(&s, &win, (h, w), below);
-        let rows: Vec<&[f64]> = (0..h).map(|y| made.rows.get(y)).collect();
+        let mut g = Gathered::new(1, w, 1);
+        g.sources
+            .extend(vec![Dot(1, 1), Dot(3, 1)], vec![0.5, 2.0, 7.0, 4.0]);
+        g.make_to(&win, (h, w), below);
+        let rows: Vec<&[f64]> = (0..h).map(|y| g.rows.get(y)).collect();
         assert_eq!(rows[1][1], 0.5);
         assert_eq!(rows[1][3], 7.0);
         assert_eq!(rows[2][2], 14.0 + 2.0);
@@ -243,10 +281,10 @@ mod tests {
         }
         // Row 2 is written: the sources of row 1 still reach it; past it,
         // they are dropped.
-        s.release(2);
-        assert_eq!(s.list.len(), 2);
-        s.release(3);
-        assert!(s.list.is_empty() && s.values.is_empty());
-        assert_eq!(s.high_water(), 2);
+        g.release(2);
+        assert_eq!(g.sources.list.len(), 2);
+        g.release(3);
+        assert!(g.sources.list.is_empty() && g.sources.values.is_empty());
+        assert_eq!(g.sources.high_water(), 2);
     }
 }

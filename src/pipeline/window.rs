@@ -42,6 +42,11 @@ impl<T: Copy> RowWindow<T> {
         }
     }
 
+    /// The values in a row.
+    pub fn row_len(&self) -> usize {
+        self.row_len
+    }
+
     /// Send the buffers of strips taken whole ([`RowWindow::push_rows`]) to
     /// `tx` once their rows have left, for the source to fill again (when
     /// `tx` is full they are dropped).

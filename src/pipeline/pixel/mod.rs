@@ -28,7 +28,7 @@
 use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
 
 use super::counts::{MethodCounts, SpreadCounts};
-use super::gather::{Made, Placed, Sources};
+use super::gather::{Gathered, Placed};
 use super::guided::GuideReader;
 use super::stage::{Output, Stage, WindowUse};
 use super::window::RowWindow;
@@ -115,15 +115,12 @@ pub struct PixelStage {
     guides: GuideReader,
     rule: PixelRule,
     win: PixelWindows,
-    spreads: Sources<Source>,
-    /// Final output rows not yet written.
-    made: Made,
+    /// The spreads, and the final output rows not yet written.
+    gathered: Gathered<Source>,
     /// Pixels whose emission guide set light aside (counted on arrival).
     emissive: u64,
     class_done: usize,
     treat_done: usize,
-    /// Output rows written.
-    released: usize,
     counts: SpreadCounts,
 }
 
@@ -173,12 +170,10 @@ impl PixelStage {
                 light: RowWindow::new(w),
                 surf: RowWindow::new(w),
             },
-            spreads: Sources::new(nch, reach),
-            made: Made::new(nch * w),
+            gathered: Gathered::new(nch, w, reach),
             emissive: 0,
             class_done: 0,
             treat_done: 0,
-            released: 0,
             counts: SpreadCounts::default(),
         })
     }
@@ -251,11 +246,11 @@ impl Stage for PixelStage {
             // is held across the whole width.
             loop {
                 self.step(input, rows_in, (self.treat_done + LAST_ROWS).min(h));
-                if self.end() > self.released || self.treat_done == h {
+                if self.end() > self.gathered.released() || self.treat_done == h {
                     break;
                 }
             }
-            self.end().min(self.released + LAST_ROWS)
+            self.end().min(self.gathered.released() + LAST_ROWS)
         };
         self.make_rows(input, end);
         end
@@ -265,17 +260,15 @@ impl Stage for PixelStage {
         // An output row is made from its input row.
         self.treat_done
             .saturating_sub(self.rule.reach)
-            .min(self.made.rows.end())
+            .min(self.gathered.rows.end())
     }
 
     fn output(&self, rows: (usize, usize)) -> Output<'_> {
-        Output::of(&self.made.rows, None, rows)
+        self.gathered.output(rows)
     }
 
     fn release(&mut self, y: usize) {
-        self.released = y;
-        self.made.rows.evict_below(y);
-        self.spreads.release(y);
+        self.gathered.release(y);
     }
 
     fn counts(&self) -> MethodCounts {
@@ -286,8 +279,8 @@ impl Stage for PixelStage {
     }
 
     fn windows(&self) -> Vec<WindowUse> {
-        let (w, nch) = (self.w, self.nch);
-        vec![
+        let w = self.w;
+        let mut v = vec![
             WindowUse {
                 name: "luminance",
                 rows: self.win.ylum.high_water(),
@@ -304,21 +297,13 @@ impl Stage for PixelStage {
                 row_bytes: w,
             },
             WindowUse {
-                name: "output",
-                rows: self.made.rows.high_water(),
-                row_bytes: nch * w * 8,
-            },
-            WindowUse {
-                name: "sources (one a row)",
-                rows: self.spreads.high_water(),
-                row_bytes: std::mem::size_of::<Source>() + self.spreads.value_bytes(),
-            },
-            WindowUse {
                 name: "surface guides",
                 rows: self.win.surf.high_water(),
                 row_bytes: w * std::mem::size_of::<Surface>(),
             },
-        ]
+        ];
+        v.extend(self.gathered.windows());
+        v
     }
 }
 
@@ -363,7 +348,7 @@ impl PixelStage {
             // Receivers are read `reach` rows above a treated row, and
             // again when their row is made.
             let receivers = self.treat_done.saturating_sub(self.rule.reach);
-            let receivers = receivers.min(self.made.rows.end());
+            let receivers = receivers.min(self.gathered.rows.end());
             self.win.light.evict_below(keep.min(receivers));
             self.win.surf.evict_below(receivers);
         }
@@ -462,7 +447,7 @@ impl PixelStage {
                 .sum();
             self.counts += t.counts;
             self.counts.spread_taps += taps * nch;
-            self.spreads.extend(t.sources, t.values);
+            self.gathered.sources.extend(t.sources, t.values);
         }
     }
 
@@ -478,8 +463,8 @@ impl PixelStage {
             .collect();
         let choose = guides.chooses_receivers();
         let (light, surf) = (&self.win.light, &self.win.surf);
-        self.made
-            .make_to(&self.spreads, input, (end, w), |s, shares, ty, acc| {
+        self.gathered
+            .make_to(input, (end, w), |s, shares, ty, acc| {
                 let k = s.k as usize;
                 let r = widths.reach[k];
                 let (sx, sy) = (s.x as usize, s.y as usize);
