@@ -271,7 +271,8 @@ pub struct CompareArgs {
     /// luminance-weighted absolute difference, in false colour with a legend.
     #[arg(long, value_name = "PNG")]
     pub diff: Option<PathBuf>,
-    #[command(flatten)]
+    /// How the --diff image shows the difference.
+    #[command(flatten, next_help_heading = "The --diff image")]
     pub look: LookArgs,
 }
 
@@ -294,6 +295,10 @@ pub struct PreviewArgs {
     /// Comma-separated labels for the montage (a newline starts another line).
     #[arg(long)]
     pub labels: Option<String>,
+    /// Luminance on a log scale in false colour, with a legend in the
+    /// image's units (as Radiance's falsecolor).
+    #[arg(long)]
+    pub false_color: bool,
     #[command(flatten)]
     pub look: LookArgs,
     /// No progress bar.
@@ -301,7 +306,7 @@ pub struct PreviewArgs {
     pub quiet: bool,
 }
 
-/// How a PNG shows an image: its size, its crop, false colour.
+/// How a PNG shows an image: its size, its crop, its false-colour scale.
 #[derive(Args)]
 pub struct LookArgs {
     /// Shrink each image to at most this many pixels wide (the mean of the
@@ -312,10 +317,6 @@ pub struct LookArgs {
     /// left (as oiiotool writes it).
     #[arg(long, value_name = "WxH+X+Y")]
     pub crop: Option<String>,
-    /// Luminance on a log scale in false colour, with a legend in the
-    /// image's units (as Radiance's falsecolor).
-    #[arg(long)]
-    pub false_color: bool,
     /// The value at the top of the false-colour scale [default: a round
     /// number above all but the brightest 0.1% of the first image].
     #[arg(long, value_name = "VALUE")]

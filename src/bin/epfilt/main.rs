@@ -360,7 +360,7 @@ fn preview(a: PreviewArgs) -> Result<(), Exit> {
         )));
     }
     let inputs: Vec<_> = paths.into_iter().zip(labels).collect();
-    let mut settings = look(&a.look, a.look.false_color)?;
+    let mut settings = look(&a.look, a.false_color)?;
     settings.exposure = a.exposure;
     settings.select = selection(&a.select);
     settings.format = format;
