@@ -31,6 +31,15 @@ pub enum Error {
         reason: String,
     },
 
+    /// The file is not a valid portable float map (PFM), or is damaged.
+    #[error("{path}: invalid or damaged portable float map: {reason}")]
+    InvalidFloatMap {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, and where.
+        reason: String,
+    },
+
     /// The file is valid but uses something epfilt cannot filter.
     #[error("{path}: unsupported: {reason}")]
     Unsupported {

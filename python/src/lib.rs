@@ -34,6 +34,7 @@ fn to_py(e: epfilt::Error) -> PyErr {
         E::Config(_) => "ConfigError",
         E::InvalidFile { .. }
         | E::InvalidPicture { .. }
+        | E::InvalidFloatMap { .. }
         | E::Unsupported { .. }
         | E::Channels { .. }
         | E::Value { .. }

@@ -44,9 +44,9 @@ pub struct PfmHeader {
 }
 
 fn invalid(path: &Path, reason: impl Into<String>) -> Error {
-    Error::InvalidFile {
+    Error::InvalidFloatMap {
         path: path.into(),
-        reason: format!("PFM: {}", reason.into()),
+        reason: reason.into(),
     }
 }
 

@@ -616,6 +616,11 @@ fn restore_reads_oidns_portable_float_map() {
         !o.status.success() && err.contains("cut.pfm") && err.contains("truncated"),
         "{err}"
     );
+    // Named as what it is, not as an EXR.
+    assert!(
+        err.contains("portable float map") && !err.contains("EXR"),
+        "{err}"
+    );
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(!p("o3.exr").exists());
 }
