@@ -112,7 +112,7 @@ pub const WINDOW_MIN_BLOCKS: u64 = 8;
 /// for `cfg`: [`READ_AHEAD_BATCHES`] batches of [`read_ahead_blocks`], or
 /// `WINDOW_MIN_BLOCKS` where that is more; at most
 /// `WINDOW_BLOCKS_PER_THREAD` a worker thread, and a worker's second block
-/// only where the batches' bytes hold it ([`queued_blocks`]).
+/// only where the batches' bytes hold it (`queued_blocks`).
 /// [`fit_memory`] takes fewer under a small budget.
 pub fn window_blocks(cfg: &PipelineConfig, block_bytes: u64) -> u64 {
     let threads = cfg.geometry_workers() as u64;

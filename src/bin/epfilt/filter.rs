@@ -65,10 +65,12 @@ fn one_file(a: &FilterArgs, skip_existing: bool, job: FilterJob) -> Result<(), E
             _ => {}
         }
     }
-    let pixels = (file
-        .input(job.part.as_ref(), job.layer.as_deref(), None)
-        .ok())
-    .map(|i| i.size().0 as f64 * i.size().1 as f64);
+    let pixels = || {
+        let i = file
+            .input(job.part.as_ref(), job.layer.as_deref(), None)
+            .ok()?;
+        Some(i.size().0 as f64 * i.size().1 as f64)
+    };
     let bar = progress_bar(a.quiet, pixels);
     let progress = |done: usize, total: usize| {
         if let Some(b) = &bar {
@@ -135,13 +137,14 @@ fn check_outputs(a: &FilterArgs, job: &SequenceJob) -> Result<(), Exit> {
 /// One bar for the whole sequence: each frame [`FRAME_STEPS`] steps of
 /// it, the rate from the first frame's size, the ETA the sequence's.
 fn sequence_bar(quiet: bool, job: &SequenceJob) -> Option<indicatif::ProgressBar> {
-    let first = job.frames.first().map(|&f| job.input.path(f));
-    let select = epfilt::io::Selection {
-        part: job.template.part.clone(),
-        layer: job.template.layer.clone(),
+    let pixels = || {
+        let first = job.input.path(*job.frames.first()?);
+        let select = epfilt::io::Selection {
+            part: job.template.part.clone(),
+            layer: job.template.layer.clone(),
+        };
+        Some(image_pixels(&first, &select)? * job.frames.len() as f64)
     };
-    let pixels =
-        (first.and_then(|p| image_pixels(&p, &select))).map(|px| px * job.frames.len() as f64);
     progress_bar(quiet, pixels)
 }
 

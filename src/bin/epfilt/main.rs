@@ -116,9 +116,11 @@ fn dispatch(cli: Cli, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
                 .transpose()
                 .map_err(usage)?;
             check_binary_stdout(&out)?;
-            let r = with_progress(quiet, None, |p| {
-                epfilt::merge::merge(&paths, &out, format, p)
-            })
+            let r = with_progress(
+                quiet,
+                || None,
+                |p| epfilt::merge::merge(&paths, &out, format, p),
+            )
             .map_err(fail)?;
             if let Some(path) = &report {
                 write_report(path, &r)?;
@@ -177,7 +179,7 @@ mod compare_status {
 fn compare(a: CompareArgs) -> Result<(), Exit> {
     read_stdin(a.quiet, [a.a.as_path(), a.b.as_path()]);
     let select = selection(&a.select);
-    let pixels = image_pixels(&a.a, &select).map(|px| 2.0 * px);
+    let pixels = || image_pixels(&a.a, &select).map(|px| 2.0 * px);
     let compared = with_progress(a.quiet, pixels, |p| {
         epfilt::compare::compare_files(&a.a, &a.b, &select, p)
     });
@@ -192,7 +194,7 @@ fn compare(a: CompareArgs) -> Result<(), Exit> {
         check_binary_stdout(png)?;
         let mut settings = look(&a.look, true)?;
         settings.select = select.clone();
-        let pixels = image_pixels(&a.a, &select).map(|px| 2.0 * px);
+        let pixels = || image_pixels(&a.a, &select).map(|px| 2.0 * px);
         with_progress(a.quiet, pixels, |p| {
             epfilt::preview::write_diff_png(&a.a, &a.b, png, &settings, p)
         })
@@ -241,8 +243,10 @@ fn restore(mut a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
     if let Some(w) = capped {
         warn(&w);
     }
-    let pixels = image_pixels(&job.energy, &job.select);
-    let r = with_progress(a.quiet, pixels, |p| epfilt::restore_file(&job, p)).map_err(fail)?;
+    let plan = epfilt::job::restore::RestorePlan::build(&job).map_err(fail)?;
+    let (w, h) = plan.size();
+    let pixels = || Some(w as f64 * h as f64);
+    let r = with_progress(a.quiet, pixels, |p| plan.run(&job, p)).map_err(fail)?;
     if let Some(path) = &a.report {
         write_report(path, &r)?;
     }
@@ -364,7 +368,7 @@ fn preview(a: PreviewArgs) -> Result<(), Exit> {
     settings.exposure = a.exposure;
     settings.select = selection(&a.select);
     settings.format = format;
-    let pixels = image_pixels(&inputs[0].0, &settings.select).map(|px| 2.0 * px);
+    let pixels = || image_pixels(&inputs[0].0, &settings.select).map(|px| 2.0 * px);
     with_progress(a.quiet, pixels, |p| {
         epfilt::preview::write_png(&inputs, &out, &settings, p)
     })
@@ -436,7 +440,7 @@ fn synth(a: SynthArgs) -> Result<(), Exit> {
         Sampling::Supersample(s) => s * s,
         Sampling::Spp(_) => 1,
     };
-    let pixels = Some((w * h * samples) as f64);
+    let pixels = || Some((w * h * samples) as f64);
     let r = with_progress(a.quiet, pixels, |p| epfilt::synth::synth(&job, p)).map_err(fail)?;
     if !a.quiet {
         eprintln!(
@@ -476,7 +480,7 @@ fn warn(text: &str) {
 /// cleared when it ends; `pixels`: the image's, for the rate.
 fn with_progress<T>(
     quiet: bool,
-    pixels: Option<f64>,
+    pixels: impl FnOnce() -> Option<f64>,
     work: impl FnOnce(epfilt::pipeline::Progress<'_>) -> T,
 ) -> T {
     let bar = progress_bar(quiet, pixels);
@@ -494,12 +498,13 @@ fn with_progress<T>(
 
 /// A progress bar on standard error when it is a terminal: the share done,
 /// the rate in megapixels a second of `pixels` (the whole work's, when
-/// known), the time spent and the time left. It ticks between updates: a
-/// wide strip takes seconds.
-fn progress_bar(quiet: bool, pixels: Option<f64>) -> Option<ProgressBar> {
+/// known; asked only where a bar is shown), the time spent and the time
+/// left. It ticks between updates: a wide strip takes seconds.
+fn progress_bar(quiet: bool, pixels: impl FnOnce() -> Option<f64>) -> Option<ProgressBar> {
     if quiet || !std::io::stderr().is_terminal() {
         return None;
     }
+    let pixels = pixels();
     let b = ProgressBar::new(0);
     let rate = move |s: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
         let secs = s.elapsed().as_secs_f64();

@@ -238,8 +238,10 @@ pub fn restore_file(job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreR
     plan.run(job, progress)
 }
 
-/// A file restore, checked and sized before a row is read.
-struct RestorePlan {
+/// A file restore, checked and sized before a row is read:
+/// [`RestorePlan::build`] opens and matches both inputs and fits the
+/// memory; [`RestorePlan::run`] makes the output.
+pub struct RestorePlan {
     energy: ExrInput,
     denoised: ExrInput,
     params: RestoreParams,
@@ -264,7 +266,7 @@ impl RestorePlan {
     /// Both inputs opened and matched, the energy image's guide and
     /// statistics found, the memory fitted: every check before a row is
     /// read.
-    fn build(job: &RestoreJob) -> Result<Self> {
+    pub fn build(job: &RestoreJob) -> Result<Self> {
         let scale = RestoreParams {
             scale: job.scale,
             keep_gain: job.keep_gain,
@@ -352,9 +354,14 @@ impl RestorePlan {
         })
     }
 
+    /// The energy image's size (width, height).
+    pub fn size(&self) -> (usize, usize) {
+        self.energy.size()
+    }
+
     /// Both passes, the ledger checked, the output put in place; the
     /// report.
-    fn run(self, job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreReport> {
+    pub fn run(self, job: &RestoreJob, progress: Progress<'_>) -> Result<RestoreReport> {
         let RestorePlan {
             energy, denoised, ..
         } = &self;
