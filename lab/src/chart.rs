@@ -40,6 +40,19 @@ pub struct Series {
     pub labels: Vec<String>,
 }
 
+impl Series {
+    /// A series without point labels.
+    pub fn new(name: &str, colour: Rgb, style: Style, points: Vec<(f64, f64)>) -> Self {
+        Series {
+            name: name.into(),
+            colour,
+            style,
+            points,
+            labels: Vec::new(),
+        }
+    }
+}
+
 /// One chart: a title, the axes' names and scales, and its series.
 #[derive(Clone, Debug, Default)]
 pub struct Chart {

@@ -125,9 +125,9 @@ pub fn window_blocks(cfg: &PipelineConfig, block_bytes: u64) -> u64 {
 /// The most blocks a window of `threads` workers holds where a worker's
 /// second block is queued only within [`READ_AHEAD_BATCHES`] x
 /// [`READ_AHEAD_BYTES`]: one block a worker at the least. On the widest
-/// inputs (a 32769-wide block of 9 channels is 19 MB) one block a worker
-/// decodes as fast at 2 threads, and the second is paid in memory
-/// (docs/bench/s1-memory.md); on many threads the window is bounded before.
+/// inputs of many channels one block a worker decodes as fast at 2 threads,
+/// and the second is paid in memory (docs/bench/s1-memory.md); on many
+/// threads the window is bounded before.
 pub fn queued_blocks(threads: u64, block_bytes: u64) -> u64 {
     let by_bytes = READ_AHEAD_BATCHES * READ_AHEAD_BYTES / block_bytes.max(1);
     threads.max(by_bytes).max(FEWEST_WINDOW_BLOCKS as u64)
@@ -538,8 +538,8 @@ mod tests {
         assert_eq!(READ_AHEAD_BATCHES * read_ahead_blocks(block), 6);
         assert_eq!(window_blocks(&on(16), block), WINDOW_MIN_BLOCKS);
         assert_eq!(window_blocks(&on(2), block), 4);
-        // Nine channels (19 MB a block): a worker's second block no longer
-        // fits the batches' bytes at 2 threads; 16 threads keep their 8.
+        // Nine channels: a worker's second block no longer fits the
+        // batches' bytes at 2 threads; 16 threads keep their 8.
         let nine = 32769 * 9 * 4 * 16;
         assert_eq!(window_blocks(&on(2), nine), 2);
         assert_eq!(window_blocks(&on(16), nine), WINDOW_MIN_BLOCKS);

@@ -636,13 +636,7 @@ impl Point {
 /// logarithmic), a colour a method, its defaults crossed, the Pareto front
 /// joined and ringed.
 fn plot(stem: &Path, points: &[Point], scenes: &[&str]) -> Result<()> {
-    let series = |name: &str, colour, style, points| Series {
-        name: name.into(),
-        colour,
-        style,
-        points,
-        labels: Vec::new(),
-    };
+    let series = Series::new;
     let charts: Vec<Chart> = (scenes.iter())
         .map(|scene| {
             let pts: Vec<&Point> = points.iter().filter(|p| p.scene == *scene).collect();

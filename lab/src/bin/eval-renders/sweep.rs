@@ -818,13 +818,7 @@ fn plot(stem: &Path, outcomes: &[Outcome]) -> Result<()> {
     if eligible.is_empty() {
         return Ok(());
     }
-    let series = |name: &str, colour, style, points| Series {
-        name: name.into(),
-        colour,
-        style,
-        points,
-        labels: Vec::new(),
-    };
+    let series = Series::new;
     let front: Vec<(f64, f64)> = (front(outcomes).into_iter())
         .filter_map(|i| point(&outcomes[i]))
         .collect();
