@@ -9,7 +9,7 @@ mod filter;
 mod options;
 
 use std::io::{IsTerminal, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
@@ -99,37 +99,12 @@ fn dispatch(cli: Cli, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
             }
         }
         Command::Merge {
-            mut paths,
+            paths,
             format,
             report,
             json,
             quiet,
-        } => {
-            let report = report.or(json.then(|| "-".into()));
-            let out = paths
-                .pop()
-                .context("merge needs an output")
-                .map_err(usage)?;
-            let format = format
-                .as_deref()
-                .map(Format::parse)
-                .transpose()
-                .map_err(usage)?;
-            check_binary_stdout(&out)?;
-            let r = with_progress(
-                quiet,
-                || None,
-                |p| epfilt::merge::merge(&paths, &out, format, p),
-            )
-            .map_err(fail)?;
-            if let Some(path) = &report {
-                write_report(path, &r)?;
-            }
-            if !quiet {
-                eprint!("{}", r.summary());
-            }
-            Ok(())
-        }
+        } => merge(paths, format, report.or(json.then(|| "-".into())), quiet),
         Command::Demo { dir, size } => {
             let (w, h) = parse_size(&size).map_err(usage)?;
             let text = epfilt::demo::run(&dir, w, h, &|line| eprintln!("{line}")).map_err(fail)?;
@@ -174,6 +149,43 @@ mod compare_status {
     pub const MISMATCH: i32 = 3;
     /// A file could not be read.
     pub const FILE: i32 = 4;
+}
+
+/// `merge`: the band files, then the output.
+fn merge(
+    mut paths: Vec<PathBuf>,
+    format: Option<String>,
+    report: Option<PathBuf>,
+    quiet: bool,
+) -> Result<(), Exit> {
+    let out = paths
+        .pop()
+        .context("merge needs an output")
+        .map_err(usage)?;
+    let format = format
+        .as_deref()
+        .map(Format::parse)
+        .transpose()
+        .map_err(usage)?;
+    check_binary_stdout(&out)?;
+    // The bands' pixels together are the image's.
+    let pixels = || {
+        let select = epfilt::io::Selection::default();
+        (paths.iter())
+            .map(|p| image_pixels(p, &select))
+            .sum::<Option<f64>>()
+    };
+    let merged = with_progress(quiet, pixels, |p| {
+        epfilt::merge::merge(&paths, &out, format, p)
+    });
+    let r = merged.map_err(fail)?;
+    if let Some(path) = &report {
+        write_report(path, &r)?;
+    }
+    if !quiet {
+        eprint!("{}", r.summary());
+    }
+    Ok(())
 }
 
 fn compare(a: CompareArgs) -> Result<(), Exit> {
