@@ -59,10 +59,6 @@ pub struct FilterJob {
     /// What the user left to the input (`--method`, `--supersample`):
     /// [`FilterJob::settle`] decides it from the file's header.
     pub undecided: Undecided,
-    /// How S and the method were decided (set by [`FilterJob::settle`]).
-    pub verdict: Option<Verdict>,
-    /// Warnings from settling (options the method decided does not read).
-    pub notes: Vec<String>,
     /// Which guide passes to use.
     pub guides: GuideRequest,
     /// How alike surface guides must be for a spread to cross them.
@@ -80,6 +76,27 @@ pub struct FilterJob {
     /// (each as an image of its own, into one output); `None`: the default
     /// view, the others left out with a warning.
     pub view: Option<ViewSelect>,
+}
+
+/// What settling a job decided from its input ([`FilterJob::settle`]).
+#[derive(Clone, Debug, Default)]
+pub struct Decided {
+    /// How S and the method were decided (`None` with `--part all`: the
+    /// settings as given).
+    pub verdict: Option<Verdict>,
+    /// Warnings from settling (options the method decided does not read).
+    pub notes: Vec<String>,
+}
+
+/// A job's input, opened once, with what its output records of it and
+/// what settling decided: what every plan of the run reads.
+pub struct Opened<'a> {
+    /// The input.
+    pub file: &'a InputFile,
+    /// What the output records of the input and the settings.
+    pub fingerprint: Fingerprint,
+    /// What the input decided.
+    pub decided: Decided,
 }
 
 /// Builds a job's settings for the method and S its input decides, with
@@ -118,11 +135,9 @@ impl FilterJob {
     /// by the input's header ([`crate::io::verdict()`]: the super-sampling
     /// attribute, else 1; ep-box where the file holds variance at S = 1,
     /// else ep-gauss), its settings rebuilt for them, from `file` (this
-    /// job's input, opened): its header only.
-    pub fn settle(&self, file: &InputFile) -> Result<FilterJob> {
-        if self.verdict.is_some() {
-            return Ok(self.clone());
-        }
+    /// job's input, opened): its header only. The job keeps what the user
+    /// asked; what the file decided comes beside it.
+    pub fn settle(&self, file: &InputFile) -> Result<(FilterJob, Decided)> {
         let u = &self.undecided;
         let given_m = (!u.method).then_some(self.params.method);
         let given_s = (!u.supersample).then_some(self.params.supersample);
@@ -136,7 +151,9 @@ impl FilterJob {
             },
             // Every part with the same settings: the parts may say different
             // things, so what is not given keeps its default.
-            _ if self.part == Some(PartSelect::All) => return Ok(self.clone()),
+            _ if self.part == Some(PartSelect::All) => {
+                return Ok((self.clone(), Decided::default()))
+            }
             _ => {
                 let view = match &self.view {
                     Some(ViewSelect::Name(v)) => Some(v.as_str()),
@@ -147,13 +164,15 @@ impl FilterJob {
             }
         };
         let mut job = self.clone();
+        let mut notes = Vec::new();
         if let Some(rebuild) = &u.rebuild {
-            let (params, notes) = rebuild(verdict.method, verdict.supersample)?;
-            job.params = params;
-            job.notes = notes;
+            (job.params, notes) = rebuild(verdict.method, verdict.supersample)?;
         }
-        job.verdict = Some(verdict);
-        Ok(job)
+        let decided = Decided {
+            verdict: Some(verdict),
+            notes,
+        };
+        Ok((job, decided))
     }
 }
 
@@ -215,8 +234,6 @@ impl FilterJob {
             stats: StatsRequest::default(),
             edge: Edge::Exact,
             undecided: Undecided::default(),
-            verdict: None,
-            notes: Vec::new(),
             guides: GuideRequest::default(),
             surface_rule: SurfaceRule::default(),
             band: None,
@@ -314,7 +331,7 @@ pub enum Existing {
 /// the same input with the same settings ([`provenance`]), and the same band
 /// or none. `file` is the job's input, opened.
 pub fn existing_output(job: &FilterJob, file: &InputFile) -> Result<Existing> {
-    let job = &job.settle(file)?;
+    let job = &job.settle(file)?.0;
     let out = &job.output;
     if out.as_os_str() == "-" {
         return Ok(Existing::Missing);
@@ -392,19 +409,23 @@ pub fn filter_file(job: &FilterJob, progress: Progress<'_>) -> Result<Report> {
 /// [`filter_file`] of `job`'s input opened as `file`: every question asked
 /// of the input before the first pixel is read is answered from it.
 pub fn filter_opened(job: &FilterJob, file: &InputFile, progress: Progress<'_>) -> Result<Report> {
-    let job = &job.settle(file)?;
+    let (job, decided) = job.settle(file)?;
     job.params.validate()?;
     check_not_same_file(&job.input, &job.output)?;
     let job = &FilterJob {
         format: Some(job.output_format()?),
-        ..job.clone()
+        ..job
     };
-    let fingerprint = &job.fingerprint(file)?;
+    let opened = &Opened {
+        file,
+        fingerprint: job.fingerprint(file)?,
+        decided,
+    };
     // A picture (Radiance, PFM) holds the colour alone.
     let to_rgbe = job.format.is_some_and(|f| f != Format::Exr);
     let parts = file.parts();
     if parts.len() < 2 {
-        return filter_views(job, file, fingerprint, progress);
+        return filter_views(job, opened, progress);
     }
     if job.view == Some(ViewSelect::All) {
         return Err(Error::Config(format!(
@@ -412,9 +433,8 @@ pub fn filter_opened(job: &FilterJob, file: &InputFile, progress: Progress<'_>) 
             job.input.display()
         )));
     }
-    let filter_part = |job: &FilterJob, progress: Progress<'_>| {
-        filter_part(job, file, fingerprint, false, progress)
-    };
+    let filter_part =
+        |job: &FilterJob, progress: Progress<'_>| filter_part(job, opened, false, progress);
     let chosen: Vec<usize> = match &job.part {
         None => return filter_part(job, progress), // its error lists the parts
         Some(PartSelect::All) => {
@@ -437,29 +457,25 @@ pub fn filter_opened(job: &FilterJob, file: &InputFile, progress: Progress<'_>) 
     }
     let all = matches!(job.part, Some(PartSelect::All));
     if all || (job.params.supersample == 1 && job.band.is_none() && !to_rgbe) {
-        filter_and_assemble(job, file, fingerprint, &parts, &chosen, progress)
+        filter_and_assemble(job, opened, &parts, &chosen, progress)
     } else {
-        filter_one_part_of_many(job, file, fingerprint, &parts, chosen[0], to_rgbe, progress)
+        filter_one_part_of_many(job, opened, &parts, chosen[0], to_rgbe, progress)
     }
 }
 
 /// The views of a single-part input: the one chosen (or the default), or
 /// with `--view all` each view filtered as an image of its own and the
 /// results put together into one output.
-fn filter_views(
-    job: &FilterJob,
-    file: &InputFile,
-    fingerprint: &Fingerprint,
-    progress: Progress<'_>,
-) -> Result<Report> {
+fn filter_views(job: &FilterJob, opened: &Opened<'_>, progress: Progress<'_>) -> Result<Report> {
     if job.view != Some(ViewSelect::All) {
-        return filter_part(job, file, fingerprint, false, progress);
+        return filter_part(job, opened, false, progress);
     }
-    let views = crate::io::reader::views(file.input(job.part.as_ref(), None, None)?.header());
+    let part = opened.file.input(job.part.as_ref(), None, None)?;
+    let views = crate::io::reader::views(part.header());
     if views.len() < 2 {
         let mut one = job.clone();
         one.view = None;
-        let mut report = filter_part(&one, file, fingerprint, false, progress)?;
+        let mut report = filter_part(&one, opened, false, progress)?;
         report.warnings.push(format!(
             "{}: --view all: the file has no other view to filter",
             job.input.display()
@@ -489,7 +505,7 @@ fn filter_views(
         sub.view = Some(ViewSelect::Name(v.clone()));
         sub.output = tmp.path().join(format!("view{i}.exr"));
         sub.format = Some(Format::Exr);
-        let mut r = filter_part(&sub, file, fingerprint, true, progress)?;
+        let mut r = filter_part(&sub, opened, true, progress)?;
         let own = sub.output.display().to_string();
         let named = format!("{} (view {v:?})", job.output.display());
         for w in r.warnings.iter_mut() {
@@ -498,7 +514,7 @@ fn filter_views(
         sources.push((sub.output.clone(), (i > 0).then(|| v.clone())));
         reports.push(r);
     }
-    crate::io::views::assemble(&sources, &job.output, &views, &fingerprint.text())?;
+    crate::io::views::assemble(&sources, &job.output, &views, &opened.fingerprint.text())?;
     let mut report = reports.remove(0);
     report.output = job.output.display().to_string();
     for r in reports {
@@ -525,14 +541,13 @@ fn temp_dir_beside(output: &Path, prefix: &str) -> Result<tempfile::TempDir> {
 /// warning and the report as left out, with why.
 fn filter_one_part_of_many(
     job: &FilterJob,
-    file: &InputFile,
-    fingerprint: &Fingerprint,
+    opened: &Opened<'_>,
     parts: &[crate::io::parts::PartInfo],
     chosen: usize,
     to_rgbe: bool,
     progress: Progress<'_>,
 ) -> Result<Report> {
-    let mut report = filter_part(job, file, fingerprint, false, progress)?;
+    let mut report = filter_part(job, opened, false, progress)?;
     let why = if to_rgbe {
         "a Radiance picture has one part".to_string()
     } else if job.band.is_some() {
@@ -576,8 +591,7 @@ fn filter_one_part_of_many(
 /// other parts (copied), in the input's order.
 fn filter_and_assemble(
     job: &FilterJob,
-    file: &InputFile,
-    fingerprint: &Fingerprint,
+    opened: &Opened<'_>,
     parts: &[crate::io::parts::PartInfo],
     chosen: &[usize],
     progress: Progress<'_>,
@@ -589,7 +603,7 @@ fn filter_and_assemble(
     let mut entries = Vec::new();
     let mut warnings = Vec::new();
     for p in parts {
-        let (filter_it, left_out) = part_action(job, file, p, chosen);
+        let (filter_it, left_out) = part_action(job, opened.file, p, chosen);
         if let Some(why) = left_out {
             warnings.push(format!(
                 "{}: part {:?} is left out: {why}",
@@ -603,7 +617,7 @@ fn filter_and_assemble(
             let mut sub = job.clone();
             sub.part = Some(PartSelect::Index(p.index));
             sub.output = tmp.path().join(format!("part{}.exr", p.index));
-            let mut r = filter_part(&sub, file, fingerprint, false, progress)?;
+            let mut r = filter_part(&sub, opened, false, progress)?;
             // What it says of its file, it says of its part of the output.
             let own = sub.output.display().to_string();
             let named = format!("{} (part {:?})", job.output.display(), p.name);
@@ -699,12 +713,11 @@ fn part_action(
 /// `--view all`, which carries nothing of the others.
 fn filter_part(
     job: &FilterJob,
-    file: &InputFile,
-    fingerprint: &Fingerprint,
+    opened: &Opened<'_>,
     exclusive: bool,
     progress: Progress<'_>,
 ) -> Result<Report> {
-    FilterPlan::build(job, file, fingerprint, exclusive)?.run(progress)
+    FilterPlan::build(job, opened, exclusive)?.run(progress)
 }
 
 /// What the output leaves out of the input's channels, said as a warning

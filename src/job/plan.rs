@@ -11,17 +11,19 @@ use crate::host::{cpu_seconds, default_max_memory};
 use crate::io::output::OutputLayout;
 use crate::io::provenance::Fingerprint;
 use crate::io::{
-    find_guides, find_stats, ExrInput, Format, FoundGuides, InputFile, StatsChannels, ViewSelect,
+    find_guides, find_stats, ExrInput, Format, FoundGuides, StatsChannels, Verdict, ViewSelect,
 };
 use crate::pipeline::stream::MAX_CHANNELS;
 use crate::pipeline::{ChannelMode, StripLayout};
 
-use super::{Edge, FilterJob};
+use super::{Decided, Edge, FilterJob, Opened};
 
 /// A run settled: everything checked that can be checked before the stream.
 pub struct FilterPlan<'a> {
     pub(crate) job: &'a FilterJob,
     pub(crate) fingerprint: &'a Fingerprint,
+    /// What the input decided of the job.
+    pub(crate) decided: &'a Decided,
     pub(crate) input: ExrInput,
     /// The job's settings (ep-box's `L_tvis` is settled by the first pass).
     pub(crate) params: FilterParams,
@@ -84,31 +86,27 @@ impl BandPlan {
 }
 
 impl<'a> FilterPlan<'a> {
-    /// Open the part, layer and view `job` names of its input `file`, and
-    /// settle the run. `exclusive`: one view of `--view all`, which carries nothing of
-    /// the others; `fingerprint` goes into the output.
-    pub fn build(
-        job: &'a FilterJob,
-        file: &InputFile,
-        fingerprint: &'a Fingerprint,
-        exclusive: bool,
-    ) -> Result<Self> {
+    /// Open the part, layer and view `job` names of its input (`opened`),
+    /// and settle the run. `exclusive`: one view of `--view all`, which
+    /// carries nothing of the others; the fingerprint goes into the output.
+    pub fn build(job: &'a FilterJob, opened: &'a Opened<'_>, exclusive: bool) -> Result<Self> {
         let cpu_start = cpu_seconds().unwrap_or(0.0);
         let view = match &job.view {
             Some(ViewSelect::Name(v)) => Some(v.as_str()),
             _ => None,
         };
-        let mut input = file.input(job.part.as_ref(), job.layer.as_deref(), view)?;
+        let mut input = (opened.file).input(job.part.as_ref(), job.layer.as_deref(), view)?;
         // A picture (Radiance, PFM) holds the colour alone.
         let to_rgbe = job.output_format()? != Format::Exr;
         let scope = crate::io::reader::view_scope(&job.input, input.header(), view, exclusive)?;
-        let mut warnings = job.notes.clone();
+        let mut warnings = opened.decided.notes.clone();
         let found_guides = guides(job, &input, &mut warnings)?;
         let carried = carry(job, &mut input, &scope, to_rgbe, &found_guides)?;
         let found = statistics(job, &mut input)?;
         let guide_layout = found_guides.attach(&mut input)?;
         warnings.extend(super::dropped_warnings(job, &input, &scope, to_rgbe));
-        let geometry = geometry(job, &input, &mut warnings)?;
+        let verdict = opened.decided.verdict.as_ref();
+        let geometry = geometry(job, verdict, &input, &mut warnings)?;
         let channels = input.channels();
         let mut pipe_job = pipeline_job(job, &input, &geometry, found.as_ref().map(|f| &f.1))?;
         pipe_job.guides = guide_layout;
@@ -131,7 +129,8 @@ impl<'a> FilterPlan<'a> {
         };
         Ok(FilterPlan {
             job,
-            fingerprint,
+            fingerprint: &opened.fingerprint,
+            decided: &opened.decided,
             input,
             params: job.params.clone(),
             found: found.map(|f| f.0),
@@ -247,7 +246,12 @@ fn statistics(
 
 /// The samples filtered: the whole data window when its size is a multiple
 /// of S, else cropped or padded as `--edge` says (with a warning), or refused.
-fn geometry(job: &FilterJob, input: &ExrInput, warnings: &mut Vec<String>) -> Result<Geometry> {
+fn geometry(
+    job: &FilterJob,
+    verdict: Option<&Verdict>,
+    input: &ExrInput,
+    warnings: &mut Vec<String>,
+) -> Result<Geometry> {
     let s = job.params.supersample;
     let (w, h) = input.size();
     let origin = input.origin();
@@ -308,7 +312,7 @@ fn geometry(job: &FilterJob, input: &ExrInput, warnings: &mut Vec<String>) -> Re
             })
         }
         Edge::Exact => {
-            let from = match &job.verdict {
+            let from = match verdict {
                 Some(v) if v.supersample_from != "--supersample" => {
                     format!(" (from the {})", v.supersample_from)
                 }

@@ -342,13 +342,9 @@ fn report(plan: &FilterPlan<'_>, outcome: &Outcome) -> Report {
     let mut report = Report {
         input: job.input.display().to_string(),
         output: job.output.display().to_string(),
-        supersample_from: job
-            .verdict
-            .as_ref()
+        supersample_from: (plan.decided.verdict.as_ref())
             .map_or("--supersample".into(), |v| v.supersample_from.clone()),
-        method_from: job
-            .verdict
-            .as_ref()
+        method_from: (plan.decided.verdict.as_ref())
             .map_or("--method".into(), |v| v.method_from.clone()),
         guides: plan.guides.describe(),
         width: g.read_w,

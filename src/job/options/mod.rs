@@ -757,8 +757,6 @@ impl FilterOptions {
             stats: self.stats_request(),
             edge: self.edge.unwrap_or_default(),
             undecided,
-            verdict: None,
-            notes: Vec::new(),
             guides: crate::io::GuideRequest::parse(&self.guides, &self.guide)?,
             surface_rule: SurfaceRule {
                 normal_degrees: self.guide_normal,
