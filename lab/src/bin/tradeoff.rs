@@ -25,15 +25,8 @@ use anyhow::{bail, Context, Result};
 use epfilt_lab::chart::{save, Chart, Rgb, Series, Style};
 use serde_json::Value;
 
-const METHODS: [&str; 7] = [
-    "ep-gauss",
-    "ep-box",
-    "gauss",
-    "box",
-    "clamp",
-    "median",
-    "alpha-trim",
-];
+/// Every method, by the command line's names.
+const METHODS: [&str; 7] = epfilt::Method::NAMES;
 const SETTINGS: [&str; 13] = [
     "tolerance",
     "support",
