@@ -13,8 +13,8 @@
 //!
 //! * [`stream`]: the skeleton (input window, cursors, books, precision);
 //! * [`spread`]: the Gaussian family's stage (ep-gauss, gauss, box, clamp);
-//! * [`excess`]: ep-box's stage (§5.1);
-//! * [`pixel`]: ep-gauss's stage at pixel resolution (S = 1);
+//! * [`pixel`]: the pixel-resolution stage and its rules: ep-box (§5.1)
+//!   and ep-gauss at S = 1;
 //! * [`order`]: the median and alpha-trim foils' stage;
 //! * [`books`], [`ledger`], [`window`]: what every stage shares;
 //! * this file: the contract (strips, sources, sinks, the job, the
@@ -26,9 +26,6 @@ pub mod books;
 pub mod counts;
 pub mod edge;
 mod estimate;
-pub mod excess;
-mod gather;
-mod guided;
 pub mod ledger;
 mod memory;
 pub mod order;

@@ -1,9 +1,8 @@
 //! The stage factory: each method's stage, built with the checks it needs,
 //! behind the [`Stage`] contract the skeleton ([`super::stream`]) runs.
 
-use super::excess::ExcessStage;
 use super::order::OrderStage;
-use super::pixel::PixelStage;
+use super::pixel::{ExcessRule, GaussRule, PixelStage};
 use super::spread::GaussianStage;
 use super::stage::Stage;
 use super::{PipelineConfig, StripLayout};
@@ -41,28 +40,21 @@ pub fn make(
             let ltvis = params.ep_box.ltvis.ok_or_else(|| {
                 Error::Config("ep-box needs L_tvis: measure L_ave first (mean_luminance)".into())
             })?;
-            Box::new(ExcessStage::new(
-                grid.in_w,
-                grid.in_h,
-                nch,
-                job.luminance.clone(),
-                job.modes.clone(),
-                job.aux.len(),
+            Box::new(PixelStage::new(ExcessRule::new(
+                (grid.in_w, grid.in_h),
+                (job.luminance.clone(), job.modes.clone(), job.aux.len()),
                 stats,
-                params,
-                ltvis,
+                (params, ltvis),
                 (job.guides.clone(), job.surface_rule),
-            )?)
+            )?))
         }
-        Method::EpGauss if grid.s == 1 => Box::new(PixelStage::new(
-            grid.in_w,
-            grid.in_h,
+        Method::EpGauss if grid.s == 1 => Box::new(PixelStage::new(GaussRule::new(
+            (grid.in_w, grid.in_h),
             job.luminance.clone(),
             job.modes.clone(),
-            job.guides.clone(),
-            job.surface_rule,
+            (job.guides.clone(), job.surface_rule),
             params,
-        )?),
+        )?)),
         Method::Median | Method::AlphaTrim => {
             Box::new(OrderStage::new(grid, job.modes.clone(), params))
         }

@@ -1,266 +1,288 @@
-//! The stage of ep-gauss at pixel resolution (S = 1; the rules are in
-//! [`crate::filter::ep_gauss::pixel`], the guides' in
-//! [`crate::filter::guides`]).
+//! The stage of the pixel-resolution methods: ep-gauss at S = 1
+//! ([`gauss`]) and ep-box ([`excess`]). Each is a [`Rule`] that declares
+//! its passes over pixel rows and what each reads; [`PixelStage`] owns the
+//! schedule.
 //!
-//! Three cursors over pixel rows:
+//! Pass 0 is the input (with what a rule makes of each row as it arrives:
+//! the lights, the surface guides); each later pass makes its rows of
+//! per-pixel windows from the rows earlier passes made; the last pass is
+//! the treatment, which decides each noisy pixel and lists the spread ones
+//! as sources (`gather.rs`). An output row is made once every source that
+//! reaches it is listed: the input row, the kept values of its sources,
+//! plus every source's shares that reach it.
 //!
-//! 1. **luminance** of row `y` on arrival (of what the emission guide leaves:
-//!    a lamp's own light is never tested);
-//! 2. **classification** of row `y` once rows `y + 2` are in: the background
-//!    (the median of the 5 x 5 about a pixel) of each local maximum, and
-//!    whether it is noisy;
-//! 3. **treatment** of row `y` once rows `y + 2` are classified and rows
-//!    `y + R` are in (with guides, the receivers a spread may not reach,
-//!    lights and other surfaces, are read there): the feature rules, the
-//!    width, and each spread pixel as a source (what it keeps, what its
-//!    kernel carries);
+//! The schedule, in one paragraph: a pass may make row `y` once every pass
+//! it reads has made the rows within its reach of `y` (all of them at the
+//! image's end). The treatment goes as far as that allows; each earlier
+//! pass goes only as far as the passes that read it need, since what waits
+//! is held across the whole width. A pass's rows leave once no pass reads
+//! them; input rows once no pass reads them and their output rows are made.
+//! When every input row is in, the treatment goes `LAST_ROWS` rows at a
+//! time, so that the last rows are handed over a few at a time rather than
+//! all held at once. The halo is derived from the same declarations.
 //!
-//! and the **output** of row `y` once every row within the widest reach `R`
-//! has been treated: the input row, the kept values of its sources, plus
-//! every source's shares that reach it (`pipeline/gather.rs`).
-//!
-//! Each pixel's decision reads only the input within 4 rows and columns of
-//! it (with surface guides, its receivers' guides within `R`), and each
+//! A rule's decision for a pixel reads only the rows it declares, and each
 //! output pixel adds its shares in source order, so the output is
 //! bit-identical across `--tile`, `--strip-rows` and `--threads`. A pixel
 //! neither spread nor reached keeps its input bits.
 
-use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
+use rayon::iter::{IntoParallelIterator, ParallelIterator};
 
-use super::counts::{MethodCounts, SpreadCounts};
-use super::gather::{Gathered, Placed};
-use super::guided::GuideReader;
+use super::counts::MethodCounts;
 use super::stage::{Output, Stage, WindowUse};
 use super::window::RowWindow;
-use super::ChannelMode;
-use crate::error::Result;
-use crate::filter::ep_gauss::pixel::{
-    gaussian_taps, local_max, median, noisy, Widths, BACKGROUND_REACH, BACKGROUND_SAMPLES,
-};
-use crate::filter::guides::{GuideLayout, Surface, SurfaceRule};
-use crate::filter::ValidParams;
-use crate::geometry::{mirror, Halo};
+use crate::geometry::Halo;
+use gather::{Gathered, Placed};
 
-mod treat;
-use treat::{Treat, Treated};
+pub mod excess;
+mod gather;
+pub mod gauss;
+mod guided;
 
-/// A source keeps to its surface (with surface guides) when at least this
-/// share of its first kernel lies on it: less, and it sits on an edge or a
-/// sliver, its own guides a mix of its samples', and keeping to them would
-/// pile its excess on the few pixels that match (docs/bench's
-/// renders-as-written.md measures the surface guides with this rule).
-pub(super) const SURFACE_SHARE: f64 = 0.5;
+pub use excess::ExcessRule;
+pub use gauss::GaussRule;
+pub use guided::GuideReader;
 
-/// Rows treated per task.
-const TREAT_ROWS: usize = 16;
-
-/// Rows handed over at once when every input row is in: the last rows are
-/// made a strip's worth at a time, not all at once.
+/// Rows handed over at once when every input row is in.
 const LAST_ROWS: usize = 16;
 
-/// Rows past a row whose classification its treatment reads (the range
-/// rule looks at the flags within [`BACKGROUND_REACH`]).
-const DECIDE_REACH: usize = BACKGROUND_REACH;
+/// What a pass reads: for each earlier pass it reads (0: the input), that
+/// pass and the rows either side of its own row it reads there.
+pub type Reads = Vec<(usize, usize)>;
 
-/// A pixel whose excess is spread.
-#[derive(Clone, Copy, Debug)]
-struct Source {
-    x: u32,
-    y: u32,
-    /// Its rung on the ladder of widths.
-    k: u32,
-    /// The surface it keeps to, where the guides choose its receivers and
-    /// it does (else, with them, it keeps clear of lights only).
-    on_surface: Option<Surface>,
+/// What a pixel-resolution method computes: its passes, and the rule for
+/// each. The stage calls them in the order the schedule gives.
+pub trait Rule: Send + Sync {
+    /// A spread pixel.
+    type Source: Placed + Send + Sync;
+    /// What a treatment task counts.
+    type Tally: Send;
+    /// Rows a treatment task takes.
+    const TREAT_ROWS: usize;
+
+    /// The image's width and height, and the filtered channels.
+    fn shape(&self) -> (usize, usize, usize);
+    /// What each pass after the input reads, in order; the last is the
+    /// treatment.
+    fn passes(&self) -> Vec<Reads>;
+    /// The widest spread's reach in rows.
+    fn reach(&self) -> usize;
+    /// Input rows `a..b` have arrived: what the rule makes of each on
+    /// arrival (pass 0's own windows).
+    fn arrive(&mut self, input: &RowWindow<f32>, a: usize, b: usize);
+    /// Make rows `a..b` of pass `pass` (neither the input nor the
+    /// treatment).
+    fn make(&mut self, pass: usize, input: &RowWindow<f32>, a: usize, b: usize);
+    /// No pass reads rows of pass `pass` below `y` any more.
+    fn evict(&mut self, pass: usize, y: usize);
+    /// Treat rows `a..b`: the spread pixels in row-major order, their
+    /// values (per source what its pixel keeps, then what one unit of its
+    /// kernel's weight carries, a value a channel each) and what it
+    /// counted.
+    fn treat(
+        &self,
+        input: &RowWindow<f32>,
+        a: usize,
+        b: usize,
+    ) -> (Vec<Self::Source>, Vec<f64>, Self::Tally);
+    /// Add what a treatment task counted of `sources`.
+    fn tally(&mut self, tally: Self::Tally, sources: &[Self::Source]);
+    /// Add to `acc` (row `ty`, `w` columns per channel) the shares of
+    /// `source`, one unit of its weight carrying `shares`.
+    fn add(
+        &self,
+        input: &RowWindow<f32>,
+        source: &Self::Source,
+        shares: &[f64],
+        ty: usize,
+        acc: &mut [f64],
+    );
+    /// What the rule counted.
+    fn counts(&self) -> MethodCounts;
+    /// The windows its passes hold.
+    fn windows(&self) -> Vec<WindowUse>;
 }
 
-impl Placed for Source {
-    fn at(&self) -> (usize, usize) {
-        (self.x as usize, self.y as usize)
+/// Rows past a row of the last pass of `passes` that it reads of the
+/// input, through every pass: the stage's search reach.
+pub fn lag(passes: &[Reads]) -> usize {
+    let mut lag = vec![0];
+    for reads in passes {
+        let l = reads.iter().map(|&(j, r)| lag[j] + r).max().unwrap_or(0);
+        lag.push(l);
     }
+    lag.last().copied().unwrap_or(0)
 }
 
-/// The widths and the tests, set once.
-struct PixelRule {
-    tolerance: f64,
-    /// The feature rules (`--guard` other than `none`).
-    features: bool,
-    widths: Widths,
-    /// Unnormalised taps of each rung (`2 reach + 1`).
-    taps: Vec<Vec<f64>>,
-    reach: usize,
-}
-
-/// The rows the stage holds between strips, each of the image's width.
-struct PixelWindows {
-    /// Luminance of what is left after the emission guide.
-    ylum: RowWindow<f64>,
-    /// The background of local maxima (NaN elsewhere).
-    bg: RowWindow<f64>,
-    /// 1 where a pixel is noisy by Rule 1.
-    cand: RowWindow<u8>,
-    /// 1 where the emission guide says a pixel is a light.
-    light: RowWindow<u8>,
-    /// Each pixel's surface guides (with them), for the rows a spread may
-    /// reach (as `light`).
-    surf: RowWindow<Surface>,
-}
-
-/// ep-gauss's state between strips at S = 1.
-pub struct PixelStage {
+/// A pixel-resolution method's stage: its rule and the schedule.
+pub struct PixelStage<R: Rule> {
+    rule: R,
     w: usize,
     h: usize,
-    nch: usize,
-    modes: Vec<ChannelMode>,
-    guides: GuideReader,
-    rule: PixelRule,
-    win: PixelWindows,
+    /// What each pass reads (`passes[i - 1]` for pass `i`).
+    passes: Vec<Reads>,
+    /// Per pass, the rows made (pass 0: the input rows in).
+    done: Vec<usize>,
     /// The spreads, and the final output rows not yet written.
-    gathered: Gathered<Source>,
-    /// Pixels whose emission guide set light aside (counted on arrival).
-    emissive: u64,
-    class_done: usize,
-    treat_done: usize,
-    counts: SpreadCounts,
+    gathered: Gathered<R::Source>,
 }
 
-impl PixelStage {
-    /// The stage for a `w x h` image whose strip rows hold `nch` filtered
-    /// channels (luminance weights `lum`, modes `modes`) and then the aux
-    /// channels; `guides` indexes that whole row. Checked by the skeleton:
-    /// the grid and the channels.
-    pub fn new(
-        w: usize,
-        h: usize,
-        lum: Vec<f64>,
-        modes: Vec<ChannelMode>,
-        guides: GuideLayout,
-        rule: SurfaceRule,
-        params: &ValidParams,
-    ) -> Result<Self> {
-        let nch = modes.len();
-        let guides = GuideReader::new(guides, rule, &lum, nch, w)?;
-        let widths = Widths::new(
-            params.radius,
-            params.max_radius,
-            params.width_step,
-            params.cutoff,
-        );
-        let taps = (widths.rho.iter().zip(&widths.reach))
-            .map(|(&r, &k)| gaussian_taps(r, k, params.cutoff))
-            .collect();
-        let reach = widths.max_reach();
-        Ok(PixelStage {
+impl<R: Rule> PixelStage<R> {
+    /// The stage of `rule`.
+    pub fn new(rule: R) -> Self {
+        let (w, h, nch) = rule.shape();
+        let passes = rule.passes();
+        let reach = rule.reach();
+        PixelStage {
+            done: vec![0; passes.len() + 1],
+            passes,
             w,
             h,
-            nch,
-            modes,
-            guides,
-            rule: PixelRule {
-                tolerance: params.tolerance,
-                features: params.ep_box.guard != crate::filter::ep_box::Guard::None,
-                widths,
-                taps,
-                reach,
-            },
-            win: PixelWindows {
-                ylum: RowWindow::new(w),
-                bg: RowWindow::new(w),
-                cand: RowWindow::new(w),
-                light: RowWindow::new(w),
-                surf: RowWindow::new(w),
-            },
             gathered: Gathered::new(nch, w, reach),
-            emissive: 0,
-            class_done: 0,
-            treat_done: 0,
-            counts: SpreadCounts::default(),
-        })
+            rule,
+        }
+    }
+
+    /// The treatment's pass.
+    fn last(&self) -> usize {
+        self.passes.len()
+    }
+
+    /// The rows each pass may make with `rows_in` input rows in: the
+    /// treatment no further than `treat`, an earlier pass no further than
+    /// the passes that read it need.
+    fn targets(&self, rows_in: usize, treat: usize) -> Vec<usize> {
+        let h = self.h;
+        let mut t = vec![rows_in];
+        for reads in &self.passes {
+            let after = |&(j, r): &(usize, usize)| match t[j] {
+                y if y == h => h,
+                y => y.saturating_sub(r),
+            };
+            let y = reads.iter().map(after).min().unwrap_or(h);
+            t.push(y);
+        }
+        let n = self.last();
+        t[n] = t[n].min(treat);
+        for i in (1..n).rev() {
+            let mut need = 0;
+            for (reads, &tk) in self.passes[i..].iter().zip(&t[i + 1..]) {
+                for &(j, r) in reads {
+                    if j == i {
+                        need = need.max((tk + r).min(h));
+                    }
+                }
+            }
+            t[i] = t[i].min(need);
+        }
+        t
+    }
+
+    /// Make every pass's rows up to its target (`treat` the treatment's
+    /// most), then let go of the rows no pass reads any more.
+    fn step(&mut self, input: &RowWindow<f32>, rows_in: usize, treat: usize) {
+        self.done[0] = rows_in;
+        let targets = self.targets(rows_in, treat);
+        let n = self.last();
+        for (i, &target) in targets.iter().enumerate().take(n).skip(1) {
+            if target > self.done[i] {
+                self.rule.make(i, input, self.done[i], target);
+                self.done[i] = target;
+            }
+        }
+        if targets[n] > self.done[n] {
+            self.treat(input, self.done[n], targets[n]);
+            self.done[n] = targets[n];
+        }
+        for j in 1..n {
+            self.rule.evict(j, self.read_from(j));
+        }
+        self.rule.evict(0, self.input_needed());
+    }
+
+    /// The first row of pass `j` a later pass will still read.
+    fn read_from(&self, j: usize) -> usize {
+        (self.passes.iter().enumerate())
+            .flat_map(|(k, reads)| {
+                let done = self.done[k + 1];
+                (reads.iter())
+                    .filter(move |&&(i, _)| i == j)
+                    .map(move |&(_, r)| done.saturating_sub(r))
+            })
+            .min()
+            .unwrap_or(self.h)
+    }
+
+    /// Treat rows `a..b`, a task per [`Rule::TREAT_ROWS`], and list the
+    /// sources in row-major order.
+    fn treat(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
+        let chunks: Vec<usize> = (a..b).step_by(R::TREAT_ROWS).collect();
+        let rule = &self.rule;
+        let region = crate::trace::region("pixel treat");
+        let results: Vec<_> = chunks
+            .into_par_iter()
+            .map(|y0| {
+                let _task = region.task("pixel treat");
+                rule.treat(input, y0, (y0 + R::TREAT_ROWS).min(b))
+            })
+            .collect();
+        for (sources, values, tally) in results {
+            self.rule.tally(tally, &sources);
+            self.gathered.sources.extend(sources, values);
+        }
+    }
+
+    /// The end of the final output rows: those no untreated row reaches.
+    fn end(&self) -> usize {
+        match self.done[self.last()] {
+            y if y == self.h => y,
+            y => y.saturating_sub(self.rule.reach()),
+        }
     }
 }
 
-impl Stage for PixelStage {
-    /// `search_reach`: the rows a treatment reads below its own (the
-    /// classification's and the range rule's, and with surface guides the
-    /// receivers'); `spread_reach`: the widest kernel's.
+impl<R: Rule> Stage for PixelStage<R> {
+    /// `search_reach`: the input rows the treatment reads past its row,
+    /// through its passes; `spread_reach`: the widest spread's.
     fn halo(&self) -> Halo {
         Halo {
             xbar_reach: 0,
             base_reach: 0,
-            search_reach: self.treat_lag(),
-            spread_reach: self.rule.reach,
+            search_reach: lag(&self.passes),
+            spread_reach: self.rule.reach(),
         }
     }
 
     fn arrive(&mut self, input: &mut RowWindow<f32>, a: usize, b: usize) {
-        for _ in a..b {
-            self.win.light.push_stale(0);
-        }
-        if self.guides.surface() {
-            for _ in a..b {
-                self.win.surf.push_stale(Surface::default());
-            }
-            let guides = &self.guides;
-            let rows = self.win.surf.range_mut(a, b);
-            rows.into_par_iter().enumerate().for_each(|(k, srow)| {
-                let row = input.get(a + k);
-                for (x, q) in srow.iter_mut().enumerate() {
-                    *q = guides.surface_of(row, x);
-                }
-            });
-        }
-        if !self.guides.emission() {
-            return;
-        }
-        // The lights, for the rows a spread may reach (their luminance is
-        // made again when their rows are classified: held until then, it
-        // would cost the width times the reach).
-        let guides = &self.guides;
-        let region = crate::trace::region("pixel lights");
-        let lights = self.win.light.range_mut(a, b);
-        let emissive: u64 = lights
-            .into_par_iter()
-            .enumerate()
-            .map(|(k, lrow)| {
-                let _task = region.task("pixel lights");
-                let row = input.get(a + k);
-                let mut emissive = 0;
-                for (x, l) in lrow.iter_mut().enumerate() {
-                    let light = guides.is_light(row, x, guides.residual_luminance(row, x));
-                    *l = u8::from(light);
-                    emissive += u64::from(light || guides.has_emission(row, x));
-                }
-                emissive
-            })
-            .sum();
-        self.emissive += emissive;
+        self.rule.arrive(input, a, b);
     }
 
     fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> usize {
-        let h = self.h;
-        let end = if rows_in < h || !all_in {
-            self.step(input, rows_in, rows_in.saturating_sub(self.treat_lag()));
+        let end = if rows_in < self.h || !all_in {
+            self.step(input, rows_in, rows_in);
             self.end()
         } else {
-            // The last rows a few at a time: what waits for its treatment
-            // is held across the whole width.
+            let released = self.gathered.released();
             loop {
-                self.step(input, rows_in, (self.treat_done + LAST_ROWS).min(h));
-                if self.end() > self.gathered.released() || self.treat_done == h {
+                let treat = self.done[self.last()] + LAST_ROWS;
+                self.step(input, rows_in, treat);
+                if self.end() > released || self.done[self.last()] == self.h {
                     break;
                 }
             }
-            self.end().min(self.gathered.released() + LAST_ROWS)
+            self.end().min(released + LAST_ROWS)
         };
-        self.make_rows(input, end);
+        let rule = &self.rule;
+        let add = |s: &R::Source, shares: &[f64], ty: usize, acc: &mut [f64]| {
+            rule.add(input, s, shares, ty, acc)
+        };
+        self.gathered.make_to(input, (end, self.w), add);
         end
     }
 
     fn input_needed(&self) -> usize {
         // An output row is made from its input row.
-        self.treat_done
-            .saturating_sub(self.rule.reach)
-            .min(self.gathered.rows.end())
+        self.read_from(0).min(self.gathered.rows.end())
     }
 
     fn output(&self, rows: (usize, usize)) -> Output<'_> {
@@ -272,514 +294,34 @@ impl Stage for PixelStage {
     }
 
     fn counts(&self) -> MethodCounts {
-        MethodCounts::EpGauss(SpreadCounts {
-            emissive: self.emissive,
-            ..self.counts
-        })
+        self.rule.counts()
     }
 
     fn windows(&self) -> Vec<WindowUse> {
-        let w = self.w;
-        let mut v = vec![
-            WindowUse {
-                name: "luminance",
-                rows: self.win.ylum.high_water(),
-                row_bytes: w * 8,
-            },
-            WindowUse {
-                name: "background",
-                rows: self.win.bg.high_water(),
-                row_bytes: w * 8,
-            },
-            WindowUse {
-                name: "flags",
-                rows: self.win.cand.high_water() + self.win.light.high_water(),
-                row_bytes: w,
-            },
-            WindowUse {
-                name: "surface guides",
-                rows: self.win.surf.high_water(),
-                row_bytes: w * std::mem::size_of::<Surface>(),
-            },
-        ];
+        let mut v = self.rule.windows();
         v.extend(self.gathered.windows());
         v
     }
 }
 
-impl PixelStage {
-    /// Rows past a row that its treatment reads: the flags' and, where the
-    /// guides choose a spread's receivers, theirs within the widest reach
-    /// (the settings' halo, [`crate::filter::halo`], counts them always).
-    fn treat_lag(&self) -> usize {
-        treat_lag(self.guides.chooses_receivers(), self.rule.reach)
-    }
-
-    /// Treat the rows up to `treat_target`, with what their treatment
-    /// reads. A treatment reads the flags DECIDE_REACH below its row, and
-    /// its spreads' receivers (their surface guides) `reach` below; a row's
-    /// flags, the luminance BACKGROUND_REACH below. Each is made when a
-    /// treatment needs it, not as rows arrive: what waits is held across the
-    /// whole width.
-    fn step(&mut self, input: &RowWindow<f32>, rows_in: usize, treat_target: usize) {
-        let h = self.h;
-        let class_target = match rows_in == h {
-            true => (treat_target + DECIDE_REACH).min(h),
-            false => (treat_target + DECIDE_REACH).min(rows_in.saturating_sub(BACKGROUND_REACH)),
-        };
-        let lum_target = match class_target == h {
-            true => h,
-            false => (class_target + BACKGROUND_REACH).min(rows_in),
-        };
-        if lum_target > self.win.ylum.end() {
-            self.luminance(input, self.win.ylum.end(), lum_target);
-        }
-        if class_target > self.class_done {
-            self.classify(self.class_done, class_target);
-            self.class_done = class_target;
-        }
-        if treat_target > self.treat_done {
-            self.treat(input, self.treat_done, treat_target);
-            self.treat_done = treat_target;
-            let keep = self.treat_done.saturating_sub(2 * BACKGROUND_REACH);
-            self.win.ylum.evict_below(keep);
-            self.win.bg.evict_below(keep);
-            self.win.cand.evict_below(keep);
-            // Receivers are read `reach` rows above a treated row, and
-            // again when their row is made.
-            let receivers = self.treat_done.saturating_sub(self.rule.reach);
-            let receivers = receivers.min(self.gathered.rows.end());
-            self.win.light.evict_below(keep.min(receivers));
-            self.win.surf.evict_below(receivers);
-        }
-    }
-
-    /// The end of the final output rows: those no untreated row reaches.
-    fn end(&self) -> usize {
-        match self.treat_done == self.h {
-            true => self.h,
-            false => self.treat_done.saturating_sub(self.rule.reach),
-        }
-    }
-
-    /// The luminance of what the emission guide leaves of rows `a..b`.
-    fn luminance(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
-        for _ in a..b {
-            self.win.ylum.push_stale(0.0);
-        }
-        let guides = &self.guides;
-        let region = crate::trace::region("pixel luminance");
-        let rows = self.win.ylum.range_mut(a, b);
-        rows.into_par_iter().enumerate().for_each(|(k, yrow)| {
-            let _task = region.task("pixel luminance");
-            let row = input.get(a + k);
-            for (x, y) in yrow.iter_mut().enumerate() {
-                *y = guides.residual_luminance(row, x);
-            }
-        });
-    }
-
-    /// Backgrounds and Rule 1 for rows `a..b` (their luminance rows within
-    /// [`BACKGROUND_REACH`] are in, reflected at the image's edges).
-    fn classify(&mut self, a: usize, b: usize) {
-        for _ in a..b {
-            self.win.bg.push_stale(f64::NAN);
-            self.win.cand.push_stale(0);
-        }
-        let (w, h) = (self.w, self.h);
-        let (ylum, light) = (&self.win.ylum, &self.win.light);
-        let bgs = self.win.bg.range_mut(a, b);
-        let cands = self.win.cand.range_mut(a, b);
-        let region = crate::trace::region("pixel classify");
-        bgs.into_par_iter()
-            .zip(cands)
-            .enumerate()
-            .for_each(|(k, (brow, crow))| {
-                let _task = region.task("pixel classify");
-                let y = a + k;
-                let r = BACKGROUND_REACH as i64;
-                let rows: Vec<&[f64]> = (-r..=r)
-                    .map(|d| ylum.get(mirror(y as i64 + d, h)))
-                    .collect();
-                let mut ring = [0.0f64; BACKGROUND_SAMPLES];
-                let lights = light.get(y);
-                for x in 0..w {
-                    let v = rows[BACKGROUND_REACH][x];
-                    brow[x] = f64::NAN;
-                    crow[x] = 0;
-                    if lights[x] != 0 || !local_max(v, &neighbours8(&rows[1..4], x, w)) {
-                        continue;
-                    }
-                    let mut n = 0;
-                    for (dy, row) in rows.iter().enumerate() {
-                        for dx in -r..=r {
-                            if dy == BACKGROUND_REACH && dx == 0 {
-                                continue;
-                            }
-                            ring[n] = row[mirror(x as i64 + dx, w)];
-                            n += 1;
-                        }
-                    }
-                    let bg = median(&mut ring);
-                    brow[x] = bg;
-                    crow[x] = u8::from(noisy(v, bg));
-                }
-            });
-    }
-
-    /// Treat rows `a..b`: decide each noisy pixel and list the spread
-    /// ones as sources.
-    fn treat(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
-        let chunks: Vec<usize> = (a..b).step_by(TREAT_ROWS).collect();
-        let ctx = Treat { stage: self, input };
-        let region = crate::trace::region("pixel treat");
-        let results: Vec<Treated> = chunks
-            .into_par_iter()
-            .map(|y0| {
-                let _task = region.task("pixel treat");
-                ctx.rows(y0, (y0 + TREAT_ROWS).min(b))
-            })
-            .collect();
-        let nch = self.nch as u64;
-        for t in results {
-            let taps: u64 = (t.sources.iter())
-                .map(|s| (2 * self.rule.widths.reach[s.k as usize] as u64 + 1).pow(2))
-                .sum();
-            self.counts += t.counts;
-            self.counts.spread_taps += taps * nch;
-            self.gathered.sources.extend(t.sources, t.values);
-        }
-    }
-
-    /// Output rows `a..b` (final: every source that reaches them is
-    /// treated): each source's shares added to the pixels its kernel
-    /// reaches (on its surface, or clear of lights, where the guides choose
-    /// receivers).
-    fn make_rows(&mut self, input: &RowWindow<f32>, end: usize) {
-        let (w, nch) = (self.w, self.nch);
-        let (taps, widths, guides) = (&self.rule.taps, &self.rule.widths, &self.guides);
-        let spread: Vec<usize> = (0..nch)
-            .filter(|&c| self.modes[c] == ChannelMode::Spread)
-            .collect();
-        let choose = guides.chooses_receivers();
-        let (light, surf) = (&self.win.light, &self.win.surf);
-        self.gathered
-            .make_to(input, (end, w), |s, shares, ty, acc| {
-                let k = s.k as usize;
-                let r = widths.reach[k];
-                let (sx, sy) = (s.x as usize, s.y as usize);
-                if ty + r < sy || ty > sy + r {
-                    return;
-                }
-                let g = &taps[k];
-                let gy = g[ty + r - sy];
-                if gy == 0.0 {
-                    return;
-                }
-                let (xa, xb) = (sx.saturating_sub(r), (sx + r + 1).min(w));
-                let gx = &g[xa + r - sx..xb + r - sx];
-                if choose {
-                    // The receivers the guides allowed when the width was
-                    // chosen ([`Treat::norm`]).
-                    let lights = light.get(ty);
-                    let on = s.on_surface.as_ref().map(|from| (from, surf.get(ty)));
-                    for (tx, &wx) in (xa..xb).zip(gx) {
-                        let ok = match on {
-                            Some((from, surfs)) => {
-                                let q = (lights[tx] != 0, &surfs[tx]);
-                                guides.accepts(q, (tx, ty), Some((from, sx, sy)))
-                            }
-                            None => lights[tx] == 0,
-                        };
-                        if ok {
-                            for &c in &spread {
-                                acc[c * w + tx] += shares[c] * gy * wx;
-                            }
-                        }
-                    }
-                    return;
-                }
-                for &c in &spread {
-                    let a = shares[c] * gy;
-                    for (d, &wx) in acc[c * w + xa..c * w + xb].iter_mut().zip(gx) {
-                        *d += a * wx;
-                    }
-                }
-            })
-    }
-}
-
-/// Rows past a row that its treatment reads, where the guides choose
-/// receivers (`choose`) within `reach` rows or not.
-pub(super) fn treat_lag(choose: bool, reach: usize) -> usize {
-    let flags = BACKGROUND_REACH + DECIDE_REACH;
-    match choose {
-        true => flags.max(reach),
-        false => flags,
-    }
-}
-
-/// The 8 neighbours of column `x` in `rows` (three rows, the pixel's in the
-/// middle), reflected at the row's ends.
-#[inline]
-fn neighbours8(rows: &[&[f64]], x: usize, w: usize) -> [f64; 8] {
-    let (l, r) = (mirror(x as i64 - 1, w), mirror(x as i64 + 1, w));
-    [
-        rows[0][l], rows[0][x], rows[0][r], rows[1][l], rows[1][r], rows[2][l], rows[2][x],
-        rows[2][r],
-    ]
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::filter::guides::GuideLayout;
-    use crate::filter::{FilterParams, Method};
-    use crate::geometry::Grid;
-    use crate::pipeline::ledger::LEDGER_TOL;
-    use crate::pipeline::{filter_in_memory, PipelineConfig, StripLayout};
-
-    /// Rec. 709 luminance weights of R, G, B.
-    const RGB: [f64; 3] = [0.2126, 0.7152, 0.0722];
-
-    /// A `w x h` R, G, B image (planar rows) of a grainy grey ground.
-    fn ground(w: usize, h: usize) -> Vec<f32> {
-        let mut v = Vec::with_capacity(w * h * 3);
-        let mut s = 0x9e37_79b9_7f4a_7c15u64;
-        for _ in 0..h {
-            for c in 0..3 {
-                for _ in 0..w {
-                    s ^= s << 13;
-                    s ^= s >> 7;
-                    s ^= s << 17;
-                    let g = 0.8 + 0.4 * (s >> 11) as f32 / (1u64 << 53) as f32;
-                    v.push(g * [1.0, 0.9, 0.8][c]);
-                }
-            }
-        }
-        v
-    }
-
-    fn set(v: &mut [f32], w: usize, (x, y): (usize, usize), rgb: [f32; 3]) {
-        for c in 0..3 {
-            v[(y * 3 + c) * w + x] = rgb[c];
-        }
-    }
-
-    fn layout(w: usize, h: usize, names: &[&str], lum: &[f64]) -> StripLayout {
-        StripLayout::new(
-            Grid {
-                in_w: w,
-                in_h: h,
-                s: 1,
-            },
-            names.iter().map(|s| s.to_string()).collect(),
-            lum.to_vec(),
-        )
-    }
-
-    /// `img` (R, G, B planar rows) with a normal pass `normal(x)` beside it,
-    /// run through ep-gauss at S = 1 with the normals as guides: the output
-    /// and the run's figures.
-    fn filtered_with_normals(
-        img: &[f32],
-        (w, h): (usize, usize),
-        normal: impl Fn(usize) -> [f32; 3],
-    ) -> (Vec<f32>, crate::pipeline::RunStats) {
-        let mut rows = Vec::new();
-        for y in 0..h {
-            rows.extend_from_slice(&img[y * 3 * w..(y + 1) * 3 * w]);
-            for c in 0..3 {
-                rows.extend((0..w).map(|x| normal(x)[c]));
-            }
-        }
-        let mut job = layout(w, h, &["R", "G", "B"], &RGB);
-        job.aux = ["N.X", "N.Y", "N.Z"].map(String::from).to_vec();
-        job.guides.normal = Some([3, 4, 5]);
-        let p = FilterParams::new(Method::EpGauss, 1);
-        filter_in_memory(rows, &job, &p, &PipelineConfig::default()).unwrap()
-    }
 
     #[test]
-    fn the_halo_is_the_settings_halo() {
-        for (mr, cut) in [(16.0, 3.0), (0.6, 3.0), (40.0, 6.0), (2.0, 1.0)] {
-            let mut p = FilterParams::new(Method::EpGauss, 1);
-            (p.max_radius, p.cutoff) = (mr, cut);
-            let v = p.validated().unwrap();
-            let st = PixelStage::new(
-                30,
-                20,
-                RGB.to_vec(),
-                vec![ChannelMode::Spread; 3],
-                GuideLayout::default(),
-                SurfaceRule::default(),
-                &v,
-            )
-            .unwrap();
-            // Without guides a treatment reads only the flags' rows.
-            let settings = crate::filter::halo(&p);
-            assert_eq!(st.halo().spread_reach, settings.spread_reach);
-            assert_eq!(st.halo().search_reach, 4, "{mr} {cut}");
-            let guides = GuideLayout {
-                emission: Some(vec![0, 1, 2]),
-                ..GuideLayout::default()
-            };
-            let st = PixelStage::new(
-                30,
-                20,
-                RGB.to_vec(),
-                vec![ChannelMode::Spread; 3],
-                guides,
-                SurfaceRule::default(),
-                &v,
-            )
-            .unwrap();
-            assert_eq!(st.halo(), settings, "{mr} {cut}");
-        }
-    }
-
-    #[test]
-    fn a_firefly_gives_its_excess_and_clean_pixels_keep_their_bits() {
-        let (w, h) = (64, 48);
-        let mut img = ground(w, h);
-        set(&mut img, w, (20, 17), [40.0, 40.0, 40.0]);
-        let job = layout(w, h, &["R", "G", "B"], &RGB);
-        let p = FilterParams::new(Method::EpGauss, 1);
-        let (out, stats) =
-            filter_in_memory(img.clone(), &job, &p, &PipelineConfig::default()).unwrap();
-        let counts = stats.ep_gauss().unwrap();
-        assert_eq!((counts.spread, counts.beyond), (1, 0));
-        // The firefly keeps about its background, its neighbours get a share
-        // each, pixels beyond the kernel keep their bits.
-        let at = |v: &[f32], x: usize, y: usize| v[(y * 3 + 1) * w + x];
-        assert!(at(&out, 20, 17) < 2.0 && at(&out, 20, 17) > 0.5);
-        assert!(at(&out, 21, 17) > at(&img, 21, 17));
-        let r = p.cutoff * p.max_radius;
-        for y in 0..h {
-            for x in 0..w {
-                let far = (x as f64 - 20.0).abs() > r || (y as f64 - 17.0).abs() > r;
-                if far {
-                    assert_eq!(at(&out, x, y).to_bits(), at(&img, x, y).to_bits());
-                }
-            }
-        }
-        for e in stats.ledger.iter().map(|l| l.rel_error) {
-            assert!(e.abs() < LEDGER_TOL, "{e}");
-        }
-    }
-
-    #[test]
-    fn an_image_without_noise_is_written_bit_for_bit() {
-        let (w, h) = (40, 30);
-        let img = ground(w, h);
-        let job = layout(w, h, &["R", "G", "B"], &RGB);
-        let p = FilterParams::new(Method::EpGauss, 1);
-        let (out, stats) =
-            filter_in_memory(img.clone(), &job, &p, &PipelineConfig::default()).unwrap();
-        assert_eq!(stats.ep_gauss().unwrap().noisy, 0);
-        assert!(out
-            .iter()
-            .zip(&img)
-            .all(|(a, b)| a.to_bits() == b.to_bits()));
-    }
-
-    #[test]
-    fn a_lamp_the_emission_guide_names_stays_a_firefly_beside_it_goes() {
-        let (w, h) = (48, 40);
-        let mut img = ground(w, h);
-        // A one-pixel bulb and, four pixels away, a firefly of the same
-        // brightness: alike without the guide.
-        set(&mut img, w, (20, 20), [60.0, 60.0, 60.0]);
-        set(&mut img, w, (24, 20), [60.0, 60.0, 60.0]);
-        let mut rows = Vec::new();
-        for y in 0..h {
-            rows.extend_from_slice(&img[y * 3 * w..(y + 1) * 3 * w]);
-            for c in 0..3 {
-                for x in 0..w {
-                    let bulb = (x, y) == (20, 20);
-                    rows.push(if bulb { 59.0 + c as f32 * 0.0 } else { 0.0 });
-                }
-            }
-        }
-        let mut job = layout(w, h, &["R", "G", "B"], &RGB);
-        job.aux = ["emission.R", "emission.G", "emission.B"]
-            .map(String::from)
-            .to_vec();
-        job.guides.emission = Some(vec![3, 4, 5]);
-        let p = FilterParams::new(Method::EpGauss, 1);
-        let (out, stats) = filter_in_memory(rows, &job, &p, &PipelineConfig::default()).unwrap();
-        let at = |x: usize, y: usize| out[(y * 3 + 1) * w + x];
-        // The bulb keeps its emission (and whatever spread reaches it).
-        assert!(at(20, 20) >= 59.0, "{}", at(20, 20));
-        assert!(at(24, 20) < 5.0, "{}", at(24, 20));
-        assert_eq!(stats.ep_gauss().unwrap().spread, 1);
-        for e in stats.ledger.iter().map(|l| l.rel_error) {
-            assert!(e.abs() < LEDGER_TOL, "{e}");
-        }
-    }
-
-    /// A firefly on a surface one pixel wide (a sliver of other normals
-    /// down column 22): its kernel is mostly off its surface, so it keeps
-    /// clear of lights only ([`SURFACE_SHARE`]) and most of its excess
-    /// lands off the sliver, where keeping to its surface (which could take
-    /// it) would pile all of it on the column.
-    #[test]
-    fn a_firefly_on_a_sliver_spreads_clear_of_lights_only() {
-        let (w, h) = (48, 40);
-        let mut img = ground(w, h);
-        // Faint enough that the column alone could take it within the cap.
-        set(&mut img, w, (22, 20), [6.0, 6.0, 6.0]);
-        let (out, stats) = filtered_with_normals(&img, (w, h), |x| {
-            if x == 22 {
-                [1.0, 0.0, 0.0]
-            } else {
-                [0.0, 0.0, 1.0]
-            }
-        });
-        assert_eq!(stats.ep_gauss().unwrap().spread, 1);
-        let moved = |on: bool| -> f64 {
-            (0..h)
-                .flat_map(|y| (0..w).map(move |x| (x, y)))
-                .filter(|&(x, y)| (x == 22) == on && (x, y) != (22, 20))
-                .map(|(x, y)| (out[(y * 3 + 1) * w + x] - img[(y * 3 + 1) * w + x]) as f64)
-                .sum()
+    fn the_lag_is_the_longest_chain_of_reaches() {
+        // Luminance reads the input; the flags the luminance 2 rows either
+        // side; the treatment the flags and the luminance 2 rows, the input
+        // `reach`.
+        let passes = |reach| {
+            vec![
+                vec![(0, 0)],
+                vec![(1, 2), (0, 0)],
+                vec![(2, 2), (1, 2), (0, reach)],
+            ]
         };
-        let (on, off) = (moved(true), moved(false));
-        // Most of it lands off the sliver (keeping to it would leave none
-        // there).
-        assert!(off > on, "on the sliver {on}, off it {off}");
-        for e in stats.ledger.iter().map(|l| l.rel_error) {
-            assert!(e.abs() < LEDGER_TOL, "{e}");
-        }
-    }
-
-    #[test]
-    fn a_surface_guide_keeps_a_spread_on_its_side_of_an_edge() {
-        let (w, h) = (48, 40);
-        let mut img = ground(w, h);
-        set(&mut img, w, (22, 20), [50.0, 50.0, 50.0]);
-        // Normals: up on the left of x = 24, facing the camera from there.
-        let (out, stats) = filtered_with_normals(&img, (w, h), |x| {
-            if x < 24 {
-                [0.0, 1.0, 0.0]
-            } else {
-                [0.0, 0.0, 1.0]
-            }
-        });
-        assert_eq!(stats.ep_gauss().unwrap().spread, 1);
-        for y in 0..h {
-            for x in 24..w {
-                let k = (y * 3 + 1) * w + x;
-                assert_eq!(out[k].to_bits(), img[k].to_bits(), "({x}, {y})");
-            }
-        }
-        let left: f64 = (0..h)
-            .flat_map(|y| (0..24).map(move |x| (x, y)))
-            .map(|(x, y)| (out[(y * 3 + 1) * w + x] - img[(y * 3 + 1) * w + x]) as f64)
-            .sum();
-        assert!(left.abs() < 1e-3, "{left}");
-        for e in stats.ledger.iter().map(|l| l.rel_error) {
-            assert!(e.abs() < LEDGER_TOL, "{e}");
-        }
+        assert_eq!(lag(&passes(0)), 4);
+        assert_eq!(lag(&passes(9)), 9);
+        assert_eq!(lag(&[]), 0);
     }
 }

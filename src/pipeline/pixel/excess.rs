@@ -1,33 +1,27 @@
-//! The stage of the `ep-box` filter (§5.1; the rules are in
+//! ep-box (§5.1) as a [`Rule`] of [`super::PixelStage`] (the rules are in
 //! [`crate::filter::ep_box`]).
 //!
-//! Input is at pixel resolution: colour channels, then the statistics channels
-//! (variance, and perhaps the sample count), all in one strip row. Three
-//! cursors over pixel rows:
+//! Input is at pixel resolution: colour channels, then the statistics
+//! channels (variance, and perhaps the sample count), all in one strip row.
+//! Its passes over pixel rows:
 //!
-//! 1. **statistics** of row `y` on arrival: luminance, `t * S_p` and the noise
-//!    flag;
-//! 2. **treatment** of row `y` once rows `y + passes` are in: the passes over
-//!    the band `y ± passes` decide each noisy pixel's excess (see the module
-//!    above), the pixel keeps the rest, and it is listed as a source;
-//! 3. **output** of row `y` once every row within the spread radius `R` has
-//!    been treated: the input row, the kept values of its sources, plus the
-//!    shares of every source whose ring reaches it (`pipeline/gather.rs`).
+//! 1. the **statistics**: luminance, `t * S_p` and the noise flag;
+//! 2. the **decision**: noisy by the paper's test and, with the carriers
+//!    guard, not a compact bright feature (the flags within
+//!    [`CLUSTER_REACH`]);
+//! 3. the **treatment**: the passes over the band `y ± passes` decide each
+//!    noisy pixel's excess (see `filter::ep_box`), the pixel keeps the
+//!    rest, and it is listed as a source whose ring prefix receives it
+//!    (with guides, the receivers' surfaces within the ring's reach).
 //!
-//! The treatment of a pixel reads only the input within `passes` of it, and
-//! each output pixel adds its shares in row-major source order, so the
-//! output is bit-identical across `--tile`, `--strip-rows` and `--threads`.
-//! Pixels that are neither treated nor reached keep their input bits exactly.
+//! The treatment of a pixel reads only the input within `passes` of it (its
+//! receivers' within the ring).
 
 use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
 
-use super::counts::{ExcessCounts, MethodCounts};
-use super::gather::{Gathered, Placed};
+use super::gauss::SURFACE_SHARE;
 use super::guided::GuideReader;
-use super::pixel::SURFACE_SHARE;
-use super::stage::{Output, Stage, WindowUse};
-use super::window::RowWindow;
-use super::ChannelMode;
+use super::{Placed, Reads, Rule};
 use crate::error::{Error, Result};
 use crate::filter::ep_box::{
     cluster_count, colour_fraction, excess, passes::chebyshev_passes, receivers, EpBoxParams,
@@ -35,19 +29,14 @@ use crate::filter::ep_box::{
 };
 use crate::filter::guides::{GuideLayout, Surface, SurfaceRule};
 use crate::filter::ValidParams;
-use crate::geometry::Halo;
-
-/// Rows treated per task: each task recomputes `2 * passes` rows of band
-/// around its own, so tasks should be several times taller than that.
-const TREAT_ROWS: usize = 32;
-
-/// Rows handed over at once when every input row is in (as
-/// [`super::pixel`]'s).
-const LAST_ROWS: usize = 16;
+use crate::pipeline::counts::{ExcessCounts, MethodCounts};
+use crate::pipeline::stage::WindowUse;
+use crate::pipeline::window::RowWindow;
+use crate::pipeline::ChannelMode;
 
 /// A pixel whose excess is spread.
 #[derive(Clone, Copy, Debug)]
-struct Source {
+pub struct Source {
     x: u32,
     y: u32,
     /// Offsets of the ring walked.
@@ -66,7 +55,7 @@ impl Placed for Source {
 }
 
 /// The excess rule's settings and factors, set once.
-struct ExcessRule {
+struct Factors {
     params: EpBoxParams,
     ltvis: f64,
     dl: f64,
@@ -81,8 +70,8 @@ struct ExcessRule {
     reach: usize,
 }
 
-/// The rows the stage holds between strips, each of the image's width.
-struct ExcessWindows {
+/// The rows the passes hold, each of the image's width.
+struct Windows {
     ylum: RowWindow<f64>,
     /// `t_g * S_p`: the most of a pixel's excess that noise can explain.
     cap: RowWindow<f64>,
@@ -92,43 +81,37 @@ struct ExcessWindows {
     noisy: RowWindow<u8>,
 }
 
-/// The `ep-box` filter state between strips.
-pub struct ExcessStage {
+/// ep-box's rule, and what its passes hold.
+pub struct ExcessRule {
     w: usize,
     h: usize,
     nch: usize,
     lum: Vec<f64>,
     /// Which channels give up the excess (the colour and additive layers).
     modes: Vec<ChannelMode>,
+    /// The channels a spread moves.
+    spread: Vec<usize>,
     stats: StatsLayout,
-    rule: ExcessRule,
-    win: ExcessWindows,
-    /// The spreads, and the final output rows not yet written.
-    gathered: Gathered<Source>,
-    treat_done: usize,
+    rule: Factors,
+    win: Windows,
     counters: ExcessCounts,
     guides: GuideReader,
 }
 
-#[allow(clippy::too_many_arguments)]
-impl ExcessStage {
-    /// Build the stage for a `w x h` image whose strips hold `nch` filtered
-    /// colour channels (luminance weights `lum`) followed by `aux` statistics
+impl ExcessRule {
+    /// The rule for a `w x h` image whose strips hold `nch` filtered colour
+    /// channels (luminance weights `lum`) followed by `aux` statistics
     /// channels laid out as `stats` says. `ltvis` is the visibility
     /// threshold (Eq. 9); the spread radius is `params.max_radius`. The
     /// skeleton has checked the grid, the channels and the tile.
     pub fn new(
-        w: usize,
-        h: usize,
-        nch: usize,
-        lum: Vec<f64>,
-        modes: Vec<ChannelMode>,
-        aux: usize,
+        (w, h): (usize, usize),
+        (lum, modes, aux): (Vec<f64>, Vec<ChannelMode>, usize),
         stats: StatsLayout,
-        params: &ValidParams,
-        ltvis: f64,
+        (params, ltvis): (&ValidParams, f64),
         (guides, rule): (GuideLayout, SurfaceRule),
     ) -> Result<Self> {
+        let nch = modes.len();
         let max_radius = params.max_radius;
         let params: &EpBoxParams = &params.ep_box;
         let nall = nch + aux;
@@ -168,14 +151,17 @@ impl ExcessStage {
             ring_rows[(dy + reach as i32) as usize].push((i as u32, dx));
         }
         let guides = GuideReader::new(guides, rule, &lum, nch, w)?;
-        Ok(ExcessStage {
+        Ok(ExcessRule {
             w,
             h,
             nch,
             lum,
+            spread: (0..nch)
+                .filter(|&c| modes[c] == ChannelMode::Spread)
+                .collect(),
             modes,
             stats,
-            rule: ExcessRule {
+            rule: Factors {
                 params: params.clone(),
                 ltvis,
                 dl: params.d * ltvis,
@@ -186,71 +172,118 @@ impl ExcessStage {
                 ring,
                 ring_rows,
             },
-            win: ExcessWindows {
+            win: Windows {
                 ylum: RowWindow::new(w),
                 cap: RowWindow::new(w),
                 raw: RowWindow::new(w),
                 noisy: RowWindow::new(w),
             },
-            gathered: Gathered::new(nch, w, reach),
-            treat_done: 0,
             counters: ExcessCounts::default(),
             guides,
         })
     }
-
-    /// The visibility threshold in use.
-    pub fn ltvis(&self) -> f64 {
-        self.rule.ltvis
-    }
 }
 
-impl Stage for ExcessStage {
-    /// `search_reach` is the passes' reach (and the guards' and the cluster
-    /// look's), `spread_reach` the ring's.
-    fn halo(&self) -> Halo {
-        Halo {
-            xbar_reach: 0,
-            base_reach: 0,
-            search_reach: self.treat_lag(),
-            spread_reach: self.rule.reach,
+/// The passes after the input and what each reads: the statistics, the
+/// decision (the cluster look's), the treatment (the passes' and the
+/// guards'; its receivers' guides within the ring's `reach`).
+pub fn passes(passes: usize, reach: usize) -> Vec<Reads> {
+    let band = passes + GUARD_REACH;
+    vec![
+        vec![(0, 0)],
+        vec![(1, CLUSTER_REACH)],
+        vec![(2, band), (1, band), (0, reach)],
+    ]
+}
+
+impl Rule for ExcessRule {
+    type Source = Source;
+    type Tally = ExcessCounts;
+    /// Each task recomputes `2 * passes` rows of band around its own, so
+    /// tasks should be several times taller than that.
+    const TREAT_ROWS: usize = 32;
+
+    fn shape(&self) -> (usize, usize, usize) {
+        (self.w, self.h, self.nch)
+    }
+
+    fn passes(&self) -> Vec<Reads> {
+        passes(self.rule.passes, self.rule.reach)
+    }
+
+    fn reach(&self) -> usize {
+        self.rule.reach
+    }
+
+    fn arrive(&mut self, _: &RowWindow<f32>, _: usize, _: usize) {}
+
+    fn make(&mut self, pass: usize, input: &RowWindow<f32>, a: usize, b: usize) {
+        match pass {
+            1 => self.statistics(input, a, b),
+            _ => self.decide(a, b),
         }
     }
 
-    fn arrive(&mut self, input: &mut RowWindow<f32>, a: usize, b: usize) {
-        for _ in a..b {
-            self.win.ylum.push_stale(0.0);
-            self.win.cap.push_stale(0.0);
-            self.win.raw.push_stale(0);
+    fn evict(&mut self, pass: usize, y: usize) {
+        match pass {
+            0 => {}
+            1 => {
+                self.win.ylum.evict_below(y);
+                self.win.cap.evict_below(y);
+                self.win.raw.evict_below(y);
+            }
+            _ => self.win.noisy.evict_below(y),
         }
-        self.statistics(input, a, b);
     }
 
-    fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> usize {
-        let end = self.run(input, rows_in);
-        let end = match all_in {
-            true => end.min(self.gathered.released() + LAST_ROWS),
-            false => end,
-        };
-        self.make_rows(input, end);
-        end
+    fn treat(
+        &self,
+        input: &RowWindow<f32>,
+        a: usize,
+        b: usize,
+    ) -> (Vec<Source>, Vec<f64>, ExcessCounts) {
+        self.band(input).treat_rows(a, b)
     }
 
-    fn input_needed(&self) -> usize {
-        // The passes read back to `passes + GUARD_REACH` rows; the spreads'
-        // receivers (their surface guides) `reach` rows; an output row is
-        // made from its input row.
-        self.treat_done
-            .saturating_sub((self.rule.passes + GUARD_REACH).max(self.rule.reach))
-            .min(self.gathered.rows.end())
+    fn tally(&mut self, c: ExcessCounts, _: &[Source]) {
+        let k = &mut self.counters;
+        k.noisy += c.noisy;
+        k.spread += c.spread;
+        k.capped += c.capped;
+        k.guarded += c.guarded;
+        k.trimmed += c.trimmed;
+        k.unresolved += c.unresolved;
+        k.passes = k.passes.max(c.passes);
     }
 
-    fn output(&self, rows: (usize, usize)) -> Output<'_> {
-        self.gathered.output(rows)
-    }
-
-    fn release(&mut self, y: usize) {
-        self.gathered.release(y);
+    /// A source's share to each in-image pixel of row `ty` in its ring
+    /// prefix (those its guides accept, where they choose receivers).
+    fn add(&self, input: &RowWindow<f32>, s: &Source, shares: &[f64], ty: usize, acc: &mut [f64]) {
+        let (w, reach) = (self.w, self.rule.reach);
+        let g = self.guides.chooses_receivers().then_some(&self.guides);
+        let (sx, sy, m) = (s.x as usize, s.y as usize, s.m);
+        if ty + reach < sy || ty > sy + reach {
+            return;
+        }
+        let from = s.on_surface.then_some((&s.surface, sx, sy));
+        let row = input.get(ty);
+        for &(i, dx) in &self.rule.ring_rows[ty + reach - sy] {
+            if i >= m {
+                break;
+            }
+            let tx = sx as i64 + dx as i64;
+            if tx < 0 || tx >= w as i64 {
+                continue;
+            }
+            let tx = tx as usize;
+            if g.is_some_and(|g| !g.accepts_in(row, (tx, ty), from)) {
+                continue;
+            }
+            // Channels that are not spread keep their bits.
+            for &c in &self.spread {
+                acc[c * w + tx] += shares[c];
+            }
+        }
     }
 
     fn counts(&self) -> MethodCounts {
@@ -259,7 +292,7 @@ impl Stage for ExcessStage {
 
     fn windows(&self) -> Vec<WindowUse> {
         let w = self.w;
-        let mut v = vec![
+        vec![
             WindowUse {
                 name: "luminance",
                 rows: self.win.ylum.high_water(),
@@ -275,16 +308,19 @@ impl Stage for ExcessStage {
                 rows: self.win.raw.high_water() + self.win.noisy.high_water(),
                 row_bytes: w,
             },
-        ];
-        v.extend(self.gathered.windows());
-        v
+        ]
     }
 }
 
-impl ExcessStage {
+impl ExcessRule {
     /// Luminance, what the statistics say ([`RAW_NOISY`], [`RAW_CARRIED`],
     /// [`RAW_FEW`]) and the stderr guard's bound of rows `a..b`.
     fn statistics(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
+        for _ in a..b {
+            self.win.ylum.push_stale(0.0);
+            self.win.cap.push_stale(0.0);
+            self.win.raw.push_stale(0);
+        }
         let w = self.w;
         let (lum, stats, dl) = (&self.lum, &self.stats, self.rule.dl);
         let (t, tg) = (&self.rule.t, &self.rule.tg);
@@ -358,56 +394,12 @@ impl ExcessStage {
         self.counters.reliable += reliable;
     }
 
-    /// Decide, treat and spread as far as `rows_in` rows allow; returns the
-    /// end of the final output rows.
-    fn run(&mut self, input: &RowWindow<f32>, rows_in: usize) -> usize {
-        let h = self.h;
-        // Decisions: a row's needs the statistics of the rows CLUSTER_REACH
-        // below it.
-        let decide_target = if rows_in == h {
-            h
-        } else {
-            rows_in.saturating_sub(CLUSTER_REACH)
-        };
-        if decide_target > self.win.noisy.end() {
-            self.decide(self.win.noisy.end(), decide_target);
-            self.win
-                .raw
-                .evict_below(self.win.noisy.end().saturating_sub(CLUSTER_REACH));
-        }
-        let decided = self.win.noisy.end();
-        let treat_target = if decided == h && rows_in == h {
-            h
-        } else {
-            // The spreads' receivers are `reach` rows below at most.
-            (decided.saturating_sub(self.rule.passes + GUARD_REACH))
-                .min(rows_in.saturating_sub(self.rule.reach))
-        };
-        if treat_target > self.treat_done {
-            self.treat(input, self.treat_done, treat_target);
-            self.treat_done = treat_target;
-            let keep = self
-                .treat_done
-                .saturating_sub(self.rule.passes + GUARD_REACH);
-            self.win.ylum.evict_below(keep);
-            self.win.cap.evict_below(keep);
-            self.win.noisy.evict_below(keep);
-        }
-        if self.treat_done == h {
-            h
-        } else {
-            self.treat_done.saturating_sub(self.rule.reach)
-        }
-    }
-
-    /// Decide the excess of every noisy pixel of rows `a..b` and list the
-    /// spread ones as sources.
-    fn treat(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
-        let (w, h, nch) = (self.w, self.h, self.nch);
-        let ctx = Band {
-            w,
-            h,
-            nch,
+    /// What a treatment task reads.
+    fn band<'a>(&'a self, input: &'a RowWindow<f32>) -> Band<'a> {
+        Band {
+            w: self.w,
+            h: self.h,
+            nch: self.nch,
             input,
             ylum: &self.win.ylum,
             cap: &self.win.cap,
@@ -419,65 +411,7 @@ impl ExcessStage {
             guard: self.rule.params.guard,
             ring: &self.rule.ring,
             guides: &self.guides,
-        };
-        let chunks: Vec<usize> = (a..b).step_by(TREAT_ROWS).collect();
-        let region = crate::trace::region("ep-box passes");
-        let results: Vec<(Vec<Source>, Vec<f64>, ExcessCounts)> = chunks
-            .into_par_iter()
-            .map(|c0| {
-                let _task = region.task("ep-box passes");
-                ctx.treat_rows(c0, (c0 + TREAT_ROWS).min(b))
-            })
-            .collect();
-        for (s, values, c) in results {
-            self.gathered.sources.extend(s, values);
-            let k = &mut self.counters;
-            k.noisy += c.noisy;
-            k.spread += c.spread;
-            k.capped += c.capped;
-            k.guarded += c.guarded;
-            k.trimmed += c.trimmed;
-            k.unresolved += c.unresolved;
-            k.passes = k.passes.max(c.passes);
         }
-    }
-
-    /// Output rows `a..b` (final: every source whose ring reaches them is
-    /// treated): each source's share added to the in-image pixels of its
-    /// ring prefix (those its guides accept, where they choose receivers).
-    fn make_rows(&mut self, input: &RowWindow<f32>, end: usize) {
-        let (w, nch, reach) = (self.w, self.nch, self.rule.reach);
-        let spread: Vec<usize> = (0..nch)
-            .filter(|&c| self.modes[c] == ChannelMode::Spread)
-            .collect();
-        let g = self.guides.chooses_receivers().then_some(&self.guides);
-        let by_row = &self.rule.ring_rows;
-        self.gathered
-            .make_to(input, (end, w), |s, shares, ty, acc| {
-                let (sx, sy, m) = (s.x as usize, s.y as usize, s.m);
-                if ty + reach < sy || ty > sy + reach {
-                    return;
-                }
-                let from = s.on_surface.then_some((&s.surface, sx, sy));
-                let row = input.get(ty);
-                for &(i, dx) in &by_row[ty + reach - sy] {
-                    if i >= m {
-                        break;
-                    }
-                    let tx = sx as i64 + dx as i64;
-                    if tx < 0 || tx >= w as i64 {
-                        continue;
-                    }
-                    let tx = tx as usize;
-                    if g.is_some_and(|g| !g.accepts_in(row, (tx, ty), from)) {
-                        continue;
-                    }
-                    // Channels that are not spread keep their bits.
-                    for &c in &spread {
-                        acc[c * w + tx] += shares[c];
-                    }
-                }
-            })
     }
 }
 
@@ -532,14 +466,6 @@ fn compact(
 
 pub use crate::filter::ep_box::{CLUSTER_REACH, COMPACT_MAX, GUARD_REACH};
 
-impl ExcessStage {
-    /// Rows past a row that its treatment reads: the passes', the guards'
-    /// and the cluster look's, and the spreads' receivers'.
-    fn treat_lag(&self) -> usize {
-        (self.rule.passes + GUARD_REACH + CLUSTER_REACH).max(self.rule.reach)
-    }
-}
-
 impl Band<'_> {
     /// The brightest converged pixel within [`GUARD_REACH`] of band row `r`
     /// (of `bh` from image row `ba`), column `x`: the `range` guard's bound.
@@ -576,8 +502,7 @@ impl Band<'_> {
             // A source whose nearest receivers are mostly on other
             // surfaces sits on an edge or a sliver, and one whose
             // surface has too few within the ring would pile its excess
-            // on them: both keep clear of lights only (pipeline::pixel's
-            // SURFACE_SHARE).
+            // on them: both keep clear of lights only (`SURFACE_SHARE`).
             let (m0, found0) = walk(false);
             let kept = g.surface().then(|| walk(true)).filter(|&(_, found)| {
                 let mine = self.ring.offsets()[..m0]

@@ -2,7 +2,7 @@
 //! rules, its width (the search over the ladder, with the guides' receivers)
 //! and what it keeps, one task per band of rows.
 
-use super::{neighbours8, PixelStage, Source, SURFACE_SHARE};
+use super::{neighbours8, GaussRule, Source, SURFACE_SHARE};
 use crate::filter::ep_gauss::pixel::{in_range, supported, BACKGROUND_REACH};
 use crate::filter::guides::Surface;
 use crate::geometry::mirror;
@@ -10,25 +10,16 @@ use crate::pipeline::counts::SpreadCounts;
 use crate::pipeline::window::RowWindow;
 use crate::pipeline::ChannelMode;
 
-/// What a treatment task found: the sources, their values (per source,
-/// what its pixel keeps, then what one unit of its kernel carries, a value
-/// a channel each) and what it counted.
-pub(super) struct Treated {
-    pub(super) sources: Vec<Source>,
-    pub(super) values: Vec<f64>,
-    pub(super) counts: SpreadCounts,
-}
-
 /// What a treatment task reads.
 pub(super) struct Treat<'a> {
-    pub(super) stage: &'a PixelStage,
+    pub(super) stage: &'a GaussRule,
     pub(super) input: &'a RowWindow<f32>,
 }
 
 impl Treat<'_> {
     /// Treat rows `y0..y1`: take each noisy pixel's excess out and list it
-    /// as a source.
-    pub(super) fn rows(&self, y0: usize, y1: usize) -> Treated {
+    /// as a source ([`super::super::Rule::treat`]).
+    pub(super) fn rows(&self, y0: usize, y1: usize) -> (Vec<Source>, Vec<f64>, SpreadCounts) {
         let st = self.stage;
         let (w, h, nch) = (st.w, st.h, st.nch);
         let mut counts = SpreadCounts::default();
@@ -44,7 +35,7 @@ impl Treat<'_> {
             for x in (0..w).filter(|&x| cand[x] != 0) {
                 counts.noisy += 1;
                 let (v, bg) = (lrows[1][x], bgrow[x]);
-                if st.rule.features {
+                if st.ladder.features {
                     let n8 = neighbours8(&lrows, x, w);
                     let calm = || {
                         let mut m = f64::NEG_INFINITY;
@@ -94,11 +85,7 @@ impl Treat<'_> {
                 });
             }
         }
-        Treated {
-            sources,
-            values,
-            counts,
-        }
+        (sources, values, counts)
     }
 
     /// The first rung, from the ladder's guess up, whose kernel (normalised
@@ -116,10 +103,13 @@ impl Treat<'_> {
         surface: &Surface,
     ) -> Option<(usize, f64, bool, bool)> {
         let st = self.stage;
-        let limit = st.rule.tolerance * bg;
-        let cap = st.rule.widths.rho.len() - 1;
+        let limit = st.ladder.tolerance * bg;
+        let cap = st.ladder.widths.rho.len() - 1;
         // Even the whole plane's kernel at the cap is too narrow: left.
-        let first = st.rule.widths.first_within(excess, bg, st.rule.tolerance)?;
+        let first = st
+            .ladder
+            .widths
+            .first_within(excess, bg, st.ladder.tolerance)?;
         let passes = |norm: f64| norm > 0.0 && excess <= limit * norm;
         // A source keeps to its surface where the surface has room for it:
         // one with little of its kernel there sits on an edge or a sliver
@@ -167,7 +157,7 @@ impl Treat<'_> {
         on_surface: Option<&Surface>,
         passes: impl Fn(f64) -> bool,
     ) -> Option<(usize, f64)> {
-        let cap = self.stage.rule.widths.rho.len() - 1;
+        let cap = self.stage.ladder.widths.rho.len() - 1;
         let (mut lo, mut step) = (None, 1);
         let mut k = first;
         let (mut hi, mut at_hi) = loop {
@@ -205,8 +195,8 @@ impl Treat<'_> {
     /// from `(x, y)`, every one of them.
     fn plain_norm(&self, k: usize, x: usize, y: usize) -> f64 {
         let st = self.stage;
-        let r = st.rule.widths.reach[k];
-        let g = &st.rule.taps[k];
+        let r = st.ladder.widths.reach[k];
+        let g = &st.ladder.taps[k];
         let (xa, xb) = (x.saturating_sub(r), (x + r + 1).min(st.w));
         let (ya, yb) = (y.saturating_sub(r), (y + r + 1).min(st.h));
         let sx: f64 = (xa..xb).map(|tx| g[tx + r - x]).sum();
@@ -217,12 +207,12 @@ impl Treat<'_> {
     /// The sum of rung `k`'s weights over the in-image pixels it reaches
     /// from `(x, y)` (those on the source's surface, with surface guides;
     /// those clear of lights, with the emission guide): the receivers
-    /// [`PixelStage::spread_rows`] gives its shares to.
+    /// [`GaussRule`]'s `add` gives its shares to.
     fn norm(&self, k: usize, x: usize, y: usize, surface: Option<&Surface>) -> f64 {
         let st = self.stage;
         let (w, h) = (st.w, st.h);
-        let r = st.rule.widths.reach[k];
-        let g = &st.rule.taps[k];
+        let r = st.ladder.widths.reach[k];
+        let g = &st.ladder.taps[k];
         let (xa, xb) = (x.saturating_sub(r), (x + r + 1).min(w));
         let (ya, yb) = (y.saturating_sub(r), (y + r + 1).min(h));
         if !st.guides.chooses_receivers() {

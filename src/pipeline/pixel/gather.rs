@@ -19,11 +19,11 @@ use std::sync::Mutex;
 
 use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
 
-use super::stage::{Output, WindowUse};
-use super::window::RowWindow;
+use crate::pipeline::stage::{Output, WindowUse};
+use crate::pipeline::window::RowWindow;
 
 /// Where a source sits.
-pub(super) trait Placed {
+pub trait Placed {
     /// Its column and row.
     fn at(&self) -> (usize, usize);
 }
