@@ -174,6 +174,21 @@ pub fn is_light(y: f64, e: f64) -> bool {
     e > 0.0 && e >= LIGHT_SHARE * y
 }
 
+/// A source keeps to its surface (with surface guides) when at least this
+/// share of its nearest receivers lies on it: less, and it sits on an edge
+/// or a sliver, its own guides a mix of its samples', and keeping to them
+/// would pile its excess on the few pixels that match (docs/bench's
+/// renders-as-written.md measures the surface guides with this rule).
+pub const SURFACE_SHARE: f64 = 0.5;
+
+/// Whether a source keeps to its surface, `on` of its nearest receivers'
+/// weight lying on it out of `all` ([`SURFACE_SHARE`]); else it keeps clear
+/// of lights only.
+#[inline]
+pub fn keeps_to_surface(on: f64, all: f64) -> bool {
+    on >= SURFACE_SHARE * all
+}
+
 /// The emission part of a channel value `x` whose emission guide reads `e`:
 /// never negative, never more than the value itself (so the rest, `x - e'`,
 /// is never below zero where `x` is not).

@@ -19,7 +19,6 @@
 
 use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
 
-use super::gauss::SURFACE_SHARE;
 use super::guided::GuideReader;
 use super::{Placed, Reads, Rule};
 use crate::error::{Error, Result};
@@ -27,7 +26,7 @@ use crate::filter::ep_box::{
     cluster_count, colour_fraction, excess, passes::chebyshev_passes, receivers, EpBoxParams,
     Guard, PixelTest, Ring, Spp, StatsLayout, TFactor,
 };
-use crate::filter::guides::{GuideLayout, Surface, SurfaceRule};
+use crate::filter::guides::{keeps_to_surface, GuideLayout, Surface, SurfaceRule};
 use crate::filter::ValidParams;
 use crate::pipeline::counts::{ExcessCounts, MethodCounts};
 use crate::pipeline::stage::WindowUse;
@@ -502,7 +501,7 @@ impl Band<'_> {
             // A source whose nearest receivers are mostly on other
             // surfaces sits on an edge or a sliver, and one whose
             // surface has too few within the ring would pile its excess
-            // on them: both keep clear of lights only (`SURFACE_SHARE`).
+            // on them: both keep clear of lights only (`keeps_to_surface`).
             let (m0, found0) = walk(false);
             let kept = g.surface().then(|| walk(true)).filter(|&(_, found)| {
                 let mine = self.ring.offsets()[..m0]
@@ -520,7 +519,7 @@ impl Band<'_> {
                             )
                     })
                     .count();
-                found >= found0 && mine as f64 >= SURFACE_SHARE * found0 as f64
+                found >= found0 && keeps_to_surface(mine as f64, found0 as f64)
             });
             match kept {
                 Some((m, found)) => (m, found, true),

@@ -36,13 +36,6 @@ use crate::pipeline::ChannelMode;
 mod treat;
 use treat::Treat;
 
-/// A source keeps to its surface (with surface guides) when at least this
-/// share of its first kernel lies on it: less, and it sits on an edge or a
-/// sliver, its own guides a mix of its samples', and keeping to them would
-/// pile its excess on the few pixels that match (docs/bench's
-/// renders-as-written.md measures the surface guides with this rule).
-pub(super) const SURFACE_SHARE: f64 = 0.5;
-
 /// Rows past a row whose classification its treatment reads (the range
 /// rule looks at the flags within [`BACKGROUND_REACH`]).
 const DECIDE_REACH: usize = BACKGROUND_REACH;
@@ -620,7 +613,7 @@ mod tests {
 
     /// A firefly on a surface one pixel wide (a sliver of other normals
     /// down column 22): its kernel is mostly off its surface, so it keeps
-    /// clear of lights only ([`SURFACE_SHARE`]) and most of its excess
+    /// clear of lights only ([`crate::filter::guides::SURFACE_SHARE`]) and most of its excess
     /// lands off the sliver, where keeping to its surface (which could take
     /// it) would pile all of it on the column.
     #[test]

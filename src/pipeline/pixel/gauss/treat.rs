@@ -2,9 +2,9 @@
 //! rules, its width (the search over the ladder, with the guides' receivers)
 //! and what it keeps, one task per band of rows.
 
-use super::{neighbours8, GaussRule, Source, SURFACE_SHARE};
+use super::{neighbours8, GaussRule, Source};
 use crate::filter::ep_gauss::pixel::{in_range, supported, BACKGROUND_REACH};
-use crate::filter::guides::Surface;
+use crate::filter::guides::{keeps_to_surface, Surface};
 use crate::geometry::mirror;
 use crate::pipeline::counts::SpreadCounts;
 use crate::pipeline::window::RowWindow;
@@ -119,7 +119,7 @@ impl Treat<'_> {
         let mut on_surface = st.guides.surface().then_some(surface);
         let at_first = self.norm(first, x, y, on_surface);
         if on_surface.is_some() {
-            if at_first >= SURFACE_SHARE * self.plain_norm(first, x, y) {
+            if keeps_to_surface(at_first, self.plain_norm(first, x, y)) {
                 if let Some((k, norm)) = self.search((x, y), first, at_first, on_surface, passes) {
                     return Some((k, norm, false, true));
                 }
