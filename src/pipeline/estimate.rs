@@ -434,8 +434,10 @@ fn estimate_pixel_bytes(
         .saturating_mul(strip.max(16) + threads);
     let bands = match gauss {
         true => 0,
+        // A task's band: each pixel's pass, and each noisy pixel's
+        // reference, index and place in two pending lists (4 + 4 + 4 + 8).
         false => w
-            .saturating_mul(9 + 4)
+            .saturating_mul(1 + 20 / NOISY_SHARE_INV)
             .saturating_mul((32 + 2 * p) * threads.max(1)),
     };
     let strips = w

@@ -27,19 +27,23 @@ pub fn chebyshev_passes<'a>(
     mut settle: impl Settle,
 ) -> Vec<u32> {
     const UNSET: u8 = u8::MAX;
+    // A converged pixel's reference is its luminance, read where it is; a
+    // noisy one's is kept beside its index (noisy pixels are few: a band's
+    // copy of every reference would cost 8 bytes a pixel and task).
     let mut dist = vec![0u8; bh * w];
-    let mut refv = vec![0.0f64; bh * w];
     let mut pending: Vec<u32> = Vec::new();
+    let mut refs: Vec<f64> = Vec::new();
     for r in 0..bh {
         let (fl, yl) = (noisy(r), lum(r));
-        refv[r * w..(r + 1) * w].copy_from_slice(&yl[..w]);
         for x in 0..w {
             if fl[x] != 0 {
                 dist[r * w + x] = UNSET;
                 pending.push((r * w + x) as u32);
+                refs.push(yl[x]);
             }
         }
     }
+    let at: Vec<u32> = pending.clone();
     let mut next = Vec::with_capacity(pending.len());
     for k in 1..=passes.min(UNSET as usize - 1) as u8 {
         if pending.is_empty() {
@@ -51,11 +55,15 @@ pub fn chebyshev_passes<'a>(
             let (r, x) = (i / w, i % w);
             let (mut count, mut sum) = (0u32, 0.0f64);
             for rr in r.saturating_sub(1)..(r + 2).min(bh) {
+                let yl = lum(rr);
                 for xx in x.saturating_sub(1)..(x + 2).min(w) {
                     let j = rr * w + xx;
                     if j != i && dist[j] < k {
                         count += 1;
-                        sum += refv[j];
+                        sum += match dist[j] {
+                            0 => yl[xx],
+                            _ => refs[at.partition_point(|&a| (a as usize) < j)],
+                        };
                     }
                 }
             }
@@ -66,7 +74,7 @@ pub fn chebyshev_passes<'a>(
             dist[i] = k;
             let excess = settle(r, x, k, sum / count as f64);
             if excess != 0.0 {
-                refv[i] -= excess;
+                refs[at.partition_point(|&a| (a as usize) < i)] -= excess;
             }
         }
         std::mem::swap(&mut pending, &mut next);
