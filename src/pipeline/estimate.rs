@@ -435,7 +435,7 @@ fn estimate_pixel_bytes(
     let bands = match gauss {
         true => 0,
         // A task's band: each pixel's pass, and each noisy pixel's
-        // reference, index and place in two pending lists (4 + 4 + 4 + 8).
+        // reference, index and place in two pending lists (4 + 4 + 4 + 8 bytes).
         false => w
             .saturating_mul(1 + 20 / NOISY_SHARE_INV)
             .saturating_mul((32 + 2 * p) * threads.max(1)),

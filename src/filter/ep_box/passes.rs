@@ -55,13 +55,13 @@ pub fn chebyshev_passes<'a>(
             let (r, x) = (i / w, i % w);
             let (mut count, mut sum) = (0u32, 0.0f64);
             for rr in r.saturating_sub(1)..(r + 2).min(bh) {
-                let yl = lum(rr);
-                for xx in x.saturating_sub(1)..(x + 2).min(w) {
-                    let j = rr * w + xx;
+                let xa = x.saturating_sub(1);
+                let row = &lum(rr)[xa..(x + 2).min(w)];
+                for (j, &y) in (rr * w + xa..).zip(row) {
                     if j != i && dist[j] < k {
                         count += 1;
                         sum += match dist[j] {
-                            0 => yl[xx],
+                            0 => y,
                             _ => refs[at.partition_point(|&a| (a as usize) < j)],
                         };
                     }
