@@ -621,3 +621,43 @@ impl Band<'_> {
         (sources, values, counters)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::filter::ep_box::VarianceKind;
+    use crate::filter::{FilterParams, Method};
+    use crate::pipeline::pixel::PixelStage;
+    use crate::pipeline::stage::Stage;
+
+    #[test]
+    fn the_halo_is_the_settings_halo() {
+        for (passes, max_radius) in [(8, 16.0), (1, 1.0), (2, 40.0), (30, 3.0)] {
+            let mut p = FilterParams::new(Method::EpBox, 1);
+            (p.ep_box.passes, p.max_radius) = (passes, max_radius);
+            let stats = StatsLayout {
+                variance: vec![3],
+                kind: VarianceKind::Sample,
+                mean_y: None,
+                spp: Spp::Fixed(16.0),
+            };
+            let rule = ExcessRule::new(
+                (30, 20),
+                (
+                    vec![0.2126, 0.7152, 0.0722],
+                    vec![ChannelMode::Spread; 3],
+                    1,
+                ),
+                stats,
+                (&p.validated().unwrap(), 0.01),
+                (GuideLayout::default(), SurfaceRule::default()),
+            );
+            let stage = PixelStage::new(rule.unwrap());
+            assert_eq!(
+                stage.halo(),
+                crate::filter::halo(&p),
+                "{passes} {max_radius}"
+            );
+        }
+    }
+}

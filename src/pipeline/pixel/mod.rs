@@ -114,6 +114,49 @@ pub fn lag(passes: &[Reads]) -> usize {
     lag.last().copied().unwrap_or(0)
 }
 
+/// The rows each of `passes` may make of an image `h` rows high with
+/// `rows_in` input rows in (pass 0): the treatment (the last) no further
+/// than `treat`, an earlier pass no further than the passes that read it
+/// need.
+fn targets(passes: &[Reads], h: usize, rows_in: usize, treat: usize) -> Vec<usize> {
+    let mut t = vec![rows_in];
+    for reads in passes {
+        let after = |&(j, r): &(usize, usize)| match t[j] {
+            y if y == h => h,
+            y => y.saturating_sub(r),
+        };
+        let y = reads.iter().map(after).min().unwrap_or(h);
+        t.push(y);
+    }
+    let n = passes.len();
+    t[n] = t[n].min(treat);
+    for i in (1..n).rev() {
+        let mut need = 0;
+        for (reads, &tk) in passes[i..].iter().zip(&t[i + 1..]) {
+            for &(j, r) in reads {
+                if j == i {
+                    need = need.max((tk + r).min(h));
+                }
+            }
+        }
+        t[i] = t[i].min(need);
+    }
+    t
+}
+
+/// The first row of pass `j` that one of `passes` will still read, each
+/// having made its rows below `done` (`done[k]` for pass `k`).
+fn read_from(passes: &[Reads], done: &[usize], j: usize) -> usize {
+    (passes.iter().zip(&done[1..]))
+        .flat_map(|(reads, &done)| {
+            (reads.iter())
+                .filter(move |&&(i, _)| i == j)
+                .map(move |&(_, r)| done.saturating_sub(r))
+        })
+        .min()
+        .unwrap_or(usize::MAX)
+}
+
 /// A pixel-resolution method's stage: its rule and the schedule.
 pub struct PixelStage<R: Rule> {
     rule: R,
@@ -148,41 +191,11 @@ impl<R: Rule> PixelStage<R> {
         self.passes.len()
     }
 
-    /// The rows each pass may make with `rows_in` input rows in: the
-    /// treatment no further than `treat`, an earlier pass no further than
-    /// the passes that read it need.
-    fn targets(&self, rows_in: usize, treat: usize) -> Vec<usize> {
-        let h = self.h;
-        let mut t = vec![rows_in];
-        for reads in &self.passes {
-            let after = |&(j, r): &(usize, usize)| match t[j] {
-                y if y == h => h,
-                y => y.saturating_sub(r),
-            };
-            let y = reads.iter().map(after).min().unwrap_or(h);
-            t.push(y);
-        }
-        let n = self.last();
-        t[n] = t[n].min(treat);
-        for i in (1..n).rev() {
-            let mut need = 0;
-            for (reads, &tk) in self.passes[i..].iter().zip(&t[i + 1..]) {
-                for &(j, r) in reads {
-                    if j == i {
-                        need = need.max((tk + r).min(h));
-                    }
-                }
-            }
-            t[i] = t[i].min(need);
-        }
-        t
-    }
-
     /// Make every pass's rows up to its target (`treat` the treatment's
     /// most), then let go of the rows no pass reads any more.
     fn step(&mut self, input: &RowWindow<f32>, rows_in: usize, treat: usize) {
         self.done[0] = rows_in;
-        let targets = self.targets(rows_in, treat);
+        let targets = targets(&self.passes, self.h, rows_in, treat);
         let n = self.last();
         for (i, &target) in targets.iter().enumerate().take(n).skip(1) {
             if target > self.done[i] {
@@ -195,22 +208,9 @@ impl<R: Rule> PixelStage<R> {
             self.done[n] = targets[n];
         }
         for j in 1..n {
-            self.rule.evict(j, self.read_from(j));
+            self.rule.evict(j, read_from(&self.passes, &self.done, j));
         }
         self.rule.evict(0, self.input_needed());
-    }
-
-    /// The first row of pass `j` a later pass will still read.
-    fn read_from(&self, j: usize) -> usize {
-        (self.passes.iter().enumerate())
-            .flat_map(|(k, reads)| {
-                let done = self.done[k + 1];
-                (reads.iter())
-                    .filter(move |&&(i, _)| i == j)
-                    .map(move |&(_, r)| done.saturating_sub(r))
-            })
-            .min()
-            .unwrap_or(self.h)
     }
 
     /// Treat rows `a..b`, a task per [`Rule::TREAT_ROWS`], and list the
@@ -282,7 +282,7 @@ impl<R: Rule> Stage for PixelStage<R> {
 
     fn input_needed(&self) -> usize {
         // An output row is made from its input row.
-        self.read_from(0).min(self.gathered.rows.end())
+        read_from(&self.passes, &self.done, 0).min(self.gathered.rows.end())
     }
 
     fn output(&self, rows: (usize, usize)) -> Output<'_> {
@@ -323,5 +323,27 @@ mod tests {
         assert_eq!(lag(&passes(0)), 4);
         assert_eq!(lag(&passes(9)), 9);
         assert_eq!(lag(&[]), 0);
+    }
+
+    #[test]
+    fn a_pass_goes_only_as_far_as_the_passes_that_read_it_need() {
+        let passes = vec![
+            vec![(0, 0)],
+            vec![(1, 2), (0, 0)],
+            vec![(2, 2), (1, 2), (0, 9)],
+        ];
+        // 40 of 100 rows in: the treatment reaches 31 (its receivers), the
+        // flags 33, the luminance 35, though 40 and 38 could be made.
+        assert_eq!(targets(&passes, 100, 40, usize::MAX), [40, 35, 33, 31]);
+        // Held back to 20: the others follow it.
+        assert_eq!(targets(&passes, 100, 40, 20), [40, 24, 22, 20]);
+        // Every row in: every pass may finish.
+        assert_eq!(targets(&passes, 100, 100, usize::MAX), [100; 4]);
+        // Rows are read no more below the lowest a reader will read.
+        let done = [40, 35, 33, 31];
+        assert_eq!(read_from(&passes, &done, 0), 22);
+        assert_eq!(read_from(&passes, &done, 1), 29);
+        assert_eq!(read_from(&passes, &done, 2), 29);
+        assert_eq!(read_from(&passes, &done, 3), usize::MAX);
     }
 }
