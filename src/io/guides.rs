@@ -25,6 +25,7 @@ use std::path::Path;
 use exr::meta::header::Header;
 
 use crate::error::{Error, Result};
+use crate::filter::channels::ChannelRule;
 use crate::filter::guides::GuideLayout;
 use crate::io::ExrInput;
 
@@ -229,13 +230,40 @@ impl FoundGuides {
         }
     }
 
-    /// Read these channels after `input`'s filtered ones and say where they
-    /// are in a strip row.
-    pub fn attach(&self, input: &mut ExrInput) -> Result<GuideLayout> {
-        input.add_aux_channels(&self.channels())?;
-        let nch = input.channels().len();
+    /// Where these channels are in a strip row of `input`: a guide carried
+    /// as it is read (in `carried` with an average or nearest rule, which
+    /// the books never alter) where it is carried; the others read after
+    /// the filtered channels. A guide read twice would be held twice across
+    /// the halo.
+    pub fn attach(
+        &self,
+        input: &mut ExrInput,
+        carried: &[(String, ChannelRule)],
+    ) -> Result<GuideLayout> {
+        let filtered = input.channels();
+        let copy = |name: &String| {
+            let rule = carried.iter().find(|(n, _)| n == name).map(|c| c.1);
+            let exact = matches!(rule, Some(ChannelRule::Average | ChannelRule::Nearest));
+            (exact && !input.is_uint(name))
+                .then(|| filtered.iter().position(|f| f == name))
+                .flatten()
+        };
+        let copies: Vec<(String, Option<usize>)> = self
+            .channels()
+            .into_iter()
+            .map(|n| (n.clone(), copy(&n)))
+            .collect();
+        let read: Vec<String> = (copies.iter())
+            .filter(|c| c.1.is_none())
+            .map(|c| c.0.clone())
+            .collect();
+        input.add_aux_channels(&read)?;
+        let nch = filtered.len();
         let aux = input.aux_channels();
-        let at = |name: &String| nch + aux.iter().position(|a| a == name).unwrap_or(0);
+        let at = |name: &String| {
+            let copied = copies.iter().find(|c| &c.0 == name).and_then(|c| c.1);
+            copied.unwrap_or_else(|| nch + aux.iter().position(|a| a == name).unwrap_or(0))
+        };
         Ok(GuideLayout {
             emission: self.emission.as_ref().map(|e| e.iter().map(at).collect()),
             albedo: self.albedo.as_ref().map(|a| a.each_ref().map(at)),

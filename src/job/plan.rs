@@ -103,7 +103,7 @@ impl<'a> FilterPlan<'a> {
         let found_guides = guides(job, &input, &mut warnings)?;
         let carried = carry(job, &mut input, &scope, to_rgbe, &found_guides)?;
         let found = statistics(job, &mut input)?;
-        let guide_layout = found_guides.attach(&mut input)?;
+        let guide_layout = found_guides.attach(&mut input, &carried)?;
         warnings.extend(super::dropped_warnings(job, &input, &scope, to_rgbe));
         let verdict = opened.decided.verdict.as_ref();
         let geometry = geometry(job, verdict, &input, &mut warnings)?;
@@ -113,7 +113,7 @@ impl<'a> FilterPlan<'a> {
         pipe_job.surface_rule = job.surface_rule;
         pipe_job.aux = input.aux_channels();
         pipe_job.block_scratch = !input.decodes_in_place();
-        let (pipeline, memory_bytes) = fit_memory(job, &input, &pipe_job, carried)?;
+        let (pipeline, memory_bytes) = fit_memory(job, &input, &pipe_job, carried.len())?;
         let mut layout = OutputLayout::of(&input, &channels, &job.output_settings);
         if geometry.w != geometry.full_w || geometry.h != input.size().1 {
             layout.crop(geometry.w, geometry.h);
@@ -157,7 +157,7 @@ fn carry(
     scope: &channels::ViewScope,
     to_rgbe: bool,
     guides: &FoundGuides,
-) -> Result<usize> {
+) -> Result<Vec<(String, ChannelRule)>> {
     // The emission guide's channels are carried as they are (averaged at
     // S > 1): the beauty's emission is never spread, nor is the layer.
     let emission = guides.emission.clone().unwrap_or_default();
@@ -191,7 +191,7 @@ fn carry(
             ),
         });
     }
-    Ok(carried.len())
+    Ok(carried)
 }
 
 /// The guide passes `job` asks for, found by name (none for the methods

@@ -261,6 +261,41 @@ fn the_emission_guide_keeps_a_bulb_and_spreads_the_firefly_beside_it() {
     assert!(r["guides"].as_str().unwrap().starts_with("emission"), "{r}");
 }
 
+/// A guide carried as it is read is held once: the stage reads it where it
+/// is carried. Dropped from the output, it is read beside the channels, and
+/// the beauty comes out the same.
+#[test]
+fn a_carried_guide_is_read_where_it_is_carried() {
+    let dir = tmpdir();
+    let d = dir.path();
+    let (w, h) = (72, 60);
+    let input = d.join("in.exr");
+    guided_room(&input, w, h, &[]);
+    let input_row = |r: &serde_json::Value| {
+        let windows = r["windows"].as_array().unwrap();
+        let input = windows.iter().find(|w| w["name"] == "input").unwrap();
+        input["row_bytes"].as_u64().unwrap() as usize
+    };
+    let carried = d.join("carried.exr");
+    let r = filter(&[s(&input), s(&carried)], d);
+    assert_eq!(input_row(&r), GUIDED_CHANNELS.len() * 4 * w, "{r}");
+    let dropped = d.join("dropped.exr");
+    let r = filter(&[s(&input), s(&dropped), "--channel-rule", "N.*=drop"], d);
+    // The three normals are read beside the seven channels carried.
+    assert_eq!(input_row(&r), GUIDED_CHANNELS.len() * 4 * w, "{r}");
+    assert!(r["guides"].as_str().unwrap().contains("normal"), "{r}");
+    let (a, b) = (planes(&carried), planes(&dropped));
+    assert!(!b.contains_key("N.X"));
+    for c in ["R", "G", "B"] {
+        assert!(
+            a[c].iter()
+                .zip(&b[c])
+                .all(|(x, y)| x.to_bits() == y.to_bits()),
+            "{c}"
+        );
+    }
+}
+
 #[test]
 fn a_surface_guide_keeps_a_spread_on_its_side_of_an_edge() {
     let dir = tmpdir();
