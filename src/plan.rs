@@ -139,7 +139,7 @@ pub fn plan_file(
     let params = &params.ep_box;
     let mut input = ExrInput::open_layer(path, part, layer)?;
     let found = find_stats(path, input.header(), req)?;
-    let layout = found.attach(&mut input, path)?;
+    let layout = found.attach(&mut input, path, &[])?;
     let (w, h) = input.size();
     let lum = input.luminance();
     let aux = input.aux_channels();

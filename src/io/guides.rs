@@ -230,39 +230,21 @@ impl FoundGuides {
         }
     }
 
-    /// Where these channels are in a strip row of `input`: a guide carried
-    /// as it is read (in `carried` with an average or nearest rule, which
-    /// the books never alter) where it is carried; the others read after
-    /// the filtered channels. A guide read twice would be held twice across
-    /// the halo.
+    /// Where these channels are in a strip row of `input`, read where
+    /// `carried` has them as they are read, else after the filtered ones
+    /// ([`ExrInput::read_beside`]).
     pub fn attach(
         &self,
         input: &mut ExrInput,
         carried: &[(String, ChannelRule)],
     ) -> Result<GuideLayout> {
-        let filtered = input.channels();
-        let copy = |name: &String| {
-            let rule = carried.iter().find(|(n, _)| n == name).map(|c| c.1);
-            let exact = matches!(rule, Some(ChannelRule::Average | ChannelRule::Nearest));
-            (exact && !input.is_uint(name))
-                .then(|| filtered.iter().position(|f| f == name))
-                .flatten()
-        };
-        let copies: Vec<(String, Option<usize>)> = self
-            .channels()
-            .into_iter()
-            .map(|n| (n.clone(), copy(&n)))
-            .collect();
-        let read: Vec<String> = (copies.iter())
-            .filter(|c| c.1.is_none())
-            .map(|c| c.0.clone())
-            .collect();
-        input.add_aux_channels(&read)?;
-        let nch = filtered.len();
-        let aux = input.aux_channels();
+        let names = self.channels();
+        let placed = input.read_beside(&names, carried)?;
         let at = |name: &String| {
-            let copied = copies.iter().find(|c| &c.0 == name).and_then(|c| c.1);
-            copied.unwrap_or_else(|| nch + aux.iter().position(|a| a == name).unwrap_or(0))
+            names
+                .iter()
+                .position(|n| n == name)
+                .map_or(0, |i| placed[i])
         };
         Ok(GuideLayout {
             emission: self.emission.as_ref().map(|e| e.iter().map(at).collect()),

@@ -20,6 +20,7 @@ use exr::meta::attribute::AttributeValue;
 use exr::meta::header::Header;
 
 use crate::error::{Error, Result};
+use crate::filter::channels::ChannelRule;
 use crate::filter::ep_box::{Spp, StatsLayout, VarianceKind};
 use crate::io::ExrInput;
 
@@ -211,17 +212,22 @@ fn spp_attribute(header: &Header) -> Option<(f64, String)> {
 }
 
 impl StatsChannels {
-    /// Read these channels after `input`'s filtered ones (`path` names it in
-    /// messages) and say where they are in a strip's channel list: the
-    /// statistics step of `epfilt filter` and `epfilt plan`.
-    pub fn attach(&self, input: &mut ExrInput, path: &Path) -> Result<StatsLayout> {
-        let mut aux = self.variance.clone();
-        aux.extend(self.mean_y.clone());
+    /// Where these channels are in a strip's channel list of `input`
+    /// (`path` names it in messages): read where `carried` has them as they
+    /// are read, else after the filtered ones ([`ExrInput::read_beside`]).
+    /// The statistics step of `epfilt filter`, `epfilt plan` and restore.
+    pub fn attach(
+        &self,
+        input: &mut ExrInput,
+        path: &Path,
+        carried: &[(String, ChannelRule)],
+    ) -> Result<StatsLayout> {
+        let mut names = self.variance.clone();
+        names.extend(self.mean_y.clone());
         if let SppFrom::Channel(c) = &self.spp {
-            aux.push(c.clone());
+            names.push(c.clone());
         }
-        input.add_aux_channels(&aux)?;
-        let nch = input.channels().len();
+        let placed = input.read_beside(&names, carried)?;
         if self.variance.len() == 3 && input.luminance().iter().filter(|&&l| l > 0.0).count() != 3 {
             return Err(Error::Channels {
                 path: path.to_path_buf(),
@@ -231,8 +237,12 @@ impl StatsChannels {
                 ),
             });
         }
-        let aux = input.aux_channels();
-        let at = |name: &str| nch + aux.iter().position(|a| a == name).unwrap_or(0);
+        let at = |name: &str| {
+            names
+                .iter()
+                .position(|n| n == name)
+                .map_or(0, |i| placed[i])
+        };
         Ok(StatsLayout {
             variance: self.variance.iter().map(|v| at(v)).collect(),
             kind: self.kind,

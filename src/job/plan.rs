@@ -14,7 +14,7 @@ use crate::io::{
     find_guides, find_stats, ExrInput, Format, FoundGuides, StatsChannels, Verdict, ViewSelect,
 };
 use crate::pipeline::stream::MAX_CHANNELS;
-use crate::pipeline::{ChannelMode, StripLayout};
+use crate::pipeline::{ChannelMode, NonFinite, StripLayout};
 
 use super::{Decided, Edge, FilterJob, Opened};
 
@@ -102,7 +102,7 @@ impl<'a> FilterPlan<'a> {
         let mut warnings = opened.decided.notes.clone();
         let found_guides = guides(job, &input, &mut warnings)?;
         let carried = carry(job, &mut input, &scope, to_rgbe, &found_guides)?;
-        let found = statistics(job, &mut input)?;
+        let found = statistics(job, &mut input, &carried)?;
         let guide_layout = found_guides.attach(&mut input, &carried)?;
         warnings.extend(super::dropped_warnings(job, &input, &scope, to_rgbe));
         let verdict = opened.decided.verdict.as_ref();
@@ -235,12 +235,20 @@ fn guides(job: &FilterJob, input: &ExrInput, warnings: &mut Vec<String>) -> Resu
 fn statistics(
     job: &FilterJob,
     input: &mut ExrInput,
+    carried: &[(String, ChannelRule)],
 ) -> Result<Option<(StatsChannels, crate::filter::ep_box::StatsLayout)>> {
     if job.params.method != Method::EpBox {
         return Ok(None);
     }
     let found = find_stats(&job.input, input.header(), &job.stats)?;
-    let layout = found.attach(input, &job.input)?;
+    // The books check the statistics as they check light: with `--nonfinite
+    // zero` they would zero a copy that is carried as it is, so the
+    // statistics are then read on their own.
+    let carried = match job.pipeline.nonfinite {
+        NonFinite::Error => carried,
+        NonFinite::Zero => &[],
+    };
+    let layout = found.attach(input, &job.input, carried)?;
     Ok(Some((found, layout)))
 }
 

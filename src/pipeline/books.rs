@@ -35,6 +35,8 @@ pub struct Books {
     coverage: Option<Coverage>,
     /// Channels of data, not light ([`super::StripLayout::data`]).
     data: Vec<bool>,
+    /// Channels of data checked all the same ([`Books::set_checked`]).
+    checked: Vec<bool>,
 }
 
 impl Books {
@@ -50,6 +52,7 @@ impl Books {
             first_nonfinite: None,
             coverage: None,
             data: Vec::new(),
+            checked: Vec::new(),
         }
     }
 
@@ -58,6 +61,13 @@ impl Books {
     /// infinite), and they stay out of the ledger.
     pub fn set_data(&mut self, data: Vec<bool>) {
         self.data = data;
+    }
+
+    /// Channels whose input a rule reads as light's evidence (statistics
+    /// read where they are carried as data): a non-finite sample is refused
+    /// as in the channels of light, though the channel is data.
+    pub fn set_checked(&mut self, checked: Vec<bool>) {
+        self.checked = checked;
     }
 
     /// `--edge pad`: output values are divided by their pixel's coverage,
@@ -320,11 +330,12 @@ impl Books {
     fn ledger_row(&self, row: &[f32], in_w: usize) -> std::result::Result<Sums, (usize, usize)> {
         let (nch, nall) = (self.names.len(), self.zeroed.len());
         let mut s = Sums::new(nch);
-        for c in (0..nall).filter(|&c| !self.data.get(c).copied().unwrap_or(false)) {
+        let is = |flags: &[bool], c: usize| flags.get(c).copied().unwrap_or(false);
+        for c in (0..nall).filter(|&c| !is(&self.data, c) || is(&self.checked, c)) {
             let ch = &row[c * in_w..(c + 1) * in_w];
             // The sum says whether every value was finite: the slice is
             // searched only when one was not.
-            if !(c < nch && s.add_slice(c, ch)) {
+            if !(c < nch && !is(&self.data, c) && s.add_slice(c, ch)) {
                 if let Some(x) = ch.iter().position(|v| !v.is_finite()) {
                     return Err((x, c));
                 }

@@ -104,6 +104,19 @@ impl Streamer {
             }
         }
         books.set_data(data);
+        if let Some(st) = &job.stats {
+            let mut checked = vec![false; nall];
+            let count = match st.spp {
+                crate::filter::ep_box::Spp::Channel(i) => Some(i),
+                crate::filter::ep_box::Spp::Fixed(_) => None,
+            };
+            for i in st.variance.iter().copied().chain(st.mean_y).chain(count) {
+                if let Some(c) = checked.get_mut(i) {
+                    *c = true;
+                }
+            }
+            books.set_checked(checked);
+        }
         if let Some(cov) = coverage {
             books.set_coverage(cov);
         }

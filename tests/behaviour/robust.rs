@@ -206,3 +206,55 @@ fn fuzzer_regressions_never_panic() {
         }
     }
 }
+
+/// ep-box reads the variance pass where it is carried (as it is read), so
+/// it is held once, and checks it as light: a non-finite variance is
+/// refused naming its channel; with `--nonfinite zero` the statistics are
+/// read on their own (zeroed and counted) and the carried pass keeps its
+/// values.
+#[test]
+fn a_carried_variance_is_read_once_and_checked_as_light() {
+    use epfilt::pipeline::NonFinite;
+    let dir = tmpdir();
+    let (w, h) = (24, 18);
+    let names = ["R", "G", "B", "variance.R", "variance.G", "variance.B"];
+    let input = dir.path().join("var.exr");
+    let write = |nan: bool| {
+        crate::exr_io::write_named(&input, w, h, &names, &[("spp", 16)], |x, y, c| match c {
+            _ if nan && (x, y, c) == (5, 7, 4) => f32::NAN,
+            0..=2 if (x, y) == (9, 9) => 30.0,
+            0..=2 => 0.5,
+            _ if (x, y) == (9, 9) => 900.0,
+            _ => 1e-6,
+        })
+    };
+    write(false);
+    let out = dir.path().join("out.exr");
+    let report = filter_file(&job(&input, &out, Method::EpBox, 1), &|_, _| {}).unwrap();
+    let input_row = report.windows.iter().find(|u| u.name == "input").unwrap();
+    assert_eq!(input_row.row_bytes, names.len() * 4 * w);
+    // The paper's test, on the variance read, finds the bright pixel noisy
+    // (the carriers guard then keeps it: a compact feature).
+    let ep_box = report.ep_box.as_ref().unwrap();
+    assert_eq!(report.samples_noisy + ep_box.reliable, 1, "{ep_box:?}");
+    write(true);
+    let err = filter_file(&job(&input, &out, Method::EpBox, 1), &|_, _| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("(5, 7)") && err.contains("variance.G"),
+        "{err}"
+    );
+    let mut j = job(&input, &out, Method::EpBox, 1);
+    j.pipeline.nonfinite = NonFinite::Zero;
+    let report = filter_file(&j, &|_, _| {}).unwrap();
+    assert_eq!(report.first_nonfinite.map(|f| (f.0, f.1)), Some((5, 7)));
+    let img = read_all_flat_layers_from_file(&out).expect("read");
+    let list = &img.layer_data[0].channel_data.list;
+    let var_g = list
+        .iter()
+        .find(|c| c.name.to_string() == "variance.G")
+        .unwrap();
+    let v: Vec<f32> = var_g.sample_data.values_as_f32().collect();
+    assert!(v[7 * w + 5].is_nan(), "carried as it was");
+}

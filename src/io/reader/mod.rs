@@ -478,6 +478,37 @@ impl ExrInput {
         Ok(())
     }
 
+    /// Where each of `names` is in a strip row: a channel `carried` keeps
+    /// as it is read (a float with an average or nearest rule: the books
+    /// never alter it) where it is carried, so it is held once; the others
+    /// read after the filtered channels ([`ExrInput::add_aux_channels`]).
+    pub fn read_beside(
+        &mut self,
+        names: &[String],
+        carried: &[(String, ChannelRule)],
+    ) -> Result<Vec<usize>> {
+        let filtered = self.channels();
+        let copy = |name: &String| {
+            let rule = carried.iter().find(|(n, _)| n == name).map(|c| c.1);
+            let exact = matches!(rule, Some(ChannelRule::Average | ChannelRule::Nearest));
+            (exact && !self.is_uint(name))
+                .then(|| filtered.iter().position(|f| f == name))
+                .flatten()
+        };
+        let copies: Vec<Option<usize>> = names.iter().map(copy).collect();
+        let read: Vec<String> = (names.iter().zip(&copies))
+            .filter(|(_, c)| c.is_none())
+            .map(|(n, _)| n.clone())
+            .collect();
+        self.add_aux_channels(&read)?;
+        let aux = self.aux_channels();
+        let at = |(name, copied): (&String, &Option<usize>)| {
+            copied
+                .unwrap_or_else(|| filtered.len() + aux.iter().position(|a| a == name).unwrap_or(0))
+        };
+        Ok(names.iter().zip(&copies).map(at).collect())
+    }
+
     /// Carry the channels beside the beauty's: each gets `rule(name, uint)`;
     /// those it drops stay dropped. Returns the carried channels and their
     /// rules. Call before [`ExrInput::add_aux_channels`].

@@ -513,7 +513,7 @@ fn statistics(
         return Ok(None);
     }
     let before = energy.aux_channels().len();
-    let stats = found.attach(energy, path)?;
+    let stats = found.attach(energy, path, &[])?;
     let channels = energy.aux_channels()[before..].to_vec();
     let from = format!(
         "{}; samples: {}",

@@ -113,8 +113,10 @@ impl ExcessRule {
         let nch = modes.len();
         let max_radius = params.max_radius;
         let params: &EpBoxParams = &params.ep_box;
+        // Statistics are read beside the filtered channels, or where they
+        // are carried as they are read (never a channel that gives up light).
         let nall = nch + aux;
-        let in_range = |i: usize| i >= nch && i < nall;
+        let in_range = |i: usize| i < nall && modes.get(i) != Some(&ChannelMode::Spread);
         let var_ok = (stats.variance.len() == 1 || stats.variance.len() == 3)
             && stats.variance.iter().all(|&i| in_range(i))
             && stats.mean_y.is_none_or(in_range)
