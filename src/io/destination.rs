@@ -141,11 +141,6 @@ impl Destination {
             Destination::Null => Path::new("/dev/null"),
         }
     }
-
-    /// Whether this is standard output.
-    pub fn is_stdout(&self) -> bool {
-        *self == Destination::Stdout
-    }
 }
 
 /// Follow the links of a path whose final target does not exist yet.

@@ -43,17 +43,6 @@ pub fn is_rgbe(bytes: &[u8]) -> bool {
     bytes.starts_with(b"#?")
 }
 
-/// Whether a path names a Radiance picture by its extension.
-pub fn is_rgbe_path(path: &Path) -> bool {
-    matches!(
-        path.extension()
-            .and_then(|e| e.to_str())
-            .map(|e| e.to_ascii_lowercase())
-            .as_deref(),
-        Some("hdr" | "pic" | "rgbe")
-    )
-}
-
 /// What a picture's header says.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RgbeHeader {

@@ -2,28 +2,7 @@
 //! of every channel of every row, so tiles can be written in parallel, each
 //! pixel by one task, in an order that does not depend on the tile size.
 
-use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
-
 use super::window::RowWindow;
-
-/// Run `f` on every column tile of `acc` in parallel: `f(columns, parts)`,
-/// `parts` as [`column_tiles`] lists them.
-pub fn for_each_tile(
-    acc: &mut RowWindow<f64>,
-    w: usize,
-    nch: usize,
-    tile: usize,
-    f: impl Fn(std::ops::Range<usize>, &mut [&mut [f64]]) + Sync,
-) {
-    let region = crate::trace::region("scatter");
-    column_tiles(acc, w, nch, tile)
-        .into_par_iter()
-        .enumerate()
-        .for_each(|(t, mut parts)| {
-            let _task = region.task("scatter");
-            f(t * tile..((t + 1) * tile).min(w), &mut parts)
-        });
-}
 
 /// The rows of `acc` (planar `[c][x]`, `w` columns per channel) cut into
 /// column tiles of `tile`: entry `t` lists tile `t`'s slices row by row,

@@ -145,13 +145,6 @@ impl Default for FalseColor {
     }
 }
 
-/// Average luminance of an image file (one streaming pass).
-pub fn average_luminance(path: &Path) -> Result<f64> {
-    let input = ExrInput::open(path, None)?;
-    let crop = Crop::of(None, &input)?;
-    Ok(survey(&mut Rows::image(&input, crop), false, &|_| {})?.0)
-}
-
 /// Write `inputs` (path, label) side by side as one sRGB PNG at `output`,
 /// under one mapping (from the first image), as `settings` say. With one
 /// input and no label, a plain preview. `progress(done, total)`: the first
