@@ -7,12 +7,11 @@
 
 use serde::Serialize;
 
-/// The unit tests' bound on a run's relative ledger error before rounding:
-/// each sample's weights sum to one within ~1e-16 and every sum is
-/// compensated, so 1e-12 leaves a wide margin and still catches one lost
-/// sample in 1e12 (the behaviour tests' `ENERGY_TOL`).
-#[cfg(test)]
-pub(crate) const LEDGER_TOL: f64 = 1e-12;
+/// The tests' bound on a run's relative ledger error before rounding (unit
+/// and behaviour tests alike): each sample's weights sum to one within
+/// ~1e-16 and every sum is compensated, so 1e-12 leaves a wide margin and
+/// still catches one lost sample in 1e12.
+pub const LEDGER_TOL: f64 = 1e-12;
 
 /// What a picture output (Radiance, PFM) holds per colour channel, summed
 /// as it is stored: the ledger's "on disk" column, each pixel weighed by its

@@ -5,10 +5,8 @@
 use epfilt::filter::ep_gauss::{relation14, EpGauss};
 use epfilt::{filter_in_memory, FilterParams, Grid, Method, PipelineConfig, RunStats, StripLayout};
 
-/// Relative energy error allowed before rounding. Each sample's weights sum
-/// to one within ~1e-16 and every sum is compensated: 1e-12 leaves a wide
-/// margin and still catches one lost sample in 1e12.
-pub const ENERGY_TOL: f64 = 1e-12;
+/// Relative energy error allowed before rounding: the ledger's own bound.
+pub use epfilt::pipeline::ledger::LEDGER_TOL as ENERGY_TOL;
 
 /// The methods of the Gaussian family's stage (`pipeline/spread.rs`), which
 /// most stream tests run: one list, so a method added there is tested
