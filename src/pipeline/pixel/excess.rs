@@ -581,18 +581,8 @@ impl Band<'_> {
             let (m, found, on_surface) = self.ring_prefix((x, yy), &surface, wanted);
             counters.spread += 1;
             counters.capped += u64::from(found < wanted);
-            let at = values.len();
-            values.resize(at + 2 * nch, 0.0);
-            let (kept, shares) = values[at..].split_at_mut(nch);
             let f = colour_fraction(excess, y);
-            for c in 0..nch {
-                kept[c] = src[c * w + x] as f64;
-                if self.modes[c] == ChannelMode::Spread {
-                    let removed = g.residual(src, c, x) * f;
-                    kept[c] -= removed;
-                    shares[c] = removed / found as f64;
-                }
-            }
+            g.give_up(&mut values, (src, x), self.modes, (f, found as f64));
             sources.push(Source {
                 x: x as u32,
                 y: yy as u32,

@@ -6,6 +6,7 @@
 use crate::error::{Error, Result};
 use crate::filter::guides::{emission_part, is_light, GuideLayout, Surface, SurfaceRule};
 use crate::filter::luminance::Luminance;
+use crate::pipeline::ChannelMode;
 
 /// A stage's reader of the guides in its strip rows.
 pub struct GuideReader {
@@ -132,6 +133,32 @@ impl GuideReader {
         let dx = sx as f32 - tx as f32;
         let dy = sy as f32 - ty as f32;
         surface.same(q, dx * dx + dy * dy, &self.rule, self.cos_max)
+    }
+
+    /// Append a source's values for pixel `x` of `row` (its `modes.len()`
+    /// filtered channels first): what it keeps, then what one of `weight`
+    /// units of its kernel carries, where it gives up the fraction `f` of
+    /// what the emission guide leaves of each spread channel (the other
+    /// channels keep their values).
+    pub fn give_up(
+        &self,
+        values: &mut Vec<f64>,
+        (row, x): (&[f32], usize),
+        modes: &[ChannelMode],
+        (f, weight): (f64, f64),
+    ) {
+        let nch = modes.len();
+        let at = values.len();
+        values.resize(at + 2 * nch, 0.0);
+        let (kept, shares) = values[at..].split_at_mut(nch);
+        for (c, mode) in modes.iter().enumerate() {
+            kept[c] = row[c * self.w + x] as f64;
+            if *mode == ChannelMode::Spread {
+                let removed = self.residual(row, c, x) * f;
+                kept[c] -= removed;
+                shares[c] = removed / weight;
+            }
+        }
     }
 
     /// [`GuideReader::accepts`] for pixel `(tx, ty)` read from its `row`.

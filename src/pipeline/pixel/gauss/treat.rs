@@ -8,7 +8,6 @@ use crate::filter::guides::{keeps_to_surface, Surface};
 use crate::geometry::mirror;
 use crate::pipeline::counts::SpreadCounts;
 use crate::pipeline::window::RowWindow;
-use crate::pipeline::ChannelMode;
 
 /// What a treatment task reads.
 pub(super) struct Treat<'a> {
@@ -21,7 +20,7 @@ impl Treat<'_> {
     /// as a source ([`super::super::Rule::treat`]).
     pub(super) fn rows(&self, y0: usize, y1: usize) -> (Vec<Source>, Vec<f64>, SpreadCounts) {
         let st = self.stage;
-        let (w, h, nch) = (st.w, st.h, st.nch);
+        let (w, h) = (st.w, st.h);
         let mut counts = SpreadCounts::default();
         let (mut sources, mut values) = (Vec::new(), Vec::new());
         for y in y0..y1 {
@@ -66,17 +65,8 @@ impl Treat<'_> {
                 counts.spread += 1;
                 counts.capped += u64::from(capped);
                 let f = excess / v;
-                let at = values.len();
-                values.resize(at + 2 * nch, 0.0);
-                let (kept, shares) = values[at..].split_at_mut(nch);
-                for c in 0..nch {
-                    kept[c] = src[c * w + x] as f64;
-                    if st.modes[c] == ChannelMode::Spread {
-                        let removed = st.guides.residual(src, c, x) * f;
-                        kept[c] -= removed;
-                        shares[c] = removed / norm;
-                    }
-                }
+                st.guides
+                    .give_up(&mut values, (src, x), &st.modes, (f, norm));
                 sources.push(Source {
                     x: x as u32,
                     y: y as u32,
