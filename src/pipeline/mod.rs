@@ -239,9 +239,10 @@ pub struct PipelineConfig {
     pub cancel: Option<Arc<AtomicBool>>,
     /// NaN and infinite input samples.
     pub nonfinite: NonFinite,
-    /// Samples of an input row one classification task searches for noise
-    /// (0: automatic; rows wider than that are cut into column ranges).
-    /// Does not change the result.
+    /// Samples of an input row one classification task searches for noise,
+    /// or pixels one pixel-resolution treatment task treats (0: automatic;
+    /// rows wider than that are cut into column ranges). Does not change
+    /// the result.
     pub classify_samples: usize,
     /// Noisy samples whose kernels may reach an edge per spread chunk (the
     /// memory of a chunk's reflected weights; 0: automatic). Does not change

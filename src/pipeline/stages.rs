@@ -40,21 +40,27 @@ pub fn make(
             let ltvis = params.ep_box.ltvis.ok_or_else(|| {
                 Error::Config("ep-box needs L_tvis: measure L_ave first (mean_luminance)".into())
             })?;
-            Box::new(PixelStage::new(ExcessRule::new(
+            let mut stage = PixelStage::new(ExcessRule::new(
                 (grid.in_w, grid.in_h),
                 (job.luminance.clone(), job.modes.clone(), job.aux.len()),
                 stats,
                 (params, ltvis),
                 (job.guides.clone(), job.surface_rule),
-            )?))
+            )?);
+            stage.set_task_columns(cfg.classify_samples);
+            Box::new(stage)
         }
-        Method::EpGauss if grid.s == 1 => Box::new(PixelStage::new(GaussRule::new(
-            (grid.in_w, grid.in_h),
-            job.luminance.clone(),
-            job.modes.clone(),
-            (job.guides.clone(), job.surface_rule),
-            params,
-        )?)),
+        Method::EpGauss if grid.s == 1 => {
+            let mut stage = PixelStage::new(GaussRule::new(
+                (grid.in_w, grid.in_h),
+                job.luminance.clone(),
+                job.modes.clone(),
+                (job.guides.clone(), job.surface_rule),
+                params,
+            )?);
+            stage.set_task_columns(cfg.classify_samples);
+            Box::new(stage)
+        }
         Method::Median | Method::AlphaTrim => {
             Box::new(OrderStage::new(grid, job.modes.clone(), params))
         }

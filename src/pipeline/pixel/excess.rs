@@ -17,6 +17,8 @@
 //! The treatment of a pixel reads only the input within `passes` of it (its
 //! receivers' within the ring).
 
+use std::ops::Range;
+
 use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
 
 use super::guided::GuideReader;
@@ -203,6 +205,9 @@ impl Rule for ExcessRule {
     /// Each task recomputes `2 * passes` rows of band around its own, so
     /// tasks should be several times taller than that.
     const TREAT_ROWS: usize = 32;
+    /// A task's passes run over its pixels and `passes` either side: a
+    /// wide strip is cut in columns, whose margins are a few columns more.
+    const TREAT_COLUMNS: usize = 4096;
 
     fn shape(&self) -> (usize, usize, usize) {
         (self.w, self.h, self.nch)
@@ -240,10 +245,10 @@ impl Rule for ExcessRule {
     fn treat(
         &self,
         input: &RowWindow<f32>,
-        a: usize,
-        b: usize,
+        rows: Range<usize>,
+        columns: Range<usize>,
     ) -> (Vec<Source>, Vec<f64>, ExcessCounts) {
-        self.band(input).treat_rows(a, b)
+        self.band(input).treat(rows, columns)
     }
 
     fn tally(&mut self, c: ExcessCounts, _: &[Source]) {
@@ -533,26 +538,39 @@ impl Band<'_> {
         }
     }
 
-    /// Treat rows `c0..c1`: the passes over the band of rows
-    /// `c0 - passes .. c1 + passes`, which holds everything those rows'
-    /// decisions read (see `filter::ep_box`). The sources in row-major
-    /// order, their values (per source what its pixel keeps, then what each
-    /// receiver gets, a value a channel each) and what it counted.
-    fn treat_rows(&self, c0: usize, c1: usize) -> (Vec<Source>, Vec<f64>, ExcessCounts) {
+    /// Treat the pixels of `rows` and `columns`: the passes over the band of
+    /// pixels `passes` (and the guard's reach) either side, which holds
+    /// everything their decisions read (see `filter::ep_box`). The sources in row-major order, their
+    /// values (per source what its pixel keeps, then what each receiver
+    /// gets, a value a channel each) and what it counted.
+    fn treat(
+        &self,
+        rows: Range<usize>,
+        columns: Range<usize>,
+    ) -> (Vec<Source>, Vec<f64>, ExcessCounts) {
         let (w, h, nch) = (self.w, self.h, self.nch);
         let margin = self.passes + GUARD_REACH;
-        let ba = c0.saturating_sub(margin);
-        let bb = (c1 + margin).min(h);
+        let ba = rows.start.saturating_sub(margin);
+        let bb = (rows.end + margin).min(h);
         let bh = bb - ba;
+        // The band's columns: the same margin either side.
+        let xa = columns.start.saturating_sub(margin);
+        let xb = (columns.end + margin).min(w);
         let mut counters = ExcessCounts::default();
-        let in_target = |r: usize| (c0..c1).contains(&(ba + r));
-        counters.noisy = (c0..c1)
-            .map(|y| self.noisy.get(y)[..w].iter().filter(|&&f| f != 0).count() as u64)
+        let in_target = |r: usize, x: usize| rows.contains(&(ba + r)) && columns.contains(&x);
+        counters.noisy = (rows.clone())
+            .map(|y| {
+                self.noisy.get(y)[columns.clone()]
+                    .iter()
+                    .filter(|&&f| f != 0)
+                    .count() as u64
+            })
             .sum();
         let (mut sources, mut values) = (Vec::new(), Vec::new());
-        let settle = |r: usize, x: usize, k: u8, mean: f64| -> f64 {
+        let settle = |r: usize, bx: usize, k: u8, mean: f64| -> f64 {
+            let x = xa + bx;
             let y = self.ylum.get(ba + r)[x];
-            let target = in_target(r);
+            let target = in_target(r, x);
             if target {
                 counters.passes = counters.passes.max(k as u64);
             }
@@ -592,16 +610,17 @@ impl Band<'_> {
             });
             excess
         };
+        let bw = xb - xa;
         let unresolved = chebyshev_passes(
-            (w, bh),
-            |r| self.noisy.get(ba + r),
-            |r| self.ylum.get(ba + r),
+            (bw, bh),
+            |r| &self.noisy.get(ba + r)[xa..xb],
+            |r| &self.ylum.get(ba + r)[xa..xb],
             self.passes,
             settle,
         );
         counters.unresolved = unresolved
             .iter()
-            .filter(|&&i| in_target(i as usize / w))
+            .filter(|&&i| in_target(i as usize / bw, xa + i as usize % bw))
             .count() as u64;
         // The passes settle pixels ring by ring: row-major for the output.
         let mut order: Vec<usize> = (0..sources.len()).collect();

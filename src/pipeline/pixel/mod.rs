@@ -26,6 +26,8 @@
 //! bit-identical across `--tile`, `--strip-rows` and `--threads`. A pixel
 //! neither spread nor reached keeps its input bits.
 
+use std::ops::Range;
+
 use rayon::iter::{IntoParallelIterator, ParallelIterator};
 
 use super::counts::MethodCounts;
@@ -59,6 +61,9 @@ pub trait Rule: Send + Sync {
     type Tally: Send;
     /// Rows a treatment task takes.
     const TREAT_ROWS: usize;
+    /// Columns a treatment task takes at most (where fewer than the image's,
+    /// a task takes one row).
+    const TREAT_COLUMNS: usize;
 
     /// The image's width and height, and the filtered channels.
     fn shape(&self) -> (usize, usize, usize);
@@ -75,15 +80,15 @@ pub trait Rule: Send + Sync {
     fn make(&mut self, pass: usize, input: &RowWindow<f32>, a: usize, b: usize);
     /// No pass reads rows of pass `pass` below `y` any more.
     fn evict(&mut self, pass: usize, y: usize);
-    /// Treat rows `a..b`: the spread pixels in row-major order, their
-    /// values (per source what its pixel keeps, then what one unit of its
-    /// kernel's weight carries, a value a channel each) and what it
-    /// counted.
+    /// Treat the pixels of rows `rows` and columns `columns`: the spread
+    /// pixels in row-major order, their values (per source what its pixel
+    /// keeps, then what one unit of its kernel's weight carries, a value a
+    /// channel each) and what it counted.
     fn treat(
         &self,
         input: &RowWindow<f32>,
-        a: usize,
-        b: usize,
+        rows: Range<usize>,
+        columns: Range<usize>,
     ) -> (Vec<Self::Source>, Vec<f64>, Self::Tally);
     /// Add what a treatment task counted of `sources`.
     fn tally(&mut self, tally: Self::Tally, sources: &[Self::Source]);
@@ -157,17 +162,49 @@ fn read_from(passes: &[Reads], done: &[usize], j: usize) -> usize {
         .unwrap_or(usize::MAX)
 }
 
+/// Lists of sources and their values (`stride` a source), each in
+/// row-major order over its own columns, the columns in order: one list in
+/// row-major order.
+fn row_major<S: Placed>(lists: Vec<(Vec<S>, Vec<f64>)>, stride: usize) -> (Vec<S>, Vec<f64>) {
+    if lists.len() == 1 {
+        if let Some(list) = lists.into_iter().next() {
+            return list;
+        }
+        return (Vec::new(), Vec::new());
+    }
+    let n = lists.iter().map(|l| l.0.len()).sum();
+    let (mut sources, mut values) = (Vec::with_capacity(n), Vec::with_capacity(n * stride));
+    let mut lists: Vec<_> = (lists.into_iter())
+        .map(|(s, v)| (s.into_iter().peekable(), v.into_iter()))
+        .collect();
+    while let Some(y) = (lists.iter_mut())
+        .filter_map(|(s, _)| s.peek().map(|p| p.at().1))
+        .min()
+    {
+        for (s, v) in &mut lists {
+            while let Some(source) = s.next_if(|p| p.at().1 == y) {
+                sources.push(source);
+                values.extend(v.by_ref().take(stride));
+            }
+        }
+    }
+    (sources, values)
+}
+
 /// A pixel-resolution method's stage: its rule and the schedule.
 pub struct PixelStage<R: Rule> {
     rule: R,
     w: usize,
     h: usize,
+    nch: usize,
     /// What each pass reads (`passes[i - 1]` for pass `i`).
     passes: Vec<Reads>,
     /// Per pass, the rows made (pass 0: the input rows in).
     done: Vec<usize>,
     /// The spreads, and the final output rows not yet written.
     gathered: Gathered<R::Source>,
+    /// Columns a treatment task takes at most (0: the rule's).
+    task_columns: usize,
 }
 
 impl<R: Rule> PixelStage<R> {
@@ -181,9 +218,17 @@ impl<R: Rule> PixelStage<R> {
             passes,
             w,
             h,
+            nch,
             gathered: Gathered::new(nch, w, reach),
             rule,
+            task_columns: 0,
         }
+    }
+
+    /// Cut the treatment's tasks at `n` columns (0: the rule's
+    /// [`Rule::TREAT_COLUMNS`]); the output does not change.
+    pub fn set_task_columns(&mut self, n: usize) {
+        self.task_columns = n;
     }
 
     /// The treatment's pass.
@@ -213,21 +258,43 @@ impl<R: Rule> PixelStage<R> {
         self.rule.evict(0, self.input_needed());
     }
 
-    /// Treat rows `a..b`, a task per [`Rule::TREAT_ROWS`], and list the
-    /// sources in row-major order.
+    /// Treat rows `a..b` and list the sources in row-major order: a task
+    /// per [`Rule::TREAT_ROWS`] rows and [`Rule::TREAT_COLUMNS`] columns (a
+    /// wide image's strip is a few rows: cut only by rows, its treatment
+    /// would be one task). A band's tasks are merged row by row.
     fn treat(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
-        let chunks: Vec<usize> = (a..b).step_by(R::TREAT_ROWS).collect();
+        let (w, rows) = (self.w.max(1), R::TREAT_ROWS.max(1));
+        let cols = match self.task_columns {
+            0 => R::TREAT_COLUMNS,
+            n => n,
+        }
+        .clamp(1, w);
+        let tasks: Vec<(usize, usize)> = (a..b)
+            .step_by(rows)
+            .flat_map(|y| (0..w).step_by(cols).map(move |x| (y, x)))
+            .collect();
         let rule = &self.rule;
         let region = crate::trace::region("pixel treat");
-        let results: Vec<_> = chunks
+        let results: Vec<_> = tasks
             .into_par_iter()
-            .map(|y0| {
+            .map(|(y, x)| {
                 let _task = region.task("pixel treat");
-                rule.treat(input, y0, (y0 + R::TREAT_ROWS).min(b))
+                rule.treat(input, y..(y + rows).min(b), x..(x + cols).min(w))
             })
             .collect();
-        for (sources, values, tally) in results {
-            self.rule.tally(tally, &sources);
+        let mut results = results.into_iter();
+        let stride = 2 * self.nch;
+        loop {
+            let band: Vec<_> = results.by_ref().take(w.div_ceil(cols)).collect();
+            if band.is_empty() {
+                break;
+            }
+            let mut lists = Vec::with_capacity(band.len());
+            for (sources, values, tally) in band {
+                self.rule.tally(tally, &sources);
+                lists.push((sources, values));
+            }
+            let (sources, values) = row_major(lists, stride);
             self.gathered.sources.extend(sources, values);
         }
     }
@@ -307,6 +374,32 @@ impl<R: Rule> Stage for PixelStage<R> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn lists_cut_by_columns_merge_row_by_row() {
+        #[derive(Debug, PartialEq)]
+        struct Dot(usize, usize);
+        impl Placed for Dot {
+            fn at(&self) -> (usize, usize) {
+                (self.0, self.1)
+            }
+        }
+        let dots = |v: &[(usize, usize)]| -> (Vec<Dot>, Vec<f64>) {
+            let values = v.iter().flat_map(|&(x, y)| [x as f64, y as f64]).collect();
+            (v.iter().map(|&(x, y)| Dot(x, y)).collect(), values)
+        };
+        // Rows 3..6, columns 0..4 then 4..8.
+        let left = dots(&[(1, 3), (0, 5), (2, 5)]);
+        let right = dots(&[(4, 3), (7, 4), (5, 5)]);
+        let (sources, values) = row_major(vec![left, right], 2);
+        let want = [(1, 3), (4, 3), (7, 4), (0, 5), (2, 5), (5, 5)];
+        assert_eq!(sources, want.map(|(x, y)| Dot(x, y)));
+        let expect: Vec<f64> = want
+            .iter()
+            .flat_map(|&(x, y)| [x as f64, y as f64])
+            .collect();
+        assert_eq!(values, expect);
+    }
 
     #[test]
     fn the_lag_is_the_longest_chain_of_reaches() {

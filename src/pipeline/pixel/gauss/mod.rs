@@ -17,6 +17,8 @@
 //! Each pixel's decision reads only the input within 4 rows and columns of
 //! it (with guides, its receivers' within `R`).
 
+use std::ops::Range;
+
 use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
 
 use super::guided::GuideReader;
@@ -172,6 +174,8 @@ impl Rule for GaussRule {
     type Source = Source;
     type Tally = SpreadCounts;
     const TREAT_ROWS: usize = 16;
+    /// A pixel is decided alone: a wide strip is cut in columns.
+    const TREAT_COLUMNS: usize = 4096;
 
     fn shape(&self) -> (usize, usize, usize) {
         (self.w, self.h, self.nch)
@@ -253,10 +257,10 @@ impl Rule for GaussRule {
     fn treat(
         &self,
         input: &RowWindow<f32>,
-        a: usize,
-        b: usize,
+        rows: Range<usize>,
+        columns: Range<usize>,
     ) -> (Vec<Source>, Vec<f64>, SpreadCounts) {
-        Treat { stage: self, input }.rows(a, b)
+        Treat { stage: self, input }.pixels(rows, columns)
     }
 
     fn tally(&mut self, tally: SpreadCounts, sources: &[Source]) {

@@ -1,6 +1,8 @@
 //! The treatment of ep-gauss's pixel stage: each noisy pixel's feature
 //! rules, its width (the search over the ladder, with the guides' receivers)
-//! and what it keeps, one task per band of rows.
+//! and what it keeps, one task per band of rows or row's columns.
+
+use std::ops::Range;
 
 use super::{neighbours8, GaussRule, Source};
 use crate::filter::ep_gauss::pixel::{in_range, supported, BACKGROUND_REACH};
@@ -16,14 +18,19 @@ pub(super) struct Treat<'a> {
 }
 
 impl Treat<'_> {
-    /// Treat rows `y0..y1`: take each noisy pixel's excess out and list it
-    /// as a source ([`super::super::Rule::treat`]).
-    pub(super) fn rows(&self, y0: usize, y1: usize) -> (Vec<Source>, Vec<f64>, SpreadCounts) {
+    /// Treat the pixels of rows `rows` and columns `columns`: take each
+    /// noisy pixel's excess out and list it as a source
+    /// ([`super::super::Rule::treat`]).
+    pub(super) fn pixels(
+        &self,
+        rows: Range<usize>,
+        columns: Range<usize>,
+    ) -> (Vec<Source>, Vec<f64>, SpreadCounts) {
         let st = self.stage;
         let (w, h) = (st.w, st.h);
         let mut counts = SpreadCounts::default();
         let (mut sources, mut values) = (Vec::new(), Vec::new());
-        for y in y0..y1 {
+        for y in rows {
             let src = self.input.get(y);
             let r = BACKGROUND_REACH as i64;
             let lrows: Vec<&[f64]> = (-1..=1)
@@ -31,7 +38,7 @@ impl Treat<'_> {
                 .collect();
             let cand = st.win.cand.get(y);
             let bgrow = st.win.bg.get(y);
-            for x in (0..w).filter(|&x| cand[x] != 0) {
+            for x in columns.clone().filter(|&x| cand[x] != 0) {
                 counts.noisy += 1;
                 let (v, bg) = (lrows[1][x], bgrow[x]);
                 if st.ladder.features {
