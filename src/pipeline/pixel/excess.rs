@@ -93,7 +93,7 @@ pub struct ExcessRule {
     /// The channels a spread moves.
     spread: Vec<usize>,
     stats: StatsLayout,
-    rule: Factors,
+    factors: Factors,
     win: Windows,
     counters: ExcessCounts,
     guides: GuideReader,
@@ -164,7 +164,7 @@ impl ExcessRule {
                 .collect(),
             modes,
             stats,
-            rule: Factors {
+            factors: Factors {
                 params: params.clone(),
                 ltvis,
                 dl: params.d * ltvis,
@@ -214,11 +214,11 @@ impl Rule for ExcessRule {
     }
 
     fn passes(&self) -> Vec<Reads> {
-        passes(self.rule.passes, self.rule.reach)
+        passes(self.factors.passes, self.factors.reach)
     }
 
     fn reach(&self) -> usize {
-        self.rule.reach
+        self.factors.reach
     }
 
     fn arrive(&mut self, _: &RowWindow<f32>, _: usize, _: usize) {}
@@ -265,7 +265,7 @@ impl Rule for ExcessRule {
     /// A source's share to each in-image pixel of row `ty` in its ring
     /// prefix (those its guides accept, where they choose receivers).
     fn add(&self, input: &RowWindow<f32>, s: &Source, shares: &[f64], ty: usize, acc: &mut [f64]) {
-        let (w, reach) = (self.w, self.rule.reach);
+        let (w, reach) = (self.w, self.factors.reach);
         let g = self.guides.chooses_receivers().then_some(&self.guides);
         let (sx, sy, m) = (s.x as usize, s.y as usize, s.m);
         if ty + reach < sy || ty > sy + reach {
@@ -273,7 +273,7 @@ impl Rule for ExcessRule {
         }
         let from = s.on_surface.then_some((&s.surface, sx, sy));
         let row = input.get(ty);
-        for &(i, dx) in &self.rule.ring_rows[ty + reach - sy] {
+        for &(i, dx) in &self.factors.ring_rows[ty + reach - sy] {
             if i >= m {
                 break;
             }
@@ -328,12 +328,12 @@ impl ExcessRule {
             self.win.raw.push_stale(0);
         }
         let w = self.w;
-        let (lum, stats, dl) = (&self.lum, &self.stats, self.rule.dl);
-        let (t, tg) = (&self.rule.t, &self.rule.tg);
+        let (lum, stats, dl) = (&self.lum, &self.stats, self.factors.dl);
+        let (t, tg) = (&self.factors.t, &self.factors.tg);
         let ys = self.win.ylum.range_mut(a, b);
         let cs = self.win.cap.range_mut(a, b);
         let fs = self.win.raw.range_mut(a, b);
-        let params = &self.rule.params;
+        let params = &self.factors.params;
         let guides = &self.guides;
         let region = crate::trace::region("ep-box statistics");
         ys.into_par_iter()
@@ -372,7 +372,7 @@ impl ExcessRule {
             self.win.noisy.push_stale(0);
         }
         let (raw, ylum) = (&self.win.raw, &self.win.ylum);
-        let guard = self.rule.params.guard;
+        let guard = self.factors.params.guard;
         let rows = self.win.noisy.range_mut(a, b);
         let region = crate::trace::region("ep-box decide");
         let reliable: u64 = rows
@@ -411,11 +411,11 @@ impl ExcessRule {
             cap: &self.win.cap,
             noisy: &self.win.noisy,
             modes: &self.modes,
-            passes: self.rule.passes,
-            dl: self.rule.dl,
-            ltvis: self.rule.ltvis,
-            guard: self.rule.params.guard,
-            ring: &self.rule.ring,
+            passes: self.factors.passes,
+            dl: self.factors.dl,
+            ltvis: self.factors.ltvis,
+            guard: self.factors.params.guard,
+            ring: &self.factors.ring,
             guides: &self.guides,
         }
     }

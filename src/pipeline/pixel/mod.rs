@@ -166,11 +166,8 @@ fn read_from(passes: &[Reads], done: &[usize], j: usize) -> usize {
 /// row-major order over its own columns, the columns in order: one list in
 /// row-major order.
 fn row_major<S: Placed>(lists: Vec<(Vec<S>, Vec<f64>)>, stride: usize) -> (Vec<S>, Vec<f64>) {
-    if lists.len() == 1 {
-        if let Some(list) = lists.into_iter().next() {
-            return list;
-        }
-        return (Vec::new(), Vec::new());
+    if lists.len() <= 1 {
+        return lists.into_iter().next().unwrap_or_default();
     }
     let n = lists.iter().map(|l| l.0.len()).sum();
     let (mut sources, mut values) = (Vec::with_capacity(n), Vec::with_capacity(n * stride));
