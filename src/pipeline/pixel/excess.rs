@@ -221,8 +221,6 @@ impl Rule for ExcessRule {
         self.factors.reach
     }
 
-    fn arrive(&mut self, _: &RowWindow<f32>, _: usize, _: usize) {}
-
     fn make(&mut self, pass: usize, input: &RowWindow<f32>, a: usize, b: usize) {
         match pass {
             1 => self.statistics(input, a, b),

@@ -73,8 +73,8 @@ pub trait Rule: Send + Sync {
     /// The widest spread's reach in rows.
     fn reach(&self) -> usize;
     /// Input rows `a..b` have arrived: what the rule makes of each on
-    /// arrival (pass 0's own windows).
-    fn arrive(&mut self, input: &RowWindow<f32>, a: usize, b: usize);
+    /// arrival (pass 0's own windows; none by default).
+    fn arrive(&mut self, _input: &RowWindow<f32>, _a: usize, _b: usize) {}
     /// Make rows `a..b` of pass `pass` (neither the input nor the
     /// treatment).
     fn make(&mut self, pass: usize, input: &RowWindow<f32>, a: usize, b: usize);
