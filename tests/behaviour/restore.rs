@@ -382,6 +382,71 @@ fn restore_keeps_a_lamp_its_samples_agree_on_without_a_guide() {
     assert!(!from.is_empty() && spread < SPREAD_BELOW, "{from} {spread}");
 }
 
+/// A render's emission pass, variance pass and sample count, carried into
+/// the output, are what restore reads of them: held once in its rows, not
+/// again beside them. Dropped from the output, they are read beside the
+/// beauty, and the beauty comes out the same.
+#[test]
+fn restore_reads_a_carried_guide_and_variance_once() {
+    let dir = tmpdir();
+    let (w, h) = (40, 24);
+    let plane = |f: &dyn Fn(usize, usize) -> f32| {
+        FlatSamples::F32((0..w * h).map(|i| f(i % w, i / w)).collect())
+    };
+    let mut channels = Vec::new();
+    for (c, name) in ["B", "G", "R"].into_iter().enumerate() {
+        let beauty = move |x, y| render(x, y, c);
+        channels.push((name.to_string(), plane(&beauty)));
+        let glow = move |x, y| if (x, y) == LAMP { 100.0 } else { 0.0 };
+        channels.push((format!("emission.{name}"), plane(&glow)));
+        let var = move |x, y| (0.2 * beauty(x, y)).powi(2) * 16.0;
+        channels.push((format!("variance.{name}"), plane(&var)));
+    }
+    channels.push(("sampleCount".to_string(), plane(&|_, _| 16.0)));
+    let e = dir.path().join("e.exr");
+    let named = channels.iter().map(|(n, p)| (n.as_str(), p.clone()));
+    write_flat(&e, (w, h), named.collect());
+    let d = dir.path().join("d.exr");
+    write(&d, (w, h), denoised);
+    let input_row = |r: &serde_json::Value| {
+        let windows = r["windows"].as_array().unwrap();
+        let input = windows.iter().find(|w| w["name"] == "input").unwrap();
+        input["row_bytes"].as_u64().unwrap() as usize
+    };
+    // The energy's 10 channels and the denoiser's 3; dropped, the 7 passes
+    // are read beside the beauty's 3.
+    const ROW_CHANNELS: usize = 13;
+    let (carried, dropped) = (
+        dir.path().join("carried.exr"),
+        dir.path().join("dropped.exr"),
+    );
+    let r = restore_report(&d, &e, &carried, &[]);
+    assert_eq!(input_row(&r), ROW_CHANNELS * 4 * w, "{r}");
+    assert!(
+        r["variance_pass"].as_str().unwrap().contains("variance.R"),
+        "{r}"
+    );
+    assert_eq!(r["emission_guide"].as_array().unwrap().len(), 3, "{r}");
+    let drop = ["emission.*=drop", "variance.*=drop", "sampleCount=drop"];
+    let args: Vec<&str> = drop.iter().flat_map(|d| ["--channel-rule", d]).collect();
+    let r = restore_report(&d, &e, &dropped, &args);
+    assert_eq!(input_row(&r), ROW_CHANNELS * 4 * w, "{r}");
+    let map = |p| {
+        read_channels(p)
+            .into_iter()
+            .collect::<std::collections::HashMap<_, _>>()
+    };
+    let (a, b) = (map(&carried), map(&dropped));
+    assert!(!b.contains_key("variance.R") && a.contains_key("variance.R"));
+    for c in ["R", "G", "B"] {
+        let same = a[c]
+            .iter()
+            .zip(&b[c])
+            .all(|(x, y)| x.to_bits() == y.to_bits());
+        assert!(same, "{c}");
+    }
+}
+
 #[test]
 fn restore_takes_the_emission_guide_it_is_told() {
     let dir = tmpdir();

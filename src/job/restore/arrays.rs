@@ -77,7 +77,7 @@ pub fn restore_array(
     let mut parts = vec![(planar(input.energy, w, nch), nch)];
     if let Some(em) = input.emission {
         parts.push((planar(em, w, nch), nch));
-        layout.emission = (0..nch).map(Some).collect();
+        layout.emission = (nch..2 * nch).map(Some).collect();
         layout.guide = vec!["emission".to_string()];
     }
     let mut variance_pass = String::new();

@@ -104,7 +104,8 @@ impl RestoreJob {
 }
 
 /// The energy image's rows: its `channels`, and the emission guide beside
-/// them where `req` finds one (read as guide channels after them). Found by
+/// them where `req` finds one (read where `carried` has it, else after
+/// them: [`ExrInput::read_beside`]). Found by
 /// name (`auto`), a file whose guides are ambiguous, not whole or hold ids
 /// gets none: the other evidence decides there. Asked for (`--guides
 /// emission`, `--guide emission=LAYER`), each of those is an error naming
@@ -112,7 +113,7 @@ impl RestoreJob {
 fn emission_guide(
     path: &std::path::Path,
     energy: &mut ExrInput,
-    channels: Vec<String>,
+    (channels, carried): (Vec<String>, &[(String, ChannelRule)]),
     req: &GuideRequest,
 ) -> Result<EnergyLayout> {
     let luminance = energy.luminance();
@@ -163,12 +164,10 @@ fn emission_guide(
     });
     let names = if asked { Some(found?) } else { found.ok() };
     if let Some(names) = names {
-        energy.add_aux_channels(&names)?;
-        let mut k = 0;
+        let mut at = energy.read_beside(&names, carried)?.into_iter();
         for (c, e) in layout.channels.iter().zip(&mut layout.emission) {
             if beauty.contains(c) {
-                *e = Some(k);
-                k += 1;
+                *e = at.next();
             }
         }
         layout.guide = names;
@@ -304,7 +303,14 @@ impl RestorePlan {
         // The output's layout from the energy's own channels, before its
         // guide and statistics are read beside them.
         let output = OutputLayout::of(&energy, &channels, &settings);
-        let mut layout = emission_guide(&job.energy, &mut energy, channels.clone(), &job.guides)?;
+        // A guide or a variance pass the output carries is read where it
+        // is carried: restore reads the energy's carried channels as they
+        // are (data: never zeroed, never altered), so it is held once.
+        let rules: Vec<_> = (carried.iter())
+            .map(|c| (c.clone(), ChannelRule::Nearest))
+            .collect();
+        let both = (channels.clone(), rules.as_slice());
+        let mut layout = emission_guide(&job.energy, &mut energy, both, &job.guides)?;
         let copied = (channels[..beauty].iter().zip(&picks))
             .filter(|(_, p)| p.is_none())
             .map(|(c, _)| c.clone())
@@ -312,7 +318,7 @@ impl RestorePlan {
         // A render's own statistics measure its uncertainty, and keep in
         // place the pixels whose samples agree (not with `--guides none`).
         let mut variance_pass = String::new();
-        if let Some((r, from)) = statistics(&job.energy, &mut energy, &layout.luminance)? {
+        if let Some((r, from)) = statistics(&job.energy, &mut energy, &layout.luminance, &rules)? {
             layout.stats = Some(r);
             layout.sure_keeps = !job.guides.none();
             variance_pass = from;
@@ -504,6 +510,7 @@ fn statistics(
     path: &std::path::Path,
     energy: &mut ExrInput,
     lum: &[f64],
+    carried: &[(String, ChannelRule)],
 ) -> Result<Option<(RenderStats, String)>> {
     let Ok(found) = find_stats(path, energy.header(), &StatsRequest::default()) else {
         return Ok(None);
@@ -513,7 +520,7 @@ fn statistics(
         return Ok(None);
     }
     let before = energy.aux_channels().len();
-    let stats = found.attach(energy, path, &[])?;
+    let stats = found.attach(energy, path, carried)?;
     let channels = energy.aux_channels()[before..].to_vec();
     let from = format!(
         "{}; samples: {}",

@@ -16,8 +16,8 @@ use crate::pipeline::window::RowWindow;
 /// Where the input rows hold what the kept part reads.
 #[derive(Clone, Debug)]
 pub(super) struct KeptLayout {
-    /// Per energy channel, its emission guide's place among the channels
-    /// after the energy's, if the energy image has one.
+    /// Per energy channel, its emission guide's place in the rows, if the
+    /// energy image has one ([`super::EnergyLayout::emission`]).
     pub emission: Vec<Option<usize>>,
     /// Channels the denoiser did not write: nothing kept, they stay whole.
     pub copied: Vec<bool>,
@@ -31,10 +31,12 @@ pub(super) struct KeptLayout {
 
 impl KeptLayout {
     /// The first of the denoiser's channels in the input rows: after the
-    /// energy's, its guide's and its statistics'.
+    /// energy's, and its guide's and statistics' read after them.
     pub fn d_at(&self) -> usize {
+        let nch = self.emission.len();
+        let guide = self.emission.iter().flatten().filter(|&&k| k >= nch);
         let stats = self.stats.as_ref().map_or(0, |r| r.channels.len());
-        self.emission.len() + self.emission.iter().flatten().count() + stats
+        nch + guide.count() + stats
     }
 }
 
@@ -221,7 +223,7 @@ impl Rows<'_> {
             let e = &row[ch * w..(ch + 1) * w];
             let offset = (d_at + ch) * w;
             let d = &row[offset..offset + w];
-            let em = self.layout.emission[ch].map(|k| &row[(nch + k) * w..(nch + k + 1) * w]);
+            let em = self.layout.emission[ch].map(|k| &row[k * w..(k + 1) * w]);
             // The rows above and below, for the share's lower bound.
             let (up, down) = (
                 &self.input.get(reflect(y as isize - 1, self.h))[offset..offset + w],

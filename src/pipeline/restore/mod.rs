@@ -35,13 +35,15 @@ pub use stage::RestoreStage;
 pub use stats::RenderStats;
 pub use survey::Survey;
 
-/// The energy image's rows: its `channels`, then the emission guide of
-/// those `emission` names (`Some(k)`: the `k`-th guide channel after them).
+/// The energy image's rows: its `channels`, then the channels of its
+/// emission guide and statistics that are not among them (a pass the
+/// energy carries is read where it is carried, once).
 #[derive(Clone, Debug)]
 pub struct EnergyLayout {
     /// The energy's channels, the ones restored.
     pub channels: Vec<String>,
-    /// Per channel, its emission guide's place among the guide channels.
+    /// Per channel, its emission guide's place in the rows: among the
+    /// channels where the energy carries it, else after them.
     pub emission: Vec<Option<usize>>,
     /// The luminance weights (for the layout).
     pub luminance: Vec<f64>,
@@ -94,7 +96,8 @@ impl EnergyLayout {
         let mut layout = StripLayout::new(grid, channels.clone(), self.luminance.clone());
         layout.data = self.data.clone();
         let guide = (channels.iter().zip(&self.emission))
-            .filter_map(|(c, e)| e.map(|_| format!("emission.{c}")));
+            .filter(|(_, e)| e.is_some_and(|k| k >= channels.len()))
+            .map(|(c, _)| format!("emission.{c}"));
         let stats = self.stats.iter().flat_map(|r| r.channels.iter().cloned());
         layout.aux = guide
             .chain(stats)
@@ -130,10 +133,13 @@ impl EnergyLayout {
         }
     }
 
-    /// Channels the energy's rows hold: its own and the guide's.
+    /// Channels the energy's rows hold: its own, then the guide's and the
+    /// statistics' read after them.
     fn row_channels(&self) -> usize {
+        let nch = self.channels.len();
+        let guide = self.emission.iter().flatten().filter(|&&k| k >= nch);
         let stats = self.stats.as_ref().map_or(0, |r| r.channels.len());
-        self.channels.len() + self.emission.iter().flatten().count() + stats
+        nch + guide.count() + stats
     }
 }
 

@@ -80,7 +80,7 @@ fn run(
                 r.iter().copied().chain(lamp).collect::<Vec<f32>>()
             })
             .collect();
-        layout.emission = (0..nch).map(Some).collect();
+        layout.emission = (nch..2 * nch).map(Some).collect();
     }
     let params = RestoreParams { scale, ..RENDER };
     restore_planar(e, d, (w, h), layout, params, cfg, Precision::F32).unwrap()
@@ -332,7 +332,7 @@ fn the_emission_guide_keeps_a_lamp_the_denoiser_removed() {
     }
     let plain = EnergyLayout::plain(vec!["Y".into()], vec![1.0]);
     let guided = EnergyLayout {
-        emission: vec![Some(0)],
+        emission: vec![Some(1)],
         ..plain.clone()
     };
     let spread = one_bright_pixel(e, plain, lamp);
