@@ -215,14 +215,9 @@ pub fn halo(p: &FilterParams) -> crate::geometry::Halo {
             }
         }
         Method::EpGauss => crate::geometry::Halo {
-            xbar_reach: shell(p.radius)
-                + if p.supersample == 1 {
-                    ep_gauss::COMPACT_REACH
-                } else {
-                    0
-                },
+            xbar_reach: shell(p.radius).max(ep_gauss::RING_REACH),
             base_reach: reach(p.radius),
-            search_reach: shell(max_rho),
+            search_reach: shell(max_rho).max(ep_gauss::RING_REACH),
             spread_reach: reach(max_rho),
         },
         Method::EpBox => {

@@ -165,6 +165,45 @@ fn zero_tolerance_spreads_every_varying_sample_to_the_cap_and_a_huge_one_equals_
     assert_eq!(bits(&huge), bits(&gauss));
 }
 
+/// Kernels narrower than a pixel's ring (`--max-radius` under 0.45 px at
+/// `--cutoff 1`): the support rule still reads the background ring about a
+/// firefly, at the image's edges too, and the energy stays exact.
+#[test]
+fn the_narrowest_kernels_with_fireflies_on_every_edge() {
+    let (w, h) = (13, 9);
+    for s in [2, 3, 4] {
+        let edge = |x: usize, y: usize| {
+            let (px, py) = (x / s, y / s);
+            // Pairs side by side: each firefly has a bright neighbour, so
+            // the support rule weighs its background.
+            (px == 0 || px == w - 1 || py == 0 || py == h - 1) && (x + 3 * y) % 7 < 2
+        };
+        let img = Img::new(w * s, h * s, 3, |x, y, c| {
+            if edge(x, y) {
+                5000.0 + c as f32
+            } else {
+                1.0 + ((x + y) % 3) as f32 * 0.1
+            }
+        });
+        for max_radius in [0.05, 0.3, 0.8] {
+            let mut p = params(Method::EpGauss, s);
+            (p.radius, p.cutoff, p.max_radius) = (0.05, 1.0, max_radius);
+            let (out, stats) = run(&img, s, &p, &PipelineConfig::default());
+            assert!(
+                stats.eg().noisy > 0,
+                "S = {s}, {max_radius}: {:?}",
+                stats.eg()
+            );
+            assert!(
+                stats.ledger.iter().all(|l| l.rel_error <= ENERGY_TOL),
+                "S = {s}, {max_radius}: {:?}",
+                stats.ledger
+            );
+            assert!(out.data.iter().all(|v| v.is_finite()));
+        }
+    }
+}
+
 #[test]
 fn half_float_input_at_its_maximum() {
     let dir = crate::exr_io::tmpdir();

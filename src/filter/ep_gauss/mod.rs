@@ -109,6 +109,13 @@ fn dot4_f32(a: &[f64], b: &[f32]) -> f64 {
 /// (0.81x the disc of `2.5 rho` it was before the second real-renders round).
 pub const AVG_CUTOFF: f64 = 2.25;
 
+/// Pixels either side of a flagged pixel whose box luminance makes its
+/// background at S > 1 (the median of the ring of eight about it, read by
+/// the support rule): the box luminance rows keep at least this many
+/// columns of padding, and the classification reads at least this many
+/// rows either side, however narrow the kernels.
+pub const RING_REACH: usize = 1;
+
 /// The average's support radius for kernel cutoff `cutoff`, in `rho`.
 pub fn avg_cutoff(cutoff: f64) -> f64 {
     cutoff.min(AVG_CUTOFF)
@@ -341,7 +348,11 @@ impl EpGauss {
         EpGauss {
             s,
             tol,
-            pad: levels.iter().map(|l| l.shell).max().unwrap_or(0),
+            pad: (levels.iter().map(|l| l.shell).max().unwrap_or(0)).max(if s > 1 {
+                RING_REACH
+            } else {
+                0
+            }),
             ln_tol: tol.ln(),
             w0s: levels.iter().map(|l| l.w0).collect(),
             levels,
@@ -423,9 +434,14 @@ impl EpGauss {
 
     /// Rows either side the classification reads: the base test's, and at
     /// S = 1 those of the pixels within [`COMPACT_REACH`] (the compact test
-    /// of [`Carriers`]).
+    /// of [`Carriers`]), at S > 1 at least the background's ring
+    /// ([`RING_REACH`]).
     pub fn xbar_reach(&self) -> usize {
-        self.levels[0].shell + if self.s == 1 { COMPACT_REACH } else { 0 }
+        let shell = self.levels[0].shell;
+        match self.s {
+            1 => shell + COMPACT_REACH,
+            _ => shell.max(RING_REACH),
+        }
     }
 
     /// Rows either side the search reads.
