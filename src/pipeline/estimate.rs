@@ -415,7 +415,7 @@ fn estimate_pixel_bytes(
     let (mut p, r) = (halo.search_reach as u64, halo.spread_reach as u64);
     if gauss {
         let choose = job.guides.emission.is_some() || job.guides.surface();
-        p = super::pixel::lag(&super::pixel::gauss::passes(choose, r as usize)) as u64;
+        p = super::schedule::lag(&super::pixel::gauss::passes(choose, r as usize)) as u64;
     }
     let threads = cfg.workers() as u64;
     let held = p + r + strip + 2;

@@ -33,6 +33,7 @@ pub mod pair;
 pub mod pixel;
 pub mod restore;
 mod runner;
+pub mod schedule;
 pub mod spread;
 pub mod stage;
 mod stages;

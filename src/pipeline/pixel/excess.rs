@@ -22,7 +22,7 @@ use std::ops::Range;
 use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
 
 use super::guided::GuideReader;
-use super::{Placed, Reads, Rule};
+use super::{Placed, Rule};
 use crate::error::{Error, Result};
 use crate::filter::ep_box::{
     cluster_count, colour_fraction, excess, passes::chebyshev_passes, receivers, EpBoxParams,
@@ -31,6 +31,7 @@ use crate::filter::ep_box::{
 use crate::filter::guides::{keeps_to_surface, GuideLayout, Surface, SurfaceRule};
 use crate::filter::ValidParams;
 use crate::pipeline::counts::{ExcessCounts, MethodCounts};
+use crate::pipeline::schedule::Reads;
 use crate::pipeline::stage::WindowUse;
 use crate::pipeline::window::RowWindow;
 use crate::pipeline::ChannelMode;

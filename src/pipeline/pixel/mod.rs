@@ -31,6 +31,7 @@ use std::ops::Range;
 use rayon::iter::{IntoParallelIterator, ParallelIterator};
 
 use super::counts::MethodCounts;
+use super::schedule::{forward, hold_back, lag, read_from, Reads};
 use super::stage::{Output, Stage, WindowUse};
 use super::window::RowWindow;
 use crate::geometry::Halo;
@@ -47,10 +48,6 @@ pub use guided::GuideReader;
 
 /// Rows handed over at once when every input row is in.
 const LAST_ROWS: usize = 16;
-
-/// What a pass reads: for each earlier pass it reads (0: the input), that
-/// pass and the rows either side of its own row it reads there.
-pub type Reads = Vec<(usize, usize)>;
 
 /// What a pixel-resolution method computes: its passes, and the rule for
 /// each. The stage calls them in the order the schedule gives.
@@ -106,60 +103,6 @@ pub trait Rule: Send + Sync {
     fn counts(&self) -> MethodCounts;
     /// The windows its passes hold.
     fn windows(&self) -> Vec<WindowUse>;
-}
-
-/// Rows past a row of the last pass of `passes` that it reads of the
-/// input, through every pass: the stage's search reach.
-pub fn lag(passes: &[Reads]) -> usize {
-    let mut lag = vec![0];
-    for reads in passes {
-        let l = reads.iter().map(|&(j, r)| lag[j] + r).max().unwrap_or(0);
-        lag.push(l);
-    }
-    lag.last().copied().unwrap_or(0)
-}
-
-/// The rows each of `passes` may make of an image `h` rows high with
-/// `rows_in` input rows in (pass 0): the treatment (the last) no further
-/// than `treat`, an earlier pass no further than the passes that read it
-/// need.
-fn targets(passes: &[Reads], h: usize, rows_in: usize, treat: usize) -> Vec<usize> {
-    let mut t = vec![rows_in];
-    for reads in passes {
-        let after = |&(j, r): &(usize, usize)| match t[j] {
-            y if y == h => h,
-            y => y.saturating_sub(r),
-        };
-        let y = reads.iter().map(after).min().unwrap_or(h);
-        t.push(y);
-    }
-    let n = passes.len();
-    t[n] = t[n].min(treat);
-    for i in (1..n).rev() {
-        let mut need = 0;
-        for (reads, &tk) in passes[i..].iter().zip(&t[i + 1..]) {
-            for &(j, r) in reads {
-                if j == i {
-                    need = need.max((tk + r).min(h));
-                }
-            }
-        }
-        t[i] = t[i].min(need);
-    }
-    t
-}
-
-/// The first row of pass `j` that one of `passes` will still read, each
-/// having made its rows below `done` (`done[k]` for pass `k`).
-fn read_from(passes: &[Reads], done: &[usize], j: usize) -> usize {
-    (passes.iter().zip(&done[1..]))
-        .flat_map(|(reads, &done)| {
-            (reads.iter())
-                .filter(move |&&(i, _)| i == j)
-                .map(move |&(_, r)| done.saturating_sub(r))
-        })
-        .min()
-        .unwrap_or(usize::MAX)
 }
 
 /// Lists of sources and their values (`stride` a source), each in
@@ -237,7 +180,8 @@ impl<R: Rule> PixelStage<R> {
     /// most), then let go of the rows no pass reads any more.
     fn step(&mut self, input: &RowWindow<f32>, rows_in: usize, treat: usize) {
         self.done[0] = rows_in;
-        let targets = targets(&self.passes, self.h, rows_in, treat);
+        let mut targets = forward(&self.passes, self.h, &[rows_in], treat);
+        hold_back(&self.passes, self.h, &mut targets);
         let n = self.last();
         for (i, &target) in targets.iter().enumerate().take(n).skip(1) {
             if target > self.done[i] {
@@ -396,44 +340,5 @@ mod tests {
             .flat_map(|&(x, y)| [x as f64, y as f64])
             .collect();
         assert_eq!(values, expect);
-    }
-
-    #[test]
-    fn the_lag_is_the_longest_chain_of_reaches() {
-        // Luminance reads the input; the flags the luminance 2 rows either
-        // side; the treatment the flags and the luminance 2 rows, the input
-        // `reach`.
-        let passes = |reach| {
-            vec![
-                vec![(0, 0)],
-                vec![(1, 2), (0, 0)],
-                vec![(2, 2), (1, 2), (0, reach)],
-            ]
-        };
-        assert_eq!(lag(&passes(0)), 4);
-        assert_eq!(lag(&passes(9)), 9);
-        assert_eq!(lag(&[]), 0);
-    }
-
-    #[test]
-    fn a_pass_goes_only_as_far_as_the_passes_that_read_it_need() {
-        let passes = vec![
-            vec![(0, 0)],
-            vec![(1, 2), (0, 0)],
-            vec![(2, 2), (1, 2), (0, 9)],
-        ];
-        // 40 of 100 rows in: the treatment reaches 31 (its receivers), the
-        // flags 33, the luminance 35, though 40 and 38 could be made.
-        assert_eq!(targets(&passes, 100, 40, usize::MAX), [40, 35, 33, 31]);
-        // Held back to 20: the others follow it.
-        assert_eq!(targets(&passes, 100, 40, 20), [40, 24, 22, 20]);
-        // Every row in: every pass may finish.
-        assert_eq!(targets(&passes, 100, 100, usize::MAX), [100; 4]);
-        // Rows are read no more below the lowest a reader will read.
-        let done = [40, 35, 33, 31];
-        assert_eq!(read_from(&passes, &done, 0), 22);
-        assert_eq!(read_from(&passes, &done, 1), 29);
-        assert_eq!(read_from(&passes, &done, 2), 29);
-        assert_eq!(read_from(&passes, &done, 3), usize::MAX);
     }
 }

@@ -1,7 +1,10 @@
 //! The stage of the Gaussian family (ep-gauss, gauss, box, and the clamp
 //! foil): scatter as the mirror image of gather.
 //!
-//! Rows flow through four cursors over output (pixel) rows:
+//! Its passes over output (pixel) rows, each declared with what it reads
+//! ([`passes`]) and scheduled as the pixel stage's are
+//! ([`crate::pipeline::schedule`]: a pass makes a row once what it reads
+//! is made):
 //!
 //! 1. **box luminance** `Ybox` of pixel row `y` once its S input rows are in;
 //! 2. **classification** of row `y` (the base noise test, which reads `Ybox`
@@ -17,12 +20,15 @@
 //!    plus the accumulator (all noisy samples of rows `≤ y + spread_reach`
 //!    spread).
 //!
-//! The first two cursors are a strip's first passes (`Front`), the last
-//! two its later ones (`Back`); with two strips in flight a strip's first
-//! passes run beside the previous strip's later ones (`GaussianStage::run`).
-//! When a pass runs may differ, never what it computes.
+//! The first two are a strip's first passes (`Front`), the others its
+//! later ones (`Back`); with two strips in flight a strip's first passes
+//! run beside the previous strip's later ones, which go as far as the rows
+//! made before it allow (`GaussianStage::run`). No pass is held back to
+//! what its readers need (the pixel stage's rule): here that would hold the
+//! horizontal pass, S input rows a pixel row, for the spread's reach. When
+//! a pass runs may differ, never what it computes.
 //!
-//! Each cursor advances only when what it reads is present, so the result does
+//! Each pass advances only when what it reads is present, so the result does
 //! not depend on how rows arrive (strip height). Every output value is built
 //! by the same operations in the same order whatever the tile size or thread
 //! count: the gather sums its taps in index order, the accumulator receives
@@ -43,6 +49,7 @@ use std::collections::VecDeque;
 use coarse::CoarseGrid;
 
 use super::counts::{MethodCounts, SpreadCounts};
+use super::schedule::{forward, read_from, Reads};
 use super::stage::{Output, Stage, WindowUse};
 use super::window::{RowWindow, Rows};
 use super::ChannelMode;
@@ -66,6 +73,41 @@ const SPREAD_CHUNK: usize = 8192;
 
 #[cfg(test)]
 mod tests;
+
+/// The passes, over pixel rows (pass 0: the pixel rows whose S input rows
+/// are in): the box luminance;
+const YBOX: usize = 1;
+/// the classification, which lists a row's noisy samples;
+const NOISY: usize = 2;
+/// the horizontal pass of its input rows, noisy samples taken out, made
+/// with the classification in one loop but declared apart: its rows go
+/// once the base rows have read them, while the spread reads the list;
+const HPASS: usize = 3;
+/// the spread of the listed samples;
+const SPREAD: usize = 4;
+/// the base rows (the vertical gather of the horizontal pass);
+const BASE: usize = 5;
+/// the final rows, base plus every spread that reaches them.
+const FINAL: usize = 6;
+
+/// What each pass reads ([`crate::pipeline::schedule`]), its reaches the
+/// halo's: the classification reads the input row below its own (the
+/// support of samples on its last row) and, for ep-gauss, the box
+/// luminance of its base test.
+fn passes(halo: &Halo, ep: bool) -> Vec<Reads> {
+    let classify = match ep {
+        true => vec![(0, 1), (YBOX, halo.xbar_reach)],
+        false => vec![(0, 1)],
+    };
+    vec![
+        vec![(0, 0)],
+        classify,
+        vec![(NOISY, 0)],
+        vec![(YBOX, halo.search_reach), (NOISY, 0)],
+        vec![(HPASS, halo.base_reach)],
+        vec![(SPREAD, halo.spread_reach), (BASE, 0)],
+    ]
+}
 
 /// A noisy sample waiting for its spread: its input position, its
 /// luminance and its pixel's average (what the width search reads). The
@@ -174,10 +216,6 @@ struct Front {
     /// The horizontal pass of the base kernel over input rows, noisy
     /// samples taken out.
     hpass: RowWindow<f64>,
-    /// Pixel rows in (with their box luminance, for ep-gauss).
-    ready: usize,
-    /// Pixel rows classified (their input rows' horizontal passes made).
-    classified: usize,
     /// Samples of an input row per classification task (0: automatic).
     classify_samples: usize,
 }
@@ -193,23 +231,18 @@ struct Back {
     c2: CoarseGrid,
     c4: CoarseGrid,
     pending: Pending,
-    /// Pixel rows whose noisy samples are spread.
-    spread_done: usize,
-    /// Output rows final (base rows made, every spread and coarse share in).
-    out_done: usize,
     counts: SpreadCounts,
     /// Noisy samples at an edge per spread chunk (0: [`SPREAD_CHUNK`]).
     spread_chunk: usize,
 }
 
-/// The first passes' rows as the later passes read them: up to the rows
-/// in and classified when they start.
+/// The first passes' rows as the later passes read them, and the rows
+/// each had made when they started (passes 0 to [`HPASS`]).
 struct Made<'a> {
     ybox: Rows<'a, f32>,
     csum: Option<(Rows<'a, f64>, usize)>,
     hpass: Rows<'a, f64>,
-    ready: usize,
-    classified: usize,
+    done: Vec<usize>,
 }
 
 impl<'a> Made<'a> {
@@ -265,6 +298,9 @@ fn grow_by_eighth<T>(q: &mut VecDeque<T>, more: usize) {
 pub struct GaussianStage {
     shape: Shape,
     rules: Rules,
+    /// What each pass reads, and the rows each has made.
+    passes: Vec<Reads>,
+    done: Vec<usize>,
     front: Front,
     back: Back,
     /// Strips worked on at once: with 2, a strip's first passes run beside
@@ -327,7 +363,10 @@ impl GaussianStage {
             .filter(|e| e.uses_bound())
             .map(|e| (RowWindow::new(w + 2 * pad + 2), e.csum_block()));
         let cols = ColumnTaps::new(&base, w, grid.in_w);
+        let passes = passes(&halo, ep.is_some());
         GaussianStage {
+            done: vec![0; passes.len() + 1],
+            passes,
             shape: Shape {
                 grid,
                 w,
@@ -356,8 +395,6 @@ impl GaussianStage {
                 ybox: RowWindow::new(w + 2 * pad),
                 csum,
                 hpass: RowWindow::new(nch * w),
-                ready: 0,
-                classified: 0,
                 classify_samples: 0,
             },
             back: Back {
@@ -366,8 +403,6 @@ impl GaussianStage {
                 c2: CoarseGrid::new(nch, (w, h), 2, coarse),
                 c4: CoarseGrid::new(nch, (w.div_ceil(2), h.div_ceil(2)), 2, coarse4),
                 pending: Pending::default(),
-                spread_done: 0,
-                out_done: 0,
                 counts: SpreadCounts::default(),
                 spread_chunk: 0,
             },
@@ -442,8 +477,8 @@ impl Stage for GaussianStage {
 
     fn input_needed(&self) -> usize {
         // Classification of the next row reads the input rows just above it
-        // (the support rule's reach).
-        (self.front.classified * self.shape.grid.s).saturating_sub(self.rules.support.reach())
+        // (the support rule's reach, in input rows: finer than the passes').
+        (self.done[NOISY] * self.shape.grid.s).saturating_sub(self.rules.support.reach())
     }
 
     fn output(&self, rows: (usize, usize)) -> Output<'_> {
@@ -521,25 +556,18 @@ impl GaussianStage {
     /// hold a strip more, and each pass computes what it would have, in the
     /// same order.
     fn run(&mut self, input: &RowWindow<f32>, rows_in: usize) -> usize {
-        let Shape { grid, h, halo, .. } = self.shape;
+        let Shape { grid, h, .. } = self.shape;
         let ep = self.rules.ep.is_some();
         let s = grid.s;
         let ready = rows_in / s;
         let all_in = ready == h;
-        // A row's classification reads `Ybox` rows `xbar_reach` below and
-        // the input row just below it (the support of samples on its last
-        // row): one pixel row more than `xbar_reach` when that is 0.
-        let cls_target = if all_in {
-            h
-        } else {
-            ready.saturating_sub(halo.xbar_reach.max(1))
-        };
+        let t = forward(&self.passes, h, &[ready], usize::MAX);
         let front = &mut self.front;
-        let (c0, c1) = (front.classified, cls_target.max(front.classified));
+        let (c0, c1) = (self.done[NOISY], t[NOISY].max(self.done[NOISY]));
         // Room for the first passes' rows (only ep-gauss reads the box
         // luminance: the others go by the rows that are in).
         let y0 = front.ybox.end();
-        let y1 = if ep { ready.max(y0) } else { y0 };
+        let y1 = if ep { t[YBOX].max(y0) } else { y0 };
         for _ in y0..y1 {
             front.ybox.push_stale(0.0); // every value is written
             if let Some((c, _)) = &mut front.csum {
@@ -562,8 +590,7 @@ impl GaussianStage {
             ybox: ybox.clone(),
             csum: csum.clone(),
             hpass,
-            ready: front.ready,
-            classified: c0,
+            done: self.done[..=HPASS].to_vec(),
         };
         let rows = FrontRows {
             ybox: (ybox, y0, ybox_new),
@@ -576,6 +603,7 @@ impl GaussianStage {
             classify: (c0, c1),
         };
         let (shape, rules, back) = (&self.shape, &self.rules, &mut self.back);
+        let (passes, back_done) = (&self.passes, &mut self.done[SPREAD..]);
         let per_task = front.classify_samples;
         let found = if self.in_flight > 1 {
             let seg = crate::trace::current_segment();
@@ -585,7 +613,11 @@ impl GaussianStage {
                         front_passes(shape, rules, input, rows, per_task)
                     })
                 },
-                || crate::trace::in_segment(seg, || back.run(shape, rules, &made)),
+                || {
+                    crate::trace::in_segment(seg, || {
+                        back.run(shape, rules, &made, passes, back_done)
+                    })
+                },
             )
             .0
         } else {
@@ -598,88 +630,68 @@ impl GaussianStage {
             back.counts.kept += kept;
             back.pending.push(list, vals);
         }
-        let front = &mut self.front;
-        (front.ready, front.classified) = (ready, c1);
+        self.done[..=HPASS].copy_from_slice(&[ready, t[YBOX], c1, c1]);
         if self.in_flight == 1 || all_in {
-            let made = front.made();
-            self.back.run(&self.shape, &self.rules, &made);
+            let made = self.front.made(&self.done[..=HPASS]);
+            let done = &mut self.done[SPREAD..];
+            self.back
+                .run(&self.shape, &self.rules, &made, &self.passes, done);
         }
-        self.evict(ready);
-        self.back.out_done
+        self.evict();
+        self.done[FINAL]
     }
 
     /// What no later pass reads goes.
-    fn evict(&mut self, ready: usize) {
-        let Shape { grid, halo, .. } = self.shape;
-        let (front, back) = (&mut self.front, &self.back);
-        let keep = if self.rules.ep.is_some() {
-            front
-                .classified
-                .saturating_sub(halo.xbar_reach)
-                .min(back.spread_done.saturating_sub(halo.search_reach))
-        } else {
-            ready
-        };
-        let keep = keep.min(ready);
+    fn evict(&mut self) {
+        let (passes, done, front) = (&self.passes, &self.done, &mut self.front);
+        let keep = read_from(passes, done, YBOX).min(done[0]);
         front.ybox.evict_below(keep);
         if let Some((c, _)) = &mut front.csum {
             // The bound reads the row above its topmost.
             c.evict_below(keep.saturating_sub(1));
         }
-        let base_keep = back.base_rows.end().saturating_sub(halo.base_reach);
-        front.hpass.evict_below(base_keep * grid.s);
+        let hpass = read_from(passes, done, HPASS);
+        front.hpass.evict_below(hpass * self.shape.grid.s);
     }
 }
 
 impl Back {
     /// A strip's later passes, as far as the first passes' rows `made`
-    /// allow.
-    fn run(&mut self, shape: &Shape, rules: &Rules, made: &Made<'_>) {
-        let Shape { w, h, halo, .. } = *shape;
-        let ep = rules.ep.is_some();
-        let all_in = made.ready == h;
-        // Spreading, once the width search's rows are in.
-        let sp_target = if all_in {
-            made.classified
-        } else {
-            made.classified
-                .min(made.ready.saturating_sub(halo.search_reach))
-        };
-        if ep && sp_target > self.spread_done {
-            self.spread(shape, rules, &made.view(h), sp_target);
-            self.spread_done = sp_target;
+    /// allow (`passes` the stage's; `done` the rows made by these, from
+    /// [`SPREAD`] on). Where targets come from rows made later, they only
+    /// grow, so a pass makes exactly its target.
+    fn run(
+        &mut self,
+        shape: &Shape,
+        rules: &Rules,
+        made: &Made<'_>,
+        passes: &[Reads],
+        done: &mut [usize],
+    ) {
+        let (w, h) = (shape.w, shape.h);
+        let t = forward(passes, h, &made.done, usize::MAX);
+        let [spread, base, out] = [SPREAD, BASE, FINAL].map(|p| t[p].max(done[p - SPREAD]));
+        if rules.ep.is_some() && spread > done[0] {
+            self.spread(shape, rules, &made.view(h), spread);
         }
-        // Base rows: the vertical gather, once its input rows are
-        // classified.
-        let base_target = if made.classified == h {
-            h
-        } else {
-            made.classified.saturating_sub(halo.base_reach)
-        };
-        self.base_rows(shape, rules, &made.hpass, base_target);
-        // Final rows: base plus spread noise, once no later sample can
-        // reach them, with the coarse grids' share added.
-        let by_spread = match ep {
-            true if self.spread_done < h => self.spread_done.saturating_sub(halo.spread_reach),
-            _ => h,
-        };
-        let out = self.base_rows.end().min(by_spread).max(self.out_done);
-        if out > self.out_done && self.c2.used {
-            self.coarse_share(w, self.out_done, out);
+        self.base_rows(shape, rules, &made.hpass, base);
+        // Final rows, with the coarse grids' share added.
+        if out > done[2] && self.c2.used {
+            self.coarse_share(w, done[2], out);
         }
-        self.out_done = out;
+        done.copy_from_slice(&[spread, base, out]);
     }
 }
 
 impl Front {
-    /// Every row made, as the later passes read them.
-    fn made(&self) -> Made<'_> {
+    /// Every row made, as the later passes read them (`done`: the rows
+    /// each first pass made).
+    fn made(&self, done: &[usize]) -> Made<'_> {
         Made {
             ybox: self.ybox.rows(),
             csum: self.csum.as_ref().map(|(c, block)| (c.rows(), *block)),
             hpass: self.hpass.rows(),
-            ready: self.ready,
-            classified: self.classified,
+            done: done.to_vec(),
         }
     }
 }

@@ -59,6 +59,15 @@ fn halo_from_params_equals_the_stages() {
                 crate::filter::halo(&p),
                 "{m:?} {s} {r} {mr} {cut}"
             );
+            // The passes' lag is the halo's, or the base kernel's reach
+            // and the input row below the classification's where that is
+            // more (the methods without a base test).
+            let h = e.halo();
+            assert_eq!(
+                crate::pipeline::schedule::lag(&e.passes),
+                h.lag().max(h.base_reach + 1),
+                "{m:?} {s} {r} {mr} {cut}"
+            );
         }
     }
 }

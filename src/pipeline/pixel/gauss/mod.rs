@@ -22,7 +22,7 @@ use std::ops::Range;
 use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
 
 use super::guided::GuideReader;
-use super::{Placed, Reads, Rule};
+use super::{Placed, Rule};
 use crate::error::Result;
 use crate::filter::ep_gauss::pixel::{
     gaussian_taps, local_max, median, noisy, Widths, BACKGROUND_REACH, BACKGROUND_SAMPLES,
@@ -31,6 +31,7 @@ use crate::filter::guides::{GuideLayout, Surface, SurfaceRule};
 use crate::filter::ValidParams;
 use crate::geometry::mirror;
 use crate::pipeline::counts::{MethodCounts, SpreadCounts};
+use crate::pipeline::schedule::Reads;
 use crate::pipeline::stage::WindowUse;
 use crate::pipeline::window::RowWindow;
 use crate::pipeline::ChannelMode;
