@@ -11,9 +11,10 @@
 //! reaches it is listed: the input row, the kept values of its sources,
 //! plus every source's shares that reach it.
 //!
-//! The schedule, in one paragraph: a pass may make row `y` once every pass
-//! it reads has made the rows within its reach of `y` (all of them at the
-//! image's end). The treatment goes as far as that allows; each earlier
+//! The schedule, in one paragraph ([`crate::pipeline::schedule`], the
+//! Gaussian stage's too): a pass may make row `y` once every pass it reads
+//! has made the rows within its reach of `y` (all of them at the image's
+//! end). The treatment goes as far as that allows; each earlier
 //! pass goes only as far as the passes that read it need, since what waits
 //! is held across the whole width. A pass's rows leave once no pass reads
 //! them; input rows once no pass reads them and their output rows are made.

@@ -2,7 +2,7 @@
 //! foil): scatter as the mirror image of gather.
 //!
 //! Its passes over output (pixel) rows, each declared with what it reads
-//! ([`passes`]) and scheduled as the pixel stage's are
+//! (`passes`) and scheduled as the pixel stage's are
 //! ([`crate::pipeline::schedule`]: a pass makes a row once what it reads
 //! is made):
 //!
