@@ -9,6 +9,7 @@
 use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
 
 use super::counts::MethodCounts;
+use super::schedule::{forward, lag, read_from, Reads};
 use super::stage::{Output, Stage, WindowUse};
 use super::window::RowWindow;
 use super::ChannelMode;
@@ -25,6 +26,9 @@ pub struct OrderStage {
     nch: usize,
     modes: Vec<ChannelMode>,
     trim: Trim,
+    /// Its one pass: an output row reads its input rows, and one row
+    /// either side at S = 1 (the 3 x 3 window), over pixel rows.
+    passes: Vec<Reads>,
     out: RowWindow<f64>,
     out_done: usize,
 }
@@ -45,6 +49,7 @@ impl OrderStage {
             nch,
             modes,
             trim,
+            passes: vec![vec![(0, usize::from(grid.s == 1))]],
             out: RowWindow::new(nch * grid.out_w()),
             out_done: 0,
         }
@@ -55,21 +60,16 @@ impl Stage for OrderStage {
     /// One row of input either side at S = 1 (the 3 x 3 window), none above.
     fn halo(&self) -> Halo {
         Halo {
-            base_reach: usize::from(self.grid.s == 1),
+            base_reach: lag(&self.passes),
             ..Default::default()
         }
     }
 
     fn arrive(&mut self, _input: &mut RowWindow<f32>, _a: usize, _b: usize) {}
 
-    fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> usize {
+    fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, _all_in: bool) -> usize {
         let (in_w, s) = (self.grid.in_w, self.grid.s);
-        // Output row y reads input rows up to (y+1)S - 1, plus one at S = 1.
-        let ready = if all_in {
-            self.h
-        } else {
-            (rows_in.saturating_sub(usize::from(s == 1))) / s
-        };
+        let ready = forward(&self.passes, self.h, &[rows_in / s], usize::MAX)[1];
         if ready <= self.out_done {
             return self.out_done;
         }
@@ -119,8 +119,7 @@ impl Stage for OrderStage {
     }
 
     fn input_needed(&self) -> usize {
-        // Keep the last input row used (S = 1 reads row y - 1 of the next).
-        (self.out_done * self.grid.s).saturating_sub(usize::from(self.grid.s == 1))
+        read_from(&self.passes, &[0, self.out_done], 0) * self.grid.s
     }
 
     fn output(&self, rows: (usize, usize)) -> Output<'_> {
