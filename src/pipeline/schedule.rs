@@ -1,6 +1,7 @@
-//! The schedule of the stages that declare their passes (the pixel
-//! stage's rules, the Gaussian stage): pure functions of what each pass
-//! reads and what each has made.
+//! The schedule of every stage: each declares its passes (the pixel
+//! stage's rules, the Gaussian stage, the order foils, restore's second
+//! pass), and these pure functions of what each pass reads and what each
+//! has made say how far each may go and which rows may leave.
 //!
 //! A pass reads earlier passes, each the rows either side of its own row
 //! (pass 0: the input). It may make row `y` once every pass it reads has

@@ -11,6 +11,7 @@ use crate::filter::restore::{
     denoiser_peak, kept, reflect, shape, taps, EMISSION_KEEP_GAIN, KEEP_SIGMA,
 };
 use crate::pipeline::counts::RestoreCounts;
+use crate::pipeline::schedule::{forward, Reads};
 use crate::pipeline::window::RowWindow;
 
 /// Where the input rows hold what the kept part reads.
@@ -97,18 +98,23 @@ impl Kept {
         self.taps.len() / 2
     }
 
-    /// `l` for every row whose rows around are in (`rows_in`, all of them
-    /// when `all_in`); returns the rows done now. The input window holds
-    /// the rows `r` above and below.
-    pub(super) fn advance(
-        &mut self,
-        input: &RowWindow<f32>,
-        rows_in: usize,
-        all_in: bool,
-    ) -> (usize, usize) {
-        let (h, r) = (self.h, self.r());
+    /// What a row's `l` reads ([`crate::pipeline::schedule`]): the input
+    /// rows `r` either side.
+    pub(super) fn reads(&self) -> Reads {
+        vec![(0, self.r())]
+    }
+
+    /// The rows of `l` that `rows_in` input rows allow ([`Kept::reads`]).
+    pub(super) fn target(&self, rows_in: usize) -> usize {
+        forward(&[self.reads()], self.h, &[rows_in], usize::MAX)[1]
+    }
+
+    /// `l` of rows up to `b` (their rows around in, [`Kept::target`]);
+    /// returns the rows done now. The input window holds the rows `r`
+    /// above and below.
+    pub(super) fn advance(&mut self, input: &RowWindow<f32>, b: usize) -> (usize, usize) {
+        let h = self.h;
         let a = self.end();
-        let b = if all_in { h } else { rows_in.saturating_sub(r) };
         if b <= a {
             return (a, a);
         }

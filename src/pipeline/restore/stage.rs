@@ -2,7 +2,9 @@
 //! target known (the first pass), the rows are carried in the denoiser's
 //! shape one row of blocks at a time.
 //!
-//! A strip's work is three steps, each a parallel loop over rows:
+//! A strip's work is three passes, each a parallel loop over rows, declared
+//! with what they read and taken as far as that allows by the schedule the
+//! filters' stages share ([`crate::pipeline::schedule`]):
 //!
 //! 1. the carrier's moments of the rows that came (the carrier reads the
 //!    block means and targets, known from the first pass);
@@ -25,8 +27,29 @@ use super::kept::{Kept, KeptLayout};
 use crate::filter::restore::{shape, FieldRows, LOOKAHEAD};
 use crate::geometry::Halo;
 use crate::pipeline::counts::{MethodCounts, RestoreCounts};
+use crate::pipeline::schedule::{forward, read_from, Reads};
 use crate::pipeline::stage::{Output, Stage, WindowUse};
 use crate::pipeline::window::RowWindow;
+
+/// The passes over pixel rows ([`crate::pipeline::schedule`]; pass 0: the
+/// input rows in): the carrier's moments of a row, its input row;
+pub(super) const MOMENTS: usize = 1;
+/// the part kept in place, the input rows around ([`Kept::reads`]);
+pub(super) const KEPT: usize = 2;
+/// the final rows, a row of blocks at a time: a block's last row once the
+/// field of its row of blocks and the next can be fixed (the moments of the
+/// [`LOOKAHEAD`] rows of blocks after the next: `(LOOKAHEAD + 1) b` rows
+/// past it) and its `l` is known.
+pub(super) const FINAL: usize = 3;
+
+/// What each pass reads, for the kept part's `kept` and blocks of `b`.
+pub(super) fn passes(kept: Reads, b: usize) -> Vec<Reads> {
+    vec![
+        vec![(0, 0)],
+        kept,
+        vec![(0, 0), (MOMENTS, (LOOKAHEAD + 1) * b), (KEPT, 0)],
+    ]
+}
 
 /// One row of blocks at a time: `c g + l`, `c = s + t (f - 1)`.
 pub struct RestoreStage {
@@ -40,6 +63,8 @@ pub struct RestoreStage {
     kept: Kept,
     /// The field of each channel (a copied channel's is never read).
     fields: Vec<FieldRows>,
+    /// What each pass reads.
+    passes: Vec<Reads>,
     /// Pixel rows whose carrier's moments are in the fields.
     momented: usize,
     /// Final rows.
@@ -62,7 +87,9 @@ impl RestoreStage {
         let nch = layout.emission.len();
         let copied = layout.copied.clone();
         let kept = Kept::new(layout, (w, h));
+        let passes = passes(kept.reads(), fields[0].b);
         RestoreStage {
+            passes,
             nch,
             copied,
             d_at: kept.d_at,
@@ -226,23 +253,23 @@ impl Stage for RestoreStage {
     fn arrive(&mut self, _input: &mut RowWindow<f32>, _a: usize, _b: usize) {}
 
     fn advance(&mut self, input: &RowWindow<f32>, rows_in: usize, all_in: bool) -> usize {
-        if rows_in > self.momented {
-            self.add_moments(input, self.momented, rows_in);
+        let t = forward(&self.passes, self.h, &[rows_in], usize::MAX);
+        if t[MOMENTS] > self.momented {
+            self.add_moments(input, self.momented, t[MOMENTS]);
         }
-        self.kept.advance(input, rows_in, all_in);
+        self.kept.advance(input, t[KEPT]);
         let (bs, h) = (self.b(), self.h);
         let nby = self.fields[0].nby;
-        // A row of blocks is finished once its field and the next row's are
-        // fixed (its lower half reads both) and its `l` is known. Once the
-        // input is all in, one row of blocks a call: the skeleton calls
-        // again, so the rows of blocks still held are never all final rows
-        // at once.
+        // A row of blocks is finished once its last row may be (its lower
+        // half reads its field and the next row's). Once the input is all
+        // in, one row of blocks a call: the skeleton calls again, so the
+        // rows of blocks still held are never all final rows at once.
         let from = self.out.end();
         while self.out.end() < h && !(all_in && self.out.end() > from) {
             let j = self.out.end() / bs;
             let next = (j + 1).min(nby - 1);
             let b = ((j + 1) * bs).min(h);
-            if !self.fields[0].can_fix(next, self.momented) || self.kept.end() < b {
+            if b > t[FINAL] {
                 break;
             }
             for (ch, f) in self.fields.iter_mut().enumerate() {
@@ -261,9 +288,8 @@ impl Stage for RestoreStage {
     }
 
     fn input_needed(&self) -> usize {
-        // The denoiser's and energy's rows of rows not yet final, and the
-        // rows around the next row of `l`.
-        self.out.end().min(self.kept.input_needed())
+        let done = [0, self.momented, self.kept.end(), self.out.end()];
+        read_from(&self.passes, &done, 0)
     }
 
     fn output(&self, (a, b): (usize, usize)) -> Output<'_> {

@@ -143,7 +143,7 @@ impl<'a> Sums<'a> {
     /// A strip in: its values checked, its rows' `l` and block sums taken
     /// as far as the rows around allow.
     fn push(&mut self, mut strip: Strip) -> Result<()> {
-        let (w, h) = self.plan.size;
+        let (w, _) = self.plan.size;
         let row_len = self.plan.row_channels * w;
         if strip.y0 != self.rows_in || strip.data.len() != strip.rows * row_len {
             return Err(Error::Internal(format!(
@@ -157,9 +157,8 @@ impl<'a> Sums<'a> {
         self.input
             .push_rows(std::mem::take(&mut strip.data), strip.rows);
         self.rows_in += strip.rows;
-        let (a, b) = self
-            .kept
-            .advance(&self.input, self.rows_in, self.rows_in == h);
+        let to = self.kept.target(self.rows_in);
+        let (a, b) = self.kept.advance(&self.input, to);
         self.add(a, b);
         self.kept.release(b);
         self.input.evict_below(self.kept.input_needed());

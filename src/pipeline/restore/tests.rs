@@ -475,3 +475,37 @@ fn the_uncertainty_is_the_renders_known_variance() {
         "residual {r} exact {exact}"
     );
 }
+
+/// The final rows' declared reads agree with the field's own rule: a row of
+/// blocks may be finished once its field and the next row's can be fixed
+/// (`FieldRows::can_fix`), whatever the height, block and moments made.
+#[test]
+fn a_row_of_blocks_is_final_when_its_fields_can_be_fixed() {
+    use crate::filter::restore::FieldRows;
+    use crate::pipeline::schedule::forward;
+    use stage::{passes, FINAL, KEPT, MOMENTS};
+    for (h, b) in [
+        (1usize, 2usize),
+        (5, 32),
+        (37, 8),
+        (64, 16),
+        (100, 32),
+        (129, 4),
+    ] {
+        let nby = h.div_ceil(b);
+        let f = FieldRows::new(1, h, b, vec![0.0; nby], vec![0.0; nby]);
+        let p = passes(vec![(0, 3)], b);
+        for m in 0..=h {
+            // Every input row in and every row's `l` known: the moments decide.
+            let mut made = vec![h; FINAL];
+            made[MOMENTS] = m;
+            made[KEPT] = h;
+            let t = forward(&p, h, &made, usize::MAX)[FINAL];
+            for j in 0..nby {
+                let last = ((j + 1) * b).min(h);
+                let by_field = f.can_fix((j + 1).min(nby - 1), m);
+                assert_eq!(last <= t, by_field, "h {h} b {b} m {m} j {j}");
+            }
+        }
+    }
+}
