@@ -590,11 +590,26 @@ impl Report {
                 String::new()
             }
         );
-        s.push_str("  energy ledger   channel      in            out x S^2     rel.err     after rounding\n");
-        for (k, c) in self.channels.iter().enumerate() {
+        // Data carried as read (normals, depth, ids) is out of the ledger:
+        // its zeros would read as a channel of no light. It is listed with
+        // the carried channels below.
+        let data = |c: &String| {
+            let rule = self.channel_rules.get(c).map(String::as_str);
+            matches!(rule, Some("average" | "nearest"))
+        };
+        let light: Vec<usize> = (0..self.channels.len())
+            .filter(|&k| !data(&self.channels[k]))
+            .collect();
+        let wide = light.iter().map(|&k| self.channels[k].len()).max();
+        let wide = wide.unwrap_or(0).max(8);
+        s.push_str(&format!(
+            "  energy ledger   {:<wide$} {:>13} {:>13}  {:>9}   after rounding\n",
+            "channel", "in", "out x S^2", "rel.err"
+        ));
+        for &k in &light {
             s.push_str(&format!(
-                "                  {:<8} {:>13.6e} {:>13.6e}  {:>9.2e}   {:>9.2e}\n",
-                c,
+                "                  {:<wide$} {:>13.6e} {:>13.6e}  {:>9.2e}   {:>9.2e}\n",
+                self.channels[k],
                 self.energy_in[k],
                 self.energy_out[k],
                 self.energy_rel_error[k],

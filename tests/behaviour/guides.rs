@@ -296,6 +296,32 @@ fn a_carried_guide_is_read_where_it_is_carried() {
     }
 }
 
+/// The summary's ledger lists the channels of light; the guide passes,
+/// carried as read, are data out of the ledger (their zeros there would
+/// read as passes of no light) and are listed as carried.
+#[test]
+fn the_summarys_ledger_lists_light_and_the_carried_passes_apart() {
+    let dir = tmpdir();
+    let d = dir.path();
+    let input = d.join("in.exr");
+    guided_room(&input, 48, 40, &[]);
+    let out = d.join("out.exr");
+    let o = epfilt(&["filter", s(&input), s(&out)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8_lossy(&o.stderr);
+    let ledger: Vec<&str> = (err.lines())
+        .skip_while(|l| !l.contains("energy ledger"))
+        .skip(1)
+        .take_while(|l| l.starts_with("                  "))
+        .map(|l| l.split_whitespace().next().unwrap_or(""))
+        .collect();
+    assert_eq!(ledger, ["R", "G", "B"], "{err}");
+    let carried = err.lines().find(|l| l.contains("carried:")).unwrap_or("");
+    for c in &GUIDED_CHANNELS[3..] {
+        assert!(carried.contains(c), "{c}: {err}");
+    }
+}
+
 #[test]
 fn a_surface_guide_keeps_a_spread_on_its_side_of_an_edge() {
     let dir = tmpdir();
