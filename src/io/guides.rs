@@ -27,6 +27,7 @@ use exr::meta::header::Header;
 use crate::error::{Error, Result};
 use crate::filter::channels::ChannelRule;
 use crate::filter::guides::GuideLayout;
+use crate::io::reader::{beauty_layers, scope};
 use crate::io::ExrInput;
 
 /// A kind of guide pass.
@@ -278,6 +279,14 @@ fn component(names: &[String], layer: &str, comps: &[&str]) -> Option<String> {
     })
 }
 
+/// What holds `layer` (a layer's name, no trailing '.'): its prefix up to
+/// and with its last '.', "" at the top (as [`scope`] of the prefix).
+fn scope_of(layer: &str) -> &str {
+    layer
+        .rsplit_once('.')
+        .map_or("", |(s, _)| &layer[..s.len() + 1])
+}
+
 /// The layers of `names` (every prefix before a last `.`), in file order.
 fn layers(names: &[String]) -> Vec<String> {
     let mut out: Vec<String> = Vec::new();
@@ -332,7 +341,17 @@ fn guides_among(
             k.name()
         ),
     };
-    let all_layers = layers(&names);
+    // A pass beside another beauty is that render's (another view layer's),
+    // not this one's; the beauty's own passes come first.
+    let own = beauty.first().and_then(|b| b.rsplit_once('.'));
+    let own = own.map_or("", |(l, _)| scope_of(l));
+    let others: Vec<String> = (beauty_layers(all).iter())
+        .filter(|l| !beauty.iter().any(|b| b.starts_with(l.as_str())))
+        .map(|l| scope(l).to_string())
+        .collect();
+    let mut all_layers = layers(&names);
+    all_layers.retain(|l| scope_of(l) == own || !others.iter().any(|o| o == scope_of(l)));
+    all_layers.sort_by_key(|l| scope_of(l) != own);
     for kind in GuideKind::ALL {
         let named = req.named.iter().rev().find(|(k, _)| *k == kind);
         let wanted = req.kinds.as_ref().is_none_or(|k| k.contains(&kind)) || named.is_some();
@@ -410,6 +429,30 @@ mod tests {
         let all: Vec<String> = names.iter().map(|s| s.to_string()).collect();
         let beauty: Vec<String> = beauty.iter().map(|s| s.to_string()).collect();
         guides_among(Path::new("x.exr"), &all, &beauty, req)
+    }
+
+    /// Blender's view layers: each `Combined` beside its own passes. The
+    /// beauty's passes are taken, never another view layer's.
+    #[test]
+    fn a_view_layers_passes_are_its_own() {
+        let rgb = |l: &str| ["R", "G", "B"].map(|c| format!("{l}.{c}"));
+        let mut names: Vec<String> = rgb("Second.Combined").to_vec();
+        names.push("Second.Depth.Z".into());
+        names.extend(rgb("ViewLayer.Combined"));
+        names.extend(rgb("ViewLayer.Emit"));
+        names.push("ViewLayer.Depth.Z".into());
+        let all: Vec<&str> = names.iter().map(String::as_str).collect();
+        let auto = GuideRequest::default();
+        let guides = |layer: &str| {
+            let beauty = rgb(layer);
+            found(&all, &beauty.each_ref().map(String::as_str), &auto).unwrap()
+        };
+        let g = guides("ViewLayer.Combined");
+        assert_eq!(g.emission.unwrap(), rgb("ViewLayer.Emit"));
+        assert_eq!(g.depth.unwrap(), "ViewLayer.Depth.Z");
+        let g = guides("Second.Combined");
+        assert!(g.emission.is_none(), "{:?}", g.emission);
+        assert_eq!(g.depth.unwrap(), "Second.Depth.Z");
     }
 
     #[test]

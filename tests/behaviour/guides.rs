@@ -5,6 +5,8 @@
 
 use std::path::Path;
 
+use exr::image::FlatSamples;
+
 use crate::common::{epfilt_run as epfilt, image_bytes, read_json, ENERGY_TOL};
 use crate::exr_io::{tmpdir, write_flat, write_named};
 
@@ -319,6 +321,49 @@ fn the_summarys_ledger_lists_light_and_the_carried_passes_apart() {
     let carried = err.lines().find(|l| l.contains("carried:")).unwrap_or("");
     for c in &GUIDED_CHANNELS[3..] {
         assert!(carried.contains(c), "{c}: {err}");
+    }
+}
+
+/// Blender with the compositor on writes `Composite.Combined` (made after
+/// the render) beside `ViewLayer.Combined` and its passes, and a second view
+/// layer has a `Combined` of its own: the render beside its passes is the
+/// one filtered, with its own guides; another layer asked for gets none of
+/// the passes of the view layer beside it.
+#[test]
+fn of_blenders_layers_the_view_layers_render_is_filtered_with_its_passes() {
+    let dir = tmpdir();
+    let (w, h) = (16, 12);
+    let path = dir.path().join("blender.exr");
+    let flat = |v: f32| FlatSamples::F32(vec![v; w * h]);
+    let mut names = Vec::new();
+    for layer in [
+        "Composite.Combined",
+        "Second.Combined",
+        "ViewLayer.Combined",
+    ] {
+        names.extend(["A", "B", "G", "R"].map(|c| format!("{layer}.{c}")));
+    }
+    names.extend(["B", "G", "R"].map(|c| format!("ViewLayer.Emit.{c}")));
+    names.extend(["X", "Y", "Z"].map(|c| format!("ViewLayer.Normal.{c}")));
+    let channels = names.iter().map(|n| (n.as_str(), flat(1.0))).collect();
+    write_flat(&path, (w, h), channels);
+    let info = epfilt(&["info", s(&path), "--json"]);
+    assert!(
+        info.status.success(),
+        "{}",
+        String::from_utf8_lossy(&info.stderr)
+    );
+    let j: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+    let part = &j["parts"][0];
+    assert_eq!(part["filtered"][0], "ViewLayer.Combined.R", "{part}");
+    assert_eq!(
+        part["guide_channels"]["emission"][0], "ViewLayer.Emit.R",
+        "{part}"
+    );
+    let out = dir.path().join("out.exr");
+    for layer in ["Composite.Combined", "Second.Combined"] {
+        let r = filter(&[s(&path), s(&out), "--layer", layer], dir.path());
+        assert_eq!(r["guides"], "none", "{layer}: {r}");
     }
 }
 

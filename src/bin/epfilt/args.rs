@@ -228,7 +228,8 @@ pub struct SelectArgs {
     #[arg(long)]
     pub part: Option<String>,
     /// Layer whose R,G,B (or Y) channels are the image, e.g. ViewLayer.Combined
-    /// [default: the unlayered channels, else a beauty-named layer, else the only one].
+    /// [default: the unlayered channels, else the beauty-named layer beside the most
+    /// passes (a view layer's Combined, not Blender's Composite), else the only one].
     #[arg(long)]
     pub layer: Option<String>,
 }

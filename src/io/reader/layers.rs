@@ -104,11 +104,46 @@ pub(super) fn layer_colour(names: &[String], layer: &str) -> Option<Vec<&'static
     Some(wanted)
 }
 
+/// Whether `layer` (a prefix: "" or ending in '.') has a beauty's name.
+fn beauty_named(layer: &str) -> bool {
+    let last = layer.trim_end_matches('.').rsplit('.').next().unwrap_or("");
+    BEAUTY_LAYERS.iter().any(|b| last.eq_ignore_ascii_case(b))
+}
+
+/// What holds `layer` (a prefix: "" or ending in '.'), its render's passes
+/// beside it: `ViewLayer.` for `ViewLayer.Combined.`, "" at the top.
+pub(crate) fn scope(layer: &str) -> &str {
+    let l = layer.trim_end_matches('.');
+    l.rsplit_once('.')
+        .map_or("", |(s, _)| &layer[..s.len() + 1])
+}
+
+/// The layers of `names` with colour and a beauty's name (prefixes ending
+/// in '.'), in file order.
+pub(crate) fn beauty_layers(names: &[String]) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    for n in names {
+        if let Some((l, _)) = n.rsplit_once('.') {
+            let l = format!("{l}.");
+            if !out.contains(&l) && beauty_named(&l) && layer_colour(names, &l).is_some() {
+                out.push(l);
+            }
+        }
+    }
+    out
+}
+
 /// The layer to filter among those with colour (`coloured`: each layer's
-/// prefix and colour channels): `layer` when given, else the unlayered
-/// channels, a beauty layer or the only one ([`choose_channels`]).
+/// prefix and colour channels; `names`: every channel): `layer` when given,
+/// else the unlayered channels, a beauty layer or the only one
+/// ([`choose_channels`]). Of several beauty layers, the render's own: the
+/// one beside the most of its render's passes. Blender writes the
+/// compositor's `Composite.Combined` beside `ViewLayer.Combined` and its
+/// passes, and one `Combined` per view layer: the composite is made after
+/// the render, and a view layer without passes is rarely the picture.
 fn choose_layer<'a>(
     path: &Path,
+    names: &[String],
     coloured: &'a [(&'a String, Vec<&'a str>)],
     layer: Option<&str>,
 ) -> Result<&'a (&'a String, Vec<&'a str>)> {
@@ -142,15 +177,18 @@ fn choose_layer<'a>(
             ))),
         }
     } else {
-        let beauty = |l: &str| {
-            let last = l.trim_end_matches('.').rsplit('.').next().unwrap_or("");
-            BEAUTY_LAYERS.iter().any(|b| last.eq_ignore_ascii_case(b))
+        let passes = |l: &str| {
+            let s = scope(l);
+            (names.iter())
+                .filter(|n| n.starts_with(s) && !n.starts_with(l))
+                .count()
         };
-        match coloured
-            .iter()
-            .find(|(l, _)| l.is_empty())
-            .or_else(|| coloured.iter().find(|(l, _)| beauty(l)))
-        {
+        // The first of those beside the most passes.
+        let beauty = (coloured.iter())
+            .filter(|(l, _)| beauty_named(l))
+            .rev()
+            .max_by_key(|(l, _)| passes(l));
+        match coloured.iter().find(|(l, _)| l.is_empty()).or(beauty) {
             Some(c) => Ok(c),
             None => match coloured {
                 [only] => Ok(only),
@@ -174,7 +212,15 @@ pub(crate) fn choose_channels(
     header: &Header,
     layer: Option<&str>,
 ) -> Result<(Vec<Selected>, Vec<String>)> {
-    let names = channel_names(header);
+    choose_among(path, channel_names(header), layer)
+}
+
+/// [`choose_channels`] among the channel names `names`, in file order.
+fn choose_among(
+    path: &Path,
+    names: Vec<String>,
+    layer: Option<&str>,
+) -> Result<(Vec<Selected>, Vec<String>)> {
     let mut layers: Vec<String> = vec![String::new()];
     for n in &names {
         if let Some((l, _)) = n.rsplit_once('.') {
@@ -197,7 +243,7 @@ pub(crate) fn choose_channels(
             ),
         ));
     }
-    let chosen = choose_layer(path, &coloured, layer)?;
+    let chosen = choose_layer(path, &names, &coloured, layer)?;
     let (layer, wanted) = chosen;
     if wanted[0] == "Y" {
         let has = |c: &str| names.iter().any(|n| *n == format!("{layer}{c}"));
@@ -224,4 +270,45 @@ pub(crate) fn choose_channels(
         .cloned()
         .collect();
     Ok((selected, dropped))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The beauty chosen among `names` (written in this order).
+    fn beauty(names: &[String]) -> String {
+        let (selected, _) = choose_among(Path::new("x.exr"), names.to_vec(), None).unwrap();
+        selected[0]
+            .name
+            .rsplit_once('.')
+            .map_or("", |(l, _)| l)
+            .to_string()
+    }
+
+    #[test]
+    fn of_several_beauty_layers_the_render_beside_its_passes_is_filtered() {
+        let rgb = |l: &str| ["A", "B", "G", "R"].map(|c| format!("{l}.{c}")).to_vec();
+        // Blender with the compositor on: the composite is made after the
+        // render; the render is the view layer beside its passes.
+        let mut names = rgb("Composite.Combined");
+        names.extend(rgb("ViewLayer.Combined"));
+        names.extend(rgb("ViewLayer.Emit")[1..].to_vec());
+        names.push("ViewLayer.Depth.Z".into());
+        assert_eq!(beauty(&names), "ViewLayer.Combined");
+        // Two view layers: the one with the passes.
+        let mut names = rgb("Second.Combined");
+        names.push("Second.Depth.Z".into());
+        names.extend(rgb("ViewLayer.Combined"));
+        names.extend(rgb("ViewLayer.Emit")[1..].to_vec());
+        assert_eq!(beauty(&names), "ViewLayer.Combined");
+        // As many passes each: the first in the file, as before.
+        let mut names = rgb("A.Combined");
+        names.extend(rgb("B.Combined"));
+        assert_eq!(beauty(&names), "A.Combined");
+        // The unlayered channels first, whatever the layers.
+        let mut names = rgb("ViewLayer.Combined");
+        names.extend(["B", "G", "R"].map(String::from));
+        assert_eq!(beauty(&names), "");
+    }
 }

@@ -35,7 +35,7 @@ pub(crate) use blocks::{
 use blocks::{bytes_of, invalid, part_name, reorder_planes, unsupported};
 pub use file::InputFile;
 use file::Layout;
-pub(crate) use layers::{base_name, choose_channels, views};
+pub(crate) use layers::{base_name, beauty_layers, choose_channels, scope, views};
 pub use layers::{view_scope, ViewSelect};
 pub use source::{ExrSource, InputSource, READ_AHEAD_BYTES};
 
@@ -285,8 +285,9 @@ impl ExrInput {
 
     /// Open and check `path`; `part` chooses a part of a multi-part file and
     /// `layer` the layer whose R, G, B (or Y) channels are filtered (e.g.
-    /// `ViewLayer.Combined`; by default the unlayered channels, else a layer
-    /// named as the beauty, else the only layer with colour).
+    /// `ViewLayer.Combined`; by default the unlayered channels, else the
+    /// layer named as the beauty beside the most passes, else the only layer
+    /// with colour).
     pub fn open_layer(path: &Path, part: Option<&PartSelect>, layer: Option<&str>) -> Result<Self> {
         Self::open_view(path, part, layer, None)
     }

@@ -374,12 +374,13 @@ options! {
     /// only.
     guide_depth: f64 { Value, GUIDES, parse: number, default: "0.05" }
     /// Layer whose R,G,B (or Y) channels are filtered, e.g. ViewLayer.Combined
-    /// [default: the unlayered channels, else a beauty-named layer, else the only one].
+    /// [default: the unlayered channels, else the beauty-named layer beside the most
+    /// passes (a view layer's Combined, not Blender's Composite), else the only one].
     layer: Option<String> {
         Value, CHANNELS, parse: text, files_only: true, commands: BOTH,
         restore_help: "The energy image's layer whose R,G,B (or Y) channels are the beauty,
-        e.g. ViewLayer.Combined [default: the unlayered channels, else a beauty-named layer,
-        else the only one]."
+        e.g. ViewLayer.Combined [default: the unlayered channels, else the beauty-named layer
+        beside the most passes, else the only one]."
     }
     /// A multi-view (stereo) file: the view to filter, or all (each view
     /// filtered as an image of its own, into one output) [default: the first
