@@ -736,6 +736,26 @@ pub(crate) fn dropped_warnings(
         .filter(|n| !asked(n) || scope.excludes(n))
         .collect();
     let mut warnings = Vec::new();
+    if job.layer.is_none() {
+        // Several beauties (Blender's composite, other view layers): the one
+        // chosen is said, and how to choose another.
+        // The beauty's channels come first, before those carried.
+        let names = crate::io::reader::channel_names(input.header());
+        let first = input.channels().into_iter().next().unwrap_or_default();
+        let layer = first.rsplit_once('.');
+        let others: Vec<String> = (crate::io::reader::beauty_layers(&names).into_iter())
+            .filter(|l| !first.starts_with(l.as_str()))
+            .map(|l| l.trim_end_matches('.').to_string())
+            .collect();
+        if !others.is_empty() {
+            warnings.push(format!(
+                "{}: filtered {}; {} carried unfiltered: --layer NAME filters another",
+                job.input.display(),
+                layer.map_or("the unlayered channels", |(l, _)| l),
+                others.join(", ")
+            ));
+        }
+    }
     let (mut views, rest): (Vec<&String>, Vec<&String>) =
         dropped.into_iter().partition(|n| scope.excludes(n));
     if scope.exclusive {

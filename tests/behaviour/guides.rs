@@ -361,6 +361,14 @@ fn of_blenders_layers_the_view_layers_render_is_filtered_with_its_passes() {
         "{part}"
     );
     let out = dir.path().join("out.exr");
+    let r = filter(&[s(&path), s(&out)], dir.path());
+    let said = r["warnings"].to_string();
+    assert!(
+        said.contains(
+            "filtered ViewLayer.Combined; Composite.Combined, Second.Combined carried unfiltered"
+        ),
+        "{r}"
+    );
     for layer in ["Composite.Combined", "Second.Combined"] {
         let r = filter(&[s(&path), s(&out), "--layer", layer], dir.path());
         assert_eq!(r["guides"], "none", "{layer}: {r}");
