@@ -747,6 +747,18 @@ pub(crate) fn dropped_warnings(
             .filter(|l| !first.starts_with(l.as_str()))
             .map(|l| l.trim_end_matches('.').to_string())
             .collect();
+        // Cycles with its denoiser on writes the denoised image as
+        // `Combined` and the render as `Noisy Image` beside it.
+        if let Some((l, _)) = layer.filter(|(l, _)| l.ends_with("Combined")) {
+            let noisy = format!("{}Noisy Image.", &l[..l.len() - "Combined".len()]);
+            if names.iter().any(|n| n.starts_with(&noisy)) {
+                let noisy = noisy.trim_end_matches('.');
+                warnings.push(format!(
+                    "{}: {l} is Blender's denoised image and {noisy} its render: --layer '{noisy}' filters the render",
+                    job.input.display()
+                ));
+            }
+        }
         if !others.is_empty() {
             warnings.push(format!(
                 "{}: filtered {}; {} carried unfiltered: --layer NAME filters another",

@@ -327,8 +327,10 @@ fn the_summarys_ledger_lists_light_and_the_carried_passes_apart() {
 /// Blender with the compositor on writes `Composite.Combined` (made after
 /// the render) beside `ViewLayer.Combined` and its passes, and a second view
 /// layer has a `Combined` of its own: the render beside its passes is the
-/// one filtered, with its own guides; another layer asked for gets none of
-/// the passes of the view layer beside it.
+/// one filtered, with its own guides, and the others are named in a
+/// warning; another layer asked for gets none of the passes of the view
+/// layer beside it. With its denoiser on, the warning says where the
+/// render is.
 #[test]
 fn of_blenders_layers_the_view_layers_render_is_filtered_with_its_passes() {
     let dir = tmpdir();
@@ -345,6 +347,8 @@ fn of_blenders_layers_the_view_layers_render_is_filtered_with_its_passes() {
     }
     names.extend(["B", "G", "R"].map(|c| format!("ViewLayer.Emit.{c}")));
     names.extend(["X", "Y", "Z"].map(|c| format!("ViewLayer.Normal.{c}")));
+    // Its denoiser on, Cycles writes the render as `Noisy Image` too.
+    names.extend(["A", "B", "G", "R"].map(|c| format!("ViewLayer.Noisy Image.{c}")));
     let channels = names.iter().map(|n| (n.as_str(), flat(1.0))).collect();
     write_flat(&path, (w, h), channels);
     let info = epfilt(&["info", s(&path), "--json"]);
@@ -369,6 +373,8 @@ fn of_blenders_layers_the_view_layers_render_is_filtered_with_its_passes() {
         ),
         "{r}"
     );
+    let noisy = "--layer 'ViewLayer.Noisy Image' filters the render";
+    assert!(said.contains(noisy), "{r}");
     for layer in ["Composite.Combined", "Second.Combined"] {
         let r = filter(&[s(&path), s(&out), "--layer", layer], dir.path());
         assert_eq!(r["guides"], "none", "{layer}: {r}");
