@@ -464,6 +464,37 @@ impl Report {
         self.energy_rel_error_rounded = ledger.iter().map(|l| l.rel_error_rounded).collect();
     }
 
+    /// The summary's ledger: a line per channel of light. Data carried as
+    /// read (normals, depth, ids) is out of the ledger: its zeros would read
+    /// as a channel of no light, and it is listed with the carried channels.
+    fn ledger_lines(&self) -> String {
+        let mut s = String::new();
+        let data = |c: &String| {
+            let rule = self.channel_rules.get(c).map(String::as_str);
+            matches!(rule, Some("average" | "nearest"))
+        };
+        let light: Vec<usize> = (0..self.channels.len())
+            .filter(|&k| !data(&self.channels[k]))
+            .collect();
+        let wide = light.iter().map(|&k| self.channels[k].len()).max();
+        let wide = wide.unwrap_or(0).max(8);
+        s.push_str(&format!(
+            "  energy ledger   {:<wide$} {:>13} {:>13}  {:>9}   after rounding\n",
+            "channel", "in", "out x S^2", "rel.err"
+        ));
+        for &k in &light {
+            s.push_str(&format!(
+                "                  {:<wide$} {:>13.6e} {:>13.6e}  {:>9.2e}   {:>9.2e}\n",
+                self.channels[k],
+                self.energy_in[k],
+                self.energy_out[k],
+                self.energy_rel_error[k],
+                self.energy_rel_error_rounded[k]
+            ));
+        }
+        s
+    }
+
     /// The human summary, a few lines.
     pub fn summary(&self) -> String {
         let filtered: Vec<&PartReport> = self.parts.iter().filter(|p| p.report.is_some()).collect();
@@ -590,32 +621,7 @@ impl Report {
                 String::new()
             }
         );
-        // Data carried as read (normals, depth, ids) is out of the ledger:
-        // its zeros would read as a channel of no light. It is listed with
-        // the carried channels below.
-        let data = |c: &String| {
-            let rule = self.channel_rules.get(c).map(String::as_str);
-            matches!(rule, Some("average" | "nearest"))
-        };
-        let light: Vec<usize> = (0..self.channels.len())
-            .filter(|&k| !data(&self.channels[k]))
-            .collect();
-        let wide = light.iter().map(|&k| self.channels[k].len()).max();
-        let wide = wide.unwrap_or(0).max(8);
-        s.push_str(&format!(
-            "  energy ledger   {:<wide$} {:>13} {:>13}  {:>9}   after rounding\n",
-            "channel", "in", "out x S^2", "rel.err"
-        ));
-        for &k in &light {
-            s.push_str(&format!(
-                "                  {:<wide$} {:>13.6e} {:>13.6e}  {:>9.2e}   {:>9.2e}\n",
-                self.channels[k],
-                self.energy_in[k],
-                self.energy_out[k],
-                self.energy_rel_error[k],
-                self.energy_rel_error_rounded[k]
-            ));
-        }
+        s.push_str(&self.ledger_lines());
         if let Some(st) = &self.carriers_rule {
             s.push_str(&format!(
                 "  carriers rule (S = 1): variance {} ({}), samples {}\n",

@@ -287,6 +287,22 @@ fn scope_of(layer: &str) -> &str {
         .map_or("", |(s, _)| &layer[..s.len() + 1])
 }
 
+/// The layers of `names` (all the file's `all` but the beauty's) a guide
+/// may come from: a pass beside another beauty is that render's (another
+/// view layer's), not this one's; the beauty's own passes come first.
+fn guide_layers(all: &[String], names: &[String], beauty: &[String]) -> Vec<String> {
+    let own = beauty.first().and_then(|b| b.rsplit_once('.'));
+    let own = own.map_or("", |(l, _)| scope_of(l));
+    let others: Vec<String> = (beauty_layers(all).iter())
+        .filter(|l| !beauty.iter().any(|b| b.starts_with(l.as_str())))
+        .map(|l| scope(l).to_string())
+        .collect();
+    let mut layers = layers(names);
+    layers.retain(|l| scope_of(l) == own || !others.iter().any(|o| o == scope_of(l)));
+    layers.sort_by_key(|l| scope_of(l) != own);
+    layers
+}
+
 /// The layers of `names` (every prefix before a last `.`), in file order.
 fn layers(names: &[String]) -> Vec<String> {
     let mut out: Vec<String> = Vec::new();
@@ -341,17 +357,7 @@ fn guides_among(
             k.name()
         ),
     };
-    // A pass beside another beauty is that render's (another view layer's),
-    // not this one's; the beauty's own passes come first.
-    let own = beauty.first().and_then(|b| b.rsplit_once('.'));
-    let own = own.map_or("", |(l, _)| scope_of(l));
-    let others: Vec<String> = (beauty_layers(all).iter())
-        .filter(|l| !beauty.iter().any(|b| b.starts_with(l.as_str())))
-        .map(|l| scope(l).to_string())
-        .collect();
-    let mut all_layers = layers(&names);
-    all_layers.retain(|l| scope_of(l) == own || !others.iter().any(|o| o == scope_of(l)));
-    all_layers.sort_by_key(|l| scope_of(l) != own);
+    let all_layers = guide_layers(all, &names, beauty);
     for kind in GuideKind::ALL {
         let named = req.named.iter().rev().find(|(k, _)| *k == kind);
         let wanted = req.kinds.as_ref().is_none_or(|k| k.contains(&kind)) || named.is_some();

@@ -736,38 +736,6 @@ pub(crate) fn dropped_warnings(
         .filter(|n| !asked(n) || scope.excludes(n))
         .collect();
     let mut warnings = Vec::new();
-    if job.layer.is_none() {
-        // Several beauties (Blender's composite, other view layers): the one
-        // chosen is said, and how to choose another.
-        // The beauty's channels come first, before those carried.
-        let names = crate::io::reader::channel_names(input.header());
-        let first = input.channels().into_iter().next().unwrap_or_default();
-        let layer = first.rsplit_once('.');
-        let others: Vec<String> = (crate::io::reader::beauty_layers(&names).into_iter())
-            .filter(|l| !first.starts_with(l.as_str()))
-            .map(|l| l.trim_end_matches('.').to_string())
-            .collect();
-        // Cycles with its denoiser on writes the denoised image as
-        // `Combined` and the render as `Noisy Image` beside it.
-        if let Some((l, _)) = layer.filter(|(l, _)| l.ends_with("Combined")) {
-            let noisy = format!("{}Noisy Image.", &l[..l.len() - "Combined".len()]);
-            if names.iter().any(|n| n.starts_with(&noisy)) {
-                let noisy = noisy.trim_end_matches('.');
-                warnings.push(format!(
-                    "{}: {l} is Blender's denoised image and {noisy} its render: --layer '{noisy}' filters the render",
-                    job.input.display()
-                ));
-            }
-        }
-        if !others.is_empty() {
-            warnings.push(format!(
-                "{}: filtered {}; {} carried unfiltered: --layer NAME filters another",
-                job.input.display(),
-                layer.map_or("the unlayered channels", |(l, _)| l),
-                others.join(", ")
-            ));
-        }
-    }
     let (mut views, rest): (Vec<&String>, Vec<&String>) =
         dropped.into_iter().partition(|n| scope.excludes(n));
     if scope.exclusive {

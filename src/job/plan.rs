@@ -105,6 +105,7 @@ impl<'a> FilterPlan<'a> {
         let found = statistics(job, &mut input, &carried)?;
         let guide_layout = found_guides.attach(&mut input, &carried)?;
         warnings.extend(super::dropped_warnings(job, &input, &scope, to_rgbe));
+        warnings.extend(beauty_warnings(job, &input));
         let verdict = opened.decided.verdict.as_ref();
         let geometry = geometry(job, verdict, &input, &mut warnings)?;
         let channels = input.channels();
@@ -456,4 +457,43 @@ fn plan_band(
         wb: (b + m).min(out_h),
         out_h,
     })
+}
+
+/// What a file with several beauties, or Blender's denoised one, says to
+/// the user when no `--layer` chose: which beauty was filtered, which are
+/// carried unfiltered, and where Blender's render is.
+fn beauty_warnings(job: &FilterJob, input: &ExrInput) -> Vec<String> {
+    let mut warnings = Vec::new();
+    if job.layer.is_some() {
+        return warnings;
+    }
+    // The beauty's channels come first, before those carried.
+    let names = crate::io::reader::channel_names(input.header());
+    let first = input.channels().into_iter().next().unwrap_or_default();
+    let layer = first.rsplit_once('.');
+    let others: Vec<String> = (crate::io::reader::beauty_layers(&names).into_iter())
+        .filter(|l| !first.starts_with(l.as_str()))
+        .map(|l| l.trim_end_matches('.').to_string())
+        .collect();
+    // Cycles with its denoiser on writes the denoised image as
+    // `Combined` and the render as `Noisy Image` beside it.
+    if let Some((l, _)) = layer.filter(|(l, _)| l.ends_with("Combined")) {
+        let noisy = format!("{}Noisy Image.", &l[..l.len() - "Combined".len()]);
+        if names.iter().any(|n| n.starts_with(&noisy)) {
+            let noisy = noisy.trim_end_matches('.');
+            warnings.push(format!(
+                "{}: {l} is Blender's denoised image and {noisy} its render: --layer '{noisy}' filters the render",
+                job.input.display()
+            ));
+        }
+    }
+    if !others.is_empty() {
+        warnings.push(format!(
+            "{}: filtered {}; {} carried unfiltered: --layer NAME filters another",
+            job.input.display(),
+            layer.map_or("the unlayered channels", |(l, _)| l),
+            others.join(", ")
+        ));
+    }
+    warnings
 }
