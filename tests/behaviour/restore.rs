@@ -8,6 +8,10 @@ use exr::image::FlatSamples;
 use crate::common::{epfilt_ok, epfilt_run, read_json, ENERGY_TOL};
 use crate::exr_io::{read_channels, read_samples, tmpdir, write_flat};
 
+/// Sums of a few hundred f32 outputs against their f64 energy: each
+/// rounding is 2^-24 of a value.
+const F32_SUMS: f64 = 1e-6;
+
 /// An R, G, B image `w x h` from `f(x, y, c)`.
 fn write(path: &std::path::Path, (w, h): (usize, usize), f: impl Fn(usize, usize, usize) -> f32) {
     let plane = |c| FlatSamples::F32((0..w * h).map(|i| f(i % w, i / w, c)).collect());
@@ -445,6 +449,62 @@ fn restore_reads_a_carried_guide_and_variance_once() {
             .all(|(x, y)| x.to_bits() == y.to_bits());
         assert!(same, "{c}");
     }
+}
+
+/// Blender with its denoiser on writes its denoised picture as
+/// `ViewLayer.Combined` and the render as `ViewLayer.Noisy Image`: one file
+/// given twice restores the one with the other's energy, the result in the
+/// denoised picture's place and names.
+#[test]
+fn restore_of_a_blender_file_puts_its_renders_energy_into_its_denoised_picture() {
+    let dir = tmpdir();
+    let (w, h) = (40, 24);
+    let plane = |f: &dyn Fn(usize, usize) -> f32| {
+        FlatSamples::F32((0..w * h).map(|i| f(i % w, i / w)).collect())
+    };
+    let mut channels = Vec::new();
+    for (c, name) in ["B", "G", "R"].into_iter().enumerate() {
+        let noisy = move |x, y| render(x, y, c);
+        channels.push((
+            format!("ViewLayer.Combined.{name}"),
+            plane(&|x, y| denoised(x, y, c)),
+        ));
+        channels.push((format!("ViewLayer.Noisy Image.{name}"), plane(&noisy)));
+    }
+    channels.push(("ViewLayer.Depth.Z".to_string(), plane(&|_, _| 3.0)));
+    let f = dir.path().join("blender.exr");
+    write_flat(
+        &f,
+        (w, h),
+        channels
+            .iter()
+            .map(|(n, p)| (n.as_str(), p.clone()))
+            .collect(),
+    );
+    let out = dir.path().join("out.exr");
+    let r = restore_report(&f, &f, &out, &[]);
+    assert_eq!(r["blender_layers"][0], "ViewLayer.Noisy Image", "{r}");
+    let o: std::collections::HashMap<_, _> = read_channels(&out).into_iter().collect();
+    assert!(
+        !o.keys().any(|k| k.contains("Noisy Image")),
+        "{:?}",
+        o.keys()
+    );
+    assert!(o.contains_key("ViewLayer.Depth.Z"));
+    for (c, name) in ["B", "G", "R"].into_iter().enumerate() {
+        let got: f64 = o[&format!("ViewLayer.Combined.{name}")]
+            .iter()
+            .map(|&v| f64::from(v))
+            .sum();
+        let want: f64 = (0..w * h).map(|i| f64::from(render(i % w, i / w, c))).sum();
+        assert!(
+            ((got - want) / want).abs() <= F32_SUMS,
+            "{name}: {got} {want}"
+        );
+    }
+    // Asked for, Blender's denoised picture is the energy, as any layer.
+    let r = restore_report(&f, &f, &out, &["--layer", "ViewLayer.Combined"]);
+    assert!(r["blender_layers"].is_null(), "{r}");
 }
 
 #[test]

@@ -303,6 +303,12 @@ fn restore(mut a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
                 None => String::new(),
             }
         );
+        if let Some((noisy, combined)) = &r.blender_layers {
+            eprintln!(
+                "{}: the energy is Blender's render, {noisy}; the result takes the place and names of its denoised {combined}",
+                r.output
+            );
+        }
         if !r.copied_channels.is_empty() {
             eprintln!(
                 "{}: {} kept as {} has it (not in the denoiser's output)",

@@ -254,6 +254,8 @@ pub struct RestorePlan {
     layout: EnergyLayout,
     /// The variance pass read, in words (empty: none).
     variance_pass: String,
+    /// Blender's render and denoised layers ([`energy_of`]).
+    blender: Option<(String, String)>,
     output: OutputLayout,
     settings: OutputSettings,
     strips: StripLayout,
@@ -284,7 +286,7 @@ impl RestorePlan {
             &[Format::Exr],
             "restore",
         )?;
-        let mut energy = job.select.open(&job.energy)?;
+        let (mut energy, blender) = energy_of(job)?;
         // A denoiser writes one image: the energy's part where it has parts
         // too, else its only one.
         let denoised = InputFile::open(&job.denoised)?;
@@ -292,10 +294,11 @@ impl RestorePlan {
         let denoised = denoised.input(part.filter(|_| denoised.parts().len() > 1), None, None)?;
         let (keep_gain, keep_gain_from) = keep_gain(job, &energy);
         let params = RestoreParams { scale, keep_gain };
-        let carried = carry(job, &mut energy)?;
-        let channels = energy.channels();
-        let beauty = channels.len() - carried.len();
+        let carried = carry(job, &mut energy, blender.as_ref().map(|b| b.1.as_str()))?;
+        let read = energy.channels();
+        let beauty = read.len() - carried.len();
         let picks = pair(job, &energy, &denoised, beauty)?;
+        let channels = written(read, beauty, blender.as_ref());
         let settings = OutputSettings {
             provenance: Some(provenance(job, params)),
             ..job.output_settings.clone()
@@ -352,6 +355,7 @@ impl RestorePlan {
             copied,
             layout,
             variance_pass,
+            blender,
             output,
             settings,
             strips,
@@ -422,6 +426,7 @@ impl RestorePlan {
             // The carried channels are copies, out of the ledger.
             ledger: report.ledger[..self.beauty].to_vec(),
             carried_channels: self.carried.clone(),
+            blender_layers: self.blender.clone(),
             ..report.with_variance_pass(self.variance_pass.clone())
         })
     }
@@ -530,21 +535,74 @@ fn statistics(
     Ok(Some((RenderStats::new(stats, lum, channels), from)))
 }
 
+/// The energy image as `job` selects it. Blender with its denoiser on
+/// writes the denoised picture as `S.Combined` and the render as
+/// `S.Noisy Image` beside it: with no `--layer`, the render is the energy,
+/// and the layers (render, denoised) are returned, the result to take the
+/// denoised picture's place and names.
+fn energy_of(job: &RestoreJob) -> Result<(ExrInput, Option<(String, String)>)> {
+    let energy = job.select.open(&job.energy)?;
+    let first = energy.channels().into_iter().next().unwrap_or_default();
+    let combined = first.rsplit_once('.').map(|(l, _)| l.to_string());
+    let noisy = combined.as_ref().and_then(|l| {
+        let noisy = format!("{}Noisy Image", l.strip_suffix("Combined")?);
+        let names = crate::io::reader::channel_names(energy.header());
+        names
+            .iter()
+            .any(|n| n.starts_with(&format!("{noisy}.")))
+            .then_some(noisy)
+    });
+    match (noisy, combined) {
+        (Some(noisy), Some(combined)) if job.select.layer.is_none() => {
+            let select = Selection {
+                layer: Some(noisy.clone()),
+                ..job.select.clone()
+            };
+            Ok((select.open(&job.energy)?, Some((noisy, combined))))
+        }
+        _ => Ok((energy, None)),
+    }
+}
+
+/// The output's channel names: those `read`, the first `beauty` of them
+/// renamed from the render's layer to the denoised one's where `blender`
+/// says ([`energy_of`]).
+fn written(read: Vec<String>, beauty: usize, blender: Option<&(String, String)>) -> Vec<String> {
+    let Some((noisy, combined)) = blender else {
+        return read;
+    };
+    let rename = |c: &String| match c.strip_prefix(noisy.as_str()) {
+        Some(rest) => format!("{combined}{rest}"),
+        None => c.clone(),
+    };
+    (read.iter().enumerate())
+        .map(|(k, c)| if k < beauty { rename(c) } else { c.clone() })
+        .collect()
+}
+
 /// Carry the energy image's channels beside the beauty into the output:
 /// restore changes the beauty alone, so each is copied as the file has it,
 /// bit for bit, whatever its rule but `drop` (`job.channel_rules`, as
 /// `filter`'s; a stereo file's other views are dropped). Their names, in
 /// strip order after the beauty's.
-fn carry(job: &RestoreJob, energy: &mut ExrInput) -> Result<Vec<String>> {
+fn carry(job: &RestoreJob, energy: &mut ExrInput, replaced: Option<&str>) -> Result<Vec<String>> {
     let scope = crate::io::reader::view_scope(&job.energy, energy.header(), None, false)?;
+    let replaced = replaced.map(|l| format!("{l}."));
     let carried = energy
-        .carry_channels(
-            |name, uint| match rule_for(name, uint, &job.channel_rules, &scope) {
+        .carry_channels(|name, uint| {
+            if replaced
+                .as_ref()
+                .is_some_and(|l| name.starts_with(l.as_str()))
+            {
+                // Blender's denoised picture: the result takes its place.
+                return ChannelRule::Drop;
+            }
+            match rule_for(name, uint, &job.channel_rules, &scope) {
                 ChannelRule::Drop => ChannelRule::Drop,
                 // Copied, which is what `nearest` does at S = 1.
                 _ => ChannelRule::Nearest,
-            },
-        )
+            }
+        })
         .into_iter()
         .map(|(name, _)| name)
         .collect();

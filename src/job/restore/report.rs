@@ -64,6 +64,10 @@ pub struct RestoreReport {
     /// The energy image's channels beside the beauty (depth, normals, ids,
     /// light AOVs), carried into the result as it has them.
     pub carried_channels: Vec<String>,
+    /// Blender with its denoiser on: the render's layer read as the energy
+    /// (`Noisy Image`) and the denoised layer whose names the result takes
+    /// (`Combined`); `None` otherwise.
+    pub blender_layers: Option<(String, String)>,
     /// Per channel: the energy image's total, the result's, their relative
     /// difference (before and after rounding).
     pub ledger: Vec<ChannelLedger>,
@@ -136,6 +140,7 @@ impl RestoreReport {
                 .collect(),
             levels: restored.levels.clone(),
             carried_channels: Vec::new(),
+            blender_layers: None,
             ledger: stats.ledger.clone(),
             kept_share: if mass > 0.0 {
                 counts.kept_energy / mass
