@@ -294,7 +294,10 @@ impl RestorePlan {
         let denoised = denoised.input(part.filter(|_| denoised.parts().len() > 1), None, None)?;
         let (keep_gain, keep_gain_from) = keep_gain(job, &energy);
         let params = RestoreParams { scale, keep_gain };
-        let carried = carry(job, &mut energy, blender.as_ref().map(|b| b.1.as_str()))?;
+        // The names the result takes: a channel of the file of the same name
+        // is not carried beside it (Blender's denoised picture).
+        let taken = written(energy.channels(), usize::MAX, blender.as_ref());
+        let carried = carry(job, &mut energy, &taken)?;
         let read = energy.channels();
         let beauty = read.len() - carried.len();
         let picks = pair(job, &energy, &denoised, beauty)?;
@@ -583,17 +586,14 @@ fn written(read: Vec<String>, beauty: usize, blender: Option<&(String, String)>)
 /// Carry the energy image's channels beside the beauty into the output:
 /// restore changes the beauty alone, so each is copied as the file has it,
 /// bit for bit, whatever its rule but `drop` (`job.channel_rules`, as
-/// `filter`'s; a stereo file's other views are dropped). Their names, in
-/// strip order after the beauty's.
-fn carry(job: &RestoreJob, energy: &mut ExrInput, replaced: Option<&str>) -> Result<Vec<String>> {
+/// `filter`'s; a stereo file's other views are dropped), but one of a name
+/// the result takes (`taken`). Their names, in strip order after the
+/// beauty's.
+fn carry(job: &RestoreJob, energy: &mut ExrInput, taken: &[String]) -> Result<Vec<String>> {
     let scope = crate::io::reader::view_scope(&job.energy, energy.header(), None, false)?;
-    let replaced = replaced.map(|l| format!("{l}."));
     let carried = energy
         .carry_channels(|name, uint| {
-            if replaced
-                .as_ref()
-                .is_some_and(|l| name.starts_with(l.as_str()))
-            {
+            if taken.iter().any(|t| t == name) {
                 // Blender's denoised picture: the result takes its place.
                 return ChannelRule::Drop;
             }
