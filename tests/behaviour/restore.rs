@@ -22,6 +22,11 @@ fn write(path: &std::path::Path, (w, h): (usize, usize), f: impl Fn(usize, usize
     );
 }
 
+/// A `w x h` channel of f32 from `f(x, y)`.
+fn flat((w, h): (usize, usize), f: &dyn Fn(usize, usize) -> f32) -> FlatSamples {
+    FlatSamples::F32((0..w * h).map(|i| f(i % w, i / w)).collect())
+}
+
 /// A noisy render with fireflies.
 fn render(x: usize, y: usize, c: usize) -> f32 {
     let h = ((x * 7919 + y * 104729 + c * 31) % 1000) as f32 / 1000.0;
@@ -273,9 +278,7 @@ const LAMP: (usize, usize) = (12, 9);
 fn lamp_render(path: &std::path::Path, layer: Option<&str>) {
     let (w, h) = (24, 24);
     let at = |x, y| (x, y) == LAMP;
-    let plane = |f: &dyn Fn(usize, usize) -> f32| {
-        FlatSamples::F32((0..w * h).map(|i| f(i % w, i / w)).collect())
-    };
+    let plane = |f: &dyn Fn(usize, usize) -> f32| flat((w, h), f);
     let beauty = |x, y| if at(x, y) { 101.0 } else { 1.0 };
     let emission = |x, y| if at(x, y) { 100.0 } else { 0.0 };
     let mut channels = vec![
@@ -344,9 +347,7 @@ fn restore_keeps_a_lamp_its_samples_agree_on_without_a_guide() {
     let at = |x, y| (x, y) == LAMP;
     let n = 16.0f32;
     let render = |path: &std::path::Path, rse: f32| {
-        let plane = |f: &dyn Fn(usize, usize) -> f32| {
-            FlatSamples::F32((0..w * h).map(|i| f(i % w, i / w)).collect())
-        };
+        let plane = |f: &dyn Fn(usize, usize) -> f32| flat((w, h), f);
         let beauty = |x, y| if at(x, y) { 101.0 } else { 1.0 };
         // The sample variance whose mean's relative standard error is `rse`.
         let var = |x, y| (rse * beauty(x, y)).powi(2) * n;
@@ -394,9 +395,7 @@ fn restore_keeps_a_lamp_its_samples_agree_on_without_a_guide() {
 fn restore_reads_a_carried_guide_and_variance_once() {
     let dir = tmpdir();
     let (w, h) = (40, 24);
-    let plane = |f: &dyn Fn(usize, usize) -> f32| {
-        FlatSamples::F32((0..w * h).map(|i| f(i % w, i / w)).collect())
-    };
+    let plane = |f: &dyn Fn(usize, usize) -> f32| flat((w, h), f);
     let mut channels = Vec::new();
     for (c, name) in ["B", "G", "R"].into_iter().enumerate() {
         let beauty = move |x, y| render(x, y, c);
@@ -459,9 +458,7 @@ fn restore_reads_a_carried_guide_and_variance_once() {
 fn restore_of_a_blender_file_puts_its_renders_energy_into_its_denoised_picture() {
     let dir = tmpdir();
     let (w, h) = (40, 24);
-    let plane = |f: &dyn Fn(usize, usize) -> f32| {
-        FlatSamples::F32((0..w * h).map(|i| f(i % w, i / w)).collect())
-    };
+    let plane = |f: &dyn Fn(usize, usize) -> f32| flat((w, h), f);
     let mut channels = Vec::new();
     for (c, name) in ["B", "G", "R"].into_iter().enumerate() {
         let noisy = move |x, y| render(x, y, c);
@@ -563,9 +560,7 @@ fn restore_matches_a_layered_render_to_a_plain_denoiser_output() {
         dir.path().join("r.json"),
     );
     let (w, h) = (40, 30);
-    let plane = |f: &dyn Fn(usize, usize) -> f32| {
-        FlatSamples::F32((0..w * h).map(|i| f(i % w, i / w)).collect())
-    };
+    let plane = |f: &dyn Fn(usize, usize) -> f32| flat((w, h), f);
     let alpha = |x: usize, y: usize| ((x * 3 + y * 5) % 7) as f32 / 6.0;
     let c = |ch| move |x, y| render(x, y, ch);
     write_flat(
@@ -625,9 +620,7 @@ fn restore_carries_the_renders_other_channels_as_they_are() {
     let dir = tmpdir();
     let (e, d) = (dir.path().join("e.exr"), dir.path().join("d.exr"));
     let (w, h) = (37, 29);
-    let f32s = |f: &dyn Fn(usize, usize) -> f32| {
-        FlatSamples::F32((0..w * h).map(|i| f(i % w, i / w)).collect())
-    };
+    let f32s = |f: &dyn Fn(usize, usize) -> f32| flat((w, h), f);
     let depth = |x: usize, y: usize| if y < 5 { f32::INFINITY } else { (x + y) as f32 };
     let normal = FlatSamples::F16(
         (0..w * h)
