@@ -1,6 +1,6 @@
 //! Write a super-sampled test render with fireflies, streaming (flat memory):
 //!
-//! `cargo run --release -p epfilt-lab --bin fireflies -- OUT.exr WIDTH HEIGHT [FRACTION] [COMPRESSION] [MIN..MAX] [--guides]`
+//! `cargo run --release -p epfilt-lab --bin fireflies -- OUT.exr WIDTH HEIGHT [FRACTION] [COMPRESSION] [MIN..MAX] [--guides[=LIST]]`
 //!
 //! WIDTH x HEIGHT are input samples. A smooth RGB background (0.2..1.0) with
 //! FRACTION (default 0.01) of the samples turned into fireflies MIN..MAX times
@@ -10,6 +10,8 @@
 //! emission pass naming a lamp (1000 times the ground) every 97th pixel of
 //! every 97th row, albedo, normals that turn at every 512th column (walls
 //! meeting) and a depth ramp: what the guides cost is measured on it.
+//! `--guides=emission,albedo` writes only the passes named (of `emission`,
+//! `albedo`, `normal`, `depth`).
 
 use epfilt::io::{parse_compression, ExrOutput};
 use epfilt::pipeline::{Precision, Sink};
@@ -23,8 +25,26 @@ fn hash(i: u64) -> u64 {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let all: Vec<String> = std::env::args().collect();
-    let guides = all.iter().any(|x| x == "--guides");
-    let a: Vec<String> = all.into_iter().filter(|x| x != "--guides").collect();
+    const PASSES: [&str; 4] = ["emission", "albedo", "normal", "depth"];
+    let mut wanted: Vec<&str> = Vec::new();
+    for x in &all {
+        match x.strip_prefix("--guides") {
+            Some("") => wanted = PASSES.to_vec(),
+            Some(list) => {
+                for p in list.trim_start_matches('=').split(',') {
+                    let p = PASSES.iter().find(|q| **q == p);
+                    wanted.push(p.ok_or("--guides=LIST names emission, albedo, normal, depth")?);
+                }
+            }
+            None => {}
+        }
+    }
+    let has = |p: &str| wanted.contains(&p);
+    let guides = !wanted.is_empty();
+    let a: Vec<String> = all
+        .into_iter()
+        .filter(|x| !x.starts_with("--guides"))
+        .collect();
     if a.len() < 4 {
         return Err(
             "usage: fireflies OUT.exr WIDTH HEIGHT [FRACTION] [COMPRESSION] [MIN..MAX]".into(),
@@ -46,19 +66,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let (l0, span) = (lo.log10(), (hi / lo).log10());
     let mut names: Vec<&str> = vec!["R", "G", "B"];
-    if guides {
-        names.extend([
-            "emission.R",
-            "emission.G",
-            "emission.B",
-            "albedo.R",
-            "albedo.G",
-            "albedo.B",
-            "N.X",
-            "N.Y",
-            "N.Z",
-            "Z",
-        ]);
+    let groups: [(&str, &[&str]); 4] = [
+        ("emission", &["emission.R", "emission.G", "emission.B"]),
+        ("albedo", &["albedo.R", "albedo.G", "albedo.B"]),
+        ("normal", &["N.X", "N.Y", "N.Z"]),
+        ("depth", &["Z"]),
+    ];
+    // Where each pass's first channel sits in a row, if it is written.
+    let mut at = [None; 4];
+    for (k, (pass, chans)) in groups.iter().enumerate() {
+        if has(pass) {
+            at[k] = Some(names.len());
+            names.extend(chans.iter());
+        }
     }
     let nch = names.len();
     let names: Vec<String> = names.iter().map(|s| s.to_string()).collect();
@@ -92,20 +112,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 for (c, tint) in [1.0f32, 0.9, 0.75].iter().enumerate() {
                     data[(r * nch + c) * w + i] = base * tint * mag as f32;
                 }
-                if guides {
-                    let wall = (i / 512) % 2 == 1;
-                    let n = if wall {
-                        [0.0, 0.0, 1.0]
-                    } else {
-                        [0.0, 1.0, 0.0]
-                    };
-                    for c in 0..3 {
-                        let at = |k: usize| (r * nch + k) * w + i;
-                        data[at(3 + c)] = if lamp { data[at(c)] } else { 0.0 };
-                        data[at(6 + c)] = if wall { 0.3 } else { 0.6 };
-                        data[at(9 + c)] = n[c];
+                let wall = (i / 512) % 2 == 1;
+                let n = if wall {
+                    [0.0, 0.0, 1.0]
+                } else {
+                    [0.0, 1.0, 0.0]
+                };
+                let idx = |k: usize| (r * nch + k) * w + i;
+                for c in 0..3 {
+                    if let Some(e) = at[0] {
+                        data[idx(e + c)] = if lamp { data[idx(c)] } else { 0.0 };
                     }
-                    data[(r * nch + 12) * w + i] = 2.0 + j as f32 / h as f32;
+                    if let Some(a) = at[1] {
+                        data[idx(a + c)] = if wall { 0.3 } else { 0.6 };
+                    }
+                    if let Some(nn) = at[2] {
+                        data[idx(nn + c)] = n[c];
+                    }
+                }
+                if let Some(z) = at[3] {
+                    data[idx(z)] = 2.0 + j as f32 / h as f32;
                 }
             }
         }
