@@ -284,6 +284,42 @@ impl ViewScope {
     pub fn name(&self) -> Option<&str> {
         self.views.get(self.this).map(String::as_str)
     }
+
+    /// `name` as this run sees it: without its view's component where it
+    /// is of this run's view (`ViewLayer.Combined.left.R`, as Blender names
+    /// the default view's channels too, is `ViewLayer.Combined.R`; `right.R`
+    /// is `R`), as it is where it is of no view, and `None` where it is of
+    /// another view. The beauty and the guides are found among these names:
+    /// a view's layers are the layers of an image of its own.
+    pub fn seen(&self, name: &str) -> Option<String> {
+        match self.view_of(name) {
+            _ if self.views.is_empty() => Some(name.to_string()),
+            Some(v) if v != self.this => None,
+            Some(_) => match name.rsplit_once('.') {
+                Some((rest, channel)) => Some(match rest.rsplit_once('.') {
+                    Some((layer, _view)) => format!("{layer}.{channel}"),
+                    None => channel.to_string(),
+                }),
+                None => Some(name.to_string()),
+            },
+            None => Some(name.to_string()),
+        }
+    }
+
+    /// The channels `names` (in file order) as this run sees them
+    /// ([`ViewScope::seen`]), each beside its name in the file. A channel of
+    /// no view that a view's channel is seen as is left out.
+    pub fn seen_names(&self, names: &[String]) -> Vec<(String, String)> {
+        let mut out: Vec<(String, String)> = (names.iter())
+            .filter_map(|n| self.seen(n).map(|s| (s, n.clone())))
+            .collect();
+        let viewed: Vec<String> = (out.iter())
+            .filter(|(s, n)| s != n)
+            .map(|(s, _)| s.clone())
+            .collect();
+        out.retain(|(s, n)| s != n || !viewed.contains(s));
+        out
+    }
 }
 
 /// The rule for `name`: the last override that matches, else the default;
@@ -368,6 +404,53 @@ mod tests {
         };
         assert!(exclusive.excludes("diffuse.R"));
         assert!(!ViewScope::default().excludes("right.R"));
+    }
+
+    #[test]
+    fn a_view_sees_its_own_channels_without_their_views_name() {
+        let names: Vec<String> = [
+            "R",
+            "right.R",
+            "ViewLayer.Combined.left.R",
+            "ViewLayer.Combined.right.R",
+            "diffuse.R",
+            "ViewLayer.Emit.left.R",
+        ]
+        .map(String::from)
+        .to_vec();
+        let left = ViewScope {
+            views: vec!["left".into(), "right".into()],
+            this: 0,
+            exclusive: false,
+        };
+        let seen = |s: &ViewScope| -> Vec<(String, String)> { s.seen_names(&names) };
+        let pair = |a: &str, b: &str| (a.to_string(), b.to_string());
+        assert_eq!(
+            seen(&left),
+            vec![
+                pair("R", "R"),
+                pair("ViewLayer.Combined.R", "ViewLayer.Combined.left.R"),
+                pair("diffuse.R", "diffuse.R"),
+                pair("ViewLayer.Emit.R", "ViewLayer.Emit.left.R"),
+            ]
+        );
+        let right = ViewScope { this: 1, ..left };
+        assert_eq!(
+            seen(&right),
+            vec![
+                pair("R", "right.R"),
+                pair("ViewLayer.Combined.R", "ViewLayer.Combined.right.R"),
+                pair("diffuse.R", "diffuse.R"),
+            ]
+        );
+        // A channel of no view that a view's channel is seen as gives way.
+        let both = ["diffuse.R", "diffuse.right.R"].map(String::from);
+        assert_eq!(
+            right.seen_names(&both),
+            vec![pair("diffuse.R", "diffuse.right.R")]
+        );
+        // Without views every name is seen as it is.
+        assert_eq!(ViewScope::default().seen_names(&names).len(), names.len());
     }
 
     #[test]

@@ -25,7 +25,7 @@ use std::path::Path;
 use exr::meta::header::Header;
 
 use crate::error::{Error, Result};
-use crate::filter::channels::ChannelRule;
+use crate::filter::channels::{ChannelRule, ViewScope};
 use crate::filter::guides::GuideLayout;
 use crate::io::reader::{beauty_layers, scope};
 use crate::io::ExrInput;
@@ -318,15 +318,32 @@ fn layers(names: &[String]) -> Vec<String> {
 
 /// Find the guides of `header` (of `path`, for messages) beside the
 /// beauty's colour channels `beauty` (never guides themselves), as `req`
-/// asks. A kind asked for by name (`--guides emission`, `--guide`) that is
-/// not there, or not whole, is an error naming what the file has.
+/// asks, among the channels of the run's view (`scope`) as it sees them
+/// ([`ViewScope::seen_names`]). A kind asked for by name (`--guides
+/// emission`, `--guide`) that is not there, or not whole, is an error naming
+/// what the file has.
 pub fn find_guides(
     path: &Path,
     header: &Header,
     beauty: &[String],
     req: &GuideRequest,
+    scope: &ViewScope,
 ) -> Result<FoundGuides> {
-    guides_among(path, &super::reader::channel_names(header), beauty, req)
+    let seen = scope.seen_names(&super::reader::channel_names(header));
+    let as_seen =
+        |n: &String| (seen.iter().find(|(_, a)| a == n)).map_or(n.clone(), |(s, _)| s.clone());
+    let as_named = |n: String| (seen.iter().find(|(s, _)| *s == n)).map_or(n, |(_, a)| a.clone());
+    let names: Vec<String> = seen.iter().map(|(s, _)| s.clone()).collect();
+    let beauty: Vec<String> = beauty.iter().map(as_seen).collect();
+    let found = guides_among(path, &names, &beauty, req)?;
+    Ok(FoundGuides {
+        emission: found
+            .emission
+            .map(|e| e.into_iter().map(as_named).collect()),
+        albedo: found.albedo.map(|c| c.map(as_named)),
+        normal: found.normal.map(|c| c.map(as_named)),
+        depth: found.depth.map(as_named),
+    })
 }
 
 /// [`find_guides`] among the channel names `all`.

@@ -171,12 +171,12 @@ fn describe_part(
         })
         .collect();
     let (mut filtered, mut carried, mut dropped, mut note) = (vec![], vec![], vec![], None);
-    match super::reader::choose_channels(path, h, None) {
+    let scope = super::reader::view_scope(path, h, None, false).unwrap_or_default();
+    match super::reader::choose_channels(path, h, None, &scope) {
         Ok((chosen, rest)) => {
             filtered = chosen.iter().map(|c| c.name.clone()).collect();
             // What `filter` does with the rest by default (--channel-rule
             // changes it; median and alpha-trim carry nothing).
-            let scope = super::reader::view_scope(path, h, None, false).unwrap_or_default();
             for name in &rest {
                 let uint = h.channels.list.iter().any(|c| {
                     c.name.to_string() == *name
@@ -256,13 +256,14 @@ fn verdict_and_guides(
         Ok(v) => v.line(),
         Err(e) => format!("none ({})", words(e)),
     };
+    let scope = super::reader::view_scope(path, h, None, false).unwrap_or_default();
     let beauty: Vec<String> = filtered
         .iter()
         .filter(|c| !c.rsplit('.').next().unwrap_or(c).eq_ignore_ascii_case("a"))
         .cloned()
         .collect();
     let (guides, emission) =
-        match super::find_guides(path, h, &beauty, &super::GuideRequest::default()) {
+        match super::find_guides(path, h, &beauty, &super::GuideRequest::default(), &scope) {
             Ok(g) => ((g.describe(), g.by_kind()), g.emission.unwrap_or_default()),
             Err(e) => (
                 (format!("none ({})", words(e)), BTreeMap::new()),

@@ -21,19 +21,19 @@ use crate::pipeline::{Sink, Source, Strip};
 /// Rows copied at once.
 const STRIP_ROWS: usize = 64;
 
-/// Write `dest` with every channel of `sources` (each a file and the layer
-/// of its colour: its view's, `None` for the default view), in that order,
-/// values as they are, under the first source's header attributes with
-/// `views` as its `multiView` and `fingerprint` recorded.
+/// Write `dest` with every channel of `sources` (each a view's file, which
+/// names that view alone), in that order, values as they are, under the
+/// first source's header attributes with `views` as its `multiView` and
+/// `fingerprint` recorded.
 pub fn assemble(
-    sources: &[(PathBuf, Option<String>)],
+    sources: &[PathBuf],
     dest: &Path,
     views: &[String],
     fingerprint: &str,
 ) -> Result<()> {
     let mut inputs = Vec::with_capacity(sources.len());
-    for (path, layer) in sources {
-        let mut input = ExrInput::open_layer(path, None, layer.as_deref())?;
+    for path in sources {
+        let mut input = ExrInput::open(path, None)?;
         // Every channel, as it is (ids stay whole numbers).
         input.carry_channels(|_, uint| {
             if uint {

@@ -511,7 +511,7 @@ fn filter_views(job: &FilterJob, opened: &Opened<'_>, progress: Progress<'_>) ->
         for w in r.warnings.iter_mut() {
             *w = w.replace(&own, &named);
         }
-        sources.push((sub.output.clone(), (i > 0).then(|| v.clone())));
+        sources.push(sub.output.clone());
         reports.push(r);
     }
     crate::io::views::assemble(&sources, &job.output, &views, &opened.fingerprint.text())?;

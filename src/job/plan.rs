@@ -100,7 +100,7 @@ impl<'a> FilterPlan<'a> {
         let to_rgbe = job.output_format()? != Format::Exr;
         let scope = crate::io::reader::view_scope(&job.input, input.header(), view, exclusive)?;
         let mut warnings = opened.decided.notes.clone();
-        let found_guides = guides(job, &input, &mut warnings)?;
+        let found_guides = guides(job, &input, &scope, &mut warnings)?;
         let carried = carry(job, &mut input, &scope, to_rgbe, &found_guides)?;
         let found = statistics(job, &mut input, &carried)?;
         let guide_layout = found_guides.attach(&mut input, &carried)?;
@@ -197,7 +197,12 @@ fn carry(
 
 /// The guide passes `job` asks for, found by name (none for the methods
 /// that spread nothing, or with `--guides none`).
-fn guides(job: &FilterJob, input: &ExrInput, warnings: &mut Vec<String>) -> Result<FoundGuides> {
+fn guides(
+    job: &FilterJob,
+    input: &ExrInput,
+    scope: &channels::ViewScope,
+    warnings: &mut Vec<String>,
+) -> Result<FoundGuides> {
     let p = &job.params;
     let spreads = matches!(p.method, Method::EpGauss | Method::EpBox);
     if !spreads || job.guides.none() {
@@ -208,7 +213,7 @@ fn guides(job: &FilterJob, input: &ExrInput, warnings: &mut Vec<String>) -> Resu
         .filter(|(_, l)| *l != 0.0)
         .map(|(c, _)| c)
         .collect();
-    let mut found = find_guides(&job.input, input.header(), &beauty, &job.guides)?;
+    let mut found = find_guides(&job.input, input.header(), &beauty, &job.guides, scope)?;
     if let Some(c) = found.channels().iter().find(|c| input.is_uint(c)) {
         return Err(Error::Channels {
             path: job.input.clone(),

@@ -117,19 +117,37 @@ pub fn write_encoded(
     channels: Vec<(&str, FlatSamples)>,
     encoding: Encoding,
 ) {
+    write_layer(path, size, channels, encoding, LayerAttributes::named(""));
+}
+
+/// [`write_flat`] of a multi-view file, `views` its `multiView` (the
+/// default first).
+pub fn write_views(
+    path: &Path,
+    size: (usize, usize),
+    channels: Vec<(&str, FlatSamples)>,
+    views: &[&str],
+) {
+    let mut attrs = LayerAttributes::named("");
+    attrs.multi_view_names = Some(views.iter().map(|v| Text::from(*v)).collect());
+    write_layer(path, size, channels, Encoding::FAST_LOSSLESS, attrs);
+}
+
+fn write_layer(
+    path: &Path,
+    size: (usize, usize),
+    channels: Vec<(&str, FlatSamples)>,
+    encoding: Encoding,
+    attrs: LayerAttributes,
+) {
     let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = channels
         .into_iter()
         .map(|(n, v)| AnyChannel::new(n, v))
         .collect();
-    Image::from_layer(Layer::new(
-        size,
-        LayerAttributes::named(""),
-        encoding,
-        AnyChannels::sort(list),
-    ))
-    .write()
-    .to_file(path)
-    .expect("write");
+    Image::from_layer(Layer::new(size, attrs, encoding, AnyChannels::sort(list)))
+        .write()
+        .to_file(path)
+        .expect("write");
 }
 
 /// A xorshift generator from `seed` (not 0): test values, the same every run.

@@ -8,7 +8,7 @@ use std::path::Path;
 use exr::image::FlatSamples;
 
 use crate::common::{epfilt_run as epfilt, image_bytes, read_json, ENERGY_TOL};
-use crate::exr_io::{tmpdir, write_flat, write_named};
+use crate::exr_io::{tmpdir, write_flat, write_named, write_views};
 
 /// A grey room (about 0.5) with a few pixels set, R, G, B alike.
 fn room(lit: &[((usize, usize), f32)]) -> impl Fn(usize, usize) -> f32 + '_ {
@@ -378,6 +378,78 @@ fn of_blenders_layers_the_view_layers_render_is_filtered_with_its_passes() {
     for layer in ["Composite.Combined", "Second.Combined"] {
         let r = filter(&[s(&path), s(&out), "--layer", layer], dir.path());
         assert_eq!(r["guides"], "none", "{layer}: {r}");
+    }
+}
+
+/// A stereo render as Blender writes it: one part, `multiView` left and
+/// right, and every pass of each view named with it, the default view's
+/// too (`ViewLayer.Combined.left.R`). Each view is filtered with its own
+/// passes: the bright pixel at (12, 10) is a lamp in the right view (its
+/// emission pass says so) and a firefly in the left one.
+#[test]
+fn blenders_stereo_file_filters_each_view_with_its_own_passes() {
+    let dir = tmpdir();
+    let d = dir.path();
+    let (w, h) = (32, 24);
+    let lamp = (12, 10);
+    let lit = [(lamp, 60.0)];
+    let px = room(&lit);
+    let plane = |f: &dyn Fn(usize, usize) -> f32| {
+        FlatSamples::F32((0..w * h).map(|i| f(i % w, i / w)).collect())
+    };
+    let mut channels = Vec::new();
+    let names: Vec<(String, &str)> = (["left", "right"].iter())
+        .flat_map(|v| {
+            ["R", "G", "B"].into_iter().flat_map(move |c| {
+                [
+                    (format!("ViewLayer.Combined.{v}.{c}"), *v),
+                    (format!("ViewLayer.Emit.{v}.{c}"), *v),
+                ]
+            })
+        })
+        .collect();
+    for (name, view) in &names {
+        let lit = |x, y| {
+            let emits = *view == "right" && (x, y) == lamp;
+            match name.contains(".Emit.") {
+                true if emits => px(x, y),
+                true => 0.0,
+                false => px(x, y),
+            }
+        };
+        channels.push((name.as_str(), plane(&lit)));
+    }
+    let input = d.join("stereo.exr");
+    write_views(&input, (w, h), channels, &["left", "right"]);
+    let info = epfilt(&["info", s(&input), "--json"]);
+    let j: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+    let part = &j["parts"][0];
+    assert_eq!(part["filtered"][0], "ViewLayer.Combined.left.R", "{part}");
+    assert_eq!(
+        part["guide_channels"]["emission"][0], "ViewLayer.Emit.left.R",
+        "{part}"
+    );
+    let at = lamp.1 * w + lamp.0;
+    let left = d.join("left.exr");
+    filter(&[s(&input), s(&left)], d);
+    let l = planes(&left);
+    assert!(l["ViewLayer.Combined.left.G"][at] < 60.0, "a firefly there");
+    let right = d.join("right.exr");
+    let r = filter(&[s(&input), s(&right), "--view", "right"], d);
+    assert!(
+        r["guides"].to_string().contains("ViewLayer.Emit.right.G"),
+        "{r}"
+    );
+    let rp = planes(&right);
+    assert_eq!(rp["ViewLayer.Combined.right.G"][at], 60.0, "a lamp there");
+    // --view all: each view as filtering it alone gives.
+    let all = d.join("all.exr");
+    filter(&[s(&input), s(&all), "--view", "all"], d);
+    let a = planes(&all);
+    for (p, view) in [(&l, "left"), (&rp, "right")] {
+        let name = format!("ViewLayer.Combined.{view}.G");
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&a[&name]), bits(&p[&name]), "{view}");
     }
 }
 

@@ -3,6 +3,7 @@
 
 use super::{channel_names, unsupported, Error, Header, Path, Selected};
 use crate::error::Result;
+use crate::filter::channels::ViewScope;
 
 /// The views of a multi-view file (`multiView`), the default first; empty
 /// for a file without views.
@@ -42,7 +43,7 @@ pub fn view_scope(
     header: &Header,
     view: Option<&str>,
     exclusive: bool,
-) -> Result<crate::filter::channels::ViewScope> {
+) -> Result<ViewScope> {
     let views = views(header);
     let this = match view {
         None => 0,
@@ -58,7 +59,7 @@ pub fn view_scope(
             ))
         })?,
     };
-    Ok(crate::filter::channels::ViewScope {
+    Ok(ViewScope {
         views,
         this,
         exclusive,
@@ -207,12 +208,44 @@ fn choose_layer<'a>(
 /// unlayered channels, else a layer with a beauty name ([`BEAUTY_LAYERS`]),
 /// else the only layer with colour; several candidates and no beauty is an
 /// error that lists them (filtering an AOV by mistake would be silent).
+///
+/// In a multi-view file the channels are chosen among the run's view's, as
+/// it sees them ([`ViewScope::seen_names`]): `--layer ViewLayer.Combined`
+/// (or `ViewLayer.Combined.left`) is `ViewLayer.Combined.left.R...` in the
+/// left view's run and `ViewLayer.Combined.right.R...` in the right's.
 pub(crate) fn choose_channels(
     path: &Path,
     header: &Header,
     layer: Option<&str>,
+    scope: &ViewScope,
 ) -> Result<(Vec<Selected>, Vec<String>)> {
-    choose_among(path, channel_names(header), layer)
+    let all = channel_names(header);
+    let seen = scope.seen_names(&all);
+    // A layer named with the run's view is the layer the view sees.
+    let layer = layer.map(|l| {
+        let l = l.trim_end_matches('.');
+        match (l.rsplit_once('.'), scope.name()) {
+            (Some((rest, v)), Some(this)) if v == this => rest,
+            _ => l,
+        }
+    });
+    let (chosen, _) = choose_among(path, seen.iter().map(|(s, _)| s.clone()).collect(), layer)?;
+    let selected: Vec<Selected> = (chosen.into_iter())
+        .map(|c| {
+            let name = (seen.iter())
+                .find(|(s, _)| *s == c.name)
+                .map_or(c.name, |(_, n)| n.clone());
+            Selected {
+                index: all.iter().position(|x| *x == name).unwrap_or(0),
+                name,
+            }
+        })
+        .collect();
+    let dropped = (all.iter())
+        .filter(|n| !selected.iter().any(|s| &s.name == *n))
+        .cloned()
+        .collect();
+    Ok((selected, dropped))
 }
 
 /// [`choose_channels`] among the channel names `names`, in file order.

@@ -293,8 +293,10 @@ impl ExrInput {
     }
 
     /// [`ExrInput::open_layer`] of one view of a multi-view file: its
-    /// colour channels are `layer.view.R` (`view.R` without a layer; the
-    /// default view's are named as without views).
+    /// colour channels are `layer.view.R` (`view.R` without a layer, and
+    /// `R` in the default view), and `layer` names the layer as the view
+    /// sees it (`ViewLayer.Combined`;
+    /// [`crate::filter::channels::ViewScope::seen`]).
     pub fn open_view(
         path: &Path,
         part: Option<&PartSelect>,
@@ -333,14 +335,7 @@ impl ExrInput {
         let header = &meta.headers[part];
         check_filterable(path, header)?;
         let scope = view_scope(path, header, view, false)?;
-        let view_layer = match (scope.name(), layer) {
-            (Some(v), l) if scope.this > 0 => Some(match l {
-                Some(l) => format!("{}.{v}", l.trim_end_matches('.')),
-                None => v.to_string(),
-            }),
-            _ => layer.map(str::to_string),
-        };
-        let (selected, dropped) = choose_channels(path, header, view_layer.as_deref())?;
+        let (selected, dropped) = choose_channels(path, header, layer, &scope)?;
 
         let rows = block_rows(
             path,

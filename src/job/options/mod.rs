@@ -384,7 +384,9 @@ options! {
     }
     /// A multi-view (stereo) file: the view to filter, or all (each view
     /// filtered as an image of its own, into one output) [default: the first
-    /// view; the others are left out, with a warning].
+    /// view; the others are left out, with a warning]. --layer and the guides
+    /// name a view's layers without it: ViewLayer.Combined is
+    /// ViewLayer.Combined.right in the right view.
     view: Option<ViewSelect> {
         Value, CHANNELS, parse: |_, s| Ok::<_, Error>(ViewSelect::parse(s)), files_only: true
     }

@@ -147,7 +147,9 @@ fn emission_guide(
         path: path.to_path_buf(),
         reason: format!("the emission guide: {why}"),
     };
-    let found = find_guides(path, energy.header(), &beauty, &emission_only).and_then(|f| {
+    // Restore reads the default view (as the reader does).
+    let scope = crate::io::reader::view_scope(path, energy.header(), None, false)?;
+    let found = find_guides(path, energy.header(), &beauty, &emission_only, &scope).and_then(|f| {
         let names = f.emission.ok_or_else(|| bad("not found".into()))?;
         if let Some(c) = names.iter().find(|c| energy.is_uint(c)) {
             return Err(bad(format!("{c} holds integers (ids), not light")));
