@@ -105,7 +105,7 @@ impl<'a> FilterPlan<'a> {
         let found = statistics(job, &mut input, &carried)?;
         let guide_layout = found_guides.attach(&mut input, &carried)?;
         warnings.extend(super::dropped_warnings(job, &input, &scope, to_rgbe));
-        warnings.extend(beauty_warnings(job, &input));
+        warnings.extend(beauty_warnings(job, &input, &scope));
         let verdict = opened.decided.verdict.as_ref();
         let geometry = geometry(job, verdict, &input, &mut warnings)?;
         let channels = input.channels();
@@ -467,14 +467,18 @@ fn plan_band(
 /// What a file with several beauties, or Blender's denoised one, says to
 /// the user when no `--layer` chose: which beauty was filtered, which are
 /// carried unfiltered, and where Blender's render is.
-fn beauty_warnings(job: &FilterJob, input: &ExrInput) -> Vec<String> {
+fn beauty_warnings(job: &FilterJob, input: &ExrInput, scope: &channels::ViewScope) -> Vec<String> {
     let mut warnings = Vec::new();
     if job.layer.is_some() {
         return warnings;
     }
-    // The beauty's channels come first, before those carried.
-    let names = crate::io::reader::channel_names(input.header());
-    let first = input.channels().into_iter().next().unwrap_or_default();
+    // The beauty's channels come first, before those carried; the names are
+    // the run's view's as it sees them, as `--layer` takes them.
+    let seen = scope.seen_names(&crate::io::reader::channel_names(input.header()));
+    let names: Vec<String> = seen.into_iter().map(|(s, _)| s).collect();
+    let first = (input.channels().first())
+        .and_then(|c| scope.seen(c))
+        .unwrap_or_default();
     let layer = first.rsplit_once('.');
     let others: Vec<String> = (crate::io::reader::beauty_layers(&names).into_iter())
         .filter(|l| !first.starts_with(l.as_str()))

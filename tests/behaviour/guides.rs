@@ -383,8 +383,44 @@ fn of_blenders_layers_the_view_layers_render_is_filtered_with_its_passes() {
 
 /// A stereo render as Blender writes it: one part, `multiView` left and
 /// right, and every pass of each view named with it, the default view's
-/// too (`ViewLayer.Combined.left.R`). Each view is filtered with its own
-/// passes: the bright pixel at (12, 10) is a lamp in the right view (its
+/// too (`ViewLayer.Combined.left.R`): the room with a bright pixel at
+/// `lamp` in each of `layers` (`Combined`...), and an `Emit` pass that
+/// names it a lamp in the right view only.
+fn write_blender_stereo(
+    path: &Path,
+    (w, h): (usize, usize),
+    lamp: (usize, usize),
+    layers: &[&str],
+) {
+    let lit = [(lamp, 60.0)];
+    let px = room(&lit);
+    let mut channels = Vec::new();
+    for view in ["left", "right"] {
+        for c in ["R", "G", "B"] {
+            for layer in layers.iter().chain(&["Emit"]) {
+                let emits = |x, y| view == "right" && (x, y) == lamp;
+                let v = |x, y| match *layer == "Emit" {
+                    true if emits(x, y) => px(x, y),
+                    true => 0.0,
+                    false => px(x, y),
+                };
+                let plane = (0..w * h).map(|i| v(i % w, i / w)).collect();
+                channels.push((
+                    format!("ViewLayer.{layer}.{view}.{c}"),
+                    FlatSamples::F32(plane),
+                ));
+            }
+        }
+    }
+    let named = channels
+        .iter()
+        .map(|(n, v)| (n.as_str(), v.clone()))
+        .collect();
+    write_views(path, (w, h), named, &["left", "right"]);
+}
+
+/// Blender's stereo file ([`write_blender_stereo`]): each view is filtered
+/// with its own passes: the bright pixel is a lamp in the right view (its
 /// emission pass says so) and a firefly in the left one.
 #[test]
 fn blenders_stereo_file_filters_each_view_with_its_own_passes() {
@@ -392,35 +428,8 @@ fn blenders_stereo_file_filters_each_view_with_its_own_passes() {
     let d = dir.path();
     let (w, h) = (32, 24);
     let lamp = (12, 10);
-    let lit = [(lamp, 60.0)];
-    let px = room(&lit);
-    let plane = |f: &dyn Fn(usize, usize) -> f32| {
-        FlatSamples::F32((0..w * h).map(|i| f(i % w, i / w)).collect())
-    };
-    let mut channels = Vec::new();
-    let names: Vec<(String, &str)> = (["left", "right"].iter())
-        .flat_map(|v| {
-            ["R", "G", "B"].into_iter().flat_map(move |c| {
-                [
-                    (format!("ViewLayer.Combined.{v}.{c}"), *v),
-                    (format!("ViewLayer.Emit.{v}.{c}"), *v),
-                ]
-            })
-        })
-        .collect();
-    for (name, view) in &names {
-        let lit = |x, y| {
-            let emits = *view == "right" && (x, y) == lamp;
-            match name.contains(".Emit.") {
-                true if emits => px(x, y),
-                true => 0.0,
-                false => px(x, y),
-            }
-        };
-        channels.push((name.as_str(), plane(&lit)));
-    }
     let input = d.join("stereo.exr");
-    write_views(&input, (w, h), channels, &["left", "right"]);
+    write_blender_stereo(&input, (w, h), lamp, &["Combined"]);
     let info = epfilt(&["info", s(&input), "--json"]);
     let j: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
     let part = &j["parts"][0];
@@ -451,6 +460,49 @@ fn blenders_stereo_file_filters_each_view_with_its_own_passes() {
         let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&a[&name]), bits(&p[&name]), "{view}");
     }
+}
+
+/// One-file restore of Blender's stereo file with its denoiser on: the
+/// default view's render (`Noisy Image.left`) is the energy, the result
+/// takes its denoised `Combined.left`'s names, and the other view is left
+/// out with a warning.
+#[test]
+fn restore_of_blenders_stereo_file_takes_its_default_views_render() {
+    let dir = tmpdir();
+    let d = dir.path();
+    let input = d.join("stereo.exr");
+    write_blender_stereo(&input, (32, 24), (12, 10), &["Combined", "Noisy Image"]);
+    let (out, rep) = (d.join("out.exr"), d.join("r.json"));
+    let o = epfilt(&[
+        "restore",
+        s(&input),
+        s(&input),
+        s(&out),
+        "--report",
+        s(&rep),
+    ]);
+    let said = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{said}");
+    assert!(said.contains("other views left out"), "{said}");
+    let r = read_json(&rep);
+    assert_eq!(r["blender_layers"][0], "ViewLayer.Noisy Image", "{r}");
+    let left_out = r["views_left_out"].to_string();
+    assert!(left_out.contains("ViewLayer.Combined.right.R"), "{r}");
+    let p = planes(&out);
+    assert!(
+        p.contains_key("ViewLayer.Combined.left.G"),
+        "{:?}",
+        p.keys()
+    );
+    assert!(
+        !p.keys().any(|k| k.contains("right") || k.contains("Noisy")),
+        "{:?}",
+        p.keys()
+    );
+    // `filter` says where the render is, as `--layer` names it.
+    let r = filter(&[s(&input), s(&out)], d);
+    let noisy = "--layer 'ViewLayer.Noisy Image' filters the render";
+    assert!(r["warnings"].to_string().contains(noisy), "{r}");
 }
 
 #[test]

@@ -269,6 +269,13 @@ fn restore(mut a: RestoreArgs, cancel: Arc<AtomicBool>) -> Result<(), Exit> {
             r.nonfinite_zeroed
         ));
     }
+    if !r.views_left_out.is_empty() {
+        warn(&format!(
+            "{}: the other views left out of the output ({}): restore reads the default view",
+            a.energy.display(),
+            named(&r.views_left_out)
+        ));
+    }
     if r.counts.denoised_nonfinite > 0 {
         warn(&format!(
             "{}: {} non-finite values taken as zero",

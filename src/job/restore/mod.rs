@@ -251,6 +251,8 @@ pub struct RestorePlan {
     channels: Vec<String>,
     beauty: usize,
     carried: Vec<String>,
+    /// A stereo file's other views' channels, left out.
+    other_views: Vec<String>,
     /// The beauty's channels the denoiser did not write.
     copied: Vec<String>,
     layout: EnergyLayout,
@@ -299,7 +301,7 @@ impl RestorePlan {
         // The names the result takes: a channel of the file of the same name
         // is not carried beside it (Blender's denoised picture).
         let taken = written(energy.channels(), usize::MAX, blender.as_ref());
-        let carried = carry(job, &mut energy, &taken)?;
+        let (carried, other_views) = carry(job, &mut energy, &taken)?;
         let read = energy.channels();
         let beauty = read.len() - carried.len();
         let picks = pair(job, &energy, &denoised, beauty)?;
@@ -357,6 +359,7 @@ impl RestorePlan {
             channels,
             beauty,
             carried,
+            other_views,
             copied,
             layout,
             variance_pass,
@@ -431,6 +434,7 @@ impl RestorePlan {
             // The carried channels are copies, out of the ledger.
             ledger: report.ledger[..self.beauty].to_vec(),
             carried_channels: self.carried.clone(),
+            views_left_out: self.other_views.clone(),
             blender_layers: self.blender.clone(),
             ..report.with_variance_pass(self.variance_pass.clone())
         })
@@ -547,14 +551,19 @@ fn statistics(
 /// denoised picture's place and names.
 fn energy_of(job: &RestoreJob) -> Result<(ExrInput, Option<(String, String)>)> {
     let energy = job.select.open(&job.energy)?;
-    let first = energy.channels().into_iter().next().unwrap_or_default();
+    // The layers as the default view sees them (a stereo file's
+    // `ViewLayer.Combined.left` is `ViewLayer.Combined`), as `--layer`
+    // takes them.
+    let scope = crate::io::reader::view_scope(&job.energy, energy.header(), None, false)?;
+    let first = (energy.channels().first())
+        .and_then(|c| scope.seen(c))
+        .unwrap_or_default();
     let combined = first.rsplit_once('.').map(|(l, _)| l.to_string());
     let noisy = combined.as_ref().and_then(|l| {
         let noisy = format!("{}Noisy Image", l.strip_suffix("Combined")?);
-        let names = crate::io::reader::channel_names(energy.header());
-        names
-            .iter()
-            .any(|n| n.starts_with(&format!("{noisy}.")))
+        let names = scope.seen_names(&crate::io::reader::channel_names(energy.header()));
+        (names.iter())
+            .any(|(n, _)| n.starts_with(&format!("{noisy}.")))
             .then_some(noisy)
     });
     match (noisy, combined) {
@@ -591,7 +600,14 @@ fn written(read: Vec<String>, beauty: usize, blender: Option<&(String, String)>)
 /// `filter`'s; a stereo file's other views are dropped), but one of a name
 /// the result takes (`taken`). Their names, in strip order after the
 /// beauty's.
-fn carry(job: &RestoreJob, energy: &mut ExrInput, taken: &[String]) -> Result<Vec<String>> {
+///
+/// Also the channels of a stereo file's other views, left out: restore
+/// reads the default view.
+fn carry(
+    job: &RestoreJob,
+    energy: &mut ExrInput,
+    taken: &[String],
+) -> Result<(Vec<String>, Vec<String>)> {
     let scope = crate::io::reader::view_scope(&job.energy, energy.header(), None, false)?;
     let carried = energy
         .carry_channels(|name, uint| {
@@ -608,7 +624,11 @@ fn carry(job: &RestoreJob, energy: &mut ExrInput, taken: &[String]) -> Result<Ve
         .into_iter()
         .map(|(name, _)| name)
         .collect();
-    Ok(carried)
+    let other_views = (energy.dropped_channels().iter())
+        .filter(|n| scope.excludes(n))
+        .cloned()
+        .collect();
+    Ok((carried, other_views))
 }
 
 /// How the restore runs within `--max-memory` ([`fit_restore_memory`]):

@@ -64,6 +64,9 @@ pub struct RestoreReport {
     /// The energy image's channels beside the beauty (depth, normals, ids,
     /// light AOVs), carried into the result as it has them.
     pub carried_channels: Vec<String>,
+    /// A stereo file's other views' channels, left out of the result
+    /// (restore reads the default view).
+    pub views_left_out: Vec<String>,
     /// Blender with its denoiser on: the render's layer read as the energy
     /// (`Noisy Image`) and the denoised layer whose names the result takes
     /// (`Combined`); `None` otherwise.
@@ -140,6 +143,7 @@ impl RestoreReport {
                 .collect(),
             levels: restored.levels.clone(),
             carried_channels: Vec::new(),
+            views_left_out: Vec::new(),
             blender_layers: None,
             ledger: stats.ledger.clone(),
             kept_share: if mass > 0.0 {
