@@ -16,7 +16,7 @@ use exr::meta::attribute::{ChannelDescription, ChannelList, IntegerBounds, LineO
 use exr::meta::header::Header;
 use exr::meta::BlockDescription;
 use exr::prelude::{Compression, SmallVec, Text};
-use rayon::iter::{IntoParallelIterator, ParallelIterator};
+use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
 
 use crate::error::{Error, Result};
 use crate::pipeline::{Precision, Sink};
@@ -57,6 +57,8 @@ pub struct ExrOutput {
     /// Sample type of each channel, in our rows' order.
     types: Vec<Precision>,
     pending: Vec<f32>,
+    /// ZIP's split bytes of the last blocks compressed, for the next ones.
+    spare: Vec<Vec<u8>>,
     pending_y0: usize,
     /// Bytes of `pending` compressed at once ([`OutputSettings::write_ahead`]).
     write_ahead: usize,
@@ -496,6 +498,7 @@ impl ExrOutput {
             lines,
             types,
             pending: Vec::new(),
+            spare: Vec::new(),
             pending_y0: 0,
             write_ahead: WRITE_AHEAD_BYTES,
             compression: header_compression,
@@ -539,9 +542,14 @@ impl ExrOutput {
         let pending = &self.pending;
         let types = &self.types;
         let region = crate::trace::region("compress");
-        let chunks: Vec<Result<(usize, Chunk)>> = (0..full)
+        // ZIP's split bytes go into the buffers of the blocks before.
+        let spare: Vec<Vec<u8>> = (0..full)
+            .map(|_| self.spare.pop().unwrap_or_default())
+            .collect();
+        let chunks: Vec<Result<(usize, Chunk, Vec<u8>)>> = (0..full)
             .into_par_iter()
-            .map(|b| {
+            .zip(spare)
+            .map(|(b, spare)| {
                 let _task = region.task("compress");
                 let r0 = b * lines;
                 let r1 = ((b + 1) * lines).min(rows);
@@ -558,16 +566,17 @@ impl ExrOutput {
                     // The samples go straight into the split bytes ZIP
                     // deflates.
                     let per_row: usize = order.iter().map(|&c| types[c].bytes() / 2).sum();
-                    let mut split = super::zip::SplitBlock::new((r1 - r0) * w * per_row);
+                    let mut split = super::zip::SplitBlock::new_in(spare, (r1 - r0) * w * per_row);
                     samples.put(&mut split);
+                    let (stream, spare) = split.compress(super::zip::ZIP_LEVEL);
                     let chunk = Chunk {
                         layer_index: 0,
                         compressed_block: CompressedBlock::ScanLine(CompressedScanLineBlock {
                             y_coordinate: y as i32 + header.own_attributes.layer_position.1,
-                            compressed_pixels_le: split.compress(super::zip::ZIP_LEVEL),
+                            compressed_pixels_le: stream,
                         }),
                     };
-                    return Ok((y / lines, chunk));
+                    return Ok((y / lines, chunk, spare));
                 }
                 let mut data = Vec::with_capacity((r1 - r0) * row_len * 4);
                 samples.put(&mut data);
@@ -583,13 +592,16 @@ impl ExrOutput {
                 let chunk = block
                     .compress_to_chunk(headers)
                     .map_err(|e| Error::from_exr(&self.dest, e, "compressing"))?;
-                Ok((y / lines, chunk))
+                Ok((y / lines, chunk, spare))
             })
             .collect();
         for c in chunks {
-            let c = c?;
+            let (index, chunk, spare) = c?;
+            if !spare.is_empty() {
+                self.spare.push(spare);
+            }
             let tx = self.tx.as_ref().ok_or(Error::Interrupted)?;
-            if tx.send(c).is_err() {
+            if tx.send((index, chunk)).is_err() {
                 return self.join_writer();
             }
         }

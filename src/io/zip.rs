@@ -39,22 +39,23 @@ pub fn compress(le: &[u8], level: u8) -> Vec<u8> {
             first[half - 1] = le[n - 1];
         }
     }
-    pack(buf, level).unwrap_or_else(|_| le.to_vec())
+    pack(&mut buf, level).unwrap_or_else(|| le.to_vec())
 }
 
 /// Apply the delta predictor to a block's split bytes and deflate them:
-/// the stream, or (when it is no smaller) the split bytes as they came.
-fn pack(mut buf: Vec<u8>, level: u8) -> std::result::Result<Vec<u8>, Vec<u8>> {
+/// the stream, or `None` (the split bytes as they came) when it is no
+/// smaller.
+fn pack(buf: &mut [u8], level: u8) -> Option<Vec<u8>> {
     let n = buf.len();
     for i in (1..n).rev() {
         buf[i] = buf[i].wrapping_sub(buf[i - 1]).wrapping_add(128);
     }
-    let packed = miniz_oxide::deflate::compress_to_vec_zlib(&buf, level);
+    let packed = miniz_oxide::deflate::compress_to_vec_zlib(buf, level);
     if packed.len() < n {
-        return Ok(packed);
+        return Some(packed);
     }
-    undo_predictor(&mut buf, None);
-    Err(buf)
+    undo_predictor(buf, None);
+    None
 }
 
 /// One block's bytes split as ZIP deflates them, filled sample by sample:
@@ -68,12 +69,14 @@ pub struct SplitBlock {
 }
 
 impl SplitBlock {
-    /// A block of `pairs` pairs of bytes (samples are 2 or 4 bytes).
-    pub fn new(pairs: usize) -> Self {
-        SplitBlock {
-            buf: vec![0u8; 2 * pairs],
-            pairs: 0,
-        }
+    /// A block of `pairs` pairs of bytes (samples are 2 or 4 bytes), in
+    /// `buf` (a buffer of an earlier block, or empty): on wide outputs a
+    /// block is megabytes, and a fresh one a block costs as much in page
+    /// faults as its deflate. Every byte is written before it is read.
+    pub fn new_in(mut buf: Vec<u8>, pairs: usize) -> Self {
+        buf.truncate(2 * pairs);
+        buf.resize(2 * pairs, 0);
+        SplitBlock { buf, pairs: 0 }
     }
 
     /// Append `src`'s samples, `N` little-endian bytes each (`N` even);
@@ -99,17 +102,19 @@ impl SplitBlock {
         self.pairs += count * per;
     }
 
-    /// The block's ZIP stream ([`compress`] of its bytes).
-    pub fn compress(self, level: u8) -> Vec<u8> {
-        pack(self.buf, level).unwrap_or_else(|split| {
-            let half = split.len() / 2;
-            let (first, second) = split.split_at(half);
+    /// The block's ZIP stream ([`compress`] of its bytes), and its buffer
+    /// for the next block.
+    pub fn compress(mut self, level: u8) -> (Vec<u8>, Vec<u8>) {
+        let stream = pack(&mut self.buf, level).unwrap_or_else(|| {
+            let half = self.buf.len() / 2;
+            let (first, second) = self.buf.split_at(half);
             first
                 .iter()
                 .zip(second)
                 .flat_map(|(&a, &b)| [a, b])
                 .collect()
-        })
+        });
+        (stream, self.buf)
     }
 }
 
@@ -388,6 +393,9 @@ mod tests {
         // noise it does not (stored raw: the bytes back in order), and
         // samples past the block's end left out.
         let mut seed = 0x853c_49e6_748f_ea9bu64;
+        // Each block in the buffer of the one before (a smaller one after a
+        // larger: its old bytes are all written over).
+        let mut spare = Vec::new();
         for (words, halves, every) in [(0, 0, 2), (1, 0, 2), (0, 1, 2), (301, 77, 3), (64, 9, 1)] {
             let data = test_bytes(4 * words + 2 * halves, &mut seed, every, 5);
             let (w, h) = data.split_at(4 * words);
@@ -399,11 +407,12 @@ mod tests {
                 .chunks_exact(2)
                 .map(|b| u16::from_le_bytes([b[0], b[1]]))
                 .collect();
-            let mut block = SplitBlock::new(2 * words + halves);
+            let mut block = SplitBlock::new_in(std::mem::take(&mut spare), 2 * words + halves);
             block.push(&w, u32::to_le_bytes);
             block.push(&h, u16::to_le_bytes);
             block.push(&h, u16::to_le_bytes);
-            let packed = block.compress(ZIP_LEVEL);
+            let (packed, buf) = block.compress(ZIP_LEVEL);
+            spare = buf;
             assert_eq!(packed, compress(&data, ZIP_LEVEL), "{words} + {halves}");
             if every == 1 {
                 assert_eq!(packed, data, "noise is stored as it is");
