@@ -37,6 +37,9 @@ pub struct Books {
     data: Vec<bool>,
     /// Channels of data checked all the same ([`Books::set_checked`]).
     checked: Vec<bool>,
+    /// Buffers of output rows the writer is done with
+    /// ([`Books::recycle_rows`]).
+    recycled: Option<crossbeam_channel::Receiver<Vec<f32>>>,
 }
 
 impl Books {
@@ -53,6 +56,7 @@ impl Books {
             coverage: None,
             data: Vec::new(),
             checked: Vec::new(),
+            recycled: None,
         }
     }
 
@@ -61,6 +65,13 @@ impl Books {
     /// infinite), and they stay out of the ledger.
     pub fn set_data(&mut self, data: Vec<bool>) {
         self.data = data;
+    }
+
+    /// Take the buffers of output rows from `rx` once the writer is done
+    /// with them: on wide images a strip's rows are megabytes, and a fresh
+    /// buffer a strip costs as much in page faults as rounding them.
+    pub fn recycle_rows(&mut self, rx: crossbeam_channel::Receiver<Vec<f32>>) {
+        self.recycled = Some(rx);
     }
 
     /// Channels whose input a rule reads as light's evidence (statistics
@@ -247,7 +258,16 @@ impl Books {
     fn run_rows(&self, input: Option<&Take<'_>>, finish: Option<&Finish<'_>>) -> BooksLoop {
         let nch = self.names.len();
         let w = finish.map_or(0, |f| f.w);
-        let mut data = finish.map_or_else(Vec::new, |f| vec![0.0f32; (f.b - f.a) * nch * w]);
+        // Every value of the rows is written (`finish_row`).
+        let mut data = finish.map_or_else(Vec::new, |f| {
+            let n = (f.b - f.a) * nch * w;
+            let mut v = (self.recycled.as_ref())
+                .and_then(|r| r.try_recv().ok())
+                .unwrap_or_default();
+            v.truncate(n);
+            v.resize(n, 0.0);
+            v
+        });
         let mut jobs = Vec::new();
         if let Some(t) = input {
             jobs.extend(t.rows.iter().map(|r| RowJob::In(r)));

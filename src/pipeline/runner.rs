@@ -99,6 +99,9 @@ pub fn run_streamer<S: Source, K: Sink>(
     };
     let (recycle, recycled) = crossbeam_channel::bounded(STRIPS_RECYCLED);
     streamer.recycle_strips(recycle);
+    // The output rows' buffers back from the writer: one waits at most.
+    let (rows_back, rows_recycled) = crossbeam_channel::bounded(1);
+    streamer.recycle_rows(rows_recycled);
     let ahead = ReadAhead {
         strip_rows,
         window_blocks: &window,
@@ -107,7 +110,7 @@ pub fn run_streamer<S: Source, K: Sink>(
 
     let result = std::thread::scope(|scope| -> Result<()> {
         let reader = scope.spawn(move || read_strips(source, io, ahead, strip_tx));
-        let writer = scope.spawn(move || write_rows(sink, io, total, row_rx));
+        let writer = scope.spawn(move || write_rows(sink, io, total, (row_rx, rows_back)));
         let channels = (&strip_rx, &row_tx);
         let (mut filter_result, writer_failed) = filter_strips(
             &mut streamer,
@@ -262,13 +265,16 @@ pub(crate) fn read_strips<S: Source>(
 }
 
 /// The writer thread: the rows from `rx` (each with the strip that finished
-/// them) into `sink`, finished once all `total` rows are in; its result and
-/// busy seconds.
+/// them) into `sink`, finished once all `total` rows are in, their buffers
+/// back to the filter through `back`; its result and busy seconds.
 fn write_rows<K: Sink>(
     mut sink: K,
     pool: &rayon::ThreadPool,
     total: usize,
-    rx: crossbeam_channel::Receiver<(usize, OutRows)>,
+    (rx, back): (
+        crossbeam_channel::Receiver<(usize, OutRows)>,
+        crossbeam_channel::Sender<Vec<f32>>,
+    ),
 ) -> (Result<()>, f64) {
     let mut written = 0;
     let mut busy = 0.0;
@@ -285,6 +291,8 @@ fn write_rows<K: Sink>(
             return (Err(e), busy);
         }
         written += rows.rows;
+        // The filter may have gone, or have a buffer waiting: then it goes.
+        let _ = back.try_send(rows.data);
     }
     // Finish only a complete image: when the filter stopped early its error
     // is the one reported, and the sink is dropped unfinished (an EXR output

@@ -232,6 +232,11 @@ impl Streamer {
         self.input.recycle_strips(tx);
     }
 
+    /// Take the output rows' buffers back from `rx` ([`Books::recycle_rows`]).
+    pub fn recycle_rows(&mut self, rx: crossbeam_channel::Receiver<Vec<f32>>) {
+        self.books.recycle_rows(rx);
+    }
+
     /// What the method counted.
     pub fn counts(&self) -> MethodCounts {
         self.stage.counts()
