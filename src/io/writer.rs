@@ -16,7 +16,7 @@ use exr::meta::attribute::{ChannelDescription, ChannelList, IntegerBounds, LineO
 use exr::meta::header::Header;
 use exr::meta::BlockDescription;
 use exr::prelude::{Compression, SmallVec, Text};
-use rayon::iter::{IndexedParallelIterator, IntoParallelIterator, ParallelIterator};
+use rayon::iter::{IntoParallelIterator, ParallelIterator};
 
 use crate::error::{Error, Result};
 use crate::pipeline::{Precision, Sink};
@@ -58,7 +58,7 @@ pub struct ExrOutput {
     types: Vec<Precision>,
     pending: Vec<f32>,
     /// ZIP's split bytes of the last blocks compressed, for the next ones.
-    spare: Vec<Vec<u8>>,
+    spare: std::sync::Mutex<Vec<Vec<u8>>>,
     pending_y0: usize,
     /// Bytes of `pending` compressed at once ([`OutputSettings::write_ahead`]).
     write_ahead: usize,
@@ -498,7 +498,7 @@ impl ExrOutput {
             lines,
             types,
             pending: Vec::new(),
-            spare: Vec::new(),
+            spare: std::sync::Mutex::new(Vec::new()),
             pending_y0: 0,
             write_ahead: WRITE_AHEAD_BYTES,
             compression: header_compression,
@@ -542,14 +542,13 @@ impl ExrOutput {
         let pending = &self.pending;
         let types = &self.types;
         let region = crate::trace::region("compress");
-        // ZIP's split bytes go into the buffers of the blocks before.
-        let spare: Vec<Vec<u8>> = (0..full)
-            .map(|_| self.spare.pop().unwrap_or_default())
-            .collect();
-        let chunks: Vec<Result<(usize, Chunk, Vec<u8>)>> = (0..full)
+        // ZIP's split bytes go into the buffers of the blocks before, each
+        // back as soon as its block is compressed: no more of them than
+        // blocks compressed at once.
+        let spare = &self.spare;
+        let chunks: Vec<Result<(usize, Chunk)>> = (0..full)
             .into_par_iter()
-            .zip(spare)
-            .map(|(b, spare)| {
+            .map(|b| {
                 let _task = region.task("compress");
                 let r0 = b * lines;
                 let r1 = ((b + 1) * lines).min(rows);
@@ -566,9 +565,14 @@ impl ExrOutput {
                     // The samples go straight into the split bytes ZIP
                     // deflates.
                     let per_row: usize = order.iter().map(|&c| types[c].bytes() / 2).sum();
-                    let mut split = super::zip::SplitBlock::new_in(spare, (r1 - r0) * w * per_row);
+                    let buf = spare.lock().ok().and_then(|mut s| s.pop());
+                    let pairs = (r1 - r0) * w * per_row;
+                    let mut split = super::zip::SplitBlock::new_in(buf.unwrap_or_default(), pairs);
                     samples.put(&mut split);
-                    let (stream, spare) = split.compress(super::zip::ZIP_LEVEL);
+                    let (stream, buf) = split.compress(super::zip::ZIP_LEVEL);
+                    if let Ok(mut s) = spare.lock() {
+                        s.push(buf);
+                    }
                     let chunk = Chunk {
                         layer_index: 0,
                         compressed_block: CompressedBlock::ScanLine(CompressedScanLineBlock {
@@ -576,7 +580,7 @@ impl ExrOutput {
                             compressed_pixels_le: stream,
                         }),
                     };
-                    return Ok((y / lines, chunk, spare));
+                    return Ok((y / lines, chunk));
                 }
                 let mut data = Vec::with_capacity((r1 - r0) * row_len * 4);
                 samples.put(&mut data);
@@ -592,16 +596,12 @@ impl ExrOutput {
                 let chunk = block
                     .compress_to_chunk(headers)
                     .map_err(|e| Error::from_exr(&self.dest, e, "compressing"))?;
-                Ok((y / lines, chunk, spare))
+                Ok((y / lines, chunk))
             })
             .collect();
         for c in chunks {
-            let (index, chunk, spare) = c?;
-            if !spare.is_empty() {
-                self.spare.push(spare);
-            }
             let tx = self.tx.as_ref().ok_or(Error::Interrupted)?;
-            if tx.send((index, chunk)).is_err() {
+            if tx.send(c?).is_err() {
                 return self.join_writer();
             }
         }
