@@ -451,6 +451,19 @@ fn blenders_stereo_file_filters_each_view_with_its_own_passes() {
     );
     let rp = planes(&right);
     assert_eq!(rp["ViewLayer.Combined.right.G"][at], 60.0, "a lamp there");
+    // Another view's layer named in this view's run: the way to it.
+    let o = epfilt(&[
+        "filter",
+        s(&input),
+        s(&right),
+        "--layer",
+        "ViewLayer.Combined.right",
+    ]);
+    let said = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && said.contains("--view right"),
+        "{said}"
+    );
     // --view all: each view as filtering it alone gives.
     let all = d.join("all.exr");
     filter(&[s(&input), s(&all), "--view", "all"], d);

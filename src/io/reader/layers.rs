@@ -222,13 +222,20 @@ pub(crate) fn choose_channels(
     let all = channel_names(header);
     let seen = scope.seen_names(&all);
     // A layer named with the run's view is the layer the view sees.
-    let layer = layer.map(|l| {
-        let l = l.trim_end_matches('.');
-        match (l.rsplit_once('.'), scope.name()) {
-            (Some((rest, v)), Some(this)) if v == this => rest,
+    let layer = match layer.map(|l| l.trim_end_matches('.')) {
+        Some(l) => Some(match l.rsplit_once('.') {
+            Some((rest, v)) if scope.name() == Some(v) => rest,
+            Some((rest, v)) if scope.views.iter().any(|o| o == v) => {
+                return Err(Error::Config(format!(
+                    "{}: --layer {l:?} is of the view {v:?}, not of this run's {:?}: --view {v} --layer {rest:?} filters it",
+                    path.display(),
+                    scope.name().unwrap_or_default()
+                )));
+            }
             _ => l,
-        }
-    });
+        }),
+        None => None,
+    };
     let (chosen, _) = choose_among(path, seen.iter().map(|(s, _)| s.clone()).collect(), layer)?;
     let selected: Vec<Selected> = (chosen.into_iter())
         .map(|c| {
