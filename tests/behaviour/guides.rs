@@ -23,6 +23,18 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// `epfilt info --json`'s first part, which must succeed.
+fn info_part(path: &Path) -> serde_json::Value {
+    let info = epfilt(&["info", s(path), "--json"]);
+    assert!(
+        info.status.success(),
+        "{}",
+        String::from_utf8_lossy(&info.stderr)
+    );
+    let j: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+    j["parts"][0].clone()
+}
+
 /// Run `epfilt filter` with a JSON report; the report.
 fn filter(args: &[&str], dir: &Path) -> serde_json::Value {
     let rep = dir.join("r.json");
@@ -351,14 +363,7 @@ fn of_blenders_layers_the_view_layers_render_is_filtered_with_its_passes() {
     names.extend(["A", "B", "G", "R"].map(|c| format!("ViewLayer.Noisy Image.{c}")));
     let channels = names.iter().map(|n| (n.as_str(), flat(1.0))).collect();
     write_flat(&path, (w, h), channels);
-    let info = epfilt(&["info", s(&path), "--json"]);
-    assert!(
-        info.status.success(),
-        "{}",
-        String::from_utf8_lossy(&info.stderr)
-    );
-    let j: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
-    let part = &j["parts"][0];
+    let part = &info_part(&path);
     assert_eq!(part["filtered"][0], "ViewLayer.Combined.R", "{part}");
     assert_eq!(
         part["guide_channels"]["emission"][0], "ViewLayer.Emit.R",
@@ -430,9 +435,7 @@ fn blenders_stereo_file_filters_each_view_with_its_own_passes() {
     let lamp = (12, 10);
     let input = d.join("stereo.exr");
     write_blender_stereo(&input, (w, h), lamp, &["Combined"]);
-    let info = epfilt(&["info", s(&input), "--json"]);
-    let j: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
-    let part = &j["parts"][0];
+    let part = &info_part(&input);
     assert_eq!(part["filtered"][0], "ViewLayer.Combined.left.R", "{part}");
     assert_eq!(
         part["guide_channels"]["emission"][0], "ViewLayer.Emit.left.R",
