@@ -1,6 +1,7 @@
-//! Writing the filtered image: scan-line blocks compressed in parallel on the
-//! shared pool, written in increasing y by the `exr` chunk writer on its own
-//! thread, into a temporary file beside the destination. The file is renamed
+//! Writing the filtered image: scan-line blocks filled as the rows come and
+//! compressed in parallel on the shared pool (`blocks.rs`), written in
+//! increasing y by the `exr` chunk writer on its own thread, into a
+//! temporary file beside the destination. The file is renamed
 //! into place only by [`ExrOutput::commit`], after the caller has checked the
 //! energy ledger; dropped uncommitted, it is removed.
 
@@ -8,18 +9,19 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::thread::JoinHandle;
 
-use exr::block::chunk::{Chunk, CompressedBlock, CompressedScanLineBlock};
+use exr::block::chunk::Chunk;
 use exr::block::writer::ChunksWriter;
-use exr::block::{BlockIndex, UncompressedBlock};
 use exr::math::Vec2;
 use exr::meta::attribute::{ChannelDescription, ChannelList, IntegerBounds, LineOrder, SampleType};
 use exr::meta::header::Header;
 use exr::meta::BlockDescription;
 use exr::prelude::{Compression, SmallVec, Text};
-use rayon::iter::{IntoParallelIterator, ParallelIterator};
 
 use crate::error::{Error, Result};
 use crate::pipeline::{Precision, Sink};
+
+mod blocks;
+use blocks::Blocks;
 
 /// What the output file looks like.
 #[derive(Clone, Debug, Default)]
@@ -49,19 +51,13 @@ pub struct ExrOutput {
     dest: PathBuf,
     staged: Option<super::Staged>,
     headers: SmallVec<[Header; 3]>,
-    w: usize,
     nch: usize,
     /// For each header channel (sorted by name), its index in our rows.
     order: Vec<usize>,
-    lines: usize,
     /// Sample type of each channel, in our rows' order.
     types: Vec<Precision>,
-    pending: Vec<f32>,
-    /// ZIP's split bytes of the last blocks compressed, for the next ones.
-    spare: std::sync::Mutex<Vec<Vec<u8>>>,
-    pending_y0: usize,
-    /// Bytes of `pending` compressed at once ([`OutputSettings::write_ahead`]).
-    write_ahead: usize,
+    /// The blocks being filled.
+    blocks: Blocks,
     compression: Compression,
     note: Option<String>,
     /// A text attribute whose value is filled in (same length) at finish.
@@ -263,7 +259,7 @@ impl ExrOutput {
         header.shared_attributes = shared;
         let mut out = Self::start(dest, header, channels, types)?;
         if settings.write_ahead > 0 {
-            out.write_ahead = settings.write_ahead;
+            out.blocks.set_batch_bytes(settings.write_ahead);
         }
         out.note = note;
         Ok(out)
@@ -451,7 +447,7 @@ impl ExrOutput {
         channels: &[String],
         types: Vec<Precision>,
     ) -> Result<Self> {
-        let (w, _) = (header.layer_size.0, header.layer_size.1);
+        let (w, h) = (header.layer_size.0, header.layer_size.1);
         let staged = super::Staged::new(dest, ".exr.tmp")?;
         let order: Vec<usize> = header
             .channels
@@ -466,6 +462,13 @@ impl ExrOutput {
             .collect();
         let lines = header.compression.scan_lines_per_block();
         let header_compression = header.compression;
+        let mut blocks = Blocks::new(
+            (w, h, lines),
+            order.clone(),
+            types.clone(),
+            super::zip::codes(header_compression),
+        );
+        blocks.set_batch_bytes(WRITE_AHEAD_BYTES);
         let headers: SmallVec<[Header; 3]> = SmallVec::from_vec(vec![header]);
 
         let file = staged
@@ -492,15 +495,10 @@ impl ExrOutput {
             dest: dest.to_path_buf(),
             staged: Some(staged),
             headers,
-            w,
             nch: channels.len(),
             order,
-            lines,
             types,
-            pending: Vec::new(),
-            spare: std::sync::Mutex::new(Vec::new()),
-            pending_y0: 0,
-            write_ahead: WRITE_AHEAD_BYTES,
+            blocks,
             compression: header_compression,
             note: None,
             fill: None,
@@ -510,104 +508,28 @@ impl ExrOutput {
         })
     }
 
+    /// Compress and send the blocks [`Blocks::take`] gives.
     fn flush_blocks(&mut self, all: bool) -> Result<()> {
-        let row_len = self.nch * self.w;
-        let rows = self.pending.len() / row_len;
         let height = self.headers[0].layer_size.1;
-        if all && self.pending_y0 + rows != height {
+        if all && self.blocks.rows_in() != height {
             // Only the image's last block may be short.
             return Err(Error::Internal(format!(
                 "{}: output incomplete ({} of {height} rows)",
                 self.dest.display(),
-                self.pending_y0 + rows
+                self.blocks.rows_in()
             )));
         }
-        let full = if all {
-            rows.div_ceil(self.lines)
-        } else {
-            rows / self.lines
-        };
-        // Compress blocks in batches of `write_ahead` bytes (one block at
-        // the least): a batch of one or two blocks per strip made the
-        // writer's compression the critical path (the scaling model,
-        // 12288x12288).
-        let block = (row_len * self.lines * 4).max(1);
-        let batch = (self.write_ahead / block).max(1);
-        if full == 0 || (!all && full < batch) {
+        let ready = self.blocks.take(all);
+        if ready.is_empty() {
             return Ok(());
         }
-        let (w, nch, lines, y0) = (self.w, self.nch, self.lines, self.pending_y0);
-        let headers = &self.headers;
-        let order = &self.order;
-        let pending = &self.pending;
-        let types = &self.types;
-        let region = crate::trace::region("compress");
-        // ZIP's split bytes go into the buffers of the blocks before, each
-        // back as soon as its block is compressed: no more of them than
-        // blocks compressed at once.
-        let spare = &self.spare;
-        let chunks: Vec<Result<(usize, Chunk)>> = (0..full)
-            .into_par_iter()
-            .map(|b| {
-                let _task = region.task("compress");
-                let r0 = b * lines;
-                let r1 = ((b + 1) * lines).min(rows);
-                let (header, y) = (&headers[0], y0 + r0);
-                let samples = Samples {
-                    pending,
-                    rows: r0..r1,
-                    order,
-                    types,
-                    w,
-                    nch,
-                };
-                if super::zip::codes(header.compression) {
-                    // The samples go straight into the split bytes ZIP
-                    // deflates.
-                    let per_row: usize = order.iter().map(|&c| types[c].bytes() / 2).sum();
-                    let buf = spare.lock().ok().and_then(|mut s| s.pop());
-                    let pairs = (r1 - r0) * w * per_row;
-                    let mut split = super::zip::SplitBlock::new_in(buf.unwrap_or_default(), pairs);
-                    samples.put(&mut split);
-                    let (stream, buf) = split.compress(super::zip::ZIP_LEVEL);
-                    if let Ok(mut s) = spare.lock() {
-                        s.push(buf);
-                    }
-                    let chunk = Chunk {
-                        layer_index: 0,
-                        compressed_block: CompressedBlock::ScanLine(CompressedScanLineBlock {
-                            y_coordinate: y as i32 + header.own_attributes.layer_position.1,
-                            compressed_pixels_le: stream,
-                        }),
-                    };
-                    return Ok((y / lines, chunk));
-                }
-                let mut data = Vec::with_capacity((r1 - r0) * row_len * 4);
-                samples.put(&mut data);
-                let block = UncompressedBlock {
-                    index: BlockIndex {
-                        layer: 0,
-                        pixel_position: Vec2(0, y),
-                        pixel_size: Vec2(w, r1 - r0),
-                        level: Vec2(0, 0),
-                    },
-                    data,
-                };
-                let chunk = block
-                    .compress_to_chunk(headers)
-                    .map_err(|e| Error::from_exr(&self.dest, e, "compressing"))?;
-                Ok((y / lines, chunk))
-            })
-            .collect();
-        for c in chunks {
+        for c in self.blocks.compress(ready, &self.headers) {
+            let c = c.map_err(|e| Error::from_exr(&self.dest, e, "compressing"))?;
             let tx = self.tx.as_ref().ok_or(Error::Interrupted)?;
-            if tx.send(c?).is_err() {
+            if tx.send(c).is_err() {
                 return self.join_writer();
             }
         }
-        let used = (full * lines).min(rows);
-        self.pending.drain(..used * row_len);
-        self.pending_y0 += used;
         Ok(())
     }
 
@@ -647,8 +569,21 @@ impl Sink for ExrOutput {
     }
 
     fn write_rows(&mut self, _y0: usize, _rows: usize, data: &[f32]) -> Result<()> {
-        self.pending.extend_from_slice(data);
-        self.flush_blocks(false)
+        let row_len = (self.nch * self.headers[0].layer_size.0).max(1);
+        let mut rows = data.chunks_exact(row_len).len();
+        let mut data = data;
+        while rows > 0 {
+            let Some(n) = self.blocks.push(data) else {
+                return Err(Error::Internal(format!(
+                    "{}: rows written past the image's end",
+                    self.dest.display()
+                )));
+            };
+            self.flush_blocks(false)?;
+            data = &data[n * row_len..];
+            rows -= n;
+        }
+        Ok(())
     }
 
     fn finish(&mut self) -> Result<()> {
@@ -663,53 +598,6 @@ impl Sink for ExrOutput {
             t.file().sync_all().ok();
         }
         Ok(())
-    }
-}
-
-/// The rows of one output block, in the file's channel order and types.
-struct Samples<'a> {
-    pending: &'a [f32],
-    rows: std::ops::Range<usize>,
-    order: &'a [usize],
-    types: &'a [Precision],
-    w: usize,
-    nch: usize,
-}
-
-/// Where a block's samples go, each as its native-endian bytes.
-trait SampleSink {
-    fn put<const N: usize>(&mut self, src: &[f32], bytes: impl Fn(f32) -> [u8; N]);
-}
-
-impl SampleSink for Vec<u8> {
-    fn put<const N: usize>(&mut self, src: &[f32], bytes: impl Fn(f32) -> [u8; N]) {
-        src.iter().for_each(|&v| self.extend_from_slice(&bytes(v)));
-    }
-}
-
-impl SampleSink for super::zip::SplitBlock {
-    fn put<const N: usize>(&mut self, src: &[f32], bytes: impl Fn(f32) -> [u8; N]) {
-        self.push(src, bytes);
-    }
-}
-
-impl Samples<'_> {
-    /// Every sample of the block's rows into `sink`, row by row, channel by
-    /// channel.
-    fn put(&self, sink: &mut impl SampleSink) {
-        for r in self.rows.clone() {
-            for &c in self.order {
-                let src = &self.pending[(r * self.nch + c) * self.w..][..self.w];
-                match self.types[c] {
-                    Precision::F32 => sink.put(src, f32::to_ne_bytes),
-                    Precision::F16 => {
-                        sink.put(src, |v| half::f16::from_f32(v).to_bits().to_ne_bytes())
-                    }
-                    // Whole numbers (the pipeline's rounding checked).
-                    Precision::U32 => sink.put(src, |v| (v as u32).to_ne_bytes()),
-                }
-            }
-        }
     }
 }
 
