@@ -18,6 +18,9 @@ pub struct RowWindow<T> {
     /// Each row held: its block (counted from `base`) and first value.
     rows: VecDeque<(usize, usize)>,
     blocks: VecDeque<Vec<T>>,
+    /// Per block, whether it is a strip taken whole (lent: it goes back to
+    /// its source, never to `spare`, even when it is one row long).
+    lent: VecDeque<bool>,
     /// The number of the block at the front of `blocks`.
     base: usize,
     spare: Vec<Vec<T>>,
@@ -35,6 +38,7 @@ impl<T: Copy> RowWindow<T> {
             row_len,
             rows: VecDeque::new(),
             blocks: VecDeque::new(),
+            lent: VecDeque::new(),
             base: 0,
             spare: Vec::new(),
             high_water: 0,
@@ -69,11 +73,12 @@ impl<T: Copy> RowWindow<T> {
         self.high_water
     }
 
-    /// Append `v` as a block of `n` whole rows.
-    fn push_block(&mut self, v: Vec<T>, n: usize) {
+    /// Append `v` as a block of `n` whole rows (`lent`: a strip's).
+    fn push_block(&mut self, v: Vec<T>, n: usize, lent: bool) {
         let id = self.base + self.blocks.len();
         self.rows.extend((0..n).map(|k| (id, k * self.row_len)));
         self.blocks.push_back(v);
+        self.lent.push_back(lent);
         self.high_water = self.high_water.max(self.rows.len());
     }
 
@@ -82,7 +87,7 @@ impl<T: Copy> RowWindow<T> {
         let mut v = self.spare.pop().unwrap_or_default();
         v.clear();
         v.resize(self.row_len, fill);
-        self.push_block(v, 1);
+        self.push_block(v, 1, false);
         self.blocks
             .back_mut()
             .map(|v| v.as_mut_slice())
@@ -93,7 +98,7 @@ impl<T: Copy> RowWindow<T> {
     /// length), keeping its buffer.
     pub fn push_rows(&mut self, data: Vec<T>, rows: usize) {
         assert_eq!(data.len(), rows * self.row_len, "a strip of whole rows");
-        self.push_block(data, rows);
+        self.push_block(data, rows, true);
     }
 
     /// Append a row for a caller that overwrites every value: a recycled
@@ -101,7 +106,7 @@ impl<T: Copy> RowWindow<T> {
     /// `fill`.
     pub fn push_stale(&mut self, fill: T) {
         match self.spare.pop() {
-            Some(v) if v.len() == self.row_len => self.push_block(v, 1),
+            Some(v) if v.len() == self.row_len => self.push_block(v, 1, false),
             other => {
                 if let Some(v) = other {
                     self.spare.push(v);
@@ -159,7 +164,8 @@ impl<T: Copy> RowWindow<T> {
         (Rows { first, rows }, new)
     }
 
-    /// Drop rows below `y`, keeping the buffers of single rows for reuse.
+    /// Drop rows below `y`, keeping the buffers of the window's own rows for
+    /// reuse.
     pub fn evict_below(&mut self, y: usize) {
         while self.first < y && !self.rows.is_empty() {
             self.rows.pop_front();
@@ -174,10 +180,12 @@ impl<T: Copy> RowWindow<T> {
             .front()
             .map_or(self.base + self.blocks.len(), |r| r.0);
         while self.base < keep_from {
+            let lent = self.lent.pop_front().unwrap_or(false);
             if let Some(v) = self.blocks.pop_front() {
-                // A buffer of one row is kept; a strip's goes (back to its
-                // source, where there is a way).
-                if v.len() == self.row_len {
+                // The window's own row is kept; a strip's buffer goes (back
+                // to its source, where there is a way), one row long or not:
+                // kept, the one-row strips of a whole image piled up here.
+                if !lent {
                     self.spare.push(v);
                 } else if let Some(tx) = &self.recycle {
                     let _ = tx.try_send(v);
@@ -311,6 +319,13 @@ mod tests {
         assert_eq!(w.spare.len(), 1);
         w.push(7);
         assert_eq!(w.get(9), &[7, 7]);
+        // Nor a strip of one row: a window fed one-row strips holds no
+        // more buffers than rows (and row 9's own).
+        for y in 10..100 {
+            w.push_rows(vec![y as u8; 2], 1);
+            w.evict_below(y - 2);
+        }
+        assert_eq!((w.blocks.len(), w.spare.len()), (3, 1));
         // Zero-length rows are still rows.
         let mut z = RowWindow::<u8>::new(0);
         z.push(0);
