@@ -103,6 +103,10 @@ pub fn input_fingerprint(input: &InputFile) -> String {
         let at = data + rest / SAMPLED_SPANS * k;
         h.update(&bytes[at..(at + SPAN_BYTES).min(bytes.len())]);
     }
+    // Each span read maps the page cache's folio around it, up to
+    // megabytes: 17 MB for a 346 MB file, held until the reader passed
+    // each span, and outside what `--max-memory` counts.
+    input.release(data, bytes.len());
     format!("{:032x}", h.digest128())
 }
 
@@ -262,6 +266,34 @@ mod tests {
         let print = |p: &Path| input_fingerprint(&InputFile::open(p).unwrap());
         assert_ne!(print(&a), print(&b));
         assert_eq!(print(&a), print(&a));
+    }
+
+    /// The resident kilobytes of the mapping of `path` in this process.
+    #[cfg(target_os = "linux")]
+    fn mapped_kb(path: &Path) -> Option<u64> {
+        let smaps = std::fs::read_to_string("/proc/self/smaps").ok()?;
+        let name = path.to_str()?;
+        let mut lines = smaps.lines().skip_while(|l| !l.ends_with(name));
+        lines.next()?;
+        let rss = lines.find(|l| l.starts_with("Rss:"))?;
+        rss.split_whitespace().nth(1)?.parse().ok()
+    }
+
+    #[test]
+    #[cfg(target_os = "linux")]
+    fn a_fingerprint_leaves_no_pixel_pages_mapped() {
+        // The page before the pixel data holds the header.
+        const HEADER_KB: u64 = 4;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("big.hdr");
+        let mut bytes = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 1024 +X 2048\n".to_vec();
+        bytes.resize(8 << 20, 7);
+        std::fs::write(&path, &bytes).unwrap();
+        let input = InputFile::open(&path).unwrap();
+        let _ = input_fingerprint(&input);
+        let kb = mapped_kb(&path).expect("the input's mapping in smaps");
+        // Before the release, the 64 spans read kept at least a page each.
+        assert!(kb <= HEADER_KB, "{kb} KB of the input still mapped");
     }
 
     #[test]

@@ -77,6 +77,12 @@ impl InputFile {
         self.map.bytes()
     }
 
+    /// Let the pages of bytes `start..end` go from this process (they stay
+    /// in the page cache: a later read maps them again).
+    pub fn release(&self, start: usize, end: usize) {
+        self.map.release(start, end);
+    }
+
     pub(super) fn map(&self) -> Arc<MappedFile> {
         Arc::clone(&self.map)
     }
