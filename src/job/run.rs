@@ -119,10 +119,13 @@ impl FilterPlan<'_> {
         Ok(Some(mean))
     }
 
-    /// The input's samples the filter reads, from sample row `y`.
+    /// The input's samples the filter reads, from sample row `y`, in the
+    /// run's window of blocks (ep-box's first pass decodes with no decoder
+    /// thread: in batches of 24 MiB, whatever `--max-memory` chose).
     fn source_from(&self, y: usize) -> Cropped<crate::io::reader::InputSource<'_>> {
         let g = &self.geometry;
-        Cropped::new(self.input.source_from(y), g.full_w, g.read_w, g.read_h)
+        let source = (self.input.source_from(y)).with_batch_blocks(self.pipeline.window_blocks);
+        Cropped::new(source, g.full_w, g.read_w, g.read_h)
     }
 
     fn source(&self) -> Cropped<crate::io::reader::InputSource<'_>> {

@@ -611,6 +611,7 @@ impl ExrInput {
             row_len: self.selected.len() * w,
             released: None,
             ahead: None,
+            batch_blocks: 0,
         })
     }
 

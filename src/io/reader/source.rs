@@ -24,18 +24,23 @@ pub struct ExrSource<'a> {
     pub(super) released: Option<(usize, usize)>,
     /// The block rows a decoder thread decodes ahead ([`Source::decoder`]).
     pub(super) ahead: Option<super::ahead::Ahead>,
+    /// Blocks a batch decoded without a decoder thread holds at the least
+    /// (0: [`read_ahead_blocks`]).
+    pub(super) batch_blocks: usize,
 }
 
 /// The block rows of the batch that starts at block row `from`: whole block
-/// rows until the batch covers `max_rows` rows and holds at least
-/// [`read_ahead_blocks`] blocks (READ_AHEAD_BYTES of blocks, two chunks at the
-/// least) whatever the thread
-/// count: several strips' blocks decode in parallel (two per worker made the
-/// reader the critical path), memory does not grow with the threads, and a
-/// 1-thread run cuts the
-/// work as a 16-thread one.
-fn batch_end(input: &ExrInput, from: usize, max_rows: usize) -> usize {
-    let want_chunks = read_ahead_blocks(input.block_bytes()) as usize;
+/// rows until the batch covers `max_rows` rows and holds at least `blocks`
+/// blocks (0: [`read_ahead_blocks`], READ_AHEAD_BYTES of blocks, two chunks
+/// at the least) whatever the thread count: several strips' blocks decode in
+/// parallel (two per worker made the reader the critical path), memory does
+/// not grow with the threads, and a 1-thread run cuts the work as a
+/// 16-thread one.
+fn batch_end(input: &ExrInput, from: usize, max_rows: usize, blocks: usize) -> usize {
+    let want_chunks = match blocks {
+        0 => read_ahead_blocks(input.block_bytes()) as usize,
+        n => n,
+    };
     let (mut end, mut chunks, mut rows) = (from, 0, 0);
     while end < input.rows.len() && (chunks < want_chunks || rows < max_rows) {
         chunks += input.rows[end].chunks.len();
@@ -96,6 +101,18 @@ pub enum InputSource<'a> {
     Pfm(crate::io::pfm::PfmSource<'a>),
 }
 
+impl InputSource<'_> {
+    /// Decode batches of at least `blocks` blocks where no decoder thread
+    /// decodes ahead (0: [`read_ahead_blocks`]): a first pass over the input
+    /// holds no more than the run's window of blocks.
+    pub fn with_batch_blocks(mut self, blocks: usize) -> Self {
+        if let InputSource::Exr(s) = &mut self {
+            s.batch_blocks = blocks;
+        }
+        self
+    }
+}
+
 impl Source for InputSource<'_> {
     fn next_strip(&mut self, max_rows: usize) -> Result<Option<Strip>> {
         match self {
@@ -137,7 +154,7 @@ impl Source for ExrSource<'_> {
             // last strip may be short): the buffer is then reused as it is,
             // never moved or grown around rows still held.
             while buffered(self) == 0 && self.next_row < self.input.rows.len() {
-                let end = batch_end(self.input, self.next_row, max_rows);
+                let end = batch_end(self.input, self.next_row, max_rows, self.batch_blocks);
                 let batch = &self.input.rows[self.next_row..end];
                 self.head = 0;
                 decode_batch(

@@ -141,3 +141,42 @@ fn a_vector_layer_is_not_a_luminance() {
     // Unlayered X, Y, Z (a Radiance XYZE picture's) keep their Y.
     assert_eq!(layer_colour(&names(&["X", "Y", "Z"]), ""), Some(vec!["Y"]));
 }
+
+#[test]
+fn a_batch_without_a_decoder_holds_the_blocks_asked_for() {
+    use crate::pipeline::{Precision, Sink};
+    // One-line blocks: 64 of them, a few hundred bytes each, so the
+    // default batch (READ_AHEAD_BYTES of blocks) is the whole image.
+    let (w, h) = (4, 64);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("zips.exr");
+    let channels = names(&["R", "G", "B"]);
+    let mut out = crate::io::writer::ExrOutput::create_new(
+        &path,
+        w,
+        h,
+        &channels,
+        exr::prelude::Compression::ZIP1,
+        Precision::F32,
+        &[],
+    )
+    .unwrap();
+    let rows: Vec<f32> = (0..w * h * 3).map(|i| i as f32).collect();
+    out.write_rows(0, h, &rows).unwrap();
+    out.finish().unwrap();
+    out.commit().unwrap();
+    let input = ExrInput::open(&path, None).unwrap();
+    let buffered = |blocks: usize| {
+        let mut src = input.source().with_batch_blocks(blocks);
+        let strip = crate::pipeline::Source::next_strip(&mut src, 1)
+            .unwrap()
+            .unwrap();
+        assert_eq!(strip.data, rows[..w * 3]);
+        match src {
+            InputSource::Exr(e) => e.buf.len() / (w * 3),
+            _ => unreachable!("an EXR"),
+        }
+    };
+    assert_eq!(buffered(0), h);
+    assert_eq!(buffered(2), 2);
+}
