@@ -223,9 +223,11 @@ impl Treat<'_> {
             let mut part = 0.0;
             match surface {
                 Some(from) => {
-                    let surfs = &st.win.surf.get(ty)[xa..xb];
+                    let p = &st.win.packing;
+                    let surfs = &st.win.surf.get(ty)[xa * p.bytes..xb * p.bytes];
                     for (k, (tx, &wx)) in (xa..xb).zip(gx).enumerate() {
-                        let q = (lights[k] != 0, &surfs[k]);
+                        let q = p.unpack(&surfs[k * p.bytes..(k + 1) * p.bytes]);
+                        let q = (lights[k] != 0, &q);
                         if st.guides.accepts(q, (tx, ty), Some((from, x, y))) {
                             part += wx;
                         }
