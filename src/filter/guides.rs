@@ -35,23 +35,6 @@ impl GuideLayout {
         self.albedo.is_some() || self.normal.is_some() || self.depth.is_some()
     }
 
-    /// How a pixel's [`Surface`] is held in a row of bytes: only the guides
-    /// present ([`Packing`]).
-    pub fn packing(&self) -> Packing {
-        let mut bytes = 0;
-        let mut place = |present: bool, n: usize| {
-            let at = present.then_some(bytes);
-            bytes += if present { n } else { 0 };
-            at
-        };
-        Packing {
-            albedo: place(self.albedo.is_some(), 3),
-            normal: place(self.normal.is_some(), 3),
-            depth: place(self.depth.is_some(), 4),
-            bytes,
-        }
-    }
-
     /// Whether no guide is present.
     pub fn is_empty(&self) -> bool {
         self.emission.is_none() && !self.surface()
@@ -126,54 +109,6 @@ pub struct Surface {
     pub hit: bool,
     /// Depth (zero where none).
     pub depth: f32,
-}
-
-/// Where each guide of a [`Surface`] lies in its packed bytes, and how many
-/// there are: albedo 3, normal 3, depth 4, each only where the render has
-/// it. A window of surfaces over a spread's reach holds a few bytes a pixel
-/// (3 with albedo alone) where a `Surface` takes 12.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Packing {
-    albedo: Option<usize>,
-    normal: Option<usize>,
-    depth: Option<usize>,
-    /// Bytes a pixel.
-    pub bytes: usize,
-}
-
-impl Packing {
-    /// `s` into `out` (`self.bytes` long).
-    #[inline]
-    pub fn pack(&self, s: &Surface, out: &mut [u8]) {
-        if let Some(i) = self.albedo {
-            out[i..i + 3].copy_from_slice(&s.albedo);
-        }
-        if let Some(i) = self.normal {
-            out[i..i + 3].copy_from_slice(&s.normal.map(|c| c as u8));
-        }
-        if let Some(i) = self.depth {
-            out[i..i + 4].copy_from_slice(&s.depth.to_le_bytes());
-        }
-    }
-
-    /// The surface [`Packing::pack`] put in `b`: a pixel saw a surface where
-    /// its normal is not zero (a unit normal in 1/127 always has a component
-    /// of 73 or more).
-    #[inline]
-    pub fn unpack(&self, b: &[u8]) -> Surface {
-        let mut s = Surface::default();
-        if let Some(i) = self.albedo {
-            s.albedo = [b[i], b[i + 1], b[i + 2]];
-        }
-        if let Some(i) = self.normal {
-            s.normal = [b[i] as i8, b[i + 1] as i8, b[i + 2] as i8];
-            s.hit = s.normal != [0; 3];
-        }
-        if let Some(i) = self.depth {
-            s.depth = f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
-        }
-        s
-    }
 }
 
 impl Surface {
@@ -311,40 +246,6 @@ impl EmissionParts {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn a_packed_surface_is_the_surface_in_the_bytes_of_its_guides() {
-        let values: [[f32; 7]; 6] = [
-            [0.2, 0.5, 0.9, 0.0, 0.0, 1.0, 3.5],
-            [1.7, -0.1, f32::NAN, -0.6, 0.7, 0.3, -0.0],
-            // A pixel that saw no surface: no normal, no depth.
-            [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, f32::INFINITY],
-            [0.4, 0.4, 0.4, 1e-9, 0.0, 0.0, 1e30],
-            [0.4, 0.4, 0.4, f32::NAN, 1.0, 0.0, f32::NAN],
-            [0.0, 1.0, 0.5, -1.0, -1.0, -1.0, 2.0],
-        ];
-        for mask in 1..8u8 {
-            let layout = GuideLayout {
-                albedo: (mask & 1 != 0).then_some([0, 1, 2]),
-                normal: (mask & 2 != 0).then_some([3, 4, 5]),
-                depth: (mask & 4 != 0).then_some(6),
-                emission: None,
-            };
-            let p = layout.packing();
-            let want = 3 * (mask & 1) + 3 * (mask >> 1 & 1) + 4 * (mask >> 2 & 1);
-            assert_eq!(p.bytes, usize::from(want));
-            for v in &values {
-                let s = Surface::read(&layout, |i| v[i]);
-                let mut b = vec![0xAA; p.bytes];
-                p.pack(&s, &mut b);
-                let u = p.unpack(&b);
-                // The same fields, the depth's bits included.
-                assert_eq!((u.albedo, u.normal, u.hit), (s.albedo, s.normal, s.hit));
-                assert_eq!(u.depth.to_bits(), s.depth.to_bits(), "{mask} {v:?}");
-            }
-        }
-        assert_eq!(GuideLayout::default().packing().bytes, 0);
-    }
 
     fn surface(albedo: f32, normal: [f32; 3], depth: f32) -> Surface {
         let layout = GuideLayout {

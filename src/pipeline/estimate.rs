@@ -423,7 +423,7 @@ fn estimate_pixel_bytes(
     let held = p + r + strip + 2;
     let input = w.saturating_mul(nall * 4).saturating_mul(held);
     let per_pixel = if gauss {
-        let surface = job.guides.packing().bytes as u64;
+        let surface = if job.guides.surface() { 12 } else { 0 };
         w.saturating_mul(8 + 8 + 1).saturating_mul(strip + 16)
             + w.saturating_mul(1 + surface).saturating_mul(held)
     } else {

@@ -4,7 +4,7 @@
 //! spread may reach it.
 
 use crate::error::{Error, Result};
-use crate::filter::guides::{emission_part, is_light, GuideLayout, Packing, Surface, SurfaceRule};
+use crate::filter::guides::{emission_part, is_light, GuideLayout, Surface, SurfaceRule};
 use crate::filter::luminance::Luminance;
 use crate::pipeline::ChannelMode;
 
@@ -53,11 +53,6 @@ impl GuideReader {
             layout,
             w,
         })
-    }
-
-    /// How a pixel's surface is packed in a window's row.
-    pub fn packing(&self) -> Packing {
-        self.layout.packing()
     }
 
     /// Whether an emission guide is read.

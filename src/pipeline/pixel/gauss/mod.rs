@@ -27,7 +27,7 @@ use crate::error::Result;
 use crate::filter::ep_gauss::pixel::{
     gaussian_taps, local_max, median, noisy, Widths, BACKGROUND_REACH, BACKGROUND_SAMPLES,
 };
-use crate::filter::guides::{GuideLayout, Packing, Surface, SurfaceRule};
+use crate::filter::guides::{GuideLayout, Surface, SurfaceRule};
 use crate::filter::ValidParams;
 use crate::geometry::mirror;
 use crate::pipeline::counts::{MethodCounts, SpreadCounts};
@@ -98,9 +98,8 @@ struct Windows {
     /// 1 where the emission guide says a pixel is a light.
     light: RowWindow<u8>,
     /// Each pixel's surface guides (with them), for the rows a spread may
-    /// reach (as `light`), packed (`packing.bytes` a pixel).
-    surf: RowWindow<u8>,
-    packing: Packing,
+    /// reach (as `light`).
+    surf: RowWindow<Surface>,
 }
 
 /// ep-gauss's rule at S = 1, and what its passes hold.
@@ -143,7 +142,6 @@ impl GaussRule {
             .map(|(&r, &k)| gaussian_taps(r, k, params.cutoff))
             .collect();
         let reach = widths.max_reach();
-        let packing = guides.packing();
         Ok(GaussRule {
             w,
             h,
@@ -165,8 +163,7 @@ impl GaussRule {
                 bg: RowWindow::new(w),
                 cand: RowWindow::new(w),
                 light: RowWindow::new(w),
-                surf: RowWindow::new(w * packing.bytes),
-                packing,
+                surf: RowWindow::new(w),
             },
             emissive: 0,
             counts: SpreadCounts::default(),
@@ -199,14 +196,14 @@ impl Rule for GaussRule {
         }
         if self.guides.surface() {
             for _ in a..b {
-                self.win.surf.push_stale(0);
+                self.win.surf.push_stale(Surface::default());
             }
-            let (guides, packing) = (&self.guides, &self.win.packing);
+            let guides = &self.guides;
             let rows = self.win.surf.range_mut(a, b);
             rows.into_par_iter().enumerate().for_each(|(k, srow)| {
                 let row = input.get(a + k);
-                for (x, q) in srow.chunks_exact_mut(packing.bytes).enumerate() {
-                    packing.pack(&guides.surface_of(row, x), q);
+                for (x, q) in srow.iter_mut().enumerate() {
+                    *q = guides.surface_of(row, x);
                 }
             });
         }
@@ -304,9 +301,7 @@ impl Rule for GaussRule {
             for (tx, &wx) in (xa..xb).zip(gx) {
                 let ok = match on {
                     Some((from, surfs)) => {
-                        let b = self.win.packing.bytes;
-                        let q = self.win.packing.unpack(&surfs[tx * b..(tx + 1) * b]);
-                        let q = (lights[tx] != 0, &q);
+                        let q = (lights[tx] != 0, &surfs[tx]);
                         guides.accepts(q, (tx, ty), Some((from, sx, sy)))
                     }
                     None => lights[tx] == 0,
@@ -355,7 +350,7 @@ impl Rule for GaussRule {
             WindowUse {
                 name: "surface guides",
                 rows: self.win.surf.high_water(),
-                row_bytes: w * self.win.packing.bytes,
+                row_bytes: w * std::mem::size_of::<Surface>(),
             },
         ]
     }

@@ -223,11 +223,9 @@ impl Treat<'_> {
             let mut part = 0.0;
             match surface {
                 Some(from) => {
-                    let p = &st.win.packing;
-                    let surfs = &st.win.surf.get(ty)[xa * p.bytes..xb * p.bytes];
+                    let surfs = &st.win.surf.get(ty)[xa..xb];
                     for (k, (tx, &wx)) in (xa..xb).zip(gx).enumerate() {
-                        let q = p.unpack(&surfs[k * p.bytes..(k + 1) * p.bytes]);
-                        let q = (lights[k] != 0, &q);
+                        let q = (lights[k] != 0, &surfs[k]);
                         if st.guides.accepts(q, (tx, ty), Some((from, x, y))) {
                             part += wx;
                         }
