@@ -103,9 +103,9 @@ pub fn input_fingerprint(input: &InputFile) -> String {
         let at = data + rest / SAMPLED_SPANS * k;
         h.update(&bytes[at..(at + SPAN_BYTES).min(bytes.len())]);
     }
-    // Each span read maps the page cache's folio around it, up to
-    // megabytes: 17 MB for a 346 MB file, held until the reader passed
-    // each span, and outside what `--max-memory` counts.
+    // Each span read maps the page cache's whole folio around it (up to
+    // megabytes), held until the reader passed each span, and outside what
+    // `--max-memory` counts (docs/bench/memory-s1.md).
     input.release(data, bytes.len());
     format!("{:032x}", h.digest128())
 }

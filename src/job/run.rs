@@ -121,7 +121,8 @@ impl FilterPlan<'_> {
 
     /// The input's samples the filter reads, from sample row `y`, in the
     /// run's window of blocks (ep-box's first pass decodes with no decoder
-    /// thread: in batches of 24 MiB, whatever `--max-memory` chose).
+    /// thread: in batches of `READ_AHEAD_BYTES`, whatever `--max-memory`
+    /// chose).
     fn source_from(&self, y: usize) -> Cropped<crate::io::reader::InputSource<'_>> {
         let g = &self.geometry;
         let source = (self.input.source_from(y)).with_batch_blocks(self.pipeline.window_blocks);

@@ -155,9 +155,9 @@ pub const NOISY_SHARE_INV: u64 = 10;
 /// What the process holds beside a job's buffers: its code and libraries,
 /// the threads' stacks, and the freed pages the allocator keeps for reuse
 /// (the peak beside the heap's, docs/bench/memory.md). `--max-memory`
-/// counts it. The binary's four arenas keep up to 4 MiB each: beside a
-/// heap of 22 MB, anonymous pages measured 8 to 19 MB more from run to run
-/// (16 MiB let one run in five of `gauss --max-memory 64` over).
+/// counts it. The binary's four arenas each keep up to their trim
+/// threshold of freed memory, which varies from run to run with the thread
+/// that freed last: the share counts all four (docs/bench/memory.md).
 pub const PROGRAM_BYTES: u64 = 24 << 20;
 
 /// The input file's bytes handed over before the reader releases their
