@@ -2,7 +2,7 @@
 //! memory estimate checked against `--max-memory` before anything is
 //! allocated.
 
-use super::{FilterParams, Halo, Method, PipelineConfig, StripLayout};
+use super::{ChannelMode, FilterParams, Halo, Method, PipelineConfig, StripLayout};
 
 /// Bytes of input one strip should hold by default: four strips are in
 /// flight at most (two queued, one being read, one being filtered), so this
@@ -430,7 +430,13 @@ fn estimate_pixel_bytes(
         w.saturating_mul(8 + 8 + 1 + 1)
             .saturating_mul(2 * p + strip + 2)
     };
-    let sources = (w.saturating_mul(held) / NOISY_SHARE_INV).saturating_mul(40 + 16 * nch);
+    // A source holds two values a spread channel, none of the others.
+    let spread = job
+        .modes
+        .iter()
+        .filter(|&&m| m == ChannelMode::Spread)
+        .count() as u64;
+    let sources = (w.saturating_mul(held) / NOISY_SHARE_INV).saturating_mul(40 + 16 * spread);
     let rows = w
         .saturating_mul(nch * 8)
         .saturating_mul(strip.max(16) + threads);

@@ -89,9 +89,8 @@ pub struct ExcessRule {
     h: usize,
     nch: usize,
     lum: Vec<f64>,
-    /// Which channels give up the excess (the colour and additive layers).
-    modes: Vec<ChannelMode>,
-    /// The channels a spread moves.
+    /// The channels that give up the excess (the colour and additive
+    /// layers).
     spread: Vec<usize>,
     stats: StatsLayout,
     factors: Factors,
@@ -163,7 +162,6 @@ impl ExcessRule {
             spread: (0..nch)
                 .filter(|&c| modes[c] == ChannelMode::Spread)
                 .collect(),
-            modes,
             stats,
             factors: Factors {
                 params: params.clone(),
@@ -216,6 +214,10 @@ impl Rule for ExcessRule {
 
     fn passes(&self) -> Vec<Reads> {
         passes(self.factors.passes, self.factors.reach)
+    }
+
+    fn spread(&self) -> &[usize] {
+        &self.spread
     }
 
     fn reach(&self) -> usize {
@@ -284,9 +286,8 @@ impl Rule for ExcessRule {
             if g.is_some_and(|g| !g.accepts_in(row, (tx, ty), from)) {
                 continue;
             }
-            // Channels that are not spread keep their bits.
-            for &c in &self.spread {
-                acc[c * w + tx] += shares[c];
+            for (j, s) in shares.iter().enumerate() {
+                acc[j * w + tx] += s;
             }
         }
     }
@@ -404,12 +405,11 @@ impl ExcessRule {
         Band {
             w: self.w,
             h: self.h,
-            nch: self.nch,
             input,
             ylum: &self.win.ylum,
             cap: &self.win.cap,
             noisy: &self.win.noisy,
-            modes: &self.modes,
+            spread: &self.spread,
             passes: self.factors.passes,
             dl: self.factors.dl,
             ltvis: self.factors.ltvis,
@@ -424,12 +424,11 @@ impl ExcessRule {
 struct Band<'a> {
     w: usize,
     h: usize,
-    nch: usize,
     input: &'a RowWindow<f32>,
     ylum: &'a RowWindow<f64>,
     cap: &'a RowWindow<f64>,
     noisy: &'a RowWindow<u8>,
-    modes: &'a [ChannelMode],
+    spread: &'a [usize],
     passes: usize,
     dl: f64,
     ltvis: f64,
@@ -541,13 +540,13 @@ impl Band<'_> {
     /// pixels `passes` (and the guard's reach) either side, which holds
     /// everything their decisions read (see `filter::ep_box`). The sources in row-major order, their
     /// values (per source what its pixel keeps, then what each receiver
-    /// gets, a value a channel each) and what it counted.
+    /// gets, a value a spread channel each) and what it counted.
     fn treat(
         &self,
         rows: Range<usize>,
         columns: Range<usize>,
     ) -> (Vec<Source>, Vec<f64>, ExcessCounts) {
-        let (w, h, nch) = (self.w, self.h, self.nch);
+        let (w, h, n) = (self.w, self.h, self.spread.len());
         let margin = self.passes + GUARD_REACH;
         let ba = rows.start.saturating_sub(margin);
         let bb = (rows.end + margin).min(h);
@@ -599,7 +598,7 @@ impl Band<'_> {
             counters.spread += 1;
             counters.capped += u64::from(found < wanted);
             let f = colour_fraction(excess, y);
-            g.give_up(&mut values, (src, x), self.modes, (f, found as f64));
+            g.give_up(&mut values, (src, x), self.spread, (f, found as f64));
             sources.push(Source {
                 x: x as u32,
                 y: yy as u32,
@@ -625,7 +624,7 @@ impl Band<'_> {
         let mut order: Vec<usize> = (0..sources.len()).collect();
         order.sort_by_key(|&i| (sources[i].y, sources[i].x));
         let values = (order.iter())
-            .flat_map(|&i| values[i * 2 * nch..(i + 1) * 2 * nch].iter().copied())
+            .flat_map(|&i| values[i * 2 * n..(i + 1) * 2 * n].iter().copied())
             .collect();
         let sources = order.iter().map(|&i| sources[i]).collect();
         (sources, values, counters)

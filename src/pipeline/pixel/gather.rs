@@ -29,32 +29,36 @@ pub trait Placed {
 }
 
 /// The sources treated and not yet written past, in row-major order, with
-/// their values: per source, what its pixel keeps (`nch`) then what one unit
-/// of its kernel's weight carries (`nch`).
+/// their values: per source, what its pixel keeps of each spread channel
+/// then what one unit of its kernel's weight carries of each (the other
+/// channels keep their bits: a source holds nothing of them).
 pub(super) struct Sources<S> {
     list: Vec<S>,
     values: Vec<f64>,
-    nch: usize,
+    /// The channels spread (an output row's planes).
+    spread: Vec<usize>,
     /// The widest kernel's reach in rows.
     reach: usize,
     high_water: usize,
 }
 
 impl<S: Placed + Sync> Sources<S> {
-    /// No sources yet, of `nch` channels, kernels reaching `reach` rows.
-    pub(super) fn new(nch: usize, reach: usize) -> Self {
+    /// No sources yet, spreading channels `spread`, kernels reaching
+    /// `reach` rows.
+    pub(super) fn new(spread: Vec<usize>, reach: usize) -> Self {
         Sources {
             list: Vec::new(),
             values: Vec::new(),
-            nch,
+            spread,
             reach,
             high_water: 0,
         }
     }
 
-    /// Add the sources of rows below any held (`values`: `2 nch` each).
+    /// Add the sources of rows below any held (`values`: two a spread
+    /// channel each).
     pub(super) fn extend(&mut self, list: Vec<S>, values: Vec<f64>) {
-        debug_assert_eq!(values.len(), list.len() * 2 * self.nch);
+        debug_assert_eq!(values.len(), list.len() * self.stride());
         debug_assert!(list.windows(2).all(|p| order(&p[0]) <= order(&p[1])));
         self.list.extend(list);
         self.values.extend(values);
@@ -65,7 +69,12 @@ impl<S: Placed + Sync> Sources<S> {
     pub(super) fn release(&mut self, y: usize) {
         let n = self.list.partition_point(|s| s.at().1 + self.reach < y);
         self.list.drain(..n);
-        self.values.drain(..n * 2 * self.nch);
+        self.values.drain(..n * self.stride());
+    }
+
+    /// Values a source holds.
+    fn stride(&self) -> usize {
+        2 * self.spread.len()
     }
 
     /// The most sources held at once.
@@ -75,7 +84,7 @@ impl<S: Placed + Sync> Sources<S> {
 
     /// Bytes a source holds beside its entry.
     pub(super) fn value_bytes(&self) -> usize {
-        2 * self.nch * 8
+        self.stride() * 8
     }
 
     /// Make output rows `a..b` into `out` (one slice a row, `w` columns
@@ -93,7 +102,8 @@ impl<S: Placed + Sync> Sources<S> {
     ) where
         F: Fn(&S, &[f64], usize, &mut [f64]) + Sync,
     {
-        let (nch, reach) = (self.nch, self.reach);
+        let (reach, spread) = (self.reach, &self.spread);
+        let n = spread.len();
         let region = crate::trace::region("spread rows");
         let scratch = || Scratch {
             acc: spare
@@ -109,7 +119,8 @@ impl<S: Placed + Sync> Sources<S> {
             .for_each_init(scratch, |scratch, (k, out)| {
                 let _task = region.task("spread rows");
                 let y = a + k;
-                for (o, &v) in out.iter_mut().zip(&input.get(y)[..nch * w]) {
+                // The row's channels: the input row's first.
+                for (o, &v) in out.iter_mut().zip(input.get(y)) {
                     *o = v as f64;
                 }
                 let lo = self.list.partition_point(|s| s.at().1 + reach < y);
@@ -119,19 +130,23 @@ impl<S: Placed + Sync> Sources<S> {
                 }
                 let acc = &mut scratch.acc;
                 acc.clear();
-                acc.resize(nch * w, -0.0);
+                acc.resize(n * w, -0.0);
                 for (i, s) in self.list[lo..hi].iter().enumerate() {
-                    let v = &self.values[(lo + i) * 2 * nch..(lo + i + 1) * 2 * nch];
+                    let v = &self.values[(lo + i) * 2 * n..(lo + i + 1) * 2 * n];
                     let (x, sy) = s.at();
                     if sy == y {
-                        for (c, &k) in v[..nch].iter().enumerate() {
+                        for (&c, &k) in spread.iter().zip(&v[..n]) {
                             out[c * w + x] = k;
                         }
                     }
-                    add(s, &v[nch..], y, acc);
+                    add(s, &v[n..], y, acc);
                 }
-                for (o, &n) in out.iter_mut().zip(acc.iter()) {
-                    *o += n;
+                // Adding `-0.0` keeps every value's bits: the channels no
+                // source spreads are left as read.
+                for (&c, acc) in spread.iter().zip(acc.chunks_exact(w)) {
+                    for (o, &a) in out[c * w..(c + 1) * w].iter_mut().zip(acc) {
+                        *o += a;
+                    }
                 }
             });
     }
@@ -166,10 +181,10 @@ pub(super) struct Gathered<S> {
 
 impl<S: Placed + Sync> Gathered<S> {
     /// Nothing yet, for rows of `nch` channels `w` wide and sources that
-    /// reach `reach` rows.
-    pub(super) fn new(nch: usize, w: usize, reach: usize) -> Self {
+    /// spread channels `spread` and reach `reach` rows.
+    pub(super) fn new(nch: usize, spread: Vec<usize>, w: usize, reach: usize) -> Self {
         Gathered {
-            sources: Sources::new(nch, reach),
+            sources: Sources::new(spread, reach),
             rows: RowWindow::new(nch * w),
             spare: Mutex::new(Vec::new()),
             released: 0,
@@ -265,7 +280,7 @@ mod tests {
     fn rows_hold_the_kept_values_and_the_shares_and_untouched_rows_the_input() {
         let (w, h) = (6, 5);
         let win = input(w, h);
-        let mut g = Gathered::new(1, w, 1);
+        let mut g = Gathered::new(1, vec![0], w, 1);
         g.sources
             .extend(vec![Dot(1, 1), Dot(3, 1)], vec![0.5, 2.0, 7.0, 4.0]);
         g.make_to(&win, (h, w), below);
@@ -286,5 +301,39 @@ mod tests {
         g.release(3);
         assert!(g.sources.list.is_empty() && g.sources.values.is_empty());
         assert_eq!(g.sources.high_water(), 2);
+    }
+
+    #[test]
+    fn channels_no_source_spreads_keep_their_bits_and_cost_a_source_nothing() {
+        let (w, h) = (4, 3);
+        // Channel 0 is spread; channel 1 is carried (signed zeros and a
+        // NaN among its values).
+        let carried = |y: usize, x: usize| match (y + x) % 3 {
+            0 => -0.0,
+            1 => f32::NAN,
+            _ => (y * w + x) as f32,
+        };
+        let mut win = RowWindow::new(2 * w);
+        for y in 0..h {
+            let row = win.push(0.0);
+            for x in 0..w {
+                row[x] = 1.0;
+                row[w + x] = carried(y, x);
+            }
+        }
+        let mut g = Gathered::new(2, vec![0], w, 1);
+        // Two values a source: what it keeps of channel 0 and what it
+        // carries of it.
+        g.sources.extend(vec![Dot(1, 1)], vec![0.25, 0.75]);
+        assert_eq!(g.sources.value_bytes(), 16);
+        g.make_to(&win, (h, w), below);
+        assert_eq!(g.rows.get(1)[1], 0.25);
+        assert_eq!(g.rows.get(2)[2], 1.75);
+        for y in 0..h {
+            for x in 0..w {
+                let v = g.rows.get(y)[w + x];
+                assert_eq!(v.to_bits(), (carried(y, x) as f64).to_bits(), "{x} {y}");
+            }
+        }
     }
 }

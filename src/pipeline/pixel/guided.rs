@@ -6,7 +6,6 @@
 use crate::error::{Error, Result};
 use crate::filter::guides::{emission_part, is_light, GuideLayout, Surface, SurfaceRule};
 use crate::filter::luminance::Luminance;
-use crate::pipeline::ChannelMode;
 
 /// A stage's reader of the guides in its strip rows.
 pub struct GuideReader {
@@ -138,26 +137,23 @@ impl GuideReader {
     /// Append a source's values for pixel `x` of `row` (its `modes.len()`
     /// filtered channels first): what it keeps, then what one of `weight`
     /// units of its kernel carries, where it gives up the fraction `f` of
-    /// what the emission guide leaves of each spread channel (the other
-    /// channels keep their values).
+    /// what the emission guide leaves of each channel of `spread` (the
+    /// other channels keep their values, and are not listed).
     pub fn give_up(
         &self,
         values: &mut Vec<f64>,
         (row, x): (&[f32], usize),
-        modes: &[ChannelMode],
+        spread: &[usize],
         (f, weight): (f64, f64),
     ) {
-        let nch = modes.len();
+        let n = spread.len();
         let at = values.len();
-        values.resize(at + 2 * nch, 0.0);
-        let (kept, shares) = values[at..].split_at_mut(nch);
-        for (c, mode) in modes.iter().enumerate() {
-            kept[c] = row[c * self.w + x] as f64;
-            if *mode == ChannelMode::Spread {
-                let removed = self.residual(row, c, x) * f;
-                kept[c] -= removed;
-                shares[c] = removed / weight;
-            }
+        values.resize(at + 2 * n, 0.0);
+        let (kept, shares) = values[at..].split_at_mut(n);
+        for (j, &c) in spread.iter().enumerate() {
+            let removed = self.residual(row, c, x) * f;
+            kept[j] = row[c * self.w + x] as f64 - removed;
+            shares[j] = removed / weight;
         }
     }
 

@@ -65,6 +65,9 @@ pub trait Rule: Send + Sync {
 
     /// The image's width and height, and the filtered channels.
     fn shape(&self) -> (usize, usize, usize);
+    /// The channels a spread moves (a source's values and its
+    /// [`Rule::add`]'s accumulator planes are theirs, in this order).
+    fn spread(&self) -> &[usize];
     /// What each pass after the input reads, in order; the last is the
     /// treatment.
     fn passes(&self) -> Vec<Reads>;
@@ -81,7 +84,7 @@ pub trait Rule: Send + Sync {
     /// Treat the pixels of rows `rows` and columns `columns`: the spread
     /// pixels in row-major order, their values (per source what its pixel
     /// keeps, then what one unit of its kernel's weight carries, a value a
-    /// channel each) and what it counted.
+    /// spread channel each) and what it counted.
     fn treat(
         &self,
         input: &RowWindow<f32>,
@@ -90,8 +93,9 @@ pub trait Rule: Send + Sync {
     ) -> (Vec<Self::Source>, Vec<f64>, Self::Tally);
     /// Add what a treatment task counted of `sources`.
     fn tally(&mut self, tally: Self::Tally, sources: &[Self::Source]);
-    /// Add to `acc` (row `ty`, `w` columns per channel) the shares of
-    /// `source`, one unit of its weight carrying `shares`.
+    /// Add to `acc` (row `ty`, `w` columns per spread channel) the shares
+    /// of `source`, one unit of its weight carrying `shares` (one a spread
+    /// channel).
     fn add(
         &self,
         input: &RowWindow<f32>,
@@ -160,7 +164,7 @@ impl<R: Rule> PixelStage<R> {
             w,
             h,
             nch,
-            gathered: Gathered::new(nch, w, reach),
+            gathered: Gathered::new(nch, rule.spread().to_vec(), w, reach),
             rule,
             task_columns: 0,
         }

@@ -107,7 +107,6 @@ pub struct GaussRule {
     w: usize,
     h: usize,
     nch: usize,
-    modes: Vec<ChannelMode>,
     /// The channels a spread moves.
     spread: Vec<usize>,
     guides: GuideReader,
@@ -149,7 +148,6 @@ impl GaussRule {
             spread: (0..nch)
                 .filter(|&c| modes[c] == ChannelMode::Spread)
                 .collect(),
-            modes,
             guides,
             ladder: Ladder {
                 tolerance: params.tolerance,
@@ -184,6 +182,10 @@ impl Rule for GaussRule {
 
     fn passes(&self) -> Vec<Reads> {
         passes(self.guides.chooses_receivers(), self.ladder.reach)
+    }
+
+    fn spread(&self) -> &[usize] {
+        &self.spread
     }
 
     fn reach(&self) -> usize {
@@ -307,16 +309,16 @@ impl Rule for GaussRule {
                     None => lights[tx] == 0,
                 };
                 if ok {
-                    for &c in &self.spread {
-                        acc[c * w + tx] += shares[c] * gy * wx;
+                    for (j, s) in shares.iter().enumerate() {
+                        acc[j * w + tx] += s * gy * wx;
                     }
                 }
             }
             return;
         }
-        for &c in &self.spread {
-            let a = shares[c] * gy;
-            for (d, &wx) in acc[c * w + xa..c * w + xb].iter_mut().zip(gx) {
+        for (j, s) in shares.iter().enumerate() {
+            let a = s * gy;
+            for (d, &wx) in acc[j * w + xa..j * w + xb].iter_mut().zip(gx) {
                 *d += a * wx;
             }
         }

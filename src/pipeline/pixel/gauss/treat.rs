@@ -73,7 +73,7 @@ impl Treat<'_> {
                 counts.capped += u64::from(capped);
                 let f = excess / v;
                 st.guides
-                    .give_up(&mut values, (src, x), &st.modes, (f, norm));
+                    .give_up(&mut values, (src, x), &st.spread, (f, norm));
                 sources.push(Source {
                     x: x as u32,
                     y: y as u32,
