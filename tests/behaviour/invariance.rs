@@ -1,7 +1,7 @@
 //! Bit-identical output whatever the tile size, strip height and thread count.
 
 use crate::common::*;
-use epfilt::Method;
+use epfilt::{Method, RunStats, StripLayout};
 use proptest::prelude::*;
 
 /// Every method, through every cut of `common::CUTS`: one answer.
@@ -235,4 +235,93 @@ fn a_smaller_memory_budget_runs_smaller_and_gives_the_same_bytes() {
             "{m:?}: some budget shortened the strips"
         );
     }
+}
+
+/// The pixel stages spread the colour and carry the other channels (alpha,
+/// an AOV) as read: a source holds values of the spread channels only, and
+/// every cut (treatment tasks cut in columns too) gives one answer, the
+/// carried bits untouched and the energy exact.
+#[test]
+fn pixel_stages_carry_what_they_do_not_spread_through_every_cut() {
+    use epfilt::pipeline::ChannelMode;
+    let (w, h) = (70, 41);
+    // A carried value of each kind: negative zero, signed, large.
+    let aov = |x: usize, y: usize| match (x + 3 * y) % 4 {
+        0 => -0.0,
+        1 => -(x as f32),
+        2 => 1e30,
+        _ => (x * y) as f32 * 0.25,
+    };
+    let carry = |job: &mut StripLayout| {
+        job.channels.push("aov.V".into());
+        job.luminance.push(0.0);
+        job.modes.push(ChannelMode::Nearest);
+    };
+    let check = |data: &[f32], nall: usize, out: &[f32], stats: &RunStats| {
+        for y in 0..h {
+            for x in 0..w {
+                for c in [3, 4] {
+                    let (i, o) = ((y * nall + c) * w + x, (y * 5 + c) * w + x);
+                    assert_eq!(
+                        out[o].to_bits(),
+                        data[i].to_bits(),
+                        "({x}, {y}) channel {c}"
+                    );
+                }
+            }
+        }
+        for l in &stats.ledger {
+            assert!(
+                l.rel_error <= ENERGY_TOL,
+                "{}: {:e}",
+                l.channel,
+                l.rel_error
+            );
+        }
+    };
+    // ep-gauss: RGBA fireflies and the AOV.
+    let mut img = fireflies(w, h, 5, 0.1, 9);
+    for y in 0..h {
+        for x in 0..w {
+            img.set(x, y, 4, aov(x, y));
+        }
+    }
+    let mut job = job_for(&Img::new(w, h, 4, |_, _, _| 0.0), 1);
+    carry(&mut job);
+    let (out, stats) = same_for_every_cut(&img.data, &job, &params(Method::EpGauss, 1));
+    assert!(stats.eg().spread > 0, "{:?}", stats.eg());
+    check(&img.data, 5, &out, &stats);
+    // ep-box: the lights scene's mean and variance, alpha and the AOV
+    // between the colour and the variance.
+    let sc = epfilt::synth::Scene {
+        kind: epfilt::synth::SceneKind::Lights,
+        w,
+        h,
+        seed: 4,
+        hot: 1e4,
+    };
+    let rows = sc.spp_rows(16, 0, h);
+    let mut data = Vec::with_capacity(rows.len() / 6 * 8);
+    for (y, row) in rows.chunks_exact(6 * w).enumerate() {
+        data.extend_from_slice(&row[..3 * w]);
+        data.extend((0..w).map(|x| 0.25 + x as f32 * 0.01));
+        data.extend((0..w).map(|x| aov(x, y)));
+        data.extend_from_slice(&row[3 * w..]);
+    }
+    let mut job = job_for(&Img::new(w, h, 4, |_, _, _| 0.0), 1);
+    carry(&mut job);
+    job.aux = vec![
+        "variance.R".into(),
+        "variance.G".into(),
+        "variance.B".into(),
+    ];
+    job.stats = Some(epfilt::filter::ep_box::StatsLayout {
+        variance: vec![5, 6, 7],
+        kind: epfilt::filter::ep_box::VarianceKind::Sample,
+        mean_y: None,
+        spp: epfilt::filter::ep_box::Spp::Fixed(16.0),
+    });
+    let (out, stats) = same_for_every_cut(&data, &job, &params(Method::EpBox, 1));
+    assert!(stats.eb().spread > 0, "{:?}", stats.eb());
+    check(&data, 8, &out, &stats);
 }

@@ -141,7 +141,6 @@ pub struct PixelStage<R: Rule> {
     rule: R,
     w: usize,
     h: usize,
-    nch: usize,
     /// What each pass reads (`passes[i - 1]` for pass `i`).
     passes: Vec<Reads>,
     /// Per pass, the rows made (pass 0: the input rows in).
@@ -163,7 +162,6 @@ impl<R: Rule> PixelStage<R> {
             passes,
             w,
             h,
-            nch,
             gathered: Gathered::new(nch, rule.spread().to_vec(), w, reach),
             rule,
             task_columns: 0,
@@ -229,7 +227,7 @@ impl<R: Rule> PixelStage<R> {
             })
             .collect();
         let mut results = results.into_iter();
-        let stride = 2 * self.nch;
+        let stride = 2 * self.rule.spread().len();
         loop {
             let band: Vec<_> = results.by_ref().take(w.div_ceil(cols)).collect();
             if band.is_empty() {
