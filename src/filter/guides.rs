@@ -35,6 +35,11 @@ impl GuideLayout {
         self.albedo.is_some() || self.normal.is_some() || self.depth.is_some()
     }
 
+    /// Whether albedo is the only surface guide ([`AlbedoOnly`] holds it).
+    pub fn albedo_only(&self) -> bool {
+        self.albedo.is_some() && self.normal.is_none() && self.depth.is_none()
+    }
+
     /// Whether no guide is present.
     pub fn is_empty(&self) -> bool {
         self.emission.is_none() && !self.surface()
@@ -141,11 +146,6 @@ impl Surface {
     #[inline]
     pub fn same(&self, other: &Surface, dist2: f32, rule: &SurfaceRule, cos_max: f32) -> bool {
         // Branch-light: this runs for every pixel a guided spread reaches.
-        let (a, b) = (&self.albedo, &other.albedo);
-        let da = a[0]
-            .abs_diff(b[0])
-            .max(a[1].abs_diff(b[1]))
-            .max(a[2].abs_diff(b[2]));
         // Two misses match; a miss and a hit do not.
         let (n, m) = (&self.normal, &other.normal);
         let dot = n[0] as i32 * m[0] as i32 + n[1] as i32 * m[1] as i32 + n[2] as i32 * m[2] as i32;
@@ -154,9 +154,61 @@ impl Surface {
         // |z - w| <= depth * max(dist, 1) * max(|z|, |w|), squared.
         let (z, w) = (self.depth, other.depth);
         let (d, lim) = (z - w, rule.depth as f32 * z.abs().max(w.abs()));
-        da as f32 <= rule.albedo as f32 * ALBEDO_STEPS
+        albedo_within(&self.albedo, &other.albedo, rule)
             && normal
             && d * d <= lim * lim * dist2.max(1.0)
+    }
+}
+
+/// Whether two quantised albedos differ by at most `rule.albedo` in every
+/// channel.
+#[inline]
+fn albedo_within(a: &[u8; 3], b: &[u8; 3], rule: &SurfaceRule) -> bool {
+    let da = a[0]
+        .abs_diff(b[0])
+        .max(a[1].abs_diff(b[1]))
+        .max(a[2].abs_diff(b[2]));
+    da as f32 <= rule.albedo as f32 * ALBEDO_STEPS
+}
+
+/// A pixel's surface guides as a window over a spread's reach holds them:
+/// [`Surface`], or [`AlbedoOnly`] for a render whose only surface guide is
+/// albedo (what is not there is not held). Each decides as [`Surface`]
+/// does.
+pub trait SurfaceGuides: Copy + Default + Send + Sync + 'static {
+    /// The guides of a pixel from its channel values ([`Surface::read`]).
+    fn read(layout: &GuideLayout, ch: impl Fn(usize) -> f32) -> Self;
+    /// [`Surface::same`].
+    fn same(&self, other: &Self, dist2: f32, rule: &SurfaceRule, cos_max: f32) -> bool;
+}
+
+impl SurfaceGuides for Surface {
+    #[inline]
+    fn read(layout: &GuideLayout, ch: impl Fn(usize) -> f32) -> Self {
+        Surface::read(layout, ch)
+    }
+
+    #[inline]
+    fn same(&self, other: &Self, dist2: f32, rule: &SurfaceRule, cos_max: f32) -> bool {
+        Surface::same(self, other, dist2, rule, cos_max)
+    }
+}
+
+/// The quantised albedo alone (3 bytes a pixel, where a [`Surface`] takes
+/// 12): for a render with an albedo pass and neither normals nor depth,
+/// whose [`Surface`]s would compare their absent guides as equal.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AlbedoOnly(pub [u8; 3]);
+
+impl SurfaceGuides for AlbedoOnly {
+    #[inline]
+    fn read(layout: &GuideLayout, ch: impl Fn(usize) -> f32) -> Self {
+        AlbedoOnly(Surface::read(layout, ch).albedo)
+    }
+
+    #[inline]
+    fn same(&self, other: &Self, _: f32, rule: &SurfaceRule, _: f32) -> bool {
+        albedo_within(&self.0, &other.0, rule)
     }
 }
 
@@ -278,6 +330,56 @@ mod tests {
         let sky = surface(0.0, [0.0; 3], 0.0);
         assert!(sky.same(&sky, 9.0, &rule, cos));
         assert!(!sky.same(&surface(0.0, [0.0, 1.0, 0.0], 0.0), 1.0, &rule, cos));
+    }
+
+    #[test]
+    fn albedo_alone_decides_as_the_surface_it_stands_for() {
+        let layout = GuideLayout {
+            albedo: Some([0, 1, 2]),
+            ..GuideLayout::default()
+        };
+        assert!(layout.albedo_only());
+        let values = [0.0, 0.03, 0.05, 0.1, 0.11, 0.5, 0.55, 0.9, 1.0, 1.7, -0.2];
+        let pixel = |i: usize| [values[i % 11], values[i / 11 % 11], values[i / 121 % 11]];
+        for rule in [
+            SurfaceRule::default(),
+            SurfaceRule {
+                albedo: 0.0,
+                ..SurfaceRule::default()
+            },
+            SurfaceRule {
+                albedo: 0.3,
+                depth: 0.0,
+                ..SurfaceRule::default()
+            },
+        ] {
+            let cos = rule.normal_degrees.to_radians().cos() as f32;
+            for (i, j) in (0..1331).map(|i| (i, (i * 37 + 5) % 1331)) {
+                let (a, b) = (pixel(i), pixel(j));
+                let (sa, sb) = (
+                    Surface::read(&layout, |k| a[k]),
+                    Surface::read(&layout, |k| b[k]),
+                );
+                let (qa, qb) = (
+                    AlbedoOnly::read(&layout, |k| a[k]),
+                    AlbedoOnly::read(&layout, |k| b[k]),
+                );
+                assert_eq!(qa.0, sa.albedo);
+                for dist2 in [0.0, 1.0, 50.0] {
+                    assert_eq!(
+                        qa.same(&qb, dist2, &rule, cos),
+                        sa.same(&sb, dist2, &rule, cos),
+                        "{a:?} {b:?} {rule:?}"
+                    );
+                }
+            }
+        }
+        // With another surface guide a render needs the whole Surface.
+        let normal = GuideLayout {
+            normal: Some([3, 4, 5]),
+            ..layout.clone()
+        };
+        assert!(!normal.albedo_only() && !GuideLayout::default().albedo_only());
     }
 
     #[test]

@@ -3,6 +3,7 @@
 //! allocated.
 
 use super::{ChannelMode, FilterParams, Halo, Method, PipelineConfig, StripLayout};
+use crate::filter::guides::{AlbedoOnly, Surface};
 
 /// Bytes of input one strip should hold by default: four strips are in
 /// flight at most (two queued, one being read, one being filtered), so this
@@ -423,7 +424,12 @@ fn estimate_pixel_bytes(
     let held = p + r + strip + 2;
     let input = w.saturating_mul(nall * 4).saturating_mul(held);
     let per_pixel = if gauss {
-        let surface = if job.guides.surface() { 12 } else { 0 };
+        // What the stage's window holds a pixel (`SurfaceGuides`).
+        let surface = match &job.guides {
+            g if g.albedo_only() => std::mem::size_of::<AlbedoOnly>() as u64,
+            g if g.surface() => std::mem::size_of::<Surface>() as u64,
+            _ => 0,
+        };
         w.saturating_mul(8 + 8 + 1).saturating_mul(strip + 16)
             + w.saturating_mul(1 + surface).saturating_mul(held)
     } else {

@@ -8,7 +8,7 @@ use super::stage::Stage;
 use super::{PipelineConfig, StripLayout};
 use crate::error::{Error, Result};
 use crate::filter::ep_box::{Spp, StatsLayout};
-use crate::filter::guides::EmissionParts;
+use crate::filter::guides::{AlbedoOnly, EmissionParts, Surface, SurfaceGuides};
 use crate::filter::{Method, ValidParams};
 
 /// Strips the stage of `method` at `s` works on at once under `cfg`: the
@@ -50,17 +50,10 @@ pub fn make(
             stage.set_task_columns(cfg.classify_samples);
             Box::new(stage)
         }
-        Method::EpGauss if grid.s == 1 => {
-            let mut stage = PixelStage::new(GaussRule::new(
-                (grid.in_w, grid.in_h),
-                job.luminance.clone(),
-                job.modes.clone(),
-                (job.guides.clone(), job.surface_rule),
-                params,
-            )?);
-            stage.set_task_columns(cfg.classify_samples);
-            Box::new(stage)
+        Method::EpGauss if grid.s == 1 && job.guides.albedo_only() => {
+            pixel_gauss::<AlbedoOnly>(job, params, cfg)?
         }
+        Method::EpGauss if grid.s == 1 => pixel_gauss::<Surface>(job, params, cfg)?,
         Method::Median | Method::AlphaTrim => {
             Box::new(OrderStage::new(grid, job.modes.clone(), params))
         }
@@ -104,4 +97,23 @@ pub fn make(
             Box::new(stage)
         }
     })
+}
+
+/// ep-gauss's stage at S = 1, its windows holding the surface guides as
+/// `G`.
+fn pixel_gauss<G: SurfaceGuides>(
+    job: &StripLayout,
+    params: &ValidParams,
+    cfg: &PipelineConfig,
+) -> Result<Box<dyn Stage>> {
+    let grid = job.grid;
+    let mut stage = PixelStage::new(GaussRule::<G>::new(
+        (grid.in_w, grid.in_h),
+        job.luminance.clone(),
+        job.modes.clone(),
+        (job.guides.clone(), job.surface_rule),
+        params,
+    )?);
+    stage.set_task_columns(cfg.classify_samples);
+    Ok(Box::new(stage))
 }

@@ -4,7 +4,7 @@
 //! spread may reach it.
 
 use crate::error::{Error, Result};
-use crate::filter::guides::{emission_part, is_light, GuideLayout, Surface, SurfaceRule};
+use crate::filter::guides::{emission_part, is_light, GuideLayout, SurfaceGuides, SurfaceRule};
 use crate::filter::luminance::Luminance;
 
 /// A stage's reader of the guides in its strip rows.
@@ -99,11 +99,11 @@ impl GuideReader {
 
     /// Pixel `x`'s surface guides (default without them).
     #[inline]
-    pub fn surface_of(&self, row: &[f32], x: usize) -> Surface {
+    pub fn surface_of<G: SurfaceGuides>(&self, row: &[f32], x: usize) -> G {
         if !self.surface() {
-            return Surface::default();
+            return G::default();
         }
-        Surface::read(&self.layout, |i| row[i * self.w + x])
+        G::read(&self.layout, |i| row[i * self.w + x])
     }
 
     /// Whether pixel `x` of `row` holds any emission.
@@ -116,12 +116,14 @@ impl GuideReader {
     /// spread from a source at `(sx, sy)` on surface `from`: not a light,
     /// and on that surface (`None`: a source that keeps clear of lights
     /// only).
-    #[inline]
-    pub fn accepts(
+    // Always: it runs for every receiver of a guided spread's every rung,
+    // and the inliner left a call there once it was generic.
+    #[inline(always)]
+    pub fn accepts<G: SurfaceGuides>(
         &self,
-        (light, q): (bool, &Surface),
+        (light, q): (bool, &G),
         (tx, ty): (usize, usize),
-        from: Option<(&Surface, usize, usize)>,
+        from: Option<(&G, usize, usize)>,
     ) -> bool {
         if light {
             return false;
@@ -134,9 +136,9 @@ impl GuideReader {
         surface.same(q, dx * dx + dy * dy, &self.rule, self.cos_max)
     }
 
-    /// Append a source's values for pixel `x` of `row` (its `modes.len()`
-    /// filtered channels first): what it keeps, then what one of `weight`
-    /// units of its kernel carries, where it gives up the fraction `f` of
+    /// Append a source's values for pixel `x` of `row`: what it keeps,
+    /// then what one of `weight` units of its kernel carries, where it
+    /// gives up the fraction `f` of
     /// what the emission guide leaves of each channel of `spread` (the
     /// other channels keep their values, and are not listed).
     pub fn give_up(
@@ -159,11 +161,11 @@ impl GuideReader {
 
     /// [`GuideReader::accepts`] for pixel `(tx, ty)` read from its `row`.
     #[inline]
-    pub fn accepts_in(
+    pub fn accepts_in<G: SurfaceGuides>(
         &self,
         row: &[f32],
         (tx, ty): (usize, usize),
-        from: Option<(&Surface, usize, usize)>,
+        from: Option<(&G, usize, usize)>,
     ) -> bool {
         let light = self.emission() && self.is_light(row, tx, self.residual_luminance(row, tx));
         self.accepts((light, &self.surface_of(row, tx)), (tx, ty), from)

@@ -27,7 +27,7 @@ use crate::error::Result;
 use crate::filter::ep_gauss::pixel::{
     gaussian_taps, local_max, median, noisy, Widths, BACKGROUND_REACH, BACKGROUND_SAMPLES,
 };
-use crate::filter::guides::{GuideLayout, Surface, SurfaceRule};
+use crate::filter::guides::{GuideLayout, SurfaceGuides, SurfaceRule};
 use crate::filter::ValidParams;
 use crate::geometry::mirror;
 use crate::pipeline::counts::{MethodCounts, SpreadCounts};
@@ -58,19 +58,20 @@ pub fn passes(choose: bool, reach: usize) -> Vec<Reads> {
     ]
 }
 
-/// A pixel whose excess is spread.
+/// A pixel whose excess is spread (`G`: how the render's surface guides
+/// are held).
 #[derive(Clone, Copy, Debug)]
-pub struct Source {
+pub struct Source<G> {
     x: u32,
     y: u32,
     /// Its rung on the ladder of widths.
     k: u32,
     /// The surface it keeps to, where the guides choose its receivers and
     /// it does (else, with them, it keeps clear of lights only).
-    on_surface: Option<Surface>,
+    on_surface: Option<G>,
 }
 
-impl Placed for Source {
+impl<G> Placed for Source<G> {
     fn at(&self) -> (usize, usize) {
         (self.x as usize, self.y as usize)
     }
@@ -88,7 +89,7 @@ struct Ladder {
 }
 
 /// The rows the passes hold, each of the image's width.
-struct Windows {
+struct Windows<G> {
     /// Luminance of what is left after the emission guide.
     ylum: RowWindow<f64>,
     /// The background of local maxima (NaN elsewhere).
@@ -99,11 +100,12 @@ struct Windows {
     light: RowWindow<u8>,
     /// Each pixel's surface guides (with them), for the rows a spread may
     /// reach (as `light`).
-    surf: RowWindow<Surface>,
+    surf: RowWindow<G>,
 }
 
-/// ep-gauss's rule at S = 1, and what its passes hold.
-pub struct GaussRule {
+/// ep-gauss's rule at S = 1, and what its passes hold (`G`: how the
+/// surface guides are held, [`SurfaceGuides`]).
+pub struct GaussRule<G> {
     w: usize,
     h: usize,
     nch: usize,
@@ -111,13 +113,13 @@ pub struct GaussRule {
     spread: Vec<usize>,
     guides: GuideReader,
     ladder: Ladder,
-    win: Windows,
+    win: Windows<G>,
     /// Pixels whose emission guide set light aside (counted on arrival).
     emissive: u64,
     counts: SpreadCounts,
 }
 
-impl GaussRule {
+impl<G: SurfaceGuides> GaussRule<G> {
     /// The rule for a `w x h` image whose strip rows hold `nch` filtered
     /// channels (luminance weights `lum`, modes `modes`) and then the aux
     /// channels; `guides` indexes that whole row. Checked by the skeleton:
@@ -169,8 +171,8 @@ impl GaussRule {
     }
 }
 
-impl Rule for GaussRule {
-    type Source = Source;
+impl<G: SurfaceGuides> Rule for GaussRule<G> {
+    type Source = Source<G>;
     type Tally = SpreadCounts;
     const TREAT_ROWS: usize = 16;
     /// A pixel is decided alone: a wide strip is cut in columns.
@@ -198,7 +200,7 @@ impl Rule for GaussRule {
         }
         if self.guides.surface() {
             for _ in a..b {
-                self.win.surf.push_stale(Surface::default());
+                self.win.surf.push_stale(G::default());
             }
             let guides = &self.guides;
             let rows = self.win.surf.range_mut(a, b);
@@ -262,11 +264,11 @@ impl Rule for GaussRule {
         input: &RowWindow<f32>,
         rows: Range<usize>,
         columns: Range<usize>,
-    ) -> (Vec<Source>, Vec<f64>, SpreadCounts) {
+    ) -> (Vec<Source<G>>, Vec<f64>, SpreadCounts) {
         Treat { stage: self, input }.pixels(rows, columns)
     }
 
-    fn tally(&mut self, tally: SpreadCounts, sources: &[Source]) {
+    fn tally(&mut self, tally: SpreadCounts, sources: &[Source<G>]) {
         let taps: u64 = (sources.iter())
             .map(|s| (2 * self.ladder.widths.reach[s.k as usize] as u64 + 1).pow(2))
             .sum();
@@ -276,7 +278,7 @@ impl Rule for GaussRule {
 
     /// A source's shares to the pixels of row `ty` its kernel reaches (on
     /// its surface, or clear of lights, where the guides choose receivers).
-    fn add(&self, _: &RowWindow<f32>, s: &Source, shares: &[f64], ty: usize, acc: &mut [f64]) {
+    fn add(&self, _: &RowWindow<f32>, s: &Source<G>, shares: &[f64], ty: usize, acc: &mut [f64]) {
         let (w, guides) = (self.w, &self.guides);
         let (taps, widths) = (&self.ladder.taps, &self.ladder.widths);
         let k = s.k as usize;
@@ -352,13 +354,13 @@ impl Rule for GaussRule {
             WindowUse {
                 name: "surface guides",
                 rows: self.win.surf.high_water(),
-                row_bytes: w * std::mem::size_of::<Surface>(),
+                row_bytes: w * std::mem::size_of::<G>(),
             },
         ]
     }
 }
 
-impl GaussRule {
+impl<G: SurfaceGuides> GaussRule<G> {
     /// The luminance of what the emission guide leaves of rows `a..b`.
     fn luminance(&mut self, input: &RowWindow<f32>, a: usize, b: usize) {
         for _ in a..b {
@@ -515,7 +517,7 @@ mod tests {
             (p.max_radius, p.cutoff) = (mr, cut);
             let v = p.validated().unwrap();
             let stage = |guides| {
-                let rule = GaussRule::new(
+                let rule = GaussRule::<crate::filter::guides::Surface>::new(
                     (30, 20),
                     RGB.to_vec(),
                     vec![ChannelMode::Spread; 3],

@@ -6,18 +6,18 @@ use std::ops::Range;
 
 use super::{neighbours8, GaussRule, Source};
 use crate::filter::ep_gauss::pixel::{in_range, supported, BACKGROUND_REACH};
-use crate::filter::guides::{keeps_to_surface, Surface};
+use crate::filter::guides::{keeps_to_surface, SurfaceGuides};
 use crate::geometry::mirror;
 use crate::pipeline::counts::SpreadCounts;
 use crate::pipeline::window::RowWindow;
 
 /// What a treatment task reads.
-pub(super) struct Treat<'a> {
-    pub(super) stage: &'a GaussRule,
+pub(super) struct Treat<'a, G> {
+    pub(super) stage: &'a GaussRule<G>,
     pub(super) input: &'a RowWindow<f32>,
 }
 
-impl Treat<'_> {
+impl<G: SurfaceGuides> Treat<'_, G> {
     /// Treat the pixels of rows `rows` and columns `columns`: take each
     /// noisy pixel's excess out and list it as a source
     /// ([`super::super::Rule::treat`]).
@@ -25,7 +25,7 @@ impl Treat<'_> {
         &self,
         rows: Range<usize>,
         columns: Range<usize>,
-    ) -> (Vec<Source>, Vec<f64>, SpreadCounts) {
+    ) -> (Vec<Source<G>>, Vec<f64>, SpreadCounts) {
         let st = self.stage;
         let (w, h) = (st.w, st.h);
         let mut counts = SpreadCounts::default();
@@ -97,7 +97,7 @@ impl Treat<'_> {
         (x, y): (usize, usize),
         excess: f64,
         bg: f64,
-        surface: &Surface,
+        surface: &G,
     ) -> Option<(usize, f64, bool, bool)> {
         let st = self.stage;
         let limit = st.ladder.tolerance * bg;
@@ -151,7 +151,7 @@ impl Treat<'_> {
         (x, y): (usize, usize),
         first: usize,
         at_first: f64,
-        on_surface: Option<&Surface>,
+        on_surface: Option<&G>,
         passes: impl Fn(f64) -> bool,
     ) -> Option<(usize, f64)> {
         let cap = self.stage.ladder.widths.rho.len() - 1;
@@ -205,7 +205,7 @@ impl Treat<'_> {
     /// from `(x, y)` (those on the source's surface, with surface guides;
     /// those clear of lights, with the emission guide): the receivers
     /// [`GaussRule`]'s `add` gives its shares to.
-    fn norm(&self, k: usize, x: usize, y: usize, surface: Option<&Surface>) -> f64 {
+    fn norm(&self, k: usize, x: usize, y: usize, surface: Option<&G>) -> f64 {
         let st = self.stage;
         let (w, h) = (st.w, st.h);
         let r = st.ladder.widths.reach[k];
