@@ -47,20 +47,25 @@ fn every_method_gives_the_same_bits_for_every_cut() {
         hot: 1e4,
     };
     let mut job = job_for(&Img::new(70, 41, 3, |_, _, _| 0.0), 1);
-    job.aux = vec![
-        "variance.R".into(),
-        "variance.G".into(),
-        "variance.B".into(),
-    ];
+    with_variance(&mut job);
+    let (_, stats) = same_for_every_cut(&sc.spp_rows(16, 0, 41), &job, &params(Method::EpBox, 1));
+    let c = stats.eb();
+    assert!(c.spread > 0 && c.reliable > 0, "{c:?}");
+}
+
+/// `job` with a variance pass of 16 samples per pixel after its channels
+/// (`variance.R`, `.G`, `.B`), as ep-box reads it.
+fn with_variance(job: &mut StripLayout) {
+    let at = job.channels.len();
+    job.aux = ["variance.R", "variance.G", "variance.B"]
+        .map(String::from)
+        .to_vec();
     job.stats = Some(epfilt::filter::ep_box::StatsLayout {
-        variance: vec![3, 4, 5],
+        variance: vec![at, at + 1, at + 2],
         kind: epfilt::filter::ep_box::VarianceKind::Sample,
         mean_y: None,
         spp: epfilt::filter::ep_box::Spp::Fixed(16.0),
     });
-    let (_, stats) = same_for_every_cut(&sc.spp_rows(16, 0, 41), &job, &params(Method::EpBox, 1));
-    let c = stats.eb();
-    assert!(c.spread > 0 && c.reliable > 0, "{c:?}");
 }
 
 proptest! {
@@ -310,17 +315,7 @@ fn pixel_stages_carry_what_they_do_not_spread_through_every_cut() {
     }
     let mut job = job_for(&Img::new(w, h, 4, |_, _, _| 0.0), 1);
     carry(&mut job);
-    job.aux = vec![
-        "variance.R".into(),
-        "variance.G".into(),
-        "variance.B".into(),
-    ];
-    job.stats = Some(epfilt::filter::ep_box::StatsLayout {
-        variance: vec![5, 6, 7],
-        kind: epfilt::filter::ep_box::VarianceKind::Sample,
-        mean_y: None,
-        spp: epfilt::filter::ep_box::Spp::Fixed(16.0),
-    });
+    with_variance(&mut job);
     let (out, stats) = same_for_every_cut(&data, &job, &params(Method::EpBox, 1));
     assert!(stats.eb().spread > 0, "{:?}", stats.eb());
     check(&data, 8, &out, &stats);
