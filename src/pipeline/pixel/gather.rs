@@ -72,8 +72,9 @@ impl<S: Placed + Sync> Sources<S> {
         self.values.drain(..n * self.stride());
     }
 
-    /// Values a source holds.
-    fn stride(&self) -> usize {
+    /// Values a source holds (a treatment's lists are merged at this
+    /// stride).
+    pub(super) fn stride(&self) -> usize {
         2 * self.spread.len()
     }
 

@@ -227,7 +227,7 @@ impl<R: Rule> PixelStage<R> {
             })
             .collect();
         let mut results = results.into_iter();
-        let stride = 2 * self.rule.spread().len();
+        let stride = self.gathered.sources.stride();
         loop {
             let band: Vec<_> = results.by_ref().take(w.div_ceil(cols)).collect();
             if band.is_empty() {
