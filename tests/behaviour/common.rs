@@ -276,6 +276,19 @@ pub fn same_for_every_cut(
     invariant(data, job, params, &CUTS).unwrap_or_else(|e| panic!("{e}"))
 }
 
+/// Every channel of `stats`' ledger balances within [`ENERGY_TOL`]; `what`
+/// names the run in the message.
+pub fn assert_balanced(stats: &RunStats, what: &str) {
+    for l in &stats.ledger {
+        assert!(
+            l.rel_error <= ENERGY_TOL,
+            "{what} {}: rel error {:e}",
+            l.channel,
+            l.rel_error
+        );
+    }
+}
+
 pub fn params(method: Method, s: usize) -> FilterParams {
     FilterParams::new(method, s)
 }

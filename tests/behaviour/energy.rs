@@ -10,14 +10,7 @@ const FLAT_TOL: f64 = 1e-6;
 fn check_energy(img: &Img, s: usize, what: &str) {
     for m in GAUSSIAN_FAMILY {
         let (_, stats) = run(img, s, &params(m, s), &PipelineConfig::default());
-        for l in &stats.ledger {
-            assert!(
-                l.rel_error <= ENERGY_TOL,
-                "{what} {m:?} channel {}: rel error {:e}",
-                l.channel,
-                l.rel_error
-            );
-        }
+        assert_balanced(&stats, &format!("{what} {m:?}"));
     }
 }
 
@@ -66,13 +59,7 @@ fn single_hot_sample_at_every_position_around_a_tile_corner() {
                     ..Default::default()
                 };
                 let (_, stats) = run(&img, s, &params(m, s), &cfg);
-                for l in &stats.ledger {
-                    assert!(
-                        l.rel_error <= ENERGY_TOL,
-                        "({i},{j}) {m:?}: {:e}",
-                        l.rel_error
-                    );
-                }
+                assert_balanced(&stats, &format!("({i},{j}) {m:?}"));
             }
         }
     }
@@ -222,14 +209,7 @@ fn alpha_stays_coverage_under_every_method() {
                 }
             }
             if m.preserves_energy() {
-                for l in &stats.ledger {
-                    assert!(
-                        l.rel_error <= ENERGY_TOL,
-                        "{m:?} S={s} {}: {:e}",
-                        l.channel,
-                        l.rel_error
-                    );
-                }
+                assert_balanced(&stats, &format!("{m:?} S={s}"));
             }
         }
     }
@@ -270,14 +250,7 @@ fn wide_fireflies_on_the_coarse_grid_keep_energy_influence_and_bits() {
             .unwrap_or_else(|e| panic!("S={s}: {e}"));
         assert!(stats.eg().coarse >= 3, "S={s}: {:?}", stats.eg());
         assert!(stats.eg().coarse4 >= 1, "S={s}: {:?}", stats.eg());
-        for l in &stats.ledger {
-            assert!(
-                l.rel_error <= ENERGY_TOL,
-                "S={s} {}: {:e}",
-                l.channel,
-                l.rel_error
-            );
-        }
+        assert_balanced(&stats, &format!("S={s}"));
         // Off, the same samples are spread at full resolution: the same
         // energy, and no output pixel differs by more than the kernels do.
         let mut off = p.clone();

@@ -9,14 +9,7 @@ fn all_methods_exact(img: &Img, s: usize, what: &str) -> Vec<Img> {
         .iter()
         .map(|&m| {
             let (out, stats) = run(img, s, &params(m, s), &PipelineConfig::default());
-            for l in &stats.ledger {
-                assert!(
-                    l.rel_error <= ENERGY_TOL,
-                    "{what} {m:?} {}: {:e}",
-                    l.channel,
-                    l.rel_error
-                );
-            }
+            assert_balanced(&stats, &format!("{what} {m:?}"));
             assert!(
                 out.data.iter().all(|v| v.is_finite()),
                 "{what} {m:?}: non-finite output"

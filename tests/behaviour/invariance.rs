@@ -153,14 +153,7 @@ fn dense_wide_fireflies_give_one_answer_and_keep_energy() {
     // (the defaults' `--bound-from`) wherever its rows are in the image.
     assert!(c.coarse4 > 0 && c.coarse > c.coarse4, "{c:?}");
     assert!(p.bound_from > 0.0 && c.bounded > 0, "{c:?}");
-    for l in &stats.ledger {
-        assert!(
-            l.rel_error <= ENERGY_TOL,
-            "channel {}: rel error {:e}",
-            l.channel,
-            l.rel_error
-        );
-    }
+    assert_balanced(&stats, "dense fireflies");
 }
 
 /// A run under a smaller `--max-memory` takes shorter strips and fewer
@@ -275,14 +268,7 @@ fn pixel_stages_carry_what_they_do_not_spread_through_every_cut() {
                 }
             }
         }
-        for l in &stats.ledger {
-            assert!(
-                l.rel_error <= ENERGY_TOL,
-                "{}: {:e}",
-                l.channel,
-                l.rel_error
-            );
-        }
+        assert_balanced(stats, "carried channels");
     };
     // ep-gauss: RGBA fireflies and the AOV.
     let mut img = fireflies(w, h, 5, 0.1, 9);
