@@ -25,12 +25,26 @@ pub fn auto_strip_rows(in_w: usize, channels: usize) -> usize {
     (STRIP_BYTES / (in_w * channels * 4).max(1)).clamp(1, 96)
 }
 
-/// Pixel rows a filtered strip holds at the least: a strip's rows are the
-/// tasks of its parallel loops (classification, base rows, ledger), so a
-/// strip of few pixel rows bounds the speed-up whatever the cores (on the
-/// widest inputs [`STRIP_BYTES`] holds only a few pixel rows at S = 3). Six,
-/// not more, because each pixel row more is paid in memory on those inputs.
+/// Pixel rows a filtered strip holds at the least where there are workers
+/// for them: a strip's rows are the tasks of its parallel loops
+/// (classification, base rows, ledger), so a strip of few pixel rows bounds
+/// the speed-up whatever the cores (on the widest inputs [`STRIP_BYTES`]
+/// holds only a few pixel rows at S = 3). Six, not more, because each pixel
+/// row more is paid in memory on those inputs: the window, and each of the
+/// strips in flight ([`STRIPS_HELD`]).
 pub const MIN_STRIP_PIXEL_ROWS: usize = 6;
+
+/// Pixel rows a filtered strip holds at the least on few workers:
+/// `STRIP_PIXEL_ROWS_PER_THREAD` a worker gives each its two tasks a loop
+/// sooner, so one or two workers are not paid the memory of six rows.
+/// Fewer than four make a strip's rounds (loops, hand-overs) the cost.
+pub const FEWEST_STRIP_PIXEL_ROWS: usize = 4;
+
+/// The least pixel rows of a strip on `threads` workers: two a worker,
+/// between [`FEWEST_STRIP_PIXEL_ROWS`] and [`MIN_STRIP_PIXEL_ROWS`].
+pub fn min_strip_pixel_rows(threads: usize) -> usize {
+    (STRIP_PIXEL_ROWS_PER_THREAD * threads).clamp(FEWEST_STRIP_PIXEL_ROWS, MIN_STRIP_PIXEL_ROWS)
+}
 
 /// Pixel rows a strip holds where they fit in `TALL_STRIP_BYTES`: each of
 /// a strip's loops (classification, base rows, finishing) has a task a
@@ -63,7 +77,7 @@ impl StripLayout {
     }
 
     /// Default strip height of this job on `threads` workers:
-    /// [`auto_strip_rows`], at least `MIN_STRIP_PIXEL_ROWS` pixel rows
+    /// [`auto_strip_rows`], at least [`min_strip_pixel_rows`] pixel rows
     /// (whole pixel rows: `S` input rows each); and `TALL_STRIP_PIXEL_ROWS`
     /// pixel rows, or `STRIP_PIXEL_ROWS_PER_THREAD` a worker, where that is
     /// more and they fit in `TALL_STRIP_BYTES` (or `STRIP_BYTES_PER_THREAD`
@@ -71,7 +85,7 @@ impl StripLayout {
     pub fn auto_strip_rows(&self, threads: usize) -> usize {
         let s = self.grid.s.max(1);
         let (w, nch) = (self.grid.in_w.max(1), self.strip_channels().max(1));
-        let rows = auto_strip_rows(w, nch).max(MIN_STRIP_PIXEL_ROWS * s);
+        let rows = auto_strip_rows(w, nch).max(min_strip_pixel_rows(threads) * s);
         let tall = TALL_STRIP_PIXEL_ROWS.max(STRIP_PIXEL_ROWS_PER_THREAD * threads) * s;
         let limit = TALL_STRIP_BYTES.max(STRIP_BYTES_PER_THREAD * threads);
         let bytes = tall.saturating_mul(w).saturating_mul(nch * 4);
@@ -509,11 +523,13 @@ mod tests {
         // fit in TALL_STRIP_BYTES.
         let square = rgb(12288, 12288);
         assert_eq!(square.auto_strip_rows(2), TALL_STRIP_PIXEL_ROWS * 3);
-        // 32769 wide: 48 rows would not fit; the 6 pixel rows stay.
-        assert_eq!(
-            rgb(32769, 3600).auto_strip_rows(2),
-            MIN_STRIP_PIXEL_ROWS * 3
-        );
+        // 32769 wide: 48 rows would not fit; the least pixel rows stay,
+        // two a worker between four and six.
+        let wide = rgb(32769, 3600);
+        assert_eq!(wide.auto_strip_rows(1), FEWEST_STRIP_PIXEL_ROWS * 3);
+        assert_eq!(wide.auto_strip_rows(2), FEWEST_STRIP_PIXEL_ROWS * 3);
+        assert_eq!(wide.auto_strip_rows(3), MIN_STRIP_PIXEL_ROWS * 3);
+        assert_eq!(wide.auto_strip_rows(4), MIN_STRIP_PIXEL_ROWS * 3);
         // Narrower: STRIP_BYTES already holds more pixel rows (56 rows).
         assert_eq!(rgb(6144, 6144).auto_strip_rows(2), 56);
         // Two pixel rows a worker where they fit: 16 workers get 32 at
@@ -521,10 +537,7 @@ mod tests {
         assert_eq!(square.auto_strip_rows(8), TALL_STRIP_PIXEL_ROWS * 3);
         assert_eq!(square.auto_strip_rows(16), 32 * 3);
         // At 32769 wide 32 pixel rows would not fit: the strip stays.
-        assert_eq!(
-            rgb(32769, 3600).auto_strip_rows(16),
-            MIN_STRIP_PIXEL_ROWS * 3
-        );
+        assert_eq!(wide.auto_strip_rows(16), MIN_STRIP_PIXEL_ROWS * 3);
         // --strip-rows wins.
         let given = PipelineConfig {
             strip_rows: 7,

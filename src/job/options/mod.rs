@@ -489,8 +489,8 @@ options! {
     /// Accumulator tile width in output pixels (does not change the result).
     tile: usize { Value, PERFORMANCE, parse: number, default: "256" }
     /// Input rows per strip, 0 = automatic (from the input's width and the
-    /// threads; at least 6 pixel rows, 16 or two a thread where they fit;
-    /// does not change the result).
+    /// threads; at least 6 pixel rows, 4 on one or two threads, 16 or two a
+    /// thread where they fit; does not change the result).
     strip_rows: usize { Value, PERFORMANCE, parse: number, default: "0" }
     /// Blocks (chunks) the reader decodes ahead at most, 0 = automatic (from
     /// the threads and the memory allowed; does not change the result).
