@@ -77,7 +77,7 @@ impl StripLayout {
     }
 
     /// Default strip height of this job on `threads` workers:
-    /// [`auto_strip_rows`], at least [`min_strip_pixel_rows`] pixel rows
+    /// [`auto_strip_rows`], at least `min_strip_pixel_rows` pixel rows
     /// (whole pixel rows: `S` input rows each); and `TALL_STRIP_PIXEL_ROWS`
     /// pixel rows, or `STRIP_PIXEL_ROWS_PER_THREAD` a worker, where that is
     /// more and they fit in `TALL_STRIP_BYTES` (or `STRIP_BYTES_PER_THREAD`
