@@ -120,6 +120,10 @@ pub trait Source: Send {
     /// Wait, outside the thread pool, until the next strip's rows are
     /// decoded (a source with a [`Source::decoder`]; else nothing).
     fn wait_ready(&mut self) {}
+
+    /// A strip's buffer the caller is done with, for the next strip (a
+    /// fresh one is faulted in page by page); dropped by default.
+    fn give_back(&mut self, _buf: Vec<f32>) {}
 }
 
 /// A wrapper's [`Source::decoder`] and [`Source::wait_ready`]: its `inner`
@@ -139,6 +143,10 @@ macro_rules! decode_ahead_in_inner {
 
         fn wait_ready(&mut self) {
             self.inner.wait_ready();
+        }
+
+        fn give_back(&mut self, buf: Vec<f32>) {
+            self.inner.give_back(buf);
         }
     };
 }

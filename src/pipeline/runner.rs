@@ -345,6 +345,7 @@ pub fn mean_luminance<S: Source>(
         }
         count += strip.rows * w;
         progress(strip.y0 + strip.rows, job.grid.in_h);
+        source.give_back(strip.data);
     }
     Ok(if count == 0 {
         0.0

@@ -612,6 +612,7 @@ impl ExrInput {
             released: None,
             ahead: None,
             batch_blocks: 0,
+            spare: Vec::new(),
         })
     }
 

@@ -27,6 +27,9 @@ pub struct ExrSource<'a> {
     /// Blocks a batch decoded without a decoder thread holds at the least
     /// (0: [`read_ahead_blocks`]).
     pub(super) batch_blocks: usize,
+    /// A strip's buffer given back, for the next strip decoded without a
+    /// decoder thread.
+    pub(super) spare: Vec<f32>,
 }
 
 /// The block rows of the batch that starts at block row `from`: whole block
@@ -141,6 +144,12 @@ impl Source for InputSource<'_> {
             s.wait_ready();
         }
     }
+
+    fn give_back(&mut self, buf: Vec<f32>) {
+        if let InputSource::Exr(s) = self {
+            s.give_back(buf);
+        }
+    }
 }
 
 impl Source for ExrSource<'_> {
@@ -172,7 +181,9 @@ impl Source for ExrSource<'_> {
             // draining it would move the rest at every strip).
             let n = max_rows.min(buffered(self));
             let k = n * self.row_len;
-            let data = self.buf[self.head..self.head + k].to_vec();
+            let mut data = std::mem::take(&mut self.spare);
+            data.clear();
+            data.extend_from_slice(&self.buf[self.head..self.head + k]);
             self.head += k;
             (n > 0).then_some((data, n))
         };
@@ -221,6 +232,14 @@ impl Source for ExrSource<'_> {
     fn wait_ready(&mut self) {
         if let Some(ahead) = self.ahead.as_mut() {
             ahead.wait(self.input);
+        }
+    }
+
+    /// Kept for the next strip decoded here; a decoder thread takes its
+    /// buffers back through `ReadAhead::recycled` instead.
+    fn give_back(&mut self, buf: Vec<f32>) {
+        if self.ahead.is_none() {
+            self.spare = buf;
         }
     }
 }

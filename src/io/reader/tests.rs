@@ -180,3 +180,42 @@ fn a_batch_without_a_decoder_holds_the_blocks_asked_for() {
     assert_eq!(buffered(0), h);
     assert_eq!(buffered(2), 2);
 }
+
+#[test]
+fn a_strip_given_back_holds_the_next_one() {
+    use crate::pipeline::{Precision, Sink, Source};
+    let (w, h) = (8, 32);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("given.exr");
+    let channels = names(&["R", "G", "B"]);
+    let mut out = crate::io::writer::ExrOutput::create_new(
+        &path,
+        w,
+        h,
+        &channels,
+        exr::prelude::Compression::ZIP16,
+        Precision::F32,
+        &[],
+    )
+    .unwrap();
+    let rows: Vec<f32> = (0..w * h * 3).map(|i| i as f32).collect();
+    out.write_rows(0, h, &rows).unwrap();
+    out.finish().unwrap();
+    out.commit().unwrap();
+    let input = ExrInput::open(&path, None).unwrap();
+    let mut src = input.source();
+    // A buffer far larger than a strip: a strip made in it keeps its
+    // capacity, a fresh one has only its rows'.
+    const GIVEN: usize = 4096;
+    let row = w * 3;
+    let mut y = 0;
+    while let Some(strip) = src.next_strip(4).unwrap() {
+        assert_eq!(strip.data, rows[y * row..(y + strip.rows) * row]);
+        if y > 0 {
+            assert!(strip.data.capacity() >= GIVEN, "a fresh buffer at row {y}");
+        }
+        y += strip.rows;
+        src.give_back(Vec::with_capacity(GIVEN));
+    }
+    assert_eq!(y, h);
+}
