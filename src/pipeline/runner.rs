@@ -99,8 +99,11 @@ pub fn run_streamer<S: Source, K: Sink>(
     };
     let (recycle, recycled) = crossbeam_channel::bounded(STRIPS_RECYCLED);
     streamer.recycle_strips(recycle);
-    // The output rows' buffers back from the writer: one waits at most.
-    let (rows_back, rows_recycled) = crossbeam_channel::bounded(1);
+    // The output rows' buffers back from the writer: two wait at most. The
+    // writer gives them back in bursts (a batch of blocks at a time), and
+    // the books finish rows in a fresh buffer, faulted in page by page,
+    // whenever none waits.
+    let (rows_back, rows_recycled) = crossbeam_channel::bounded(2);
     streamer.recycle_rows(rows_recycled);
     let ahead = ReadAhead {
         strip_rows,
