@@ -142,21 +142,22 @@ fn a_vector_layer_is_not_a_luminance() {
     assert_eq!(layer_colour(&names(&["X", "Y", "Z"]), ""), Some(vec!["Y"]));
 }
 
-#[test]
-fn a_batch_without_a_decoder_holds_the_blocks_asked_for() {
+/// An RGB float file of `w` x `h` in `dir`, in `compression`, its
+/// samples counting up: its path and its rows.
+fn counting_rgb(
+    dir: &std::path::Path,
+    (w, h): (usize, usize),
+    compression: exr::prelude::Compression,
+) -> (std::path::PathBuf, Vec<f32>) {
     use crate::pipeline::{Precision, Sink};
-    // One-line blocks: 64 of them, a few hundred bytes each, so the
-    // default batch (READ_AHEAD_BYTES of blocks) is the whole image.
-    let (w, h) = (4, 64);
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("zips.exr");
+    let path = dir.join("rgb.exr");
     let channels = names(&["R", "G", "B"]);
     let mut out = crate::io::writer::ExrOutput::create_new(
         &path,
         w,
         h,
         &channels,
-        exr::prelude::Compression::ZIP1,
+        compression,
         Precision::F32,
         &[],
     )
@@ -165,6 +166,16 @@ fn a_batch_without_a_decoder_holds_the_blocks_asked_for() {
     out.write_rows(0, h, &rows).unwrap();
     out.finish().unwrap();
     out.commit().unwrap();
+    (path, rows)
+}
+
+#[test]
+fn a_batch_without_a_decoder_holds_the_blocks_asked_for() {
+    // One-line blocks: 64 of them, a few hundred bytes each, so the
+    // default batch (READ_AHEAD_BYTES of blocks) is the whole image.
+    let (w, h) = (4, 64);
+    let dir = tempfile::tempdir().unwrap();
+    let (path, rows) = counting_rgb(dir.path(), (w, h), exr::prelude::Compression::ZIP1);
     let input = ExrInput::open(&path, None).unwrap();
     let buffered = |blocks: usize| {
         let mut src = input.source().with_batch_blocks(blocks);
@@ -183,25 +194,10 @@ fn a_batch_without_a_decoder_holds_the_blocks_asked_for() {
 
 #[test]
 fn a_strip_given_back_holds_the_next_one() {
-    use crate::pipeline::{Precision, Sink, Source};
+    use crate::pipeline::Source;
     let (w, h) = (8, 32);
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("given.exr");
-    let channels = names(&["R", "G", "B"]);
-    let mut out = crate::io::writer::ExrOutput::create_new(
-        &path,
-        w,
-        h,
-        &channels,
-        exr::prelude::Compression::ZIP16,
-        Precision::F32,
-        &[],
-    )
-    .unwrap();
-    let rows: Vec<f32> = (0..w * h * 3).map(|i| i as f32).collect();
-    out.write_rows(0, h, &rows).unwrap();
-    out.finish().unwrap();
-    out.commit().unwrap();
+    let (path, rows) = counting_rgb(dir.path(), (w, h), exr::prelude::Compression::ZIP16);
     let input = ExrInput::open(&path, None).unwrap();
     let mut src = input.source();
     // A buffer far larger than a strip: a strip made in it keeps its
