@@ -419,7 +419,7 @@ impl Report {
             strip_rows: layout.strip_rows(run.cfg),
             strips_in_flight: crate::pipeline::strips_in_flight(run.cfg, params.method, g.s),
             window_blocks: (run.cfg.window_blocks > 0).then_some(run.cfg.window_blocks),
-            write_ahead_bytes: run.cfg.write_ahead_bytes(),
+            write_ahead_bytes: layout.write_ahead_bytes(run.cfg),
             memory_estimate_bytes: 0,
             threads: run.cfg.workers(),
             peak_rss_bytes: peak_rss_bytes(),

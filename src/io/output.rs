@@ -86,6 +86,18 @@ impl OutputLayout {
         ))
     }
 
+    /// Scan lines a block of the output at `dest` holds: the rows the
+    /// writer compresses together.
+    pub fn block_lines(&self, dest: &Path, settings: &OutputSettings) -> Result<usize> {
+        let (compression, _) = super::writer::choose_compression(
+            dest,
+            self.header.compression,
+            settings,
+            &self.types,
+        )?;
+        Ok(compression.scan_lines_per_block())
+    }
+
     /// Start the output at `dest` (see [`Output::create`]).
     pub fn create(
         &self,

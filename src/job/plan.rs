@@ -114,8 +114,11 @@ impl<'a> FilterPlan<'a> {
         pipe_job.surface_rule = job.surface_rule;
         pipe_job.aux = input.aux_channels();
         pipe_job.block_scratch = !input.decodes_in_place();
-        let (pipeline, memory_bytes) = fit_memory(job, &input, &pipe_job, carried.len())?;
         let mut layout = OutputLayout::of(&input, &channels, &job.output_settings);
+        if !to_rgbe {
+            pipe_job.out_block_lines = layout.block_lines(&job.output, &job.output_settings)?;
+        }
+        let (pipeline, memory_bytes) = fit_memory(job, &input, &pipe_job, carried.len())?;
         if geometry.w != geometry.full_w || geometry.h != input.size().1 {
             layout.crop(geometry.w, geometry.h);
         }

@@ -174,7 +174,7 @@ impl FilterPlan<'_> {
             .join(" ");
         let mut out = OutputSettings {
             provenance: Some(provenance),
-            write_ahead: self.pipeline.write_ahead_bytes(),
+            write_ahead: self.pipe_job.write_ahead_bytes(&self.pipeline),
             ..self.job.output_settings.clone()
         };
         out.extra

@@ -76,6 +76,23 @@ impl StripLayout {
         }
     }
 
+    /// Bytes of output rows the sink holds before it encodes them:
+    /// `cfg.write_ahead`, or [`WRITE_AHEAD_BYTES_PER_THREAD`] a worker and
+    /// at least a block of output rows ([`StripLayout::out_block_lines`]) for
+    /// every [`WORKERS_PER_WRITE_BLOCK`] workers.
+    pub fn write_ahead_bytes(&self, cfg: &PipelineConfig) -> usize {
+        match cfg.write_ahead {
+            0 => {
+                let workers = cfg.geometry_workers();
+                let block = (self.grid.out_w() * self.channels.len() * 4)
+                    .saturating_mul(self.out_block_lines.max(1));
+                let blocks = workers.div_ceil(WORKERS_PER_WRITE_BLOCK);
+                (WRITE_AHEAD_BYTES_PER_THREAD * workers).max(block.saturating_mul(blocks))
+            }
+            n => n,
+        }
+    }
+
     /// Default strip height of this job on `threads` workers:
     /// [`auto_strip_rows`], at least `min_strip_pixel_rows` pixel rows
     /// (whole pixel rows: `S` input rows each); and `TALL_STRIP_PIXEL_ROWS`
@@ -159,6 +176,14 @@ pub const WINDOW_BLOCKS_PER_THREAD: u64 = 2;
 /// them in parallel: a block or two a worker at ordinary widths, so that a
 /// batch keeps the workers compressing and few threads hold little.
 pub const WRITE_AHEAD_BYTES_PER_THREAD: usize = 1 << 20;
+
+/// Workers per output block the sink compresses at once, at the least.
+/// A batch's blocks are its parallel tasks, and the workers share the cores
+/// with the filter: a block for every two keeps the compression beside a
+/// filter on many cores, where wide outputs of many channels (a few blocks
+/// in `WRITE_AHEAD_BYTES_PER_THREAD` a worker) left it waiting for the
+/// writer; on two workers one block was as fast as two.
+pub const WORKERS_PER_WRITE_BLOCK: usize = 2;
 
 /// The share of samples the estimate counts as noisy at once (one in this
 /// many): ep-gauss keeps each noisy sample from its classification to its
@@ -405,7 +430,7 @@ pub(super) fn around(
 ) -> u64 {
     let nch = job.channels.len() as u64;
     let out_f32 = ow.saturating_mul(nch * 4);
-    (2 * cfg.write_ahead_bytes() as u64)
+    (2 * job.write_ahead_bytes(cfg) as u64)
         .saturating_add(out_f32.saturating_mul(3 * out_rows))
         .saturating_add(MAPPED_RELEASE_BYTES as u64)
         .saturating_add(block_bytes.saturating_mul(blocks))
@@ -553,6 +578,37 @@ mod tests {
         };
         let tall = estimate_bytes(&square, &ep, &PipelineConfig::default(), block);
         assert!(tall > estimate_bytes(&square, &ep, &short, block));
+    }
+
+    #[test]
+    fn a_write_batch_holds_a_block_for_every_two_workers() {
+        let on = |threads| PipelineConfig {
+            threads,
+            ..PipelineConfig::default()
+        };
+        // 8192 pixels wide at S = 1, nine channels, 16-row blocks: a block
+        // is 4.5 MiB, more than a worker's bytes.
+        let mut wide = rgb(8192, 4096);
+        wide.grid.s = 1;
+        wide.channels = (0..9).map(|c| c.to_string()).collect();
+        wide.out_block_lines = 16;
+        let block = 8192 * 9 * 4 * 16;
+        assert_eq!(wide.write_ahead_bytes(&on(1)), block);
+        assert_eq!(wide.write_ahead_bytes(&on(2)), block);
+        assert_eq!(wide.write_ahead_bytes(&on(3)), 2 * block);
+        assert_eq!(wide.write_ahead_bytes(&on(16)), 8 * block);
+        // 4096 pixels of RGB at S = 3: a worker's bytes hold more.
+        let mut narrow = rgb(12288, 12288);
+        narrow.out_block_lines = 16;
+        let per = WRITE_AHEAD_BYTES_PER_THREAD;
+        assert_eq!(narrow.write_ahead_bytes(&on(2)), 2 * per);
+        assert_eq!(narrow.write_ahead_bytes(&on(16)), 16 * per);
+        // A given write-ahead wins.
+        let given = PipelineConfig {
+            write_ahead: 5,
+            ..on(16)
+        };
+        assert_eq!(wide.write_ahead_bytes(&given), 5);
     }
 
     #[test]

@@ -61,7 +61,7 @@ pub use stream::Streamer;
 pub use estimate::{
     auto_strip_rows, estimate_bytes, fit_memory, read_ahead_blocks, window_blocks,
     MAPPED_RELEASE_BYTES, PROGRAM_BYTES, READ_AHEAD_BATCHES, READ_AHEAD_BYTES, STRIPS_RECYCLED,
-    STRIP_BYTES, WRITE_AHEAD_BYTES_PER_THREAD,
+    STRIP_BYTES, WORKERS_PER_WRITE_BLOCK, WRITE_AHEAD_BYTES_PER_THREAD,
 };
 pub use memory::{filter_in_memory, filter_planar, MemoryRun, MemorySink, MemorySource};
 pub use restore::estimate::{fit_restore_memory, restore_bytes};
@@ -241,7 +241,7 @@ pub struct PipelineConfig {
     /// [`Self::workers`]).
     pub geometry_threads: usize,
     /// Bytes of output rows the sink holds before it encodes them (0:
-    /// [`PipelineConfig::write_ahead_bytes`]'s rule; [`fit_memory`] sets
+    /// [`StripLayout::write_ahead_bytes`]'s rule; [`fit_memory`] sets
     /// fewer under a small budget).
     pub write_ahead: usize,
     /// Set to stop the run early (e.g. on SIGINT).
@@ -267,15 +267,6 @@ impl PipelineConfig {
     pub fn workers(&self) -> usize {
         match self.threads {
             0 => rayon::current_num_threads(),
-            n => n,
-        }
-    }
-
-    /// Bytes of output rows the sink holds before it encodes them:
-    /// `write_ahead`, or [`WRITE_AHEAD_BYTES_PER_THREAD`] a worker.
-    pub fn write_ahead_bytes(&self) -> usize {
-        match self.write_ahead {
-            0 => WRITE_AHEAD_BYTES_PER_THREAD * self.geometry_workers(),
             n => n,
         }
     }
@@ -359,6 +350,9 @@ pub struct StripLayout {
     /// codecs `exr` decodes); blocks inflated straight into the reader's
     /// window (ZIP, ZIPS) need none.
     pub block_scratch: bool,
+    /// Output rows the sink compresses together (an EXR block's scan
+    /// lines; 1 where the output has no blocks).
+    pub out_block_lines: usize,
 }
 
 impl StripLayout {
@@ -381,6 +375,7 @@ impl StripLayout {
             surface_rule: SurfaceRule::default(),
             padded_from: None,
             block_scratch: true,
+            out_block_lines: 1,
         }
     }
 
