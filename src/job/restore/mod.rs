@@ -336,7 +336,8 @@ impl RestorePlan {
         layout.denoised = picks;
         layout.denoised_channels = denoised.channels().len();
         layout.data = (0..channels.len()).map(|c| c >= beauty).collect();
-        let strips = layout.strips(energy.size());
+        let mut strips = layout.strips(energy.size());
+        strips.out_block_lines = output.block_lines(&job.output, &settings)?;
         if strips.strip_channels() > MAX_CHANNELS {
             return Err(Error::Channels {
                 path: job.energy.clone(),
@@ -351,6 +352,11 @@ impl RestorePlan {
         let cfg = config(job.threads, job.nonfinite, job.cancel.clone());
         let blocks = [energy.block_bytes(), denoised.block_bytes()];
         let (cfg, memory) = fit_memory(job, &strips, scale, &cfg, blocks)?;
+        // The writer's batch follows the rule the estimate counted.
+        let settings = OutputSettings {
+            write_ahead: strips.write_ahead_bytes(&cfg),
+            ..settings
+        };
         Ok(RestorePlan {
             energy,
             denoised,
