@@ -79,14 +79,14 @@ impl StripLayout {
     /// Bytes of output rows the sink holds before it encodes them:
     /// `cfg.write_ahead`, or [`WRITE_AHEAD_BYTES_PER_THREAD`] a worker and
     /// at least a block of output rows ([`StripLayout::out_block_lines`]) for
-    /// every [`WORKERS_PER_WRITE_BLOCK`] workers.
+    /// every [`StripLayout::workers_per_write_block`] workers.
     pub fn write_ahead_bytes(&self, cfg: &PipelineConfig) -> usize {
         match cfg.write_ahead {
             0 => {
                 let workers = cfg.geometry_workers();
                 let block = (self.grid.out_w() * self.channels.len() * 4)
                     .saturating_mul(self.out_block_lines.max(1));
-                let blocks = workers.div_ceil(WORKERS_PER_WRITE_BLOCK);
+                let blocks = workers.div_ceil(self.workers_per_write_block.max(1));
                 (WRITE_AHEAD_BYTES_PER_THREAD * workers).max(block.saturating_mul(blocks))
             }
             n => n,
@@ -177,12 +177,13 @@ pub const WINDOW_BLOCKS_PER_THREAD: u64 = 2;
 /// batch keeps the workers compressing and few threads hold little.
 pub const WRITE_AHEAD_BYTES_PER_THREAD: usize = 1 << 20;
 
-/// Workers per output block the sink compresses at once, at the least.
-/// A batch's blocks are its parallel tasks, and the workers share the cores
-/// with the filter: a block for every two keeps the compression beside a
-/// filter on many cores, where wide outputs of many channels (a few blocks
-/// in `WRITE_AHEAD_BYTES_PER_THREAD` a worker) left it waiting for the
-/// writer; on two workers one block was as fast as two.
+/// Workers per output block the sink compresses at once, at the least,
+/// for the filter ([`StripLayout::workers_per_write_block`]). A batch's
+/// blocks are its parallel tasks, and the workers share the cores with the
+/// filter: a block for every two keeps the compression beside a filter on
+/// many cores, where wide outputs of many channels (a few blocks in
+/// `WRITE_AHEAD_BYTES_PER_THREAD` a worker) left it waiting for the writer;
+/// on two workers one block was as fast as two.
 pub const WORKERS_PER_WRITE_BLOCK: usize = 2;
 
 /// The share of samples the estimate counts as noisy at once (one in this

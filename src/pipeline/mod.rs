@@ -353,6 +353,9 @@ pub struct StripLayout {
     /// Output rows the sink compresses together (an EXR block's scan
     /// lines; 1 where the output has no blocks).
     pub out_block_lines: usize,
+    /// Workers per output block the sink compresses at once, at the least
+    /// ([`WORKERS_PER_WRITE_BLOCK`] for the filter).
+    pub workers_per_write_block: usize,
 }
 
 impl StripLayout {
@@ -376,6 +379,7 @@ impl StripLayout {
             padded_from: None,
             block_scratch: true,
             out_block_lines: 1,
+            workers_per_write_block: WORKERS_PER_WRITE_BLOCK,
         }
     }
 

@@ -67,7 +67,7 @@ fn strips_grow_to_sixteen_pixel_rows_where_they_fit() {
 }
 
 #[test]
-fn a_write_batch_holds_a_block_for_every_two_workers() {
+fn a_write_batch_holds_a_block_for_every_two_workers_or_each() {
     let on = |threads| PipelineConfig {
         threads,
         ..PipelineConfig::default()
@@ -83,6 +83,13 @@ fn a_write_batch_holds_a_block_for_every_two_workers() {
     assert_eq!(wide.write_ahead_bytes(&on(2)), block);
     assert_eq!(wide.write_ahead_bytes(&on(3)), 2 * block);
     assert_eq!(wide.write_ahead_bytes(&on(16)), 8 * block);
+    // Restore's writer: a block a worker.
+    let restore = StripLayout {
+        workers_per_write_block: crate::pipeline::restore::RESTORE_WORKERS_PER_WRITE_BLOCK,
+        ..wide.clone()
+    };
+    assert_eq!(restore.write_ahead_bytes(&on(2)), 2 * block);
+    assert_eq!(restore.write_ahead_bytes(&on(16)), 16 * block);
     // 4096 pixels of RGB at S = 3: a worker's bytes hold more.
     let mut narrow = rgb(12288, 12288);
     narrow.out_block_lines = 16;

@@ -35,6 +35,12 @@ pub use stage::RestoreStage;
 pub use stats::RenderStats;
 pub use survey::Survey;
 
+/// Workers per output block restore's writer compresses at once, at the
+/// least: one each. Restore's own work is light beside its two inputs'
+/// decoding and its output's compression, which is what its workers wait
+/// on; one block for two workers was slower on two.
+pub const RESTORE_WORKERS_PER_WRITE_BLOCK: usize = 1;
+
 /// The energy image's rows: its `channels`, then the channels of its
 /// emission guide and statistics that are not among them (a pass the
 /// energy carries is read where it is carried, once).
@@ -95,6 +101,7 @@ impl EnergyLayout {
         let channels = &self.channels;
         let mut layout = StripLayout::new(grid, channels.clone(), self.luminance.clone());
         layout.data = self.data.clone();
+        layout.workers_per_write_block = RESTORE_WORKERS_PER_WRITE_BLOCK;
         let guide = (channels.iter().zip(&self.emission))
             .filter(|(_, e)| e.is_some_and(|k| k >= channels.len()))
             .map(|(c, _)| format!("emission.{c}"));
