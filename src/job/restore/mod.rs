@@ -267,6 +267,27 @@ pub struct RestorePlan {
     memory: u64,
 }
 
+/// At most [`MAX_CHANNELS`] read a strip row: `written` channels and the
+/// guide's, statistics' and denoiser's beside them.
+fn check_channels(
+    job: &RestoreJob,
+    strips: &StripLayout,
+    written: usize,
+    carried: &[String],
+) -> Result<()> {
+    if strips.strip_channels() <= MAX_CHANNELS {
+        return Ok(());
+    }
+    Err(Error::Channels {
+        path: job.energy.clone(),
+        reason: format!(
+            "{written} channels to restore and carry, and restore reads {} in all (the energy's, its guide's and the denoiser's), at most {MAX_CHANNELS}: drop some with --channel-rule 'PATTERN=drop' (carried: {})",
+            strips.strip_channels(),
+            carried.join(", ")
+        ),
+    })
+}
+
 impl RestorePlan {
     /// Both inputs opened and matched, the energy image's guide and
     /// statistics found, the memory fitted: every check before a row is
@@ -338,17 +359,7 @@ impl RestorePlan {
         layout.data = (0..channels.len()).map(|c| c >= beauty).collect();
         let mut strips = layout.strips(energy.size());
         strips.out_block_lines = output.block_lines(&job.output, &settings)?;
-        if strips.strip_channels() > MAX_CHANNELS {
-            return Err(Error::Channels {
-                path: job.energy.clone(),
-                reason: format!(
-                    "{} channels to restore and carry, and restore reads {} in all (the energy's, its guide's and the denoiser's), at most {MAX_CHANNELS}: drop some with --channel-rule 'PATTERN=drop' (carried: {})",
-                    channels.len(),
-                    strips.strip_channels(),
-                    carried.join(", ")
-                ),
-            });
-        }
+        check_channels(job, &strips, channels.len(), &carried)?;
         let cfg = config(job.threads, job.nonfinite, job.cancel.clone());
         let blocks = [energy.block_bytes(), denoised.block_bytes()];
         let (cfg, memory) = fit_memory(job, &strips, scale, &cfg, blocks)?;
