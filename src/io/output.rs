@@ -68,12 +68,7 @@ impl OutputLayout {
     /// `settings` would have, and its name: the bands of `--band` end on
     /// them. A lossy compression is refused (a band's ledger must be exact).
     pub fn band_unit(&self, dest: &Path, settings: &OutputSettings) -> Result<(usize, String)> {
-        let (compression, _) = super::writer::choose_compression(
-            dest,
-            self.header.compression,
-            settings,
-            &self.types,
-        )?;
+        let compression = self.compression(dest, settings)?;
         if self.types.iter().any(|&t| super::is_lossy(compression, t)) {
             return Err(Error::Config(format!(
                 "--band needs a lossless output compression, not {}",
@@ -89,13 +84,17 @@ impl OutputLayout {
     /// Scan lines a block of the output at `dest` holds: the rows the
     /// writer compresses together.
     pub fn block_lines(&self, dest: &Path, settings: &OutputSettings) -> Result<usize> {
-        let (compression, _) = super::writer::choose_compression(
-            dest,
-            self.header.compression,
-            settings,
-            &self.types,
-        )?;
-        Ok(compression.scan_lines_per_block())
+        Ok(self.compression(dest, settings)?.scan_lines_per_block())
+    }
+
+    /// The compression an EXR at `dest` written with `settings` has.
+    fn compression(
+        &self,
+        dest: &Path,
+        settings: &OutputSettings,
+    ) -> Result<exr::compression::Compression> {
+        let header = self.header.compression;
+        super::writer::choose_compression(dest, header, settings, &self.types).map(|(c, _)| c)
     }
 
     /// Start the output at `dest` (see [`Output::create`]).
