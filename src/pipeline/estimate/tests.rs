@@ -73,7 +73,7 @@ fn a_write_batch_holds_a_block_for_every_two_workers_or_each() {
         ..PipelineConfig::default()
     };
     // 8192 pixels wide at S = 1, nine channels, 16-row blocks: a block
-    // is 4.5 MiB, more than a worker's bytes.
+    // holds more than a worker's bytes.
     let mut wide = rgb(8192, 4096);
     wide.grid.s = 1;
     wide.channels = (0..9).map(|c| c.to_string()).collect();
