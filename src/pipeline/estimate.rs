@@ -201,6 +201,22 @@ pub const NOISY_SHARE_INV: u64 = 10;
 /// that freed last: the share counts all four (docs/bench/memory.md).
 pub const PROGRAM_BYTES: u64 = 24 << 20;
 
+/// Bytes from which the binary's allocator gives an allocation pages of
+/// its own, returned to the system when it is freed (glibc's
+/// `M_MMAP_THRESHOLD`, set by the binary at start). A smaller buffer freed
+/// among live ones stays in the allocator's arena.
+pub const MAPPED_ALLOCATION_BYTES: usize = 4 << 20;
+
+/// An empty buffer for `n` values that the allocator maps on its own
+/// ([`MAPPED_ALLOCATION_BYTES`] at the least), so that it goes back to the
+/// system when dropped, however few values it holds: buffers of short strips
+/// (the memory fitting's) freed among live ones otherwise stayed in the
+/// arenas, and held more than the default strips. The pages its values do
+/// not fill are never touched.
+pub fn own_pages<T>(n: usize) -> Vec<T> {
+    Vec::with_capacity(n.max(MAPPED_ALLOCATION_BYTES / std::mem::size_of::<T>().max(1)))
+}
+
 /// The input file's bytes handed over before the reader releases their
 /// pages (each release interrupts every core): at most this much of the
 /// mapped input is resident beside the window of blocks decoding.

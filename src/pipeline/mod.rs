@@ -59,9 +59,10 @@ pub use stages::strips_in_flight;
 pub use stream::Streamer;
 
 pub use estimate::{
-    auto_strip_rows, estimate_bytes, fit_memory, read_ahead_blocks, window_blocks,
-    MAPPED_RELEASE_BYTES, PROGRAM_BYTES, READ_AHEAD_BATCHES, READ_AHEAD_BYTES, STRIPS_RECYCLED,
-    STRIP_BYTES, WORKERS_PER_WRITE_BLOCK, WRITE_AHEAD_BYTES_PER_THREAD,
+    auto_strip_rows, estimate_bytes, fit_memory, own_pages, read_ahead_blocks, window_blocks,
+    MAPPED_ALLOCATION_BYTES, MAPPED_RELEASE_BYTES, PROGRAM_BYTES, READ_AHEAD_BATCHES,
+    READ_AHEAD_BYTES, STRIPS_RECYCLED, STRIP_BYTES, WORKERS_PER_WRITE_BLOCK,
+    WRITE_AHEAD_BYTES_PER_THREAD,
 };
 pub use memory::{filter_in_memory, filter_planar, MemoryRun, MemorySink, MemorySource};
 pub use restore::estimate::{fit_restore_memory, restore_bytes};

@@ -656,11 +656,12 @@ fn one_line(e: &anyhow::Error) -> String {
 /// (docs/bench/memory-gigapixel.md: the floor's peak within its budget).
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 fn tune_allocator() {
+    const MAPPED: usize = epfilt::pipeline::MAPPED_ALLOCATION_BYTES;
     // SAFETY: mallopt only changes glibc's allocation thresholds; it is called
     // once, first thing in main, before any other thread exists.
     #[allow(unsafe_code)]
     unsafe {
-        libc::mallopt(libc::M_MMAP_THRESHOLD, 4 * 1024 * 1024);
+        libc::mallopt(libc::M_MMAP_THRESHOLD, MAPPED as i32);
         libc::mallopt(libc::M_TRIM_THRESHOLD, 4 * 1024 * 1024);
         // glibc gives threads up to 8 arenas per core, each keeping up to
         // the trim threshold of freed memory, so peak memory grew with the

@@ -275,14 +275,15 @@ impl Ahead {
             };
         }
         let n = max_rows.min(self.queued_rows);
-        // A strip buffer handed back (its pages already in), or a new one.
+        // A strip buffer handed back (its pages already in), or a new one
+        // that goes back to the system when dropped.
         let mut data = match self.recycled.as_ref().and_then(|r| r.try_recv().ok()) {
             Some(mut v) => {
                 v.clear();
                 v.reserve_exact(n * row_len);
                 v
             }
-            None => Vec::with_capacity(n * row_len),
+            None => crate::pipeline::own_pages(n * row_len),
         };
         let mut need = n;
         while need > 0 {

@@ -302,3 +302,12 @@ fn the_accumulators_count_their_own_kernels_reach() {
     // rows and width cost less than on the output grid.
     assert!(estimate_bytes(&job, &p, &cfg, block) > coarse);
 }
+
+#[test]
+fn own_pages_are_at_least_the_mapping_threshold_and_hold_nothing() {
+    let small: Vec<f32> = own_pages(10);
+    assert!(small.is_empty());
+    assert!(small.capacity() * 4 >= MAPPED_ALLOCATION_BYTES);
+    let rows: Vec<f64> = own_pages(MAPPED_ALLOCATION_BYTES);
+    assert!(rows.is_empty() && rows.capacity() >= MAPPED_ALLOCATION_BYTES);
+}
