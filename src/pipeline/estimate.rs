@@ -499,9 +499,7 @@ fn estimate_pixel_bytes(
         .filter(|&&m| m == ChannelMode::Spread)
         .count() as u64;
     let sources = (w.saturating_mul(held) / NOISY_SHARE_INV).saturating_mul(40 + 16 * spread);
-    let rows = w
-        .saturating_mul(nch * 8)
-        .saturating_mul(strip.max(16) + threads);
+    let rows = w.saturating_mul(nch * 8).saturating_mul(strip + threads);
     let bands = match gauss {
         true => 0,
         // A task's band: each pixel's pass, and each noisy pixel's

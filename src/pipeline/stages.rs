@@ -48,6 +48,7 @@ pub fn make(
                 (job.guides.clone(), job.surface_rule),
             )?);
             stage.set_task_columns(cfg.classify_samples);
+            stage.set_last_rows(job.strip_rows(cfg));
             Box::new(stage)
         }
         Method::EpGauss if grid.s == 1 && job.guides.albedo_only() => {
@@ -115,5 +116,6 @@ fn pixel_gauss<G: SurfaceGuides>(
         params,
     )?);
     stage.set_task_columns(cfg.classify_samples);
+    stage.set_last_rows(job.strip_rows(cfg));
     Ok(Box::new(stage))
 }

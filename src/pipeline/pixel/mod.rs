@@ -18,9 +18,9 @@
 //! pass goes only as far as the passes that read it need, since what waits
 //! is held across the whole width. A pass's rows leave once no pass reads
 //! them; input rows once no pass reads them and their output rows are made.
-//! When every input row is in, the treatment goes `LAST_ROWS` rows at a
-//! time, so that the last rows are handed over a few at a time rather than
-//! all held at once. The halo is derived from the same declarations.
+//! When every input row is in, the treatment goes a strip's rows at a
+//! time ([`PixelStage::set_last_rows`]), so that the last rows are handed
+//! over as the others were rather than all held at once. The halo is derived from the same declarations.
 //!
 //! A rule's decision for a pixel reads only the rows it declares, and each
 //! output pixel adds its shares in source order, so the output is
@@ -47,7 +47,8 @@ pub use excess::ExcessRule;
 pub use gauss::GaussRule;
 pub use guided::GuideReader;
 
-/// Rows handed over at once when every input row is in.
+/// Rows handed over at once when every input row is in, unless the
+/// skeleton says its strips' ([`PixelStage::set_last_rows`]).
 const LAST_ROWS: usize = 16;
 
 /// What a pixel-resolution method computes: its passes, and the rule for
@@ -149,6 +150,8 @@ pub struct PixelStage<R: Rule> {
     gathered: Gathered<R::Source>,
     /// Columns a treatment task takes at most (0: the rule's).
     task_columns: usize,
+    /// Rows treated at once when every input row is in.
+    last_rows: usize,
 }
 
 impl<R: Rule> PixelStage<R> {
@@ -165,7 +168,15 @@ impl<R: Rule> PixelStage<R> {
             gathered: Gathered::new(nch, rule.spread().to_vec(), w, reach),
             rule,
             task_columns: 0,
+            last_rows: LAST_ROWS,
         }
+    }
+
+    /// Treat `n` rows at a time (at least one) once every input row is in:
+    /// the strips' rows, so that the last output rows are held as the
+    /// others were; the output does not change.
+    pub fn set_last_rows(&mut self, n: usize) {
+        self.last_rows = n.max(1);
     }
 
     /// Cut the treatment's tasks at `n` columns (0: the rule's
@@ -275,13 +286,13 @@ impl<R: Rule> Stage for PixelStage<R> {
         } else {
             let released = self.gathered.released();
             loop {
-                let treat = self.done[self.last()] + LAST_ROWS;
+                let treat = self.done[self.last()] + self.last_rows;
                 self.step(input, rows_in, treat);
                 if self.end() > released || self.done[self.last()] == self.h {
                     break;
                 }
             }
-            self.end().min(released + LAST_ROWS)
+            self.end().min(released + self.last_rows)
         };
         let rule = &self.rule;
         let add = |s: &R::Source, shares: &[f64], ty: usize, acc: &mut [f64]| {

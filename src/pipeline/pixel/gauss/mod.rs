@@ -512,6 +512,42 @@ mod tests {
         filter_in_memory(rows, &job, &p, &PipelineConfig::default()).unwrap()
     }
 
+    /// Once every input row is in, the last rows are treated a strip's
+    /// rows at a time: the output rows made at once are never more than a
+    /// strip's, and the result is the same for every strip height.
+    #[test]
+    fn the_last_rows_are_made_a_strip_at_a_time() {
+        let (w, h) = (40, 60);
+        let mut img = ground(w, h);
+        for (x, y) in [(7, 50), (30, 55), (12, 58), (21, 5)] {
+            set(&mut img, w, (x, y), [30.0, 28.0, 25.0]);
+        }
+        let job = layout(w, h, &["R", "G", "B"], &RGB);
+        let p = FilterParams::new(Method::EpGauss, 1);
+        let mut first = None;
+        for strip_rows in [1, 3, 7, h] {
+            let cfg = PipelineConfig {
+                threads: 2,
+                strip_rows,
+                ..Default::default()
+            };
+            let (out, stats) = filter_in_memory(img.clone(), &job, &p, &cfg).unwrap();
+            assert!(stats.ep_gauss().unwrap().spread >= 4);
+            let made = stats.windows.iter().find(|u| u.name == "output").unwrap();
+            assert!(
+                made.rows <= strip_rows,
+                "strips of {strip_rows}: {}",
+                made.rows
+            );
+            let bits: Vec<u32> = out.iter().map(|v| v.to_bits()).collect();
+            assert_eq!(
+                *first.get_or_insert(bits.clone()),
+                bits,
+                "strips of {strip_rows}"
+            );
+        }
+    }
+
     #[test]
     fn the_halo_is_the_settings_halo() {
         for (mr, cut) in [(16.0, 3.0), (0.6, 3.0), (40.0, 6.0), (2.0, 1.0)] {
