@@ -114,6 +114,7 @@ impl<'a> FilterPlan<'a> {
         pipe_job.surface_rule = job.surface_rule;
         pipe_job.aux = input.aux_channels();
         pipe_job.block_scratch = !input.decodes_in_place();
+        pipe_job.stored_block_bytes = input.stored_block_bytes();
         let mut layout = OutputLayout::of(&input, &channels, &job.output_settings);
         if !to_rgbe {
             pipe_job.out_block_lines = layout.block_lines(&job.output, &job.output_settings)?;

@@ -436,8 +436,9 @@ fn estimate_with(
 /// What a job holds around its stage: the sink's rows waiting to be encoded
 /// (`write_ahead` bytes of f32 rows, and as many encoded), the output rows
 /// of three strips on their way to it (`ow` wide, `out_rows` a strip), and
-/// the mapped input's resident pages (the window's compressed blocks, at
-/// most their decoded size, and what waits to be released).
+/// the mapped input's resident pages (the window's blocks as the file
+/// stores them, [`StripLayout::stored_block_bytes`], at most their decoded
+/// size, and what waits to be released).
 pub(super) fn around(
     job: &StripLayout,
     cfg: &PipelineConfig,
@@ -447,10 +448,14 @@ pub(super) fn around(
 ) -> u64 {
     let nch = job.channels.len() as u64;
     let out_f32 = ow.saturating_mul(nch * 4);
+    let stored = match job.stored_block_bytes {
+        0 => block_bytes,
+        n => n.min(block_bytes),
+    };
     (2 * job.write_ahead_bytes(cfg) as u64)
         .saturating_add(out_f32.saturating_mul(3 * out_rows))
         .saturating_add(MAPPED_RELEASE_BYTES as u64)
-        .saturating_add(block_bytes.saturating_mul(blocks))
+        .saturating_add(stored.saturating_mul(blocks))
 }
 
 /// The pixel-resolution stages (ep-box; ep-gauss at S = 1): input rows

@@ -354,6 +354,9 @@ pub struct StripLayout {
     /// Output rows the sink compresses together (an EXR block's scan
     /// lines; 1 where the output has no blocks).
     pub out_block_lines: usize,
+    /// Bytes an input block takes in the file at most (0: as many as it
+    /// decodes to): the mapped pages the reader's window holds a block.
+    pub stored_block_bytes: u64,
     /// Workers per output block the sink compresses at once, at the least
     /// ([`WORKERS_PER_WRITE_BLOCK`] for the filter).
     pub workers_per_write_block: usize,
@@ -380,6 +383,7 @@ impl StripLayout {
             padded_from: None,
             block_scratch: true,
             out_block_lines: 1,
+            stored_block_bytes: 0,
             workers_per_write_block: WORKERS_PER_WRITE_BLOCK,
         }
     }

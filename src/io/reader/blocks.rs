@@ -185,6 +185,18 @@ pub(crate) fn block_bytes(h: &Header) -> u64 {
     px.saturating_mul(h.channels.bytes_per_pixel as u64)
 }
 
+/// The largest gap from one of `offsets` (a part's chunks) to the next, or
+/// to `end` (the file's length) from the last: at least what any of those
+/// chunks takes in the file (other parts' chunks between count too). `None`
+/// where there are none.
+pub(super) fn largest_chunk(offsets: impl Iterator<Item = usize>, end: usize) -> Option<u64> {
+    let mut offsets: Vec<usize> = offsets.collect();
+    offsets.sort_unstable();
+    let last = offsets.last().map(|&o| end.saturating_sub(o));
+    let gaps = offsets.windows(2).map(|p| p[1] - p[0]);
+    gaps.chain(last).max().map(|g| g as u64)
+}
+
 /// One chunk as it lies in the mapped file: its part, the block it holds and
 /// its compressed bytes, borrowed (a ZIP or ZIPS block is inflated from the
 /// map; other codecs take a copy, [`RawChunk::to_chunk`], as `exr`'s

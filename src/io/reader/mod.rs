@@ -414,6 +414,15 @@ impl ExrInput {
         block_bytes(self.header())
     }
 
+    /// Bytes one block of this file takes in it at most (its offset table's
+    /// gaps), at most [`ExrInput::block_bytes`]: what the reader's window
+    /// holds of the mapped file a block.
+    pub fn stored_block_bytes(&self) -> u64 {
+        let offsets = self.rows.iter().flat_map(|r| r.chunks.iter().map(|c| c.0));
+        let largest = blocks::largest_chunk(offsets, self.map.bytes().len());
+        largest.map_or(self.block_bytes(), |n| n.min(self.block_bytes()))
+    }
+
     /// Whether its blocks are inflated straight into the reader's window
     /// (ZIP and ZIPS scan lines, [`crate::io::zip::codes`], every channel a
     /// 32-bit float and read): no decoder holds a block of its own.

@@ -215,3 +215,39 @@ fn a_strip_given_back_holds_the_next_one() {
     }
     assert_eq!(y, h);
 }
+
+#[test]
+fn the_largest_chunk_is_the_widest_gap_to_the_next_or_the_end() {
+    assert_eq!(
+        blocks::largest_chunk([100, 10, 40].into_iter(), 130),
+        Some(60)
+    );
+    assert_eq!(blocks::largest_chunk([10].into_iter(), 12), Some(2));
+    assert_eq!(blocks::largest_chunk(std::iter::empty(), 12), None);
+}
+
+/// What the reader's window holds of the mapped file a block: at least
+/// each chunk's bytes, at most a decoded block.
+#[test]
+fn a_block_stored_bounds_its_chunks_and_no_more_than_it_decodes_to() {
+    use exr::prelude::Compression;
+    let (w, h) = (64, 48);
+    for compression in [Compression::Uncompressed, Compression::ZIP16] {
+        let dir = tempfile::tempdir().unwrap();
+        let (path, _) = counting_rgb(dir.path(), (w, h), compression);
+        let input = ExrInput::open(&path, None).unwrap();
+        let (stored, decoded) = (input.stored_block_bytes(), input.block_bytes());
+        assert!(stored <= decoded, "{compression:?}");
+        let bytes = std::fs::read(&path).unwrap();
+        for r in &input.rows {
+            for &(offset, at) in &r.chunks {
+                let (_, end) = exr_read_chunk(&bytes, &input.meta, 0, offset, at).unwrap();
+                let chunk = (end - offset) as u64;
+                assert!(chunk <= stored || stored == decoded, "{compression:?}");
+            }
+        }
+        if compression == Compression::ZIP16 {
+            assert!(stored < decoded, "counting values compress");
+        }
+    }
+}

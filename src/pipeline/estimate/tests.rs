@@ -311,3 +311,22 @@ fn own_pages_are_at_least_the_mapping_threshold_and_hold_nothing() {
     let rows: Vec<f64> = own_pages(MAPPED_ALLOCATION_BYTES);
     assert!(rows.is_empty() && rows.capacity() >= MAPPED_ALLOCATION_BYTES);
 }
+
+#[test]
+fn the_mapped_input_counts_each_block_as_stored_at_most_as_decoded() {
+    let (mut job, block) = (rgb(6144, 6144), 6144 * 3 * 4 * 16);
+    let p = FilterParams::new(Method::Box, 3);
+    let cfg = PipelineConfig {
+        window_blocks: 4,
+        ..Default::default()
+    };
+    let decoded = estimate_bytes(&job, &p, &cfg, block);
+    job.stored_block_bytes = block / 3;
+    let stored = estimate_bytes(&job, &p, &cfg, block);
+    // The window's four blocks' mapped pages, a third of their size.
+    assert_eq!(decoded - stored, 4 * (block - block / 3));
+    // A block stored larger than it decodes (a chunk's header, or other
+    // parts' chunks between) counts as decoded.
+    job.stored_block_bytes = 2 * block;
+    assert_eq!(estimate_bytes(&job, &p, &cfg, block), decoded);
+}
