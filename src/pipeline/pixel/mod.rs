@@ -20,7 +20,8 @@
 //! them; input rows once no pass reads them and their output rows are made.
 //! When every input row is in, the treatment goes a strip's rows at a
 //! time ([`PixelStage::set_last_rows`]), so that the last rows are handed
-//! over as the others were rather than all held at once. The halo is derived from the same declarations.
+//! over as the others were rather than all held at once. The halo is
+//! derived from the same declarations.
 //!
 //! A rule's decision for a pixel reads only the rows it declares, and each
 //! output pixel adds its shares in source order, so the output is
